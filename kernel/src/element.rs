@@ -1,0 +1,645 @@
+//! The nonlinear element library (thesis §2.2: eqs. 5–7, and friction).
+//!
+//! An element acts on a scalar coordinate `u = Σ w_i q_i` of the structure (one DOF relative
+//! to ground, the relative motion `q_a − q_b` of two DOFs, or any weighted direction, which is
+//! how an element is carried into reduced coordinates) and applies the force `g(u, u̇)`
+//! along the same direction: its contribution to `f_NL` in thesis eq. (4)
+//! `M q̈ + V q̇ + K q + f_NL(q, q̇) = f(t)` is `w g(u, u̇)`. A positive `g` resists positive `u`.
+//!
+//! Each law gives its force, the derivatives `∂g/∂u`, `∂g/∂u̇` (for Newton) and `∂g/∂p` for
+//! each named parameter `p` (for calibration). Units: `u` in m, `u̇` in m/s, `g` in N.
+
+use crate::error::{Error, Result};
+
+/// Force and state derivatives of a law at one point.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LawEval {
+    /// Force `g(u, u̇)` (N).
+    pub force: f64,
+    /// `∂g/∂u` (N/m).
+    pub df_du: f64,
+    /// `∂g/∂u̇` (N s/m).
+    pub df_dv: f64,
+}
+
+/// One term `coef · x^power` of a polynomial law.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PolyTerm {
+    /// Integer power, at least 1.
+    pub power: u32,
+    /// Coefficient (N/m^power for stiffness, N (s/m)^power for damping).
+    pub coef: f64,
+}
+
+/// A force law `g(u, u̇; p)` with named parameters `p`.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Law {
+    /// Cubic spring `g = k3 u³` (thesis eq. 5); `k3` in N/m³, negative for softening.
+    Cubic {
+        /// Cubic stiffness (N/m³).
+        k3: f64,
+    },
+    /// Polynomial stiffness and damping `g = Σ k_n uⁿ + Σ c_n u̇ⁿ` with integer powers `n ≥ 1`.
+    /// Parameters are named `k<n>` and `c<n>`. Even powers are asymmetric and create even
+    /// harmonics (e.g. the hardening–softening beam's `k2 u² + k3 u³`).
+    Polynomial {
+        /// Stiffness terms `k_n uⁿ`.
+        stiffness: Vec<PolyTerm>,
+        /// Damping terms `c_n u̇ⁿ`.
+        damping: Vec<PolyTerm>,
+    },
+    /// Clearance, thesis eq. (6): `g = k1 (u − e1)^r` for `u > e1`, `g = −k2 (−u − e2)^s` for
+    /// `u < −e2`, zero in the gap `−e2 ≤ u ≤ e1`. The negative side is written with
+    /// `|u + e2|` so that it restores for any real exponent (eq. 6 as printed equals it for odd
+    /// integer `s`). A one-sided bump stop is `k2 = 0`. Gaps in m, exponents ≥ 1.
+    Clearance {
+        /// Contact stiffness on the positive side (N/m^r).
+        k1: f64,
+        /// Contact stiffness on the negative side (N/m^s).
+        k2: f64,
+        /// Positive-side gap (m).
+        e1: f64,
+        /// Negative-side gap (m).
+        e2: f64,
+        /// Positive-side exponent (≥ 1).
+        r: f64,
+        /// Negative-side exponent (≥ 1).
+        s: f64,
+    },
+    /// Quadratic damping `g = c2 u̇ |u̇|`, thesis eq. (7); `c2` in N s²/m².
+    QuadraticDamping {
+        /// Quadratic damping coefficient (N s²/m²).
+        c2: f64,
+    },
+    /// Coulomb friction regularised by `tanh`: `g = fc tanh(u̇ / v_reg)`.
+    Coulomb {
+        /// Friction (slip) force (N).
+        fc: f64,
+        /// Regularisation velocity (m/s): below it the law is a steep viscous damper.
+        v_reg: f64,
+    },
+    /// Elastic dry friction (Jenkins element): a spring `kt` in series with a slider that slips
+    /// at force `fs`. History state: the slider position `z` (m); `g = kt (u − z)` while
+    /// `|kt (u − z)| ≤ fs` (stick), `g = ±fs` in slip.
+    Jenkins {
+        /// Tangential (stick) stiffness (N/m).
+        kt: f64,
+        /// Slip force (N).
+        fs: f64,
+    },
+}
+
+impl Law {
+    /// The law's type name as used in model files.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Law::Cubic { .. } => "cubic",
+            Law::Polynomial { .. } => "polynomial",
+            Law::Clearance { .. } => "clearance",
+            Law::QuadraticDamping { .. } => "quadratic_damping",
+            Law::Coulomb { .. } => "coulomb",
+            Law::Jenkins { .. } => "jenkins",
+        }
+    }
+
+    /// A one-sided bump stop: contact stiffness `k` beyond gap `gap`, linear (`r = 1`).
+    pub fn bump_stop(k: f64, gap: f64) -> Self {
+        Law::Clearance {
+            k1: k,
+            k2: 0.0,
+            e1: gap,
+            e2: 0.0,
+            r: 1.0,
+            s: 1.0,
+        }
+    }
+
+    /// Number of named parameters.
+    pub fn n_params(&self) -> usize {
+        match self {
+            Law::Cubic { .. } | Law::QuadraticDamping { .. } => 1,
+            Law::Polynomial { stiffness, damping } => stiffness.len() + damping.len(),
+            Law::Clearance { .. } => 6,
+            Law::Coulomb { .. } | Law::Jenkins { .. } => 2,
+        }
+    }
+
+    /// Name of parameter `i` (`k3`, `e1`, …); `i < n_params()`.
+    pub fn param_name(&self, i: usize) -> String {
+        match self {
+            Law::Cubic { .. } => "k3".into(),
+            Law::QuadraticDamping { .. } => "c2".into(),
+            Law::Polynomial { stiffness, damping } => {
+                if i < stiffness.len() {
+                    format!("k{}", stiffness[i].power)
+                } else {
+                    format!("c{}", damping[i - stiffness.len()].power)
+                }
+            }
+            Law::Clearance { .. } => ["k1", "k2", "e1", "e2", "r", "s"][i].into(),
+            Law::Coulomb { .. } => ["fc", "v_reg"][i].into(),
+            Law::Jenkins { .. } => ["kt", "fs"][i].into(),
+        }
+    }
+
+    /// Value of parameter `i`.
+    pub fn param(&self, i: usize) -> f64 {
+        match self {
+            Law::Cubic { k3 } => *k3,
+            Law::QuadraticDamping { c2 } => *c2,
+            Law::Polynomial { stiffness, damping } => {
+                if i < stiffness.len() {
+                    stiffness[i].coef
+                } else {
+                    damping[i - stiffness.len()].coef
+                }
+            }
+            Law::Clearance {
+                k1,
+                k2,
+                e1,
+                e2,
+                r,
+                s,
+            } => [*k1, *k2, *e1, *e2, *r, *s][i],
+            Law::Coulomb { fc, v_reg } => [*fc, *v_reg][i],
+            Law::Jenkins { kt, fs } => [*kt, *fs][i],
+        }
+    }
+
+    fn param_mut(&mut self, i: usize) -> &mut f64 {
+        match self {
+            Law::Cubic { k3 } => k3,
+            Law::QuadraticDamping { c2 } => c2,
+            Law::Polynomial { stiffness, damping } => {
+                let ns = stiffness.len();
+                if i < ns {
+                    &mut stiffness[i].coef
+                } else {
+                    &mut damping[i - ns].coef
+                }
+            }
+            Law::Clearance {
+                k1,
+                k2,
+                e1,
+                e2,
+                r,
+                s,
+            } => match i {
+                0 => k1,
+                1 => k2,
+                2 => e1,
+                3 => e2,
+                4 => r,
+                _ => s,
+            },
+            Law::Coulomb { fc, v_reg } => {
+                if i == 0 {
+                    fc
+                } else {
+                    v_reg
+                }
+            }
+            Law::Jenkins { kt, fs } => {
+                if i == 0 {
+                    kt
+                } else {
+                    fs
+                }
+            }
+        }
+    }
+
+    /// Sets parameter `i` to `value`, keeping the old value if the law would become invalid.
+    /// `element` names the element in the error.
+    pub fn set_param(&mut self, element: &str, i: usize, value: f64) -> Result<()> {
+        if i >= self.n_params() {
+            return Err(Error::invalid(
+                format!("parameter index {i} of element '{element}'"),
+                format!("the {} law has {} parameters", self.kind(), self.n_params()),
+            ));
+        }
+        let old = self.param(i);
+        *self.param_mut(i) = value;
+        if let Err(e) = self.validate(element) {
+            *self.param_mut(i) = old;
+            return Err(e);
+        }
+        Ok(())
+    }
+
+    /// Checks every parameter for finiteness and range; `element` names the element in errors.
+    pub fn validate(&self, element: &str) -> Result<()> {
+        let name = |p: &str| format!("{element}.{p}");
+        for i in 0..self.n_params() {
+            let v = self.param(i);
+            if !v.is_finite() {
+                return Err(Error::InvalidParameter {
+                    name: name(&self.param_name(i)),
+                    value: v,
+                    reason: "must be finite".into(),
+                });
+            }
+        }
+        let nonneg = |p: &str, v: f64, what: &str| {
+            if v < 0.0 {
+                Err(Error::InvalidParameter {
+                    name: name(p),
+                    value: v,
+                    reason: format!("{what} must be >= 0"),
+                })
+            } else {
+                Ok(())
+            }
+        };
+        match self {
+            Law::Cubic { .. } => Ok(()),
+            Law::QuadraticDamping { c2 } => nonneg("c2", *c2, "a damping coefficient"),
+            Law::Polynomial { stiffness, damping } => {
+                if stiffness.is_empty() && damping.is_empty() {
+                    return Err(Error::invalid(
+                        format!("element '{element}'"),
+                        "a polynomial law needs at least one stiffness or damping term",
+                    ));
+                }
+                for (terms, prefix) in [(stiffness, 'k'), (damping, 'c')] {
+                    for (a, t) in terms.iter().enumerate() {
+                        if t.power == 0 || t.power > 15 {
+                            return Err(Error::InvalidParameter {
+                                name: name(&format!("{prefix}{}", t.power)),
+                                value: t.power as f64,
+                                reason: "powers must be integers from 1 to 15".into(),
+                            });
+                        }
+                        if terms[..a].iter().any(|o| o.power == t.power) {
+                            return Err(Error::DuplicateName {
+                                what: "polynomial term".into(),
+                                name: name(&format!("{prefix}{}", t.power)),
+                            });
+                        }
+                    }
+                }
+                Ok(())
+            }
+            Law::Clearance {
+                k1,
+                k2,
+                e1,
+                e2,
+                r,
+                s,
+            } => {
+                nonneg("k1", *k1, "a contact stiffness")?;
+                nonneg("k2", *k2, "a contact stiffness")?;
+                for (p, v) in [("r", *r), ("s", *s)] {
+                    if v < 1.0 {
+                        return Err(Error::InvalidParameter {
+                            name: name(p),
+                            value: v,
+                            reason: "a contact exponent must be >= 1 (smaller ones give an infinite stiffness at first contact)".into(),
+                        });
+                    }
+                }
+                if e1 + e2 < 0.0 {
+                    return Err(Error::InvalidParameter {
+                        name: name("e1"),
+                        value: *e1,
+                        reason: format!(
+                            "the contact regions overlap: need e1 + e2 >= 0, e2 = {e2:e}"
+                        ),
+                    });
+                }
+                Ok(())
+            }
+            Law::Coulomb { fc, v_reg } => {
+                nonneg("fc", *fc, "a friction force")?;
+                if *v_reg <= 0.0 {
+                    return Err(Error::InvalidParameter {
+                        name: name("v_reg"),
+                        value: *v_reg,
+                        reason: "the regularisation velocity must be > 0".into(),
+                    });
+                }
+                Ok(())
+            }
+            Law::Jenkins { kt, fs } => {
+                if *kt <= 0.0 {
+                    return Err(Error::InvalidParameter {
+                        name: name("kt"),
+                        value: *kt,
+                        reason: "the stick stiffness must be > 0".into(),
+                    });
+                }
+                nonneg("fs", *fs, "a slip force")
+            }
+        }
+    }
+
+    /// Number of history variables the law carries (1 for Jenkins: the slider position).
+    pub fn n_states(&self) -> usize {
+        match self {
+            Law::Jenkins { .. } => 1,
+            _ => 0,
+        }
+    }
+
+    /// True when the force or its derivative has kinks (clearance, Jenkins): harmonic balance
+    /// should sample such laws more densely and the time integrator should locate events.
+    pub fn is_nonsmooth(&self) -> bool {
+        matches!(self, Law::Clearance { .. } | Law::Jenkins { .. })
+    }
+
+    /// Force and derivatives at displacement `u` (m) and velocity `v` (m/s), given the committed
+    /// history `state` (length [`Law::n_states`]). Allocation-free.
+    ///
+    /// At a kink (`u = e1` or `u = −e2` of the clearance, the stick–slip limit of Jenkins) the
+    /// derivative returned is the one of the gap/stick side.
+    #[inline]
+    pub fn eval(&self, u: f64, v: f64, state: &[f64]) -> LawEval {
+        match self {
+            Law::Cubic { k3 } => LawEval {
+                force: k3 * u * u * u,
+                df_du: 3.0 * k3 * u * u,
+                df_dv: 0.0,
+            },
+            Law::Polynomial { stiffness, damping } => {
+                let mut e = LawEval::default();
+                for t in stiffness {
+                    let p = t.power as i32;
+                    e.force += t.coef * u.powi(p);
+                    e.df_du += t.coef * p as f64 * u.powi(p - 1);
+                }
+                for t in damping {
+                    let p = t.power as i32;
+                    e.force += t.coef * v.powi(p);
+                    e.df_dv += t.coef * p as f64 * v.powi(p - 1);
+                }
+                e
+            }
+            Law::Clearance {
+                k1,
+                k2,
+                e1,
+                e2,
+                r,
+                s,
+            } => {
+                let d1 = u - e1;
+                let d2 = -u - e2;
+                if d1 > 0.0 {
+                    LawEval {
+                        force: k1 * d1.powf(*r),
+                        df_du: k1 * r * d1.powf(r - 1.0),
+                        df_dv: 0.0,
+                    }
+                } else if d2 > 0.0 {
+                    LawEval {
+                        force: -k2 * d2.powf(*s),
+                        df_du: k2 * s * d2.powf(s - 1.0),
+                        df_dv: 0.0,
+                    }
+                } else {
+                    LawEval::default()
+                }
+            }
+            Law::QuadraticDamping { c2 } => LawEval {
+                force: c2 * v * v.abs(),
+                df_du: 0.0,
+                df_dv: 2.0 * c2 * v.abs(),
+            },
+            Law::Coulomb { fc, v_reg } => {
+                let t = (v / v_reg).tanh();
+                LawEval {
+                    force: fc * t,
+                    df_du: 0.0,
+                    df_dv: fc / v_reg * (1.0 - t * t),
+                }
+            }
+            Law::Jenkins { kt, fs } => {
+                let trial = kt * (u - state[0]);
+                if trial.abs() <= *fs {
+                    LawEval {
+                        force: trial,
+                        df_du: *kt,
+                        df_dv: 0.0,
+                    }
+                } else {
+                    LawEval {
+                        force: fs.copysign(trial),
+                        df_du: 0.0,
+                        df_dv: 0.0,
+                    }
+                }
+            }
+        }
+    }
+
+    /// Commits the history after a converged step at `(u, v)`: the Jenkins slider moves so that
+    /// the spring force is at the slip limit. No-op for memoryless laws.
+    #[inline]
+    pub fn commit_state(&self, u: f64, _v: f64, state: &mut [f64]) {
+        if let Law::Jenkins { kt, fs } = self {
+            let trial = kt * (u - state[0]);
+            if trial.abs() > *fs {
+                state[0] = u - fs.copysign(trial) / kt;
+            }
+        }
+    }
+
+    /// `∂g/∂p_i` for every parameter, written into `out` (length [`Law::n_params`]), at fixed
+    /// committed `state`. The derivative of `r`, `s` at the contact point is its limit 0.
+    pub fn dforce_dparams(&self, u: f64, v: f64, state: &[f64], out: &mut [f64]) {
+        assert_eq!(
+            out.len(),
+            self.n_params(),
+            "dforce_dparams: wrong output length"
+        );
+        match self {
+            Law::Cubic { .. } => out[0] = u * u * u,
+            Law::QuadraticDamping { .. } => out[0] = v * v.abs(),
+            Law::Polynomial { stiffness, damping } => {
+                let ns = stiffness.len();
+                for (o, t) in out[..ns].iter_mut().zip(stiffness) {
+                    *o = u.powi(t.power as i32);
+                }
+                for (o, t) in out[ns..].iter_mut().zip(damping) {
+                    *o = v.powi(t.power as i32);
+                }
+            }
+            Law::Clearance {
+                k1,
+                k2,
+                e1,
+                e2,
+                r,
+                s,
+            } => {
+                out.fill(0.0);
+                let d1 = u - e1;
+                let d2 = -u - e2;
+                if d1 > 0.0 {
+                    let p = d1.powf(*r);
+                    out[0] = p;
+                    out[2] = -k1 * r * d1.powf(r - 1.0);
+                    out[4] = k1 * p * d1.ln();
+                } else if d2 > 0.0 {
+                    let p = d2.powf(*s);
+                    out[1] = -p;
+                    out[3] = k2 * s * d2.powf(s - 1.0);
+                    out[5] = -k2 * p * d2.ln();
+                }
+            }
+            Law::Coulomb { fc, v_reg } => {
+                let x = v / v_reg;
+                let t = x.tanh();
+                out[0] = t;
+                out[1] = -fc * (1.0 - t * t) * x / v_reg;
+            }
+            Law::Jenkins { kt, fs } => {
+                let trial = kt * (u - state[0]);
+                if trial.abs() <= *fs {
+                    out[0] = u - state[0];
+                    out[1] = 0.0;
+                } else {
+                    out[0] = 0.0;
+                    out[1] = 1.0_f64.copysign(trial);
+                }
+            }
+        }
+    }
+}
+
+/// The coordinate an element acts on: `u = Σ w_i q_i` over a few DOFs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Coupling {
+    dofs: Vec<usize>,
+    weights: Vec<f64>,
+}
+
+impl Coupling {
+    /// One DOF relative to ground: `u = q_dof`.
+    pub fn single(dof: usize) -> Self {
+        Coupling {
+            dofs: vec![dof],
+            weights: vec![1.0],
+        }
+    }
+
+    /// Relative motion of two DOFs: `u = q_a − q_b`.
+    pub fn relative(a: usize, b: usize) -> Self {
+        Coupling {
+            dofs: vec![a, b],
+            weights: vec![1.0, -1.0],
+        }
+    }
+
+    /// A general direction `u = Σ w_i q_i` (e.g. a scaled DOF, or a skewed contact normal).
+    pub fn weighted(terms: &[(usize, f64)]) -> Result<Self> {
+        if terms.is_empty() {
+            return Err(Error::invalid("element coupling", "needs at least one DOF"));
+        }
+        for (k, &(d, w)) in terms.iter().enumerate() {
+            if !w.is_finite() || w == 0.0 {
+                return Err(Error::invalid(
+                    "element coupling",
+                    format!("weight {w} of term {} must be finite and non-zero", k + 1),
+                ));
+            }
+            if terms[..k].iter().any(|&(o, _)| o == d) {
+                return Err(Error::invalid(
+                    "element coupling",
+                    format!("DOF index {d} appears twice"),
+                ));
+            }
+        }
+        Ok(Coupling {
+            dofs: terms.iter().map(|t| t.0).collect(),
+            weights: terms.iter().map(|t| t.1).collect(),
+        })
+    }
+
+    /// DOF indices involved.
+    pub fn dofs(&self) -> &[usize] {
+        &self.dofs
+    }
+
+    /// Their weights.
+    pub fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+
+    /// `u = Σ w_i q_i`.
+    #[inline]
+    pub fn coordinate(&self, q: &[f64]) -> f64 {
+        self.dofs
+            .iter()
+            .zip(&self.weights)
+            .map(|(&d, &w)| w * q[d])
+            .sum()
+    }
+
+    /// `out += w g`: adds the element force `g` to a DOF-space vector.
+    #[inline]
+    pub fn scatter_add(&self, g: f64, out: &mut [f64]) {
+        for (&d, &w) in self.dofs.iter().zip(&self.weights) {
+            out[d] += w * g;
+        }
+    }
+}
+
+/// A named nonlinear element: a law acting on a coupling coordinate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NonlinearElement {
+    name: String,
+    law: Law,
+    coupling: Coupling,
+}
+
+impl NonlinearElement {
+    /// A validated element. Names are identifiers: letters, digits, `_`, `-`.
+    pub fn new(name: impl Into<String>, law: Law, coupling: Coupling) -> Result<Self> {
+        let name = name.into();
+        if name.is_empty()
+            || !name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+        {
+            return Err(Error::invalid(
+                format!("element name '{name}'"),
+                "use letters, digits, '_' and '-' only (it prefixes parameter names, e.g. tip.k3)",
+            ));
+        }
+        law.validate(&name)?;
+        Ok(NonlinearElement {
+            name,
+            law,
+            coupling,
+        })
+    }
+
+    /// The element's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Its force law.
+    pub fn law(&self) -> &Law {
+        &self.law
+    }
+
+    /// Its coordinate.
+    pub fn coupling(&self) -> &Coupling {
+        &self.coupling
+    }
+
+    /// Full name of parameter `i`: `element.param`.
+    pub fn param_full_name(&self, i: usize) -> String {
+        format!("{}.{}", self.name, self.law.param_name(i))
+    }
+
+    /// Sets parameter `i` with range checking.
+    pub fn set_param(&mut self, i: usize, value: f64) -> Result<()> {
+        self.law.set_param(&self.name, i, value)
+    }
+}

@@ -1,0 +1,39 @@
+//! # nlsim-kernel
+//!
+//! The model layer of nlsim: a large linear finite-element structure
+//! `M q̈ + V q̇ + K q + f_NL(q, q̇) = f(t)` (Chen 2016, eq. 4) with a handful of local nonlinear
+//! elements. Everything else in nlsim builds on these types:
+//!
+//! - [`SparseSym`]: sparse symmetric mass/stiffness/damping matrices on faer, assembled from
+//!   triplets;
+//! - [`DofMap`] and [`DofLabel`]: human DOF labels such as `12:uz`;
+//! - [`Damping`]: Rayleigh, modal (per mode or per band) or an explicit matrix;
+//! - [`Law`] and [`NonlinearElement`]: the element library with force, state derivatives and
+//!   parameter derivatives;
+//! - [`Model`]: all of it together, with validation that names what is wrong and where;
+//! - [`Error`]: the one error type of the numeric crates.
+//!
+//! Units are SI throughout: m, kg, s, N, rad; frequencies in Hz where named `*_hz`, rad/s
+//! otherwise.
+
+pub mod damping;
+pub mod dof;
+pub mod element;
+pub mod error;
+pub mod linalg;
+pub mod model;
+pub mod sparse;
+#[cfg(any(test, feature = "test-util"))]
+pub mod testing;
+
+pub use damping::{Damping, DampingBand, ModalDamping};
+pub use dof::{Component, DofLabel, DofMap};
+pub use element::{Coupling, Law, LawEval, NonlinearElement, PolyTerm};
+pub use error::{Error, Result};
+pub use model::{
+    Excitation, Model, ParamId, ParameterSet, Quantity, Sensor, ValidationConfig, ValidationReport,
+};
+pub use sparse::SparseSym;
+
+/// faer, re-exported so that users of nlsim build matrices with the same version.
+pub use faer;

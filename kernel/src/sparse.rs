@@ -1,0 +1,299 @@
+//! Sparse symmetric structural matrices (mass, stiffness, damping) on faer.
+//!
+//! Both triangles are stored (compressed sparse columns), so products need no
+//! special casing and a factorisation can read either side. Assembly sums repeated
+//! entries, the way finite-element assembly expects.
+
+use crate::error::{Error, Result};
+use faer::sparse::{SparseColMat, SparseColMatRef, Triplet};
+use faer::{Mat, Side};
+
+/// An `n × n` sparse matrix that is meant to be symmetric (checked by [`SparseSym::symmetry_defect`]).
+#[derive(Debug, Clone)]
+pub struct SparseSym {
+    mat: SparseColMat<usize, f64>,
+}
+
+/// The worst asymmetric entry pair of a matrix.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SymmetryDefect {
+    /// Row of the worst entry.
+    pub row: usize,
+    /// Column of the worst entry.
+    pub col: usize,
+    /// `A[row, col]`.
+    pub a_ij: f64,
+    /// `A[col, row]`.
+    pub a_ji: f64,
+    /// `|a_ij − a_ji| / max|A|`.
+    pub rel_diff: f64,
+}
+
+impl SparseSym {
+    /// Assembles an `n × n` matrix from `(row, col, value)` triplets, summing repeats.
+    ///
+    /// Both triangles must be given (as FE assembly of full element matrices does); use
+    /// [`SparseSym::from_lower_triplets`] when only one triangle is at hand.
+    pub fn from_triplets(name: &str, n: usize, triplets: &[(usize, usize, f64)]) -> Result<Self> {
+        let mut t = Vec::with_capacity(triplets.len());
+        for &(row, col, val) in triplets {
+            if row >= n || col >= n {
+                return Err(Error::IndexOutOfRange {
+                    matrix: name.to_string(),
+                    row,
+                    col,
+                    n,
+                });
+            }
+            t.push(Triplet::new(row, col, val));
+        }
+        Self::from_faer_triplets(name, n, &t)
+    }
+
+    /// Assembles from the entries of one triangle (either), mirroring off-diagonal entries.
+    ///
+    /// An off-diagonal pair given on both sides would be counted twice, so each
+    /// `(i, j)` with `i ≠ j` must appear on one side only.
+    pub fn from_lower_triplets(
+        name: &str,
+        n: usize,
+        triplets: &[(usize, usize, f64)],
+    ) -> Result<Self> {
+        let mut full = Vec::with_capacity(2 * triplets.len());
+        for &(r, c, v) in triplets {
+            full.push((r, c, v));
+            if r != c {
+                full.push((c, r, v));
+            }
+        }
+        Self::from_triplets(name, n, &full)
+    }
+
+    pub(crate) fn from_faer_triplets(
+        name: &str,
+        n: usize,
+        t: &[Triplet<usize, usize, f64>],
+    ) -> Result<Self> {
+        let mat = SparseColMat::try_new_from_triplets(n, n, t).map_err(|e| Error::Numerical {
+            what: format!("assembly of {name}"),
+            detail: format!("{e:?}"),
+        })?;
+        Ok(SparseSym { mat })
+    }
+
+    /// Wraps a faer matrix; fails unless it is square.
+    pub fn from_faer(name: &str, mat: SparseColMat<usize, f64>) -> Result<Self> {
+        if mat.nrows() != mat.ncols() {
+            return Err(Error::DimensionMismatch {
+                what: format!("{name} columns (must be square)"),
+                expected: mat.nrows(),
+                found: mat.ncols(),
+            });
+        }
+        Ok(SparseSym { mat })
+    }
+
+    /// A dense matrix given row by row, keeping its nonzero entries.
+    pub fn from_dense_rows(name: &str, rows: &[Vec<f64>]) -> Result<Self> {
+        let n = rows.len();
+        let mut t = Vec::new();
+        for (i, row) in rows.iter().enumerate() {
+            if row.len() != n {
+                return Err(Error::DimensionMismatch {
+                    what: format!("{name} row {} length", i + 1),
+                    expected: n,
+                    found: row.len(),
+                });
+            }
+            for (j, &v) in row.iter().enumerate() {
+                if v != 0.0 {
+                    t.push((i, j, v));
+                }
+            }
+        }
+        Self::from_triplets(name, n, &t)
+    }
+
+    /// The diagonal matrix `diag(d)`.
+    pub fn diagonal(name: &str, d: &[f64]) -> Result<Self> {
+        let t: Vec<_> = d.iter().enumerate().map(|(i, &v)| (i, i, v)).collect();
+        Self::from_triplets(name, d.len(), &t)
+    }
+
+    /// Order `n` of the matrix.
+    pub fn n(&self) -> usize {
+        self.mat.nrows()
+    }
+
+    /// Number of stored entries (both triangles).
+    pub fn nnz(&self) -> usize {
+        self.mat.compute_nnz()
+    }
+
+    /// The faer matrix (both triangles stored).
+    pub fn as_faer(&self) -> SparseColMatRef<'_, usize, f64> {
+        self.mat.as_ref()
+    }
+
+    /// Column `j` as (row indices, values).
+    pub fn col(&self, j: usize) -> (&[usize], &[f64]) {
+        let m = self.mat.as_ref();
+        (m.row_idx_of_col_raw(j), m.val_of_col(j))
+    }
+
+    /// Iterates over all stored entries as `(row, col, value)`.
+    pub fn entries(&self) -> impl Iterator<Item = (usize, usize, f64)> + '_ {
+        (0..self.n()).flat_map(move |j| {
+            let (rows, vals) = self.col(j);
+            rows.iter().zip(vals).map(move |(&i, &v)| (i, j, v))
+        })
+    }
+
+    /// Entry `A[i, j]` (zero when not stored).
+    pub fn get(&self, i: usize, j: usize) -> f64 {
+        let (rows, vals) = self.col(j);
+        rows.binary_search(&i).map_or(0.0, |p| vals[p])
+    }
+
+    /// The diagonal.
+    pub fn diag(&self) -> Vec<f64> {
+        (0..self.n()).map(|i| self.get(i, i)).collect()
+    }
+
+    /// Largest absolute entry.
+    pub fn max_abs(&self) -> f64 {
+        self.mat.val().iter().fold(0.0_f64, |m, v| m.max(v.abs()))
+    }
+
+    /// The first entry (in column order) that is NaN or infinite.
+    pub fn first_non_finite(&self) -> Option<(usize, usize, f64)> {
+        self.entries().find(|(_, _, v)| !v.is_finite())
+    }
+
+    /// The worst pair `|A[i,j] − A[j,i]|` relative to `max|A|` (None for a zero matrix).
+    pub fn symmetry_defect(&self) -> Option<SymmetryDefect> {
+        let scale = self.max_abs();
+        if scale == 0.0 || !scale.is_finite() {
+            return None;
+        }
+        let mut worst: Option<SymmetryDefect> = None;
+        for (i, j, a_ij) in self.entries() {
+            if i <= j {
+                // Each unordered pair is visited from its lower entry; an upper entry with no
+                // stored mirror is caught when the mirror is read as zero below.
+                if i == j {
+                    continue;
+                }
+                let a_ji = self.get(j, i);
+                if a_ji == 0.0 {
+                    let d = a_ij.abs() / scale;
+                    if worst.is_none_or(|w| d > w.rel_diff) {
+                        worst = Some(SymmetryDefect {
+                            row: i,
+                            col: j,
+                            a_ij,
+                            a_ji,
+                            rel_diff: d,
+                        });
+                    }
+                }
+                continue;
+            }
+            let a_ji = self.get(j, i);
+            let d = (a_ij - a_ji).abs() / scale;
+            if worst.is_none_or(|w| d > w.rel_diff) {
+                worst = Some(SymmetryDefect {
+                    row: i,
+                    col: j,
+                    a_ij,
+                    a_ji,
+                    rel_diff: d,
+                });
+            }
+        }
+        worst
+    }
+
+    /// `y = A x`.
+    pub fn mul_vec(&self, x: &[f64], y: &mut [f64]) {
+        assert_eq!(x.len(), self.n(), "mul_vec: x has the wrong length");
+        assert_eq!(y.len(), self.n(), "mul_vec: y has the wrong length");
+        y.fill(0.0);
+        for (j, &xj) in x.iter().enumerate() {
+            if xj == 0.0 {
+                continue;
+            }
+            let (rows, vals) = self.col(j);
+            for (&i, &v) in rows.iter().zip(vals) {
+                y[i] += v * xj;
+            }
+        }
+    }
+
+    /// The quadratic form `xᵀ A y`.
+    pub fn bilinear(&self, x: &[f64], y: &[f64]) -> f64 {
+        let mut s = 0.0;
+        for (j, &yj) in y.iter().enumerate() {
+            let (rows, vals) = self.col(j);
+            let mut c = 0.0;
+            for (&i, &v) in rows.iter().zip(vals) {
+                c += v * x[i];
+            }
+            s += c * yj;
+        }
+        s
+    }
+
+    /// `a A + b B` for matrices of the same order (the union of both patterns).
+    pub fn linear_combination(
+        name: &str,
+        a: f64,
+        am: &SparseSym,
+        b: f64,
+        bm: &SparseSym,
+    ) -> Result<Self> {
+        if am.n() != bm.n() {
+            return Err(Error::DimensionMismatch {
+                what: format!("{name}: orders of the combined matrices"),
+                expected: am.n(),
+                found: bm.n(),
+            });
+        }
+        let mut t = Vec::with_capacity(am.nnz() + bm.nnz());
+        t.extend(am.entries().map(|(i, j, v)| Triplet::new(i, j, a * v)));
+        t.extend(bm.entries().map(|(i, j, v)| Triplet::new(i, j, b * v)));
+        Self::from_faer_triplets(name, am.n(), &t)
+    }
+
+    /// The same matrix scaled by `s`.
+    pub fn scaled(&self, s: f64) -> Self {
+        let mut mat = self.mat.clone();
+        for v in mat.val_mut() {
+            *v *= s;
+        }
+        SparseSym { mat }
+    }
+
+    /// The dense copy (for tests and small models).
+    pub fn to_dense(&self) -> Mat<f64> {
+        let n = self.n();
+        let mut d = Mat::zeros(n, n);
+        for (i, j, v) in self.entries() {
+            d[(i, j)] += v;
+        }
+        d
+    }
+
+    /// Attempts a sparse Cholesky factorisation `A = L Lᵀ` (fill-reducing ordering by faer);
+    /// `Err` carries the failing elimination step.
+    pub fn cholesky(
+        &self,
+    ) -> core::result::Result<faer::sparse::linalg::solvers::Llt<usize, f64>, usize> {
+        self.mat.sp_cholesky(Side::Lower).map_err(|e| match e {
+            faer::sparse::linalg::LltError::Numeric(
+                faer::linalg::cholesky::llt::factor::LltError::NonPositivePivot { index },
+            ) => index,
+            _ => usize::MAX,
+        })
+    }
+}

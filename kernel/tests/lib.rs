@@ -1,0 +1,615 @@
+//! Tests of nlsim-kernel: element derivatives against finite differences, sparse assembly,
+//! DOF labels and model validation.
+
+use nlsim_kernel::testing::check_fd;
+use nlsim_kernel::*;
+use proptest::prelude::*;
+
+mod elements {
+    use super::*;
+
+    /// A valid law with parameters on realistic scales.
+    fn law_strategy() -> impl Strategy<Value = Law> {
+        let pos = |lo: f64, hi: f64| (lo.ln()..hi.ln()).prop_map(f64::exp);
+        prop_oneof![
+            (pos(1e6, 1e13), any::<bool>()).prop_map(|(k, neg)| Law::Cubic {
+                k3: if neg { -k } else { k }
+            }),
+            (
+                proptest::collection::btree_map(1u32..6, -1e8..1e8f64, 1..4),
+                proptest::collection::btree_map(1u32..4, -1e3..1e3f64, 0..3)
+            )
+                .prop_map(|(s, d)| Law::Polynomial {
+                    stiffness: s
+                        .into_iter()
+                        .map(|(power, coef)| PolyTerm { power, coef })
+                        .collect(),
+                    damping: d
+                        .into_iter()
+                        .map(|(power, coef)| PolyTerm { power, coef })
+                        .collect(),
+                }),
+            (
+                pos(1e3, 1e8),
+                pos(1e3, 1e8),
+                0.0..5e-3f64,
+                0.0..5e-3f64,
+                1.0..3.0f64,
+                1.0..3.0f64
+            )
+                .prop_map(|(k1, k2, e1, e2, r, s)| Law::Clearance {
+                    k1,
+                    k2,
+                    e1,
+                    e2,
+                    r,
+                    s
+                }),
+            pos(1e-2, 1e3).prop_map(|c2| Law::QuadraticDamping { c2 }),
+            (pos(1e-2, 1e2), pos(1e-4, 1e-1)).prop_map(|(fc, v_reg)| Law::Coulomb { fc, v_reg }),
+            (pos(1e3, 1e8), pos(1e-2, 1e2)).prop_map(|(kt, fs)| Law::Jenkins { kt, fs }),
+        ]
+    }
+
+    /// Distance (m) from `u` to the nearest kink of the law at history `z`.
+    fn kink_distance(law: &Law, u: f64, z: f64) -> f64 {
+        match law {
+            Law::Clearance { e1, e2, .. } => (u - e1).abs().min((u + e2).abs()),
+            Law::Jenkins { kt, fs } => ((u - z).abs() - fs / kt).abs(),
+            _ => f64::INFINITY,
+        }
+    }
+
+    /// A scale for FD steps in parameter `i` (gaps and exponents are not scale-free).
+    fn param_scale(law: &Law, i: usize) -> f64 {
+        match (law, i) {
+            (Law::Clearance { .. }, 2 | 3) => 1e-3,
+            (Law::Clearance { .. }, 4 | 5) => 1.0,
+            _ => law.param(i).abs().max(1e-12),
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 2000, ..ProptestConfig::default() })]
+
+        /// ∂g/∂u, ∂g/∂u̇ and every ∂g/∂p against central differences, away from kinks.
+        #[test]
+        fn derivatives_match_finite_differences(
+            law in law_strategy(),
+            u in -1e-2..1e-2f64,
+            v in -1.0..1.0f64,
+            z in -5e-3..5e-3f64,
+        ) {
+            let state = [z];
+            let st = &state[..law.n_states()];
+            // FD steps reach 1e-6 of the scale on each side; keep them off the kinks.
+            prop_assume!(kink_distance(&law, u, z) > 1e-6);
+            let e = law.eval(u, v, st);
+            check_fd("dg/du", |x| law.eval(x, v, st).force, u, 1e-3, e.df_du, 1e-6).map_err(TestCaseError::fail)?;
+            check_fd("dg/dv", |x| law.eval(u, x, st).force, v, 1e-1, e.df_dv, 1e-6).map_err(TestCaseError::fail)?;
+            let mut dp = vec![0.0; law.n_params()];
+            law.dforce_dparams(u, v, st, &mut dp);
+            for i in 0..law.n_params() {
+                let scale = param_scale(&law, i);
+                // Parameter steps must not move a gap across u either.
+                if matches!(law, Law::Clearance { .. }) && (i == 2 || i == 3) {
+                    prop_assume!(kink_distance(&law, u, z) > 1e-6 * scale.max(law.param(i).abs()) * 4.0);
+                }
+                let f = |p: f64| {
+                    let mut l = law.clone();
+                    *param_slot(&mut l, i) = p;
+                    l.eval(u, v, st).force
+                };
+                check_fd(&format!("dg/d{}", law.param_name(i)), f, law.param(i), scale, dp[i], 1e-6)
+                    .map_err(TestCaseError::fail)?;
+            }
+        }
+    }
+
+    /// Sets a parameter without validation (FD steps may leave the admissible range).
+    fn param_slot(law: &mut Law, i: usize) -> &mut f64 {
+        match law {
+            Law::Cubic { k3 } => k3,
+            Law::QuadraticDamping { c2 } => c2,
+            Law::Polynomial { stiffness, damping } => {
+                let ns = stiffness.len();
+                if i < ns {
+                    &mut stiffness[i].coef
+                } else {
+                    &mut damping[i - ns].coef
+                }
+            }
+            Law::Clearance {
+                k1,
+                k2,
+                e1,
+                e2,
+                r,
+                s,
+            } => [k1, k2, e1, e2, r, s].into_iter().nth(i).unwrap(),
+            Law::Coulomb { fc, v_reg } => [fc, v_reg].into_iter().nth(i).unwrap(),
+            Law::Jenkins { kt, fs } => [kt, fs].into_iter().nth(i).unwrap(),
+        }
+    }
+
+    /// Approaching each clearance kink from both sides: one-sided differences with steps
+    /// smaller than the distance to the kink match the analytic derivative of that side, and
+    /// the force is continuous across it.
+    #[test]
+    fn clearance_kinks_from_both_sides() {
+        for (r, s) in [(1.0, 1.0), (1.5, 2.0), (3.0, 3.0)] {
+            let law = Law::Clearance {
+                k1: 2e5,
+                k2: 5e4,
+                e1: 1e-3,
+                e2: 2e-3,
+                r,
+                s,
+            };
+            for kink in [1e-3, -2e-3] {
+                for delta in [1e-5, 1e-7, 1e-9] {
+                    for side in [-1.0, 1.0] {
+                        let u = kink + side * delta;
+                        let h = delta / 8.0;
+                        let e = law.eval(u, 0.0, &[]);
+                        let fd = (law.eval(u + h, 0.0, &[]).force
+                            - law.eval(u - h, 0.0, &[]).force)
+                            / (2.0 * h);
+                        // Central-difference truncation bound h^2/6 max|g'''|, with g''' of
+                        // k d^p largest at the nearest distance d = delta - h to the kink; plus
+                        // the round-off of u - e (eps |u|) times the slope, over 2h.
+                        let d_min = delta - h;
+                        let third = |k: f64, p: f64| {
+                            (k * p * (p - 1.0) * (p - 2.0)).abs() * d_min.powf(p - 3.0)
+                        };
+                        let trunc = h * h / 6.0 * third(2e5, r).max(third(5e4, s));
+                        let round = 4.0 * f64::EPSILON * u.abs() * e.df_du.abs() / h;
+                        assert!(
+                            (e.df_du - fd).abs() <= 1.1 * trunc + round + 1e-12 * e.df_du.abs(),
+                            "r={r} s={s} kink {kink} side {side} delta {delta}: analytic {} fd {fd}",
+                            e.df_du
+                        );
+                    }
+                    // Continuity: the force jumps by no more than the contact force at delta.
+                    let jump = (law.eval(kink + delta, 0.0, &[]).force
+                        - law.eval(kink - delta, 0.0, &[]).force)
+                        .abs();
+                    assert!(
+                        jump <= 2e5 * delta.powf(r.min(s)) * 1.000001,
+                        "force jumps {jump} across {kink}"
+                    );
+                }
+            }
+            // Inside the gap the element carries nothing; at the kink it is the gap side.
+            assert_eq!(law.eval(0.0, 1.0, &[]), LawEval::default());
+            assert_eq!(law.eval(1e-3, 0.0, &[]).df_du, 0.0);
+        }
+        // Exact values on each side: linear contact k1 (u − e1) and −k2 (−u − e2).
+        let lin = Law::Clearance {
+            k1: 2e5,
+            k2: 5e4,
+            e1: 1e-3,
+            e2: 2e-3,
+            r: 1.0,
+            s: 1.0,
+        };
+        assert_eq!(lin.eval(3e-3, 0.0, &[]).force, 2e5 * 2e-3);
+        assert_eq!(lin.eval(-5e-3, 0.0, &[]).force, -5e4 * 3e-3);
+        assert_eq!(lin.eval(-5e-3, 0.0, &[]).df_du, 5e4);
+    }
+
+    /// The Jenkins element traces the textbook hysteresis loop under a displacement cycle.
+    #[test]
+    fn jenkins_hysteresis_loop() {
+        let (kt, fs) = (1e5, 10.0);
+        let law = Law::Jenkins { kt, fs };
+        let mut z = [0.0];
+        let amp = 1e-3; // 10 × the slip displacement fs/kt = 1e-4
+        let mut energy = 0.0;
+        let mut prev = (0.0, 0.0);
+        let n = 4000;
+        for k in 0..=2 * n {
+            let u = amp * (2.0 * std::f64::consts::PI * k as f64 / n as f64).sin();
+            let e = law.eval(u, 0.0, &z);
+            assert!(e.force.abs() <= fs * (1.0 + 1e-12));
+            law.commit_state(u, 0.0, &mut z);
+            if k > n {
+                energy += 0.5 * (e.force + prev.1) * (u - prev.0);
+            }
+            prev = (u, e.force);
+        }
+        // Closed form dissipation per cycle: 4 fs (a − fs/kt).
+        let exact = 4.0 * fs * (amp - fs / kt);
+        assert!(
+            (energy - exact).abs() < 1e-3 * exact,
+            "dissipated {energy} vs {exact}"
+        );
+    }
+
+    #[test]
+    fn out_of_range_parameters_are_named() {
+        let cases: Vec<(Law, &str)> = vec![
+            (
+                Law::Clearance {
+                    k1: -1.0,
+                    k2: 0.0,
+                    e1: 0.0,
+                    e2: 0.0,
+                    r: 1.0,
+                    s: 1.0,
+                },
+                "stop.k1",
+            ),
+            (
+                Law::Clearance {
+                    k1: 1.0,
+                    k2: 0.0,
+                    e1: 0.0,
+                    e2: 0.0,
+                    r: 0.5,
+                    s: 1.0,
+                },
+                "stop.r",
+            ),
+            (
+                Law::Clearance {
+                    k1: 1.0,
+                    k2: 0.0,
+                    e1: -2e-3,
+                    e2: 1e-3,
+                    r: 1.0,
+                    s: 1.0,
+                },
+                "stop.e1",
+            ),
+            (
+                Law::Coulomb {
+                    fc: 1.0,
+                    v_reg: 0.0,
+                },
+                "stop.v_reg",
+            ),
+            (Law::Jenkins { kt: 0.0, fs: 1.0 }, "stop.kt"),
+            (Law::QuadraticDamping { c2: -3.0 }, "stop.c2"),
+            (Law::Cubic { k3: f64::NAN }, "stop.k3"),
+            (
+                Law::Polynomial {
+                    stiffness: vec![PolyTerm {
+                        power: 0,
+                        coef: 1.0,
+                    }],
+                    damping: vec![],
+                },
+                "stop.k0",
+            ),
+        ];
+        for (law, name) in cases {
+            let err = NonlinearElement::new("stop", law.clone(), Coupling::single(0)).unwrap_err();
+            assert!(
+                err.to_string().contains(name),
+                "{law:?}: '{err}' should name {name}"
+            );
+        }
+        let mut e =
+            NonlinearElement::new("stop", Law::bump_stop(1e5, 1e-3), Coupling::single(0)).unwrap();
+        assert!(e.set_param(4, 0.2).is_err());
+        assert_eq!(e.law().param(4), 1.0, "a rejected value leaves the old one");
+    }
+
+    #[test]
+    fn coupling_relative_and_weighted() {
+        let c = Coupling::relative(2, 0);
+        let q = [1.0, 5.0, 3.0];
+        assert_eq!(c.coordinate(&q), 2.0);
+        let mut f = [0.0; 3];
+        c.scatter_add(4.0, &mut f);
+        assert_eq!(f, [-4.0, 0.0, 4.0]);
+        let w = Coupling::weighted(&[(0, 0.5), (1, 2.0)]).unwrap();
+        assert_eq!(w.coordinate(&q), 10.5);
+        assert!(Coupling::weighted(&[(0, 1.0), (0, 2.0)]).is_err());
+        assert!(Coupling::weighted(&[(0, f64::NAN)]).is_err());
+    }
+}
+
+mod sparse {
+    use super::*;
+
+    #[test]
+    fn triplet_assembly_sums_repeats_and_rejects_bad_indices() {
+        let m = SparseSym::from_triplets(
+            "K",
+            3,
+            &[(0, 0, 1.0), (0, 0, 2.0), (1, 2, 4.0), (2, 1, 4.0)],
+        )
+        .unwrap();
+        assert_eq!(m.get(0, 0), 3.0);
+        assert_eq!(m.get(2, 1), 4.0);
+        assert_eq!(m.nnz(), 3);
+        let e = SparseSym::from_triplets("K", 3, &[(3, 0, 1.0)]).unwrap_err();
+        assert!(matches!(e, Error::IndexOutOfRange { row: 3, .. }), "{e}");
+        let l = SparseSym::from_lower_triplets("K", 2, &[(0, 0, 2.0), (1, 0, -1.0), (1, 1, 2.0)])
+            .unwrap();
+        assert_eq!(l.get(0, 1), -1.0);
+        assert!(l.symmetry_defect().unwrap().rel_diff == 0.0);
+    }
+
+    #[test]
+    fn products_match_dense() {
+        let rows = vec![
+            vec![4.0, -1.0, 0.0],
+            vec![-1.0, 4.0, -1.0],
+            vec![0.0, -1.0, 4.0],
+        ];
+        let a = SparseSym::from_dense_rows("A", &rows).unwrap();
+        let x = [1.0, 2.0, 3.0];
+        let mut y = [0.0; 3];
+        a.mul_vec(&x, &mut y);
+        assert_eq!(y, [2.0, 4.0, 10.0]);
+        assert_eq!(a.bilinear(&x, &x), 1.0 * 2.0 + 2.0 * 4.0 + 3.0 * 10.0);
+        let c = SparseSym::linear_combination(
+            "C",
+            2.0,
+            &a,
+            -1.0,
+            &SparseSym::diagonal("I", &[1.0; 3]).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(c.get(1, 1), 7.0);
+        assert_eq!(c.get(0, 1), -2.0);
+    }
+
+    #[test]
+    fn symmetry_defect_finds_worst_pair_and_one_sided_entries() {
+        let a = SparseSym::from_triplets(
+            "A",
+            3,
+            &[(0, 0, 10.0), (0, 1, 1.0), (1, 0, 1.0 + 1e-6), (2, 0, 0.5)],
+        )
+        .unwrap();
+        let d = a.symmetry_defect().unwrap();
+        assert_eq!((d.row.min(d.col), d.row.max(d.col)), (0, 2));
+        assert!((d.rel_diff - 0.05).abs() < 1e-15);
+    }
+}
+
+mod dofs {
+    use super::*;
+
+    #[test]
+    fn labels_parse_and_errors_say_why() {
+        let l: DofLabel = "12:uz".parse().unwrap();
+        assert_eq!(l, DofLabel::new(12, Component::Uz));
+        assert_eq!(l.to_string(), "12:uz");
+        for (bad, why) in [
+            ("12", "NODE:COMPONENT"),
+            ("x:uz", "non-negative integer"),
+            ("3:uq", "ux, uy"),
+        ] {
+            let e = bad.parse::<DofLabel>().unwrap_err().to_string();
+            assert!(e.contains(why), "'{bad}': {e}");
+        }
+        let map = DofMap::new(vec![
+            DofLabel::new(2, Component::Ux),
+            DofLabel::new(2, Component::Uz),
+        ])
+        .unwrap();
+        assert_eq!(map.find("2:uz").unwrap(), 1);
+        let e = map.find("2:uy").unwrap_err().to_string();
+        assert!(e.contains("2:uy") && e.contains("ux, uz"), "{e}");
+        let e = map.find("7:ux").unwrap_err().to_string();
+        assert!(e.contains("from 2 to 2"), "{e}");
+        let e = DofMap::new(vec![DofLabel::new(1, Component::U); 2]).unwrap_err();
+        assert!(matches!(
+            e,
+            Error::DuplicateDof {
+                first: 0,
+                second: 1,
+                ..
+            }
+        ));
+    }
+}
+
+mod model {
+    use super::*;
+
+    fn two_dof(m: [[f64; 2]; 2], k: [[f64; 2]; 2]) -> Result<Model> {
+        let rows = |a: [[f64; 2]; 2]| vec![a[0].to_vec(), a[1].to_vec()];
+        Model::new(
+            "t",
+            DofMap::scalar(2),
+            SparseSym::from_dense_rows("mass matrix", &rows(m))?,
+            SparseSym::from_dense_rows("stiffness matrix", &rows(k))?,
+        )
+    }
+
+    /// Table of invalid models: each error names what is wrong and where.
+    #[test]
+    fn validation_names_what_and_where() {
+        let good_m = [[1.0, 0.0], [0.0, 1.0]];
+        let good_k = [[2.0, -1.0], [-1.0, 1.0]];
+        let cases: Vec<([[f64; 2]; 2], [[f64; 2]; 2], &[&str])> = vec![
+            (
+                good_m,
+                [[2.0, -1.0], [-1.1, 1.0]],
+                &["stiffness matrix is not symmetric", "2:u", "1:u"],
+            ),
+            (
+                good_m,
+                [[2.0, f64::NAN], [-1.0, 1.0]],
+                &["stiffness matrix is not finite", "(1:u, 2:u)"],
+            ),
+            ([[1.0, 0.0], [0.0, 0.0]], good_k, &["no mass", "2:u"]),
+            (
+                [[1.0, 2.0], [2.0, 1.0]],
+                good_k,
+                &["mass matrix is not positive definite"],
+            ),
+            (
+                good_m,
+                [[1.0, -2.0], [-2.0, 1.0]],
+                &[
+                    "stiffness matrix is not positive semi-definite",
+                    "negative eigenvalue",
+                ],
+            ),
+            (
+                good_m,
+                [[-1.0, 0.0], [0.0, 1.0]],
+                &["negative diagonal", "1:u"],
+            ),
+        ];
+        for (m, k, expect) in cases {
+            let err = two_dof(m, k)
+                .unwrap()
+                .validate(&ValidationConfig::default())
+                .unwrap_err()
+                .to_string();
+            for e in expect {
+                assert!(err.contains(e), "expected '{e}' in: {err}");
+            }
+        }
+        // A free-free structure (singular K) is valid.
+        two_dof(good_m, [[1.0, -1.0], [-1.0, 1.0]])
+            .unwrap()
+            .validate(&ValidationConfig::default())
+            .unwrap();
+        // Dimensions.
+        let e = Model::new(
+            "t",
+            DofMap::scalar(3),
+            SparseSym::diagonal("M", &[1.0; 2]).unwrap(),
+            SparseSym::diagonal("K", &[1.0; 3]).unwrap(),
+        )
+        .unwrap_err();
+        assert!(
+            matches!(
+                e,
+                Error::DimensionMismatch {
+                    expected: 3,
+                    found: 2,
+                    ..
+                }
+            ),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn elements_excitation_sensors_and_parameters() {
+        let mut m = two_dof([[1.0, 0.0], [0.0, 1.0]], [[2.0, -1.0], [-1.0, 1.0]]).unwrap();
+        m.add_element(
+            NonlinearElement::new("a", Law::Cubic { k3: 1e9 }, Coupling::single(0)).unwrap(),
+        )
+        .unwrap();
+        m.add_element(
+            NonlinearElement::new("b", Law::bump_stop(1e5, 1e-3), Coupling::relative(1, 0))
+                .unwrap(),
+        )
+        .unwrap();
+        let e = m
+            .add_element(
+                NonlinearElement::new("a", Law::Cubic { k3: 1.0 }, Coupling::single(1)).unwrap(),
+            )
+            .unwrap_err();
+        assert!(matches!(e, Error::DuplicateName { .. }));
+        let e = m
+            .add_element(
+                NonlinearElement::new("c", Law::Cubic { k3: 1.0 }, Coupling::single(5)).unwrap(),
+            )
+            .unwrap_err();
+        assert!(
+            e.to_string().contains("element 'c' refers to DOF index 5"),
+            "{e}"
+        );
+        let p = m.parameters();
+        assert_eq!(p.names[0], "a.k3");
+        assert_eq!(p.names.len(), 7);
+        m.set_param_by_name("b.e1", 2e-3).unwrap();
+        assert_eq!(m.param(m.param_id("b.e1").unwrap()), 2e-3);
+        let e = m.set_param_by_name("b.gap", 1.0).unwrap_err().to_string();
+        assert!(
+            e.contains("unknown parameter 'b.gap'") && e.contains("b.e1"),
+            "{e}"
+        );
+        let e = m.set_param_by_name("b.k1", -5.0).unwrap_err().to_string();
+        assert!(e.contains("b.k1"), "{e}");
+        assert_eq!(m.nonlinear_dofs(), vec![0, 1]);
+        let e = m
+            .add_sensor(Sensor {
+                name: "s".into(),
+                dof: 9,
+                quantity: Quantity::Velocity,
+            })
+            .unwrap_err();
+        assert!(e.to_string().contains("sensor 's'"));
+        let e = m
+            .add_excitation(Excitation {
+                name: "f".into(),
+                dof: 0,
+                amplitude: f64::INFINITY,
+            })
+            .unwrap_err();
+        assert!(e.to_string().contains("excitation 'f'"));
+    }
+
+    #[test]
+    fn damping_models() {
+        let d = Damping::rayleigh_from_two_modes(10.0, 0.02, 100.0, 0.05).unwrap();
+        let Damping::Rayleigh { alpha, beta } = d else {
+            panic!()
+        };
+        for (w, z) in [(10.0, 0.02), (100.0, 0.05)] {
+            assert!((alpha / (2.0 * w) + beta * w / 2.0 - z).abs() < 1e-15);
+        }
+        let md = ModalDamping {
+            per_mode: vec![0.01],
+            bands: vec![DampingBand {
+                f_min_hz: 0.0,
+                f_max_hz: 100.0,
+                zeta: 0.02,
+            }],
+            default: 0.03,
+        };
+        assert_eq!(md.zeta(0, 500.0), 0.01);
+        assert_eq!(md.zeta(1, 50.0), 0.02);
+        assert_eq!(md.zeta(2, 150.0), 0.03);
+        assert!(
+            Damping::Modal(ModalDamping::uniform(1.5))
+                .validate()
+                .is_err()
+        );
+        assert!(
+            Damping::Rayleigh {
+                alpha: -1.0,
+                beta: 0.0
+            }
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("damping.alpha")
+        );
+    }
+}
+
+mod dense {
+    use super::*;
+    use nlsim_kernel::linalg::dense_generalized_eigen;
+
+    /// Two-mass chain: ω² = (k/m)(3 ∓ √5)/2, mass-normalised vectors.
+    #[test]
+    fn generalized_eigen_closed_form() {
+        let (m, k) = (2.0, 50.0);
+        let kk = faer::mat![[2.0 * k, -k], [-k, k]];
+        let mm = faer::mat![[m, 0.0], [0.0, m]];
+        let e = dense_generalized_eigen(kk.as_ref(), mm.as_ref()).unwrap();
+        let s5 = 5.0_f64.sqrt();
+        nlsim_kernel::assert_close!(e.values[0], k / m * (3.0 - s5) / 2.0, 1e-14, 0.0);
+        nlsim_kernel::assert_close!(e.values[1], k / m * (3.0 + s5) / 2.0, 1e-14, 0.0);
+        for j in 0..2 {
+            let v = e.vectors.col(j);
+            let mnorm = m * (v[0] * v[0] + v[1] * v[1]);
+            nlsim_kernel::assert_close!(mnorm, 1.0, 1e-14, 0.0);
+        }
+    }
+}
