@@ -1,1 +1,416 @@
+//! End-to-end tests through the facade and the `nlsim` binary: model files (every rejected
+//! input names file, line and key), Matrix Market, the CLI's exit codes and the README demo.
 
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("nlsim-e2e-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn nlsim(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_nlsim"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+mod model_files {
+    use super::*;
+
+    const GOOD: &str = r#"name = "t"
+[matrices]
+dofs = ["1:u", "2:u"]
+mass = [[1.0, 0.0], [0.0, 1.0]]
+stiffness = [[2.0, -1.0], [-1.0, 1.0]]
+
+[[element]]
+name = "s"
+type = "cubic"
+dof = "1:u"
+k3 = 1e9
+"#;
+
+    #[test]
+    fn examples_load_and_validate() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/models");
+        let mut n = 0;
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let p = entry.unwrap().path();
+            if p.extension().is_some_and(|e| e == "toml") {
+                let m = nlsim::load_model(p.to_str().unwrap()).unwrap_or_else(|e| panic!("{e}"));
+                m.model
+                    .validate(&Default::default())
+                    .unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+                n += 1;
+            }
+        }
+        assert!(n >= 3);
+        let m = nlsim::load_model(dir.join("two_dof.toml").to_str().unwrap())
+            .unwrap()
+            .model;
+        assert_eq!(
+            m.parameters().names,
+            [
+                "stop.k1",
+                "stop.k2",
+                "stop.e1",
+                "stop.e2",
+                "stop.r",
+                "stop.s",
+                "damper.c2"
+            ]
+        );
+        assert_eq!(m.mass().get(1, 1), 0.5);
+        let m = nlsim::load_model(dir.join("spring_mass.toml").to_str().unwrap())
+            .unwrap()
+            .model;
+        assert_eq!(m.dofs().find("20:ux").unwrap(), 1);
+        assert_eq!(m.stiffness().get(0, 1), -1.0e4);
+        // Fixture-based file: 30 elements, file's element replaces the fixture's, sensor too.
+        let m = nlsim::load_model(dir.join("ecl_from_fixture.toml").to_str().unwrap())
+            .unwrap()
+            .model;
+        assert_eq!(m.n_dofs(), 180);
+        assert_eq!(m.parameters().names, ["tip_spring.k2", "tip_spring.k3"]);
+        assert_eq!(m.sensors().len(), 1);
+        assert_eq!(m.excitation().len(), 1, "the fixture's excitation is kept");
+    }
+
+    /// Every rejected input: (what to change in GOOD, the line, words the error must hold).
+    #[test]
+    fn rejected_inputs_name_file_line_and_key() {
+        let cases: &[(&str, &str, usize, &[&str])] = &[
+            (
+                "k3 = 1e9",
+                "k3 = 1e9\nk4 = 2",
+                12,
+                &["element[1].k4", "unknown key"],
+            ),
+            (
+                "dof = \"1:u\"",
+                "dof = \"7:u\"",
+                10,
+                &["element[1].dof", "unknown DOF '7:u'"],
+            ),
+            (
+                "dof = \"1:u\"",
+                "dof = \"1:uq\"",
+                10,
+                &["element[1].dof", "component must be one of"],
+            ),
+            (
+                "type = \"cubic\"",
+                "type = \"cubik\"",
+                9,
+                &["element[1].type", "unknown element type 'cubik'"],
+            ),
+            (
+                "k3 = 1e9",
+                "k3 = \"big\"",
+                11,
+                &["element[1].k3", "expected a finite number"],
+            ),
+            ("k3 = 1e9", "k3 = nan", 11, &["element[1].k3", "finite"]),
+            ("k3 = 1e9", "", 7, &["element[1].k3", "missing"]),
+            (
+                "[[1.0, 0.0], [0.0, 1.0]]",
+                "[[1.0, 0.0], [0.0]]",
+                4,
+                &["matrices.mass", "row has 1 entries"],
+            ),
+            (
+                "name = \"t\"",
+                "name = \"t\"\nunits = \"imperial\"",
+                2,
+                &["units", "SI"],
+            ),
+            (
+                "name = \"t\"",
+                "name = \"t\"\nfoo = 1",
+                2,
+                &["foo", "unknown key"],
+            ),
+            (
+                "mass = [[1.0, 0.0], [0.0, 1.0]]",
+                "",
+                2,
+                &["matrices.mass", "missing"],
+            ),
+            (
+                "dofs = [\"1:u\", \"2:u\"]",
+                "dofs = [\"1:u\", \"1:u\"]",
+                3,
+                &["matrices.dofs", "defined twice"],
+            ),
+            (
+                "name = \"t\"",
+                "name = \"t\"\n[damping]\ntype = \"modal\"\nzeta = 1.5",
+                4,
+                &["damping.zeta", "[0, 1)"],
+            ),
+            (
+                "name = \"t\"",
+                "name = \"t\"\n[damping]\ntype = \"viscous\"",
+                3,
+                &["damping.type", "unknown damping type"],
+            ),
+            (
+                "name = \"t\"",
+                "name = \"t\"\n[damping]\ntype = \"matrix\"\nmatrix = [[1.0]]",
+                4,
+                &["damping.matrix", "1x1"],
+            ),
+            ("[matrices]", "[matrices", 2, &["(syntax)"]),
+            (
+                "type = \"cubic\"",
+                "type = \"clearance\"\nk1 = -5.0\ne1 = 1e-3",
+                10,
+                &["element[1].k1", "s.k1", "must be >= 0"],
+            ),
+            (
+                "name = \"s\"",
+                "name = \"s s\"",
+                7,
+                &["element[1]", "letters, digits"],
+            ),
+        ];
+        let dir = scratch("rejected");
+        for (i, (from, to, line, words)) in cases.iter().enumerate() {
+            assert!(
+                GOOD.contains(from),
+                "case {i}: '{from}' not in the template"
+            );
+            let text = GOOD.replacen(from, to, 1);
+            let path = dir.join(format!("case{i}.toml"));
+            std::fs::write(&path, &text).unwrap();
+            let err = nlsim::load_model(path.to_str().unwrap())
+                .and_then(|m| m.model.validate(&Default::default()).map_err(Into::into))
+                .expect_err(&format!("case {i} must be rejected:\n{text}"))
+                .to_string();
+            let loc = format!("case{i}.toml:{line}:");
+            assert!(
+                err.contains(&loc),
+                "case {i}: expected location '{loc}' in: {err}"
+            );
+            for w in *words {
+                assert!(err.contains(w), "case {i}: expected '{w}' in: {err}");
+            }
+        }
+    }
+
+    #[test]
+    fn numeric_defects_are_named_by_dof() {
+        let dir = scratch("numeric");
+        let p = dir.join("asym.toml");
+        std::fs::write(
+            &p,
+            GOOD.replace("[[2.0, -1.0], [-1.0, 1.0]]", "[[2.0, -1.0], [-1.5, 1.0]]"),
+        )
+        .unwrap();
+        let m = nlsim::load_model(p.to_str().unwrap()).unwrap();
+        let e = m
+            .model
+            .validate(&Default::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("stiffness matrix is not symmetric")
+                && e.contains("2:u")
+                && e.contains("1:u"),
+            "{e}"
+        );
+        let p = dir.join("massless.toml");
+        std::fs::write(
+            &p,
+            GOOD.replace("[[1.0, 0.0], [0.0, 1.0]]", "[[1.0, 0.0], [0.0, 0.0]]"),
+        )
+        .unwrap();
+        let e = nlsim::load_model(p.to_str().unwrap())
+            .unwrap()
+            .model
+            .validate(&Default::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("no mass") && e.contains("2:u"), "{e}");
+    }
+}
+
+mod matrix_market {
+    use super::*;
+    use nlsim::mtx::{parse_matrix_market, to_matrix_market};
+
+    #[test]
+    fn round_trip_and_errors_with_lines() {
+        let fx = nlsim::fixtures::ecl_beam();
+        let k = fx.model.stiffness();
+        let text = to_matrix_market(k);
+        let back = parse_matrix_market(&text, Path::new("k.mtx"), "stiffness matrix").unwrap();
+        assert_eq!(back.nnz(), k.nnz());
+        for (i, j, v) in k.entries() {
+            assert_eq!(back.get(i, j), v, "entry ({i}, {j})");
+        }
+        let cases: &[(&str, usize, &str)] = &[
+            ("", 1, "empty file"),
+            (
+                "%%MatrixMarket matrix array real general\n2 2\n",
+                1,
+                "coordinate",
+            ),
+            (
+                "%%MatrixMarket matrix coordinate complex general\n",
+                1,
+                "complex",
+            ),
+            (
+                "%%MatrixMarket matrix coordinate real symmetric\n2 3 1\n",
+                2,
+                "square",
+            ),
+            (
+                "%%MatrixMarket matrix coordinate real symmetric\n2 2 1\n3 1 1.0\n",
+                3,
+                "outside 1..=2",
+            ),
+            (
+                "%%MatrixMarket matrix coordinate real symmetric\n2 2 1\n1 2 1.0\n",
+                3,
+                "above the diagonal",
+            ),
+            (
+                "%%MatrixMarket matrix coordinate real general\n2 2 1\n1 1 x\n",
+                3,
+                "not a number",
+            ),
+            (
+                "%%MatrixMarket matrix coordinate real general\n2 2 2\n% c\n1 1 1.0\n",
+                4,
+                "announces 2 entries",
+            ),
+        ];
+        for (text, line, word) in cases {
+            let e = parse_matrix_market(text, Path::new("m.mtx"), "mass matrix")
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.starts_with(&format!("m.mtx:{line}:")) && e.contains(word),
+                "{text:?}: {e}"
+            );
+        }
+    }
+}
+
+mod cli {
+    use super::*;
+
+    /// Every error path prints one clear line on stderr and exits non-zero.
+    #[test]
+    fn error_paths_print_one_line_and_fail() {
+        let dir = scratch("cli");
+        let bad = dir.join("bad.toml");
+        std::fs::write(&bad, "[matrices\n").unwrap();
+        let unknown_dof = dir.join("dof.toml");
+        std::fs::write(
+            &unknown_dof,
+            "[matrices]\nfixture = \"duffing_fig3\"\n[[sensor]]\ndof = \"9:uz\"\n",
+        )
+        .unwrap();
+        let missing = dir.join("missing.toml");
+        let cases: Vec<(Vec<String>, i32, String)> = vec![
+            (
+                vec!["check".into(), missing.display().to_string()],
+                1,
+                "missing.toml".into(),
+            ),
+            (
+                vec!["check".into(), bad.display().to_string()],
+                1,
+                "bad.toml:1:".into(),
+            ),
+            (
+                vec!["check".into(), "no_such_model".into()],
+                1,
+                "neither a model file nor a built-in model".into(),
+            ),
+            (
+                vec!["check".into(), unknown_dof.display().to_string()],
+                1,
+                "unknown DOF '9:uz'".into(),
+            ),
+            (
+                vec!["check".into(), "bracket:refinement=0".into()],
+                1,
+                "refinement='0'".into(),
+            ),
+            (
+                vec![
+                    "demo".into(),
+                    "--model".into(),
+                    "ecl_beam:colour=red".into(),
+                ],
+                1,
+                "unknown option".into(),
+            ),
+            (
+                vec!["frobnicate".into()],
+                2,
+                "unrecognized subcommand".into(),
+            ),
+        ];
+        for (args, code, word) in cases {
+            let a: Vec<&str> = args.iter().map(String::as_str).collect();
+            let (rc, _out, err) = nlsim(&a);
+            assert_eq!(rc, code, "{args:?}: stderr {err}");
+            assert!(err.contains(&word), "{args:?}: expected '{word}' in {err}");
+            if code == 1 {
+                assert_eq!(
+                    err.trim_end().lines().count(),
+                    1,
+                    "{args:?}: one line, got {err}"
+                );
+                assert!(err.starts_with("error: "));
+            }
+        }
+    }
+
+    #[test]
+    fn check_and_fixtures_list() {
+        let (rc, out, _) = nlsim(&["check", "duffing_fig3"]);
+        assert_eq!(rc, 0);
+        assert!(
+            out.contains("spring (cubic) on 1:u: k3 = 1.7000e15 N/m^3"),
+            "{out}"
+        );
+        assert!(out.contains("M positive definite"));
+        let (rc, out, _) = nlsim(&["fixtures"]);
+        assert_eq!(rc, 0);
+        for f in nlsim::fixtures::CATALOGUE {
+            assert!(out.contains(f.name));
+        }
+        let (rc, out, _) = nlsim(&["--quiet", "check", "chain_2dof"]);
+        assert_eq!((rc, out.as_str()), (0, ""));
+    }
+
+    /// What `make demo` runs: the demo on the default model names every stage, and the ones
+    /// not built yet say so.
+    #[test]
+    fn demo_runs_and_names_unbuilt_stages() {
+        let (rc, out, err) = nlsim(&["demo"]);
+        assert_eq!(rc, 0, "{err}");
+        assert!(
+            out.contains("ecl_beam") && out.contains("[1/8] model: loaded and validated"),
+            "{out}"
+        );
+        for k in 2..=8 {
+            assert!(out.contains(&format!("[{k}/8]")), "stage {k} missing");
+        }
+        assert!(out.contains("not built yet"));
+    }
+}

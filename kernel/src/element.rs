@@ -142,6 +142,24 @@ impl Law {
         }
     }
 
+    /// SI unit of parameter `i`, for reports (`N/m^3`, `m`, `-`).
+    pub fn param_unit(&self, i: usize) -> String {
+        match self {
+            Law::Cubic { .. } => "N/m^3".into(),
+            Law::QuadraticDamping { .. } => "N s^2/m^2".into(),
+            Law::Polynomial { stiffness, damping } => {
+                if i < stiffness.len() {
+                    format!("N/m^{}", stiffness[i].power)
+                } else {
+                    format!("N s^{0}/m^{0}", damping[i - stiffness.len()].power)
+                }
+            }
+            Law::Clearance { .. } => ["N/m^r", "N/m^s", "m", "m", "-", "-"][i].into(),
+            Law::Coulomb { .. } => ["N", "m/s"][i].into(),
+            Law::Jenkins { .. } => ["N/m", "N"][i].into(),
+        }
+    }
+
     /// Value of parameter `i`.
     pub fn param(&self, i: usize) -> f64 {
         match self {

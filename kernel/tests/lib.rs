@@ -428,7 +428,8 @@ mod model {
     fn validation_names_what_and_where() {
         let good_m = [[1.0, 0.0], [0.0, 1.0]];
         let good_k = [[2.0, -1.0], [-1.0, 1.0]];
-        let cases: Vec<([[f64; 2]; 2], [[f64; 2]; 2], &[&str])> = vec![
+        type Case = ([[f64; 2]; 2], [[f64; 2]; 2], &'static [&'static str]);
+        let cases: Vec<Case> = vec![
             (
                 good_m,
                 [[2.0, -1.0], [-1.1, 1.0]],

@@ -1,0 +1,18 @@
+# nlsim: the two commands of the README.
+#   make demo   build and run the pipeline on the built-in ECL beam
+#   make test   formatting, lints and the whole test suite
+.PHONY: demo test bench deps
+
+demo:
+	@scripts/ensure-deps.sh
+	cargo run --release --quiet --bin nlsim -- demo
+
+test:
+	@scripts/ensure-deps.sh --test
+	cargo fmt --all -- --check
+	cargo clippy --workspace --all-targets -- -D warnings
+	cargo test --workspace
+
+bench:
+	@scripts/ensure-deps.sh
+	cargo bench -p nlsim-bench --bench kernel -- --quick --noplot

@@ -1,0 +1,50 @@
+//! The error type of the nlsim facade: file and command-line problems, wrapping the numeric
+//! crates' [`nlsim_kernel::Error`].
+
+use std::path::PathBuf;
+use thiserror::Error;
+
+/// Result alias of the facade.
+pub type Result<T, E = Error> = core::result::Result<T, E>;
+
+/// What went wrong, with the file, line and key where that applies.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// A model file is malformed or inconsistent.
+    #[error("{}:{line}: {key}: {message}", file.display())]
+    Spec {
+        /// The model file.
+        file: PathBuf,
+        /// 1-based line of the offending key or value.
+        line: usize,
+        /// Dotted key path, e.g. `element[2].dof`.
+        key: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A Matrix Market or DOF-label file is malformed.
+    #[error("{}:{line}: {message}", file.display())]
+    DataFile {
+        /// The file.
+        file: PathBuf,
+        /// 1-based line.
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
+    /// A file could not be read or written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The system error.
+        source: std::io::Error,
+    },
+    /// The model argument names neither a file nor a fixture.
+    #[error("model '{0}' is neither a model file nor a built-in model; built-in models: {1}")]
+    UnknownModel(String, String),
+    /// The model itself is invalid (numbers, not syntax).
+    #[error("{0}")]
+    Model(#[from] nlsim_kernel::Error),
+}

@@ -1,0 +1,161 @@
+//! A readable summary of a model, for `nlsim check` and the demo.
+
+use nlsim_kernel::{Component, Damping, Model, ValidationReport};
+use std::fmt::Write;
+
+/// Formats the summary of `model` (and of its validation, when given) as aligned text.
+pub fn model_summary(model: &Model, source: &str, validation: Option<&ValidationReport>) -> String {
+    let mut s = String::new();
+    let dofs = model.dofs();
+    let mut nodes: Vec<u64> = dofs.labels().iter().map(|l| l.node).collect();
+    nodes.sort_unstable();
+    nodes.dedup();
+    let mut comps: Vec<Component> = dofs.labels().iter().map(|l| l.component).collect();
+    comps.sort_unstable();
+    comps.dedup();
+    let comp_list: Vec<&str> = comps.iter().map(|c| c.as_str()).collect();
+    let _ = writeln!(s, "  model        {}  ({source})", model.name());
+    let _ = writeln!(
+        s,
+        "  DOFs         {} on {} nodes ({})",
+        model.n_dofs(),
+        nodes.len(),
+        comp_list.join(" ")
+    );
+    let _ = writeln!(s, "  mass         {} stored entries", model.mass().nnz());
+    let masses: Vec<String> = [Component::Ux, Component::Uy, Component::Uz, Component::U]
+        .into_iter()
+        .filter(|c| comps.contains(c))
+        .map(|c| format!("{c} {:.4} kg", model.translational_mass(c)))
+        .collect();
+    if !masses.is_empty() {
+        let _ = writeln!(
+            s,
+            "               rigid-body mass along {}",
+            masses.join(", ")
+        );
+    }
+    let _ = writeln!(
+        s,
+        "  stiffness    {} stored entries",
+        model.stiffness().nnz()
+    );
+    let damping = match model.damping() {
+        Damping::None => "none".to_string(),
+        Damping::Rayleigh { alpha, beta } => {
+            format!("Rayleigh, alpha = {alpha:.4e} 1/s, beta = {beta:.4e} s")
+        }
+        Damping::Modal(m) if m.per_mode.is_empty() && m.bands.is_empty() => {
+            format!("modal, zeta = {} for every mode", m.default)
+        }
+        Damping::Modal(m) => format!(
+            "modal, {} per-mode ratios, {} bands, default {}",
+            m.per_mode.len(),
+            m.bands.len(),
+            m.default
+        ),
+        Damping::Matrix(v) => format!("explicit matrix, {} stored entries", v.nnz()),
+    };
+    let _ = writeln!(s, "  damping      {damping}");
+    if model.elements().is_empty() {
+        let _ = writeln!(s, "  elements     none (a linear model)");
+    }
+    for (i, e) in model.elements().iter().enumerate() {
+        let at: Vec<String> = e
+            .coupling()
+            .dofs()
+            .iter()
+            .zip(e.coupling().weights())
+            .map(|(&d, &w)| {
+                if w == 1.0 {
+                    dofs.describe(d)
+                } else if w == -1.0 {
+                    format!("-{}", dofs.describe(d))
+                } else {
+                    format!("{w}*{}", dofs.describe(d))
+                }
+            })
+            .collect();
+        let params: Vec<String> = (0..e.law().n_params())
+            .map(|p| {
+                format!(
+                    "{} = {:.4e} {}",
+                    e.law().param_name(p),
+                    e.law().param(p),
+                    e.law().param_unit(p)
+                )
+            })
+            .collect();
+        let head = if i == 0 {
+            "  elements     "
+        } else {
+            "               "
+        };
+        let _ = writeln!(
+            s,
+            "{head}{} ({}) on {}: {}",
+            e.name(),
+            e.law().kind(),
+            at.join(" + "),
+            params.join(", ")
+        );
+    }
+    for (i, x) in model.excitation().iter().enumerate() {
+        let head = if i == 0 {
+            "  excitation   "
+        } else {
+            "               "
+        };
+        let _ = writeln!(
+            s,
+            "{head}{} at {}, {} N",
+            x.name,
+            dofs.describe(x.dof),
+            x.amplitude
+        );
+    }
+    let sensors: Vec<String> = model
+        .sensors()
+        .iter()
+        .map(|x| {
+            format!(
+                "{} ({} at {})",
+                x.name,
+                x.quantity.as_str(),
+                dofs.describe(x.dof)
+            )
+        })
+        .collect();
+    let _ = writeln!(
+        s,
+        "  sensors      {}",
+        if sensors.is_empty() {
+            "none".into()
+        } else {
+            sensors.join(", ")
+        }
+    );
+    let p = model.parameters();
+    let _ = writeln!(
+        s,
+        "  parameters   {}",
+        if p.names.is_empty() {
+            "none".into()
+        } else {
+            p.names.join(", ")
+        }
+    );
+    if let Some(v) = validation {
+        let _ = writeln!(
+            s,
+            "  validation   finite, symmetric (worst relative asymmetry {:.1e}){}",
+            v.max_asymmetry,
+            if v.definiteness_checked {
+                ", M positive definite, K positive semi-definite"
+            } else {
+                " (definiteness not checked)"
+            }
+        );
+    }
+    s
+}
