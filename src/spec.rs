@@ -262,11 +262,12 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
     let sensors = top.array_of_tables("sensor")?;
     if from_fixture {
         // Lists given in the file replace the fixture's; absent lists keep them.
-        model = rebuild_without(
+        model = rebuild(
             &model,
-            !elements.is_empty(),
-            !excitation.is_empty(),
-            !sensors.is_empty(),
+            &name,
+            elements.is_empty(),
+            excitation.is_empty(),
+            sensors.is_empty(),
         )?;
     }
     for mut e in elements {
@@ -323,25 +324,26 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
     })
 }
 
-fn rebuild_without(m: &Model, drop_el: bool, drop_ex: bool, drop_se: bool) -> Result<Model> {
+/// A copy of `m` named `name` that keeps only the lists asked for.
+fn rebuild(m: &Model, name: &str, keep_el: bool, keep_ex: bool, keep_se: bool) -> Result<Model> {
     let mut out = Model::new(
-        m.name(),
+        name,
         m.dofs().clone(),
         m.mass().clone(),
         m.stiffness().clone(),
     )?;
     out.set_damping(m.damping().clone())?;
-    if !drop_el {
+    if keep_el {
         for e in m.elements() {
             out.add_element(e.clone())?;
         }
     }
-    if !drop_ex {
+    if keep_ex {
         for e in m.excitation() {
             out.add_excitation(e.clone())?;
         }
     }
-    if !drop_se {
+    if keep_se {
         for s in m.sensors() {
             out.add_sensor(s.clone())?;
         }
@@ -374,9 +376,7 @@ fn read_matrices(t: &mut Tab<'_, '_>, name: &str, base: &Path) -> Result<Matrice
         }
         let f = nlsim_fixtures::build(&fx, &opts)
             .map_err(|e| t.doc.err(span, &t.key("fixture"), e.to_string()))?;
-        let mut model = f.model;
-        model = rename(&model, name)?;
-        return Ok((model, Some(f.description), f.references, true));
+        return Ok((f.model, Some(f.description), f.references, true));
     }
     let mass_v = t.get("mass").ok_or_else(|| {
         t.missing(
@@ -421,26 +421,6 @@ fn read_matrices(t: &mut Tab<'_, '_>, name: &str, base: &Path) -> Result<Matrice
     let model = Model::new(name, dofs, mass, stiffness)
         .map_err(|e| t.doc.err(t.span.clone(), &t.key("dofs"), e.to_string()))?;
     Ok((model, None, vec![], false))
-}
-
-fn rename(m: &Model, name: &str) -> Result<Model> {
-    let mut out = Model::new(
-        name,
-        m.dofs().clone(),
-        m.mass().clone(),
-        m.stiffness().clone(),
-    )?;
-    out.set_damping(m.damping().clone())?;
-    for e in m.elements() {
-        out.add_element(e.clone())?;
-    }
-    for e in m.excitation() {
-        out.add_excitation(e.clone())?;
-    }
-    for s in m.sensors() {
-        out.add_sensor(s.clone())?;
-    }
-    Ok(out)
 }
 
 fn read_matrix(

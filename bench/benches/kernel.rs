@@ -5,28 +5,13 @@
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use nlsim_bench::BRACKET_REFINEMENTS;
 use nlsim_fixtures::bracket::{Bracket, BracketConfig};
-use nlsim_kernel::{Law, PolyTerm, ValidationConfig};
+use nlsim_kernel::{Law, ValidationConfig};
 use std::hint::black_box;
 
 fn element_eval(c: &mut Criterion) {
     let laws = [
         ("cubic", Law::Cubic { k3: 6e9 }),
-        (
-            "polynomial",
-            Law::Polynomial {
-                stiffness: vec![
-                    PolyTerm {
-                        power: 2,
-                        coef: -1.05e7,
-                    },
-                    PolyTerm {
-                        power: 3,
-                        coef: 8e9,
-                    },
-                ],
-                damping: vec![],
-            },
-        ),
+        ("polynomial", nlsim_fixtures::hardening_softening_law()),
         (
             "clearance",
             Law::Clearance {
