@@ -183,8 +183,24 @@ impl<'a, 'i> Tab<'a, 'i> {
             })
             .collect()
     }
+    /// `name` (or `default`) and the required labelled `dof` of an excitation or sensor.
+    fn name_and_dof(
+        &mut self,
+        default: String,
+        dofs: &DofMap,
+        what: &str,
+    ) -> Result<(String, usize)> {
+        let name = self.str("name")?.map_or(default, |s| s.0);
+        let dof = read_dof(self, "dof", dofs)?
+            .ok_or_else(|| self.missing("dof", &format!("{what}, e.g. dof = \"21:uz\"")))?;
+        Ok((name, dof))
+    }
+    /// A model error located at this table.
+    fn at_table(&self, e: nlsim_kernel::Error) -> Error {
+        self.doc.err(self.span.clone(), &self.path, e.to_string())
+    }
     /// Errors on the first key that was never read.
-    fn finish(self, allowed_hint: &str) -> Result<()> {
+    fn finish(&self, allowed_hint: &str) -> Result<()> {
         for (k, v) in self.t.iter() {
             if !self.used.iter().any(|u| u == k.get_ref().as_ref()) {
                 return Err(self.doc.err(
@@ -271,20 +287,16 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
         )?;
     }
     for mut e in elements {
-        let span = e.span.clone();
-        let key = e.path.clone();
         let el = read_element(&mut e, model.dofs())?;
         e.finish("an element takes name, type, dof, dof2 and the parameters of its type")?;
-        model
-            .add_element(el)
-            .map_err(|err| doc.err(span, &key, err.to_string()))?;
+        model.add_element(el).map_err(|err| e.at_table(err))?;
     }
     for (i, mut x) in excitation.into_iter().enumerate() {
-        let span = x.span.clone();
-        let key = x.path.clone();
-        let name = x.str("name")?.map_or(format!("force{}", i + 1), |s| s.0);
-        let dof = read_dof(&mut x, "dof", model.dofs())?
-            .ok_or_else(|| x.missing("dof", "the DOF the force acts on, e.g. dof = \"21:uz\""))?;
+        let (name, dof) = x.name_and_dof(
+            format!("force{}", i + 1),
+            model.dofs(),
+            "the DOF the force acts on",
+        )?;
         let amplitude = x.req_f64("amplitude", "the force amplitude in N")?;
         x.finish("an excitation takes name, dof, amplitude")?;
         model
@@ -293,18 +305,16 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
                 dof,
                 amplitude,
             })
-            .map_err(|err| doc.err(span, &key, err.to_string()))?;
+            .map_err(|err| x.at_table(err))?;
     }
     for (i, mut s) in sensors.into_iter().enumerate() {
-        let span = s.span.clone();
-        let key = s.path.clone();
-        let name = s.str("name")?.map_or(format!("sensor{}", i + 1), |s| s.0);
-        let dof = read_dof(&mut s, "dof", model.dofs())?
-            .ok_or_else(|| s.missing("dof", "the measured DOF, e.g. dof = \"21:uz\""))?;
+        let (name, dof) =
+            s.name_and_dof(format!("sensor{}", i + 1), model.dofs(), "the measured DOF")?;
         let quantity = match s.str("quantity")? {
             None => Quantity::Acceleration,
-            Some((q, sp)) => Quantity::parse(&q)
-                .map_err(|e| doc.err(sp, &format!("{key}.quantity"), e.to_string()))?,
+            Some((q, sp)) => {
+                Quantity::parse(&q).map_err(|e| doc.err(sp, &s.key("quantity"), e.to_string()))?
+            }
         };
         s.finish("a sensor takes name, dof, quantity")?;
         model
@@ -313,7 +323,7 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
                 dof,
                 quantity,
             })
-            .map_err(|err| doc.err(span, &key, err.to_string()))?;
+            .map_err(|err| s.at_table(err))?;
     }
     top.finish("the top level takes name, units, [matrices], [damping], [[element]], [[excitation]], [[sensor]]")?;
     Ok(LoadedModel {
