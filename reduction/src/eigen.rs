@@ -1,0 +1,849 @@
+//! The lowest modes of `K φ = ω² M φ` for large sparse `K`, `M`: shift-invert block Lanczos
+//! with thick (Krylov–Schur) restarts, on a sparse Cholesky factor of `K − σM`.
+//!
+//! # Method
+//!
+//! With `σ` below the spectrum, `K − σM` is positive definite and the operator
+//! `Op = (K − σM)⁻¹ M` is self-adjoint in the `M` inner product, with eigenvalues
+//! `θ = 1 / (λ − σ)`: the lowest `λ` become the largest, best separated `θ`. A block of `b`
+//! vectors is expanded into an `M`-orthonormal basis `V` (classical Gram–Schmidt, twice, against
+//! the whole basis), so that `Op V = V H + W B` with `H = Vᵀ M Op V` symmetric and `W` the next
+//! block. When the basis is full, the Ritz pairs of `H` are computed; the best `k` Ritz vectors
+//! are kept (`V ← V Y_k`, `H ← diag θ_k`, `B ← B Y_k`) and the expansion goes on. The residual
+//! of a Ritz pair `(θ, V y)` is `‖B y‖₂` exactly, so convergence needs no extra solve.
+//!
+//! A block of `b ≥ 2` vectors finds repeated eigenvalues up to multiplicity `b` in exact
+//! arithmetic (the symmetric-section pairs of a beam, the six rigid-body modes of a free–free
+//! body with the default `b = 6`), and the Sturm sequence check (the inertia of `K − σ_c M`
+//! just above the last wanted eigenvalue) proves that none was missed; if one was, the solve is
+//! repeated with a larger block.
+//!
+//! Free–free structures: when `K` itself is singular, `σ` is taken slightly negative
+//! (`−10⁻⁸ max_i K_ii/M_ii`), which keeps rigid-body modes (`λ ≈ 0`) in the spectrum.
+
+use crate::factor::{ShiftFactor, ShiftedPencil};
+use faer::linalg::matmul::matmul;
+use faer::sparse::linalg::matmul::sparse_dense_matmul;
+use faer::{Accum, Mat, MatMut, MatRef, Par};
+use nlsim_kernel::{Error, Result, SparseSym};
+use std::time::Instant;
+
+/// Which modes to compute.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ModeSelection {
+    /// The lowest `n` modes.
+    Lowest(usize),
+    /// Every mode whose undamped frequency lies below `f_max_hz` (Hz); the count comes from a
+    /// Sturm sequence check at `(2π f_max)²`.
+    Below {
+        /// Upper frequency (Hz, exclusive).
+        f_max_hz: f64,
+    },
+}
+
+/// Which algorithm solved the problem.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EigenMethod {
+    /// Shift-invert block Lanczos with thick restarts on a sparse Cholesky factor.
+    Lanczos,
+    /// The dense generalized eigen solver (small models).
+    Dense,
+}
+
+/// Settings of [`EigenSolver::solve`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct EigenConfig {
+    /// Which modes.
+    pub selection: ModeSelection,
+    /// Convergence tolerance on the Ritz residual: `‖Op x − θ x‖_M ≤ tol · θ`.
+    pub tol: f64,
+    /// Vectors per Lanczos block (the largest multiplicity found without relying on round-off).
+    pub block_size: usize,
+    /// Basis size before a restart; `None` chooses `max(2·nev, nev + 4·b)`.
+    pub basis_size: Option<usize>,
+    /// Most restarts before giving up.
+    pub max_restarts: usize,
+    /// Shift `σ` (rad²/s²); must lie below the lowest wanted eigenvalue. `None` picks 0, or a
+    /// small negative value when `K` is singular.
+    pub shift: Option<f64>,
+    /// Seed of the random starting block.
+    pub seed: u64,
+    /// Verify with a Sturm sequence count that no mode below the last one returned was missed
+    /// (one extra `L D Lᵀ` factorisation).
+    pub sturm_check: bool,
+    /// Models with at most this many DOFs are solved densely (exact, O(n³)).
+    pub dense_below: usize,
+}
+
+impl Default for EigenConfig {
+    fn default() -> Self {
+        EigenConfig {
+            selection: ModeSelection::Lowest(10),
+            tol: 1e-10,
+            block_size: 6,
+            basis_size: None,
+            max_restarts: 200,
+            shift: None,
+            seed: 0x5eed_0001,
+            sturm_check: true,
+            dense_below: 200,
+        }
+    }
+}
+
+/// How a solve went: where the time went and what was checked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EigenStats {
+    /// Algorithm used.
+    pub method: EigenMethod,
+    /// Shift `σ` (rad²/s²) of the factorisation.
+    pub shift: f64,
+    /// Lanczos block size.
+    pub block_size: usize,
+    /// Basis size at restart.
+    pub basis_size: usize,
+    /// Restarts performed.
+    pub restarts: usize,
+    /// Columns passed through `(K − σM)⁻¹ M`.
+    pub operator_applications: usize,
+    /// Values stored in the Cholesky factor (fill included).
+    pub factor_nnz: usize,
+    /// Whether the symbolic analysis of an earlier solve was reused.
+    pub reused_analysis: bool,
+    /// Seconds in symbolic analysis.
+    pub analysis_seconds: f64,
+    /// Seconds in numeric factorisation(s) of the operator.
+    pub factor_seconds: f64,
+    /// Seconds in the Lanczos iteration (solves, orthogonalisation, Ritz problems).
+    pub iteration_seconds: f64,
+    /// Seconds in the Sturm check and the residual check.
+    pub check_seconds: f64,
+    /// Number of eigenvalues below the check shift found by the Sturm count, and that shift.
+    pub sturm: Option<(usize, f64)>,
+    /// Largest backward error `‖Kφ − λMφ‖ / ((‖K‖ + |λ|‖M‖) ‖φ‖)` over the returned modes.
+    pub max_residual: f64,
+}
+
+/// Progress of a long solve, reported after each restart.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EigenProgress {
+    /// Restarts so far.
+    pub restart: usize,
+    /// Wanted modes converged so far.
+    pub converged: usize,
+    /// Wanted modes.
+    pub wanted: usize,
+}
+
+/// Mass-normalised modes, ascending.
+#[derive(Debug, Clone)]
+pub struct Modes {
+    /// Eigenvalues `λ_r = ω_r²` (rad²/s²), ascending.
+    pub eigenvalues: Vec<f64>,
+    /// Mode shapes as columns, `φ_rᵀ M φ_r = 1`, sign fixed so that the largest entry is
+    /// positive.
+    pub vectors: Mat<f64>,
+    /// Backward error of each mode (see [`EigenStats::max_residual`]).
+    pub residuals: Vec<f64>,
+    /// How the solve went.
+    pub stats: EigenStats,
+}
+
+impl Modes {
+    /// Number of modes.
+    pub fn len(&self) -> usize {
+        self.eigenvalues.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.eigenvalues.is_empty()
+    }
+
+    /// Circular frequencies `ω_r = √λ_r` (rad/s); eigenvalues at round-off level below zero
+    /// (rigid-body modes) give 0.
+    pub fn omega(&self) -> Vec<f64> {
+        self.eigenvalues.iter().map(|&l| l.max(0.0).sqrt()).collect()
+    }
+
+    /// Frequencies `f_r = ω_r / 2π` (Hz).
+    pub fn frequencies_hz(&self) -> Vec<f64> {
+        self.omega()
+            .into_iter()
+            .map(|w| w / (2.0 * std::f64::consts::PI))
+            .collect()
+    }
+}
+
+/// SplitMix64: a tiny deterministic generator for starting vectors (seeded, recorded).
+pub(crate) struct SplitMix(u64);
+
+impl SplitMix {
+    pub(crate) fn new(seed: u64) -> Self {
+        SplitMix(seed)
+    }
+    /// Uniform in `[-1, 1)`.
+    pub(crate) fn next(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^= z >> 31;
+        (z >> 11) as f64 * (2.0 / (1u64 << 53) as f64) - 1.0
+    }
+}
+
+/// The eigen solver; keeps the symbolic analysis and the last factor between solves, so that
+/// a parameter study with new values on the same pattern only refactorises, and the residual
+/// flexibility reuses the factor of the eigen solve.
+#[derive(Debug, Default)]
+pub struct EigenSolver {
+    pencil: Option<ShiftedPencil>,
+    factor: Option<ShiftFactor>,
+}
+
+/// Checks shared by every entry point: sizes, finite values, mass on every DOF.
+pub(crate) fn check_pencil(k: &SparseSym, m: &SparseSym) -> Result<()> {
+    if k.n() != m.n() {
+        return Err(Error::DimensionMismatch {
+            what: "mass matrix order (must equal the stiffness matrix order)".into(),
+            expected: k.n(),
+            found: m.n(),
+        });
+    }
+    if k.n() == 0 {
+        return Err(Error::invalid("eigen problem", "the model has no DOFs"));
+    }
+    for (name, a) in [("stiffness matrix", k), ("mass matrix", m)] {
+        if let Some((i, j, v)) = a.first_non_finite() {
+            return Err(Error::NonFinite {
+                what: name.into(),
+                location: format!("entry ({i}, {j}) (0-based DOF indices)"),
+                value: v,
+            });
+        }
+    }
+    let massless: Vec<usize> = m
+        .diag()
+        .iter()
+        .enumerate()
+        .filter(|(_, d)| **d <= 0.0)
+        .map(|(i, _)| i)
+        .collect();
+    if !massless.is_empty() {
+        return Err(Error::MasslessDofs {
+            count: massless.len(),
+            listed: massless
+                .iter()
+                .take(10)
+                .map(|i| format!("DOF index {i}"))
+                .collect::<Vec<_>>()
+                .join(", "),
+        });
+    }
+    Ok(())
+}
+
+/// `‖A‖_∞` (the largest absolute row sum; rows and columns agree for symmetric A).
+fn norm_inf(a: &SparseSym) -> f64 {
+    (0..a.n())
+        .map(|j| a.col(j).1.iter().map(|v| v.abs()).sum::<f64>())
+        .fold(0.0, f64::max)
+}
+
+fn sparse_times(a: &SparseSym, x: MatRef<'_, f64>, par: Par) -> Mat<f64> {
+    let mut y = Mat::zeros(x.nrows(), x.ncols());
+    sparse_dense_matmul(y.as_mut(), Accum::Replace, a.as_faer(), x, 1.0, par);
+    y
+}
+
+/// Backward errors of eigenpairs and the sign convention (largest entry positive).
+fn finish_vectors(k: &SparseSym, m: &SparseSym, values: &[f64], vectors: &mut Mat<f64>) -> Vec<f64> {
+    let par = faer::get_global_parallelism();
+    for c in 0..vectors.ncols() {
+        let col = vectors.col(c);
+        let mut best = 0.0f64;
+        let mut sign = 1.0;
+        for i in 0..col.nrows() {
+            if col[i].abs() > best {
+                best = col[i].abs();
+                sign = col[i].signum();
+            }
+        }
+        if sign < 0.0 {
+            for i in 0..vectors.nrows() {
+                vectors[(i, c)] = -vectors[(i, c)];
+            }
+        }
+    }
+    let kx = sparse_times(k, vectors.as_ref(), par);
+    let mx = sparse_times(m, vectors.as_ref(), par);
+    let (kn, mn) = (norm_inf(k), norm_inf(m));
+    (0..vectors.ncols())
+        .map(|c| {
+            let l = values[c];
+            let r = (kx.col(c) - mx.col(c) * faer::Scale(l)).norm_l2();
+            r / ((kn + l.abs() * mn) * vectors.col(c).norm_l2())
+        })
+        .collect()
+}
+
+impl EigenSolver {
+    /// A solver with nothing analysed yet.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The analysed pencil of the last Lanczos solve.
+    pub fn pencil(&self) -> Option<&ShiftedPencil> {
+        self.pencil.as_ref()
+    }
+
+    /// The Cholesky factor of `K − σM` from the last Lanczos solve.
+    pub fn factor(&self) -> Option<&ShiftFactor> {
+        self.factor.as_ref()
+    }
+
+    /// The pencil and its factor, when a Lanczos solve has run.
+    pub fn pencil_and_factor(&self) -> Option<(&ShiftedPencil, &ShiftFactor)> {
+        Some((self.pencil.as_ref()?, self.factor.as_ref()?))
+    }
+
+    /// Solves `K φ = λ M φ` for the modes `cfg.selection` asks for.
+    pub fn solve(&mut self, k: &SparseSym, m: &SparseSym, cfg: &EigenConfig) -> Result<Modes> {
+        self.solve_with_progress(k, m, cfg, &mut |_| {})
+    }
+
+    /// As [`EigenSolver::solve`], calling `progress` after each restart.
+    pub fn solve_with_progress(
+        &mut self,
+        k: &SparseSym,
+        m: &SparseSym,
+        cfg: &EigenConfig,
+        progress: &mut dyn FnMut(&EigenProgress),
+    ) -> Result<Modes> {
+        check_pencil(k, m)?;
+        check_config(cfg)?;
+        let n = k.n();
+        if n <= cfg.dense_below {
+            return solve_dense(k, m, cfg);
+        }
+        let t0 = Instant::now();
+        let reused = match self.pencil.as_mut() {
+            Some(p) if p.n() == n => p.set_values(k, m)?,
+            _ => {
+                self.pencil = Some(ShiftedPencil::new(k, m)?);
+                false
+            }
+        };
+        self.factor = None;
+        let pencil = self.pencil.as_ref().expect("set above");
+        let analysis_seconds = if reused { 0.0 } else { t0.elapsed().as_secs_f64() };
+
+        // Shift and operator factor.
+        let t1 = Instant::now();
+        let factor = choose_shift_and_factor(pencil, k, m, cfg)?;
+        let sigma = factor.shift();
+        let mut factor_seconds = t1.elapsed().as_secs_f64();
+
+        let mut check_seconds = 0.0;
+        let nev = match cfg.selection {
+            ModeSelection::Lowest(c) => c,
+            ModeSelection::Below { f_max_hz } => {
+                let t = Instant::now();
+                let s = (2.0 * std::f64::consts::PI * f_max_hz).powi(2);
+                let c = pencil.count_below(s)?;
+                check_seconds += t.elapsed().as_secs_f64();
+                if c == 0 {
+                    return Err(Error::invalid(
+                        "mode selection",
+                        format!("no mode lies below {f_max_hz} Hz (Sturm count at that frequency is 0)"),
+                    ));
+                }
+                c
+            }
+        };
+        if nev > n {
+            return Err(Error::invalid(
+                "mode selection",
+                format!("{nev} modes asked for, but the model has only {n} DOFs"),
+            ));
+        }
+
+        let mut block = cfg.block_size;
+        let mut attempt = 0;
+        loop {
+            attempt += 1;
+            let t2 = Instant::now();
+            let basis = cfg
+                .basis_size
+                .unwrap_or((2 * nev).max(nev + 4 * block))
+                .min(n);
+            if basis < nev + block {
+                // Too few DOFs for a Krylov basis: the problem is small, solve it densely.
+                let mut modes = solve_dense(k, m, cfg)?;
+                modes.stats.factor_seconds += factor_seconds;
+                return Ok(modes);
+            }
+            let ks = KrylovSchur {
+                pencil,
+                factor: &factor,
+                m,
+                nev,
+                block,
+                basis,
+                tol: cfg.tol,
+                max_restarts: cfg.max_restarts,
+                seed: cfg.seed.wrapping_add(attempt as u64 - 1),
+            };
+            let ritz = ks.run(progress)?;
+            let iteration_seconds = t2.elapsed().as_secs_f64();
+
+            let t3 = Instant::now();
+            let mut values: Vec<f64> = ritz.theta[..nev].iter().map(|t| sigma + 1.0 / t).collect();
+            let mut vectors = ritz.vectors;
+            // Sturm check: eigenvalues below a point just above the last wanted one, against
+            // the converged Ritz values there.
+            let mut sturm = None;
+            let mut missed = false;
+            let check = match cfg.selection {
+                ModeSelection::Lowest(_) => cfg.sturm_check,
+                ModeSelection::Below { .. } => true,
+            };
+            if check {
+                let last = values[nev - 1];
+                let scale = values.iter().fold(0.0f64, |a, v| a.max(v.abs())).max(1e-300);
+                let mut sc = last + 1e-8 * last.abs().max(scale * 1e-6);
+                let count = loop {
+                    match pencil.count_below(sc) {
+                        Ok(c) => break c,
+                        Err(_) => sc += 1e-8 * scale,
+                    }
+                };
+                let found = ritz
+                    .theta
+                    .iter()
+                    .zip(&ritz.converged)
+                    .filter(|(t, c)| **c && sigma + 1.0 / **t < sc)
+                    .count();
+                sturm = Some((count, sc));
+                missed = count > found;
+                if let ModeSelection::Below { f_max_hz } = cfg.selection {
+                    // All wanted modes must lie below f_max (the count said so).
+                    let lim = (2.0 * std::f64::consts::PI * f_max_hz).powi(2);
+                    missed |= values.iter().any(|&v| v >= lim);
+                }
+            }
+            if missed && attempt < 3 && block < n / 4 {
+                block *= 2;
+                check_seconds += t3.elapsed().as_secs_f64();
+                continue;
+            }
+            if missed {
+                let (count, sc) = sturm.expect("set when missed");
+                return Err(Error::Numerical {
+                    what: "shift-invert Lanczos".into(),
+                    detail: format!(
+                        "the Sturm count finds {count} eigenvalues below {:.6} Hz but only {} \
+                         converged there after {attempt} attempts (block size up to {block}); \
+                         raise the block size",
+                        sc.max(0.0).sqrt() / (2.0 * std::f64::consts::PI),
+                        ritz.converged.iter().filter(|c| **c).count()
+                    ),
+                });
+            }
+            let residuals = finish_vectors(k, m, &values, &mut vectors);
+            // Exact zeros below round-off stay as computed; sort is already ascending.
+            values.truncate(nev);
+            check_seconds += t3.elapsed().as_secs_f64();
+            let max_residual = residuals.iter().fold(0.0f64, |a, &r| a.max(r));
+            factor_seconds += 0.0;
+            let modes = Modes {
+                eigenvalues: values,
+                vectors,
+                residuals,
+                stats: EigenStats {
+                    method: EigenMethod::Lanczos,
+                    shift: sigma,
+                    block_size: block,
+                    basis_size: basis,
+                    restarts: ritz.restarts,
+                    operator_applications: ritz.applications,
+                    factor_nnz: factor.nnz(),
+                    reused_analysis: reused,
+                    analysis_seconds,
+                    factor_seconds,
+                    iteration_seconds,
+                    check_seconds,
+                    sturm,
+                    max_residual,
+                },
+            };
+            self.factor = Some(factor);
+            return Ok(modes);
+        }
+    }
+}
+
+fn check_config(cfg: &EigenConfig) -> Result<()> {
+    match cfg.selection {
+        ModeSelection::Lowest(0) => {
+            return Err(Error::invalid("mode selection", "asks for 0 modes"));
+        }
+        ModeSelection::Below { f_max_hz } if !(f_max_hz.is_finite() && f_max_hz > 0.0) => {
+            return Err(Error::invalid(
+                "mode selection",
+                format!("the upper frequency must be positive and finite (got {f_max_hz} Hz)"),
+            ));
+        }
+        _ => {}
+    }
+    if !(cfg.tol > 0.0 && cfg.tol < 1.0) {
+        return Err(Error::invalid(
+            "eigen solver tolerance",
+            format!("must lie in (0, 1) (got {})", cfg.tol),
+        ));
+    }
+    if cfg.block_size == 0 {
+        return Err(Error::invalid("eigen solver block size", "must be at least 1"));
+    }
+    if let Some(s) = cfg.shift
+        && !s.is_finite()
+    {
+        return Err(Error::invalid("eigen solver shift", format!("must be finite (got {s})")));
+    }
+    Ok(())
+}
+
+/// Factor `K − σM` at the requested shift, at 0, or at a small negative shift when `K` is
+/// singular; a clear error when `K` is indefinite.
+fn choose_shift_and_factor(
+    pencil: &ShiftedPencil,
+    k: &SparseSym,
+    m: &SparseSym,
+    cfg: &EigenConfig,
+) -> Result<ShiftFactor> {
+    if let Some(s) = cfg.shift {
+        return pencil.cholesky(s)?.map_err(|step| Error::invalid(
+            "eigen solver shift",
+            format!(
+                "K − σM is not positive definite at σ = {s:e} rad²/s² (pivot {step}): the shift \
+                 must lie below the lowest eigenvalue"
+            ),
+        ));
+    }
+    if let Ok(f) = pencil.cholesky(0.0)? {
+        return Ok(f);
+    }
+    let (kd, md) = (k.diag(), m.diag());
+    let scale = kd
+        .iter()
+        .zip(&md)
+        .map(|(a, b)| a.abs() / b)
+        .fold(0.0f64, f64::max)
+        .max(f64::MIN_POSITIVE);
+    let mut last = 0;
+    for e in [1e-8, 1e-6, 1e-4] {
+        match pencil.cholesky(-e * scale)? {
+            Ok(f) => return Ok(f),
+            Err(step) => last = step,
+        }
+    }
+    Err(Error::NotDefinite {
+        matrix: "stiffness matrix".into(),
+        required: "positive semi-definite".into(),
+        detail: format!(
+            "K + sM stays indefinite for s up to {:.3e} rad²/s² (pivot {last} of the \
+             reordered matrix): K has negative eigenvalues",
+            1e-4 * scale
+        ),
+    })
+}
+
+/// The dense path: exact for small models.
+fn solve_dense(k: &SparseSym, m: &SparseSym, cfg: &EigenConfig) -> Result<Modes> {
+    let t = Instant::now();
+    let d = nlsim_kernel::linalg::dense_generalized_eigen_low(
+        k.to_dense().as_ref(),
+        m.to_dense().as_ref(),
+    )?;
+    let n = k.n();
+    let count = match cfg.selection {
+        ModeSelection::Lowest(c) => {
+            if c > n {
+                return Err(Error::invalid(
+                    "mode selection",
+                    format!("{c} modes asked for, but the model has only {n} DOFs"),
+                ));
+            }
+            c
+        }
+        ModeSelection::Below { f_max_hz } => {
+            let lim = (2.0 * std::f64::consts::PI * f_max_hz).powi(2);
+            let c = d.values.iter().filter(|&&v| v < lim).count();
+            if c == 0 {
+                return Err(Error::invalid(
+                    "mode selection",
+                    format!("no mode lies below {f_max_hz} Hz"),
+                ));
+            }
+            c
+        }
+    };
+    let values = d.values[..count].to_vec();
+    let mut vectors = d.vectors.subcols(0, count).to_owned();
+    let iteration_seconds = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let residuals = finish_vectors(k, m, &values, &mut vectors);
+    let max_residual = residuals.iter().fold(0.0f64, |a, &r| a.max(r));
+    Ok(Modes {
+        eigenvalues: values,
+        vectors,
+        residuals,
+        stats: EigenStats {
+            method: EigenMethod::Dense,
+            shift: 0.0,
+            block_size: 0,
+            basis_size: n,
+            restarts: 0,
+            operator_applications: 0,
+            factor_nnz: n * (n + 1) / 2,
+            reused_analysis: false,
+            analysis_seconds: 0.0,
+            factor_seconds: 0.0,
+            iteration_seconds,
+            check_seconds: t.elapsed().as_secs_f64(),
+            sturm: None,
+            max_residual,
+        },
+    })
+}
+
+/// One run of the thick-restart block Lanczos iteration.
+struct KrylovSchur<'a> {
+    pencil: &'a ShiftedPencil,
+    factor: &'a ShiftFactor,
+    m: &'a SparseSym,
+    nev: usize,
+    block: usize,
+    basis: usize,
+    tol: f64,
+    max_restarts: usize,
+    seed: u64,
+}
+
+/// Ritz pairs of the final basis, largest `θ` first.
+struct Ritz {
+    theta: Vec<f64>,
+    converged: Vec<bool>,
+    /// The first `nev` Ritz vectors.
+    vectors: Mat<f64>,
+    restarts: usize,
+    applications: usize,
+}
+
+impl KrylovSchur<'_> {
+    fn op(&self, x: MatRef<'_, f64>, par: Par) -> Mat<f64> {
+        let mut y = sparse_times(self.m, x, par);
+        self.pencil.solve_in_place(self.factor, y.as_mut());
+        y
+    }
+
+    /// `x ← x − V (Vᵀ M x)`, twice; returns the accumulated coefficients `Vᵀ M x`.
+    fn orth_against(&self, v: MatRef<'_, f64>, mut x: MatMut<'_, f64>, par: Par) -> Mat<f64> {
+        let mut coef = Mat::<f64>::zeros(v.ncols(), x.ncols());
+        if v.ncols() == 0 {
+            return coef;
+        }
+        for _ in 0..2 {
+            let mx = sparse_times(self.m, x.as_ref(), par);
+            let c = v.transpose() * &mx;
+            matmul(x.as_mut(), Accum::Add, v, c.as_ref(), -1.0, par);
+            coef += &c;
+        }
+        coef
+    }
+
+    fn m_norm(&self, x: MatRef<'_, f64>) -> Result<f64> {
+        let mut s = 0.0;
+        let col = x.col(0);
+        for j in 0..self.m.n() {
+            let (rows, vals) = self.m.col(j);
+            let mut acc = 0.0;
+            for (&i, &a) in rows.iter().zip(vals) {
+                acc += a * col[i];
+            }
+            s += acc * col[j];
+        }
+        if s < 0.0 {
+            return Err(Error::NotDefinite {
+                matrix: "mass matrix".into(),
+                required: "positive definite".into(),
+                detail: format!("a Lanczos vector has xᵀMx = {s:e} < 0"),
+            });
+        }
+        Ok(s.sqrt())
+    }
+
+    /// M-orthonormalises the columns of `x` (already orthogonal to `v`) among themselves.
+    /// Returns `R` with `x_in = x_out R`; a column that is (numerically) dependent is replaced by
+    /// a fresh random direction orthogonal to everything, with a zero diagonal in `R`.
+    fn orthonormalize(
+        &self,
+        v: MatRef<'_, f64>,
+        x: &mut Mat<f64>,
+        norms_in: &[f64],
+        rng: &mut SplitMix,
+        par: Par,
+    ) -> Result<Mat<f64>> {
+        let b = x.ncols();
+        let n = x.nrows();
+        let mut r = Mat::<f64>::zeros(b, b);
+        for c in 0..b {
+            let mut fresh = false;
+            loop {
+                for _ in 0..2 {
+                    if c > 0 {
+                        let prev = x.subcols(0, c).to_owned();
+                        let mut xc = x.subcols_mut(c, 1);
+                        let mx = sparse_times(self.m, xc.as_ref(), par);
+                        let s = prev.transpose() * &mx;
+                        matmul(xc.as_mut(), Accum::Add, prev.as_ref(), s.as_ref(), -1.0, par);
+                        if !fresh {
+                            for d in 0..c {
+                                r[(d, c)] += s[(d, 0)];
+                            }
+                        }
+                    }
+                }
+                let nrm = self.m_norm(x.subcols(c, 1))?;
+                let reference = if fresh { 1.0 } else { norms_in[c] };
+                if nrm > 1e-10 * reference && nrm > 0.0 {
+                    if !fresh {
+                        r[(c, c)] = nrm;
+                    }
+                    for i in 0..n {
+                        x[(i, c)] /= nrm;
+                    }
+                    break;
+                }
+                // Deflation: the block has lost rank (an invariant subspace was found).
+                if fresh && nrm == 0.0 {
+                    return Err(Error::Numerical {
+                        what: "shift-invert Lanczos".into(),
+                        detail: "cannot extend the basis: the Krylov space is exhausted".into(),
+                    });
+                }
+                fresh = true;
+                for i in 0..n {
+                    x[(i, c)] = rng.next();
+                }
+                let mut xc = x.subcols_mut(c, 1);
+                let _ = self.orth_against(v, xc.as_mut(), par);
+                let nrm0 = self.m_norm(xc.as_ref())?;
+                for i in 0..n {
+                    xc[(i, 0)] /= nrm0.max(f64::MIN_POSITIVE);
+                }
+            }
+        }
+        Ok(r)
+    }
+
+    fn run(&self, progress: &mut dyn FnMut(&EigenProgress)) -> Result<Ritz> {
+        let par = faer::get_global_parallelism();
+        let (n, b, nv, nev) = (self.pencil.n(), self.block, self.basis, self.nev);
+        let mut rng = SplitMix::new(self.seed);
+        let mut v = Mat::<f64>::zeros(n, nv);
+        let mut h = Mat::<f64>::zeros(nv, nv);
+        let mut bc = Mat::<f64>::zeros(b, nv);
+        let mut applications = 0;
+
+        // Starting block: Op applied to a random block (purges directions Op cannot reach).
+        let x0 = Mat::from_fn(n, b, |_, _| rng.next());
+        let mut w = self.op(x0.as_ref(), par);
+        applications += b;
+        let norms: Vec<f64> = (0..b)
+            .map(|c| self.m_norm(w.subcols(c, 1)))
+            .collect::<Result<_>>()?;
+        self.orthonormalize(v.subcols(0, 0), &mut w, &norms, &mut rng, par)?;
+        let mut j = 0;
+        let mut restarts = 0;
+        loop {
+            // Expand to the full basis.
+            while j + b <= nv {
+                v.subcols_mut(j, b).copy_from(&w);
+                // Rows of H for the new block against the old columns: the old coupling.
+                for r in 0..b {
+                    for c in 0..j {
+                        h[(j + r, c)] = bc[(r, c)];
+                    }
+                }
+                let mut x = self.op(w.as_ref(), par);
+                applications += b;
+                let norms: Vec<f64> = (0..b)
+                    .map(|c| self.m_norm(x.subcols(c, 1)))
+                    .collect::<Result<_>>()?;
+                let coef = self.orth_against(v.subcols(0, j + b), x.as_mut(), par);
+                h.submatrix_mut(0, j, j + b, b).copy_from(&coef);
+                let r = self.orthonormalize(v.subcols(0, j + b), &mut x, &norms, &mut rng, par)?;
+                bc.fill(0.0);
+                bc.submatrix_mut(0, j, b, b).copy_from(&r);
+                w = x;
+                j += b;
+            }
+            // Rayleigh–Ritz on the symmetric projection.
+            let hs = Mat::from_fn(j, j, |a, c| 0.5 * (h[(a, c)] + h[(c, a)]));
+            let (s, u) = nlsim_kernel::linalg::symmetric_eigen(hs.as_ref())?;
+            // Largest θ first.
+            let theta: Vec<f64> = (0..j).rev().map(|i| s[i]).collect();
+            let y = Mat::from_fn(j, j, |a, c| u[(a, j - 1 - c)]);
+            let resid = bc.subcols(0, j) * &y;
+            let converged: Vec<bool> = (0..j)
+                .map(|c| resid.col(c).norm_l2() <= self.tol * theta[c].abs())
+                .collect();
+            let nconv = converged[..nev].iter().filter(|c| **c).count();
+            progress(&EigenProgress {
+                restart: restarts,
+                converged: nconv,
+                wanted: nev,
+            });
+            if nconv == nev {
+                let vectors = v.subcols(0, j) * y.subcols(0, nev);
+                return Ok(Ritz {
+                    theta,
+                    converged,
+                    vectors,
+                    restarts,
+                    applications,
+                });
+            }
+            if restarts >= self.max_restarts {
+                let worst = (0..nev)
+                    .map(|c| resid.col(c).norm_l2() / theta[c].abs())
+                    .fold(0.0f64, f64::max);
+                return Err(Error::Numerical {
+                    what: "shift-invert Lanczos".into(),
+                    detail: format!(
+                        "{nconv} of {nev} modes converged after {restarts} restarts (worst \
+                         relative Ritz residual {worst:.2e} > tolerance {:.1e}); raise the basis \
+                         size or the restart limit",
+                        self.tol
+                    ),
+                });
+            }
+            // Thick restart: keep the best `keep` Ritz vectors.
+            let keep = ((nev + j) / 2).max(nev).min(j - b);
+            let vk = v.subcols(0, j) * y.subcols(0, keep);
+            v.subcols_mut(0, keep).copy_from(&vk);
+            h.fill(0.0);
+            for c in 0..keep {
+                h[(c, c)] = theta[c];
+            }
+            let bk = bc.subcols(0, j) * y.subcols(0, keep);
+            bc.fill(0.0);
+            bc.subcols_mut(0, keep).copy_from(&bk);
+            j = keep;
+            restarts += 1;
+        }
+    }
+}

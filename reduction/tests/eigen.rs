@@ -1,0 +1,258 @@
+//! The sparse eigen solver against the dense generalized eigen solver (the oracle).
+
+use faer::Mat;
+use nlsim_fixtures::bracket::BracketConfig;
+use nlsim_kernel::linalg::dense_generalized_eigen_low as dense_generalized_eigen;
+use nlsim_kernel::{Error, SparseSym};
+use nlsim_reduction::{EigenConfig, EigenMethod, EigenSolver, ModeSelection, Modes};
+
+fn lanczos(selection: ModeSelection) -> EigenConfig {
+    EigenConfig {
+        selection,
+        dense_below: 0,
+        ..EigenConfig::default()
+    }
+}
+
+fn bracket(refinement: usize, clamped: bool) -> (SparseSym, SparseSym) {
+    let cfg = BracketConfig {
+        refinement,
+        clamped,
+        lumped_mass: false,
+    };
+    let f = nlsim_fixtures::bracket_fixture(&cfg, "none").unwrap();
+    (f.model.stiffness().clone(), f.model.mass().clone())
+}
+
+fn ecl() -> (SparseSym, SparseSym) {
+    let f = nlsim_fixtures::ecl_beam();
+    (f.model.stiffness().clone(), f.model.mass().clone())
+}
+
+/// Eigenvalues to `rtol` relative (with `atol` for rigid-body modes at zero), and mode shapes
+/// up to sign: for every cluster of (numerically) equal eigenvalues, the sparse vectors span the
+/// dense ones, checked by `‖Φ_sᵀ M Φ_d‖` being orthogonal on the cluster.
+fn compare(k: &SparseSym, m: &SparseSym, modes: &Modes, rtol: f64, atol: f64) {
+    let dense = dense_generalized_eigen(k.to_dense().as_ref(), m.to_dense().as_ref()).unwrap();
+    let n_modes = modes.len();
+    for r in 0..n_modes {
+        let (a, b) = (modes.eigenvalues[r], dense.values[r]);
+        assert!(
+            (a - b).abs() <= rtol * b.abs() + atol,
+            "mode {}: λ = {a:e} against dense {b:e} (rel {:.2e})",
+            r + 1,
+            (a - b).abs() / b.abs()
+        );
+    }
+    // Clusters: consecutive dense eigenvalues within 1e-8 relative (or both rigid).
+    let md = m.to_dense();
+    let cross = modes.vectors.transpose() * &md * &dense.vectors; // n_modes × n
+    let mut start = 0;
+    while start < n_modes {
+        let mut end = start + 1;
+        while end < dense.values.len()
+            && (dense.values[end] - dense.values[start]).abs()
+                <= 1e-8 * dense.values[start].abs() + atol
+        {
+            end += 1;
+        }
+        // Within the cluster (restricted to the sparse modes we have), the overlap with the
+        // dense cluster must be a full-norm projection: Σ_j c_ij² = 1 for each sparse mode.
+        for i in start..end.min(n_modes) {
+            let s: f64 = (start..end).map(|j| cross[(i, j)].powi(2)).sum();
+            assert!(
+                (s - 1.0).abs() < 1e-7,
+                "mode {} is not in the span of dense modes {}..{}: overlap {s}",
+                i + 1,
+                start + 1,
+                end
+            );
+        }
+        start = end;
+    }
+    // Mass normalisation.
+    let g = modes.vectors.transpose() * &md * &modes.vectors;
+    let eye = Mat::<f64>::identity(n_modes, n_modes);
+    assert!((&g - &eye).norm_max() < 1e-10, "ΦᵀMΦ ≠ I: {:e}", (&g - &eye).norm_max());
+}
+
+#[test]
+fn ecl_beam_with_symmetric_section_pairs() {
+    let (k, m) = ecl();
+    let mut s = EigenSolver::new();
+    let modes = s.solve(&k, &m, &lanczos(ModeSelection::Lowest(24))).unwrap();
+    assert_eq!(modes.stats.method, EigenMethod::Lanczos);
+    compare(&k, &m, &modes, 1e-10, 0.0);
+    // The square section gives equal bending pairs: both members present.
+    let f = modes.frequencies_hz();
+    assert!((f[0] - f[1]).abs() < 1e-6 * f[0], "first bending pair {} {}", f[0], f[1]);
+    assert!(modes.stats.max_residual < 1e-9, "{:?}", modes.stats);
+    let (count, _) = modes.stats.sturm.unwrap();
+    assert!(count >= 24);
+}
+
+#[test]
+fn single_vector_blocks_do_not_miss_multiple_eigenvalues() {
+    // With block size 1 a repeated eigenvalue can only appear through round-off; the Sturm
+    // check must detect any miss and the solver enlarge the block until none is missed.
+    let (k, m) = ecl();
+    let cfg = EigenConfig {
+        block_size: 1,
+        ..lanczos(ModeSelection::Lowest(12))
+    };
+    let modes = EigenSolver::new().solve(&k, &m, &cfg).unwrap();
+    compare(&k, &m, &modes, 1e-10, 0.0);
+}
+
+#[test]
+fn clamped_bracket_against_dense() {
+    let (k, m) = bracket(1, true);
+    let modes = EigenSolver::new()
+        .solve(&k, &m, &lanczos(ModeSelection::Lowest(40)))
+        .unwrap();
+    compare(&k, &m, &modes, 1e-10, 0.0);
+    assert_eq!(modes.stats.shift, 0.0);
+}
+
+#[test]
+fn free_free_bracket_finds_six_rigid_body_modes() {
+    let (k, m) = bracket(1, false);
+    let modes = EigenSolver::new()
+        .solve(&k, &m, &lanczos(ModeSelection::Lowest(16)))
+        .unwrap();
+    assert!(modes.stats.shift < 0.0, "a singular K needs a negative shift");
+    // Rigid-body eigenvalues are zero to round-off of the largest eigenvalue scale.
+    let dense = dense_generalized_eigen(k.to_dense().as_ref(), m.to_dense().as_ref()).unwrap();
+    let lmax = dense.values.last().copied().unwrap();
+    compare(&k, &m, &modes, 1e-10, 1e-12 * lmax);
+    let elastic = dense.values[6];
+    for r in 0..6 {
+        assert!(modes.eigenvalues[r].abs() < 1e-9 * elastic, "rigid mode {r}");
+    }
+    assert!(modes.eigenvalues[6] > 0.5 * elastic);
+}
+
+#[test]
+fn all_modes_below_a_frequency() {
+    let (k, m) = bracket(1, true);
+    let dense = dense_generalized_eigen(k.to_dense().as_ref(), m.to_dense().as_ref()).unwrap();
+    // Midway between modes 17 and 18.
+    let lim = 0.5 * (dense.values[16] + dense.values[17]);
+    let f_max_hz = lim.sqrt() / (2.0 * std::f64::consts::PI);
+    let modes = EigenSolver::new()
+        .solve(&k, &m, &lanczos(ModeSelection::Below { f_max_hz }))
+        .unwrap();
+    assert_eq!(modes.len(), 17);
+    compare(&k, &m, &modes, 1e-10, 0.0);
+    // The dense path agrees on the count.
+    let cfg = EigenConfig {
+        selection: ModeSelection::Below { f_max_hz },
+        dense_below: 10_000,
+        ..EigenConfig::default()
+    };
+    let d = EigenSolver::new().solve(&k, &m, &cfg).unwrap();
+    assert_eq!(d.stats.method, EigenMethod::Dense);
+    assert_eq!(d.len(), 17);
+}
+
+#[test]
+fn parameter_study_reuses_the_symbolic_analysis() {
+    let (k, m) = bracket(1, true);
+    let mut s = EigenSolver::new();
+    let cfg = lanczos(ModeSelection::Lowest(8));
+    let a = s.solve(&k, &m, &cfg).unwrap();
+    assert!(!a.stats.reused_analysis);
+    // Stiffer material: same pattern, eigenvalues scale exactly.
+    let b = s.solve(&k.scaled(1.21), &m, &cfg).unwrap();
+    assert!(b.stats.reused_analysis);
+    assert_eq!(s.pencil().unwrap().analyses(), 1);
+    for r in 0..8 {
+        let want = 1.21 * a.eigenvalues[r];
+        assert!((b.eigenvalues[r] - want).abs() < 1e-10 * want);
+    }
+}
+
+#[test]
+fn results_do_not_depend_on_the_seed_beyond_tolerance() {
+    let (k, m) = bracket(1, true);
+    let a = EigenSolver::new()
+        .solve(&k, &m, &lanczos(ModeSelection::Lowest(10)))
+        .unwrap();
+    let cfg = EigenConfig {
+        seed: 99,
+        block_size: 3,
+        ..lanczos(ModeSelection::Lowest(10))
+    };
+    let b = EigenSolver::new().solve(&k, &m, &cfg).unwrap();
+    for r in 0..10 {
+        assert!((a.eigenvalues[r] - b.eigenvalues[r]).abs() < 1e-11 * a.eigenvalues[r]);
+    }
+}
+
+#[test]
+fn bad_input_is_named() {
+    let (k, m) = bracket(1, true);
+    // A massless DOF (semi-definite mass, as in a speaker-box model with pressure DOFs).
+    let n = m.n();
+    let mut d = m.diag();
+    d[17] = 0.0;
+    let lumped = SparseSym::diagonal("M", &d).unwrap();
+    let e = EigenSolver::new()
+        .solve(&k, &lumped, &lanczos(ModeSelection::Lowest(5)))
+        .unwrap_err();
+    assert!(matches!(e, Error::MasslessDofs { count: 1, .. }), "{e}");
+    assert!(e.to_string().contains("DOF index 17"), "{e}");
+    // An indefinite stiffness.
+    let neg = SparseSym::diagonal("K", &vec![-1e9; n]).unwrap();
+    let bad = SparseSym::linear_combination("K", 1.0, &k, 1.0, &neg).unwrap();
+    let e = EigenSolver::new()
+        .solve(&bad, &m, &lanczos(ModeSelection::Lowest(5)))
+        .unwrap_err();
+    assert!(matches!(e, Error::NotDefinite { .. }), "{e}");
+    // Non-finite values, wrong orders, impossible selections.
+    let nan = SparseSym::diagonal("K", &vec![f64::NAN; n]).unwrap();
+    let e = EigenSolver::new()
+        .solve(&nan, &m, &lanczos(ModeSelection::Lowest(5)))
+        .unwrap_err();
+    assert!(matches!(e, Error::NonFinite { .. }), "{e}");
+    let small = SparseSym::diagonal("M", &[1.0; 3]).unwrap();
+    let e = EigenSolver::new()
+        .solve(&k, &small, &lanczos(ModeSelection::Lowest(5)))
+        .unwrap_err();
+    assert!(matches!(e, Error::DimensionMismatch { .. }), "{e}");
+    for sel in [
+        ModeSelection::Lowest(0),
+        ModeSelection::Lowest(n + 1),
+        ModeSelection::Below { f_max_hz: -1.0 },
+        ModeSelection::Below { f_max_hz: 1e-3 },
+    ] {
+        let e = EigenSolver::new().solve(&k, &m, &lanczos(sel)).unwrap_err();
+        assert!(matches!(e, Error::InvalidInput { .. }), "{sel:?}: {e}");
+    }
+}
+
+#[test]
+fn sturm_check_catches_a_missed_multiple_eigenvalue_and_the_retry_finds_it() {
+    // λ = 10 four times (DOFs 9..12), the last wanted modes. A single-vector Krylov space sees
+    // one combination of the four; the Sturm count shows the miss and the solver retries with
+    // a larger block.
+    let n = 400;
+    let mut d: Vec<f64> = (1..=n).map(|i| i as f64).collect();
+    d[10] = 10.0;
+    d[11] = 10.0;
+    d[12] = 10.0;
+    let k = SparseSym::diagonal("K", &d).unwrap();
+    let m = SparseSym::diagonal("M", &vec![1.0; n]).unwrap();
+    let cfg = EigenConfig {
+        block_size: 1,
+        ..lanczos(ModeSelection::Lowest(12))
+    };
+    let modes = EigenSolver::new().solve(&k, &m, &cfg).unwrap();
+    assert!(modes.stats.block_size > 1, "the miss must be detected: {:?}", modes.stats);
+    let want = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 10.0, 10.0];
+    for (a, b) in modes.eigenvalues.iter().zip(want) {
+        assert!((a - b).abs() < 1e-12 * b, "{a} vs {b}");
+    }
+    let (count, _) = modes.stats.sturm.unwrap();
+    assert_eq!(count, 13);
+}
