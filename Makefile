@@ -16,3 +16,4 @@ test:
 bench:
 	@scripts/ensure-deps.sh
 	cargo bench -p nlsim-bench --bench kernel -- --quick --noplot
+	cargo bench -p nlsim-bench --bench reduction -- --quick --noplot

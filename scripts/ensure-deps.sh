@@ -3,8 +3,9 @@
 # exact command to run. Called by `make demo` and `make test`.
 set -euo pipefail
 
-# Debian packages the build needs: a C compiler for mimalloc.
-APT_PACKAGES=(gcc libc6-dev)
+# Debian packages the build needs: a C compiler for mimalloc, and the HDF5 library (with
+# pkg-config to find it) for the result files.
+APT_PACKAGES=(gcc libc6-dev libhdf5-dev pkg-config)
 
 say() { printf 'nlsim setup: %s\n' "$*" >&2; }
 

@@ -47,4 +47,15 @@ pub enum Error {
     /// The model itself is invalid (numbers, not syntax).
     #[error("{0}")]
     Model(#[from] nlsim_kernel::Error),
+    /// An HDF5 file could not be written or read.
+    #[error("{}: HDF5: {message}", path.display())]
+    Hdf5 {
+        /// The file.
+        path: PathBuf,
+        /// What the HDF5 library reported.
+        message: String,
+    },
+    /// A command-line value is unusable (exit code 2).
+    #[error("{0}")]
+    Usage(String),
 }

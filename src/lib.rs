@@ -3,7 +3,7 @@
 //! Simulation and calibration of large linear structures with local nonlinearities, after
 //! Y. Chen, *Model calibration methods for mechanical systems with local nonlinearities*
 //! (Linnaeus University, 2016). This crate is the facade: it re-exports the numeric crates
-//! and holds what touches files — model files, Matrix Market — and the `nlsim` command line
+//! and holds what touches files — model files, Matrix Market, HDF5 results — and the `nlsim` command line
 //! (feature `cli`, on by default; link with `default-features = false` to leave out clap).
 //!
 //! ```no_run
@@ -13,6 +13,7 @@
 //! ```
 
 pub mod error;
+pub mod modes;
 pub mod mtx;
 pub mod spec;
 pub mod summary;
@@ -20,4 +21,5 @@ pub mod summary;
 pub use error::{Error, Result};
 pub use nlsim_fixtures as fixtures;
 pub use nlsim_kernel as kernel;
+pub use nlsim_reduction as reduction;
 pub use spec::{LoadedModel, load_model, parse_model_file};

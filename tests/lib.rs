@@ -411,6 +411,151 @@ mod cli {
         for k in 2..=8 {
             assert!(out.contains(&format!("[{k}/8]")), "stage {k} missing");
         }
+        assert!(
+            out.contains("[2/8] modes: the lowest 12") && out.contains("23.661478"),
+            "{out}"
+        );
         assert!(out.contains("not built yet"));
+    }
+}
+
+mod modes {
+    use super::*;
+    use hdf5_metno as hdf5;
+
+    /// `nlsim modes` to CSV and HDF5: the ECL beam's first bending pair against
+    /// Euler–Bernoulli theory (0.1 %), shapes mass-normalised in the file, the table on stdout.
+    #[test]
+    fn csv_and_hdf5_outputs() {
+        let d = scratch("modes");
+        let csv = d.join("beam.csv");
+        let (rc, out, err) = nlsim(&[
+            "modes",
+            "ecl_beam",
+            "--count",
+            "6",
+            "--out",
+            csv.to_str().unwrap(),
+        ]);
+        assert_eq!(rc, 0, "{err}");
+        assert!(
+            out.contains("frequency Hz") && out.contains("meff uz"),
+            "{out}"
+        );
+        let text = std::fs::read_to_string(&csv).unwrap();
+        let rows: Vec<Vec<f64>> = text
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+            .collect();
+        assert_eq!(rows.len(), 6);
+        let f1 = nlsim::fixtures::ecl_cantilever(20)
+            .bending_frequency_hz(1, nlsim::fixtures::ecl_cantilever(20).i_y());
+        for r in &rows[..2] {
+            assert!((r[1] - f1).abs() < 1e-3 * f1, "{} vs {f1}", r[1]);
+            assert!(
+                (r[3] - 0.01).abs() < 1e-9,
+                "Rayleigh fitted to 1 % at mode 1"
+            );
+        }
+
+        let h5 = d.join("beam.h5");
+        let (rc, _, err) = nlsim(&[
+            "-q",
+            "modes",
+            "ecl_beam",
+            "--fmax",
+            "500",
+            "--out",
+            h5.to_str().unwrap(),
+        ]);
+        assert_eq!(rc, 0, "{err}");
+        let file = hdf5::File::open(&h5).unwrap();
+        let f: Vec<f64> = file
+            .dataset("modes/frequency_hz")
+            .unwrap()
+            .read_raw()
+            .unwrap();
+        // Bending pairs 1–3 in both planes lie below 500 Hz (plus nothing else).
+        assert_eq!(f.len(), 6, "{f:?}");
+        assert!(f.iter().all(|&x| x < 500.0));
+        let shapes = file.dataset("modes/shapes").unwrap();
+        assert_eq!(shapes.shape(), vec![6, 120]);
+        let phi: Vec<f64> = shapes.read_raw().unwrap();
+        let model = nlsim::load_model("ecl_beam").unwrap().model;
+        let mut mphi = vec![0.0; 120];
+        model.mass().mul_vec(&phi[..120], &mut mphi);
+        let norm: f64 = phi[..120].iter().zip(&mphi).map(|(a, b)| a * b).sum();
+        assert!((norm - 1.0).abs() < 1e-12, "φᵀMφ = {norm}");
+        let labels = file.dataset("dofs/labels").unwrap();
+        assert_eq!(labels.shape(), vec![120]);
+        // No temporary files left behind.
+        let left: Vec<_> = std::fs::read_dir(&d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(left.len(), 2, "{left:?}");
+    }
+
+    #[test]
+    fn lanczos_path_on_the_bracket_and_errors() {
+        let d = scratch("modes-err");
+        let out = d.join("b.csv");
+        let (rc, stdout, err) = nlsim(&[
+            "modes",
+            "bracket:refinement=2,nonlinear=none",
+            "--count",
+            "12",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(rc, 0, "{err}");
+        assert!(
+            stdout.contains("shift-invert block Lanczos") && stdout.contains("Sturm check: "),
+            "{stdout}"
+        );
+        assert_eq!(std::fs::read_to_string(&out).unwrap().lines().count(), 13);
+        // Unknown output format: usage error before any work, nothing written.
+        let bad = d.join("b.xlsx");
+        let (rc, _, err) = nlsim(&["modes", "ecl_beam", "--out", bad.to_str().unwrap()]);
+        assert_eq!(rc, 2, "{err}");
+        assert!(
+            err.contains("unknown output format") && !bad.exists(),
+            "{err}"
+        );
+        // Impossible requests name the problem.
+        let (rc, _, err) = nlsim(&["modes", "ecl_beam", "--fmax", "1"]);
+        assert_eq!(rc, 1);
+        assert!(err.contains("no mode lies below 1 Hz"), "{err}");
+        let (rc, _, err) = nlsim(&["modes", "ecl_beam", "--count", "500"]);
+        assert_eq!(rc, 1);
+        assert!(err.contains("only 120 DOFs"), "{err}");
+        // An unwritable destination: a clear error, no partial file.
+        let missing = d.join("no/such/dir/m.h5");
+        let (rc, _, err) = nlsim(&[
+            "-q",
+            "modes",
+            "ecl_beam",
+            "--out",
+            missing.to_str().unwrap(),
+        ]);
+        assert_eq!(rc, 1);
+        assert!(err.contains("no/such/dir"), "{err}");
+    }
+
+    #[test]
+    fn export_writes_matrix_market_that_reads_back() {
+        let d = scratch("export");
+        let (rc, _, err) = nlsim(&["-q", "export", "chain_2dof", d.to_str().unwrap()]);
+        assert_eq!(rc, 0, "{err}");
+        let k = std::fs::read_to_string(d.join("K.mtx")).unwrap();
+        let back =
+            nlsim::mtx::parse_matrix_market(&k, &d.join("K.mtx"), "stiffness matrix").unwrap();
+        assert_eq!(back.get(0, 0), 2e4);
+        assert_eq!(back.get(1, 0), -1e4);
+        assert_eq!(
+            std::fs::read_to_string(d.join("dofs.txt")).unwrap(),
+            "1:u\n2:u\n"
+        );
     }
 }

@@ -163,7 +163,10 @@ impl Modes {
     /// Circular frequencies `ω_r = √λ_r` (rad/s); eigenvalues at round-off level below zero
     /// (rigid-body modes) give 0.
     pub fn omega(&self) -> Vec<f64> {
-        self.eigenvalues.iter().map(|&l| l.max(0.0).sqrt()).collect()
+        self.eigenvalues
+            .iter()
+            .map(|&l| l.max(0.0).sqrt())
+            .collect()
     }
 
     /// Frequencies `f_r = ω_r / 2π` (Hz).
@@ -223,6 +226,23 @@ pub(crate) fn check_pencil(k: &SparseSym, m: &SparseSym) -> Result<()> {
             });
         }
     }
+    // Only the lower triangle is factorised: an asymmetric matrix would be silently
+    // symmetrised, so it is refused (the default tolerance of model validation).
+    for (name, a) in [("stiffness matrix", k), ("mass matrix", m)] {
+        if let Some(d) = a.symmetry_defect()
+            && d.rel_diff > 1e-10
+        {
+            return Err(Error::NotSymmetric {
+                matrix: name.into(),
+                row: format!("DOF index {}", d.row),
+                col: format!("DOF index {}", d.col),
+                a_ij: d.a_ij,
+                a_ji: d.a_ji,
+                rel_diff: d.rel_diff,
+                tolerance: 1e-10,
+            });
+        }
+    }
     let massless: Vec<usize> = m
         .diag()
         .iter()
@@ -258,7 +278,12 @@ fn sparse_times(a: &SparseSym, x: MatRef<'_, f64>, par: Par) -> Mat<f64> {
 }
 
 /// Backward errors of eigenpairs and the sign convention (largest entry positive).
-fn finish_vectors(k: &SparseSym, m: &SparseSym, values: &[f64], vectors: &mut Mat<f64>) -> Vec<f64> {
+fn finish_vectors(
+    k: &SparseSym,
+    m: &SparseSym,
+    values: &[f64],
+    vectors: &mut Mat<f64>,
+) -> Vec<f64> {
     let par = faer::get_global_parallelism();
     for c in 0..vectors.ncols() {
         let col = vectors.col(c);
@@ -338,11 +363,15 @@ impl EigenSolver {
         };
         self.factor = None;
         let pencil = self.pencil.as_ref().expect("set above");
-        let analysis_seconds = if reused { 0.0 } else { t0.elapsed().as_secs_f64() };
+        let analysis_seconds = if reused {
+            0.0
+        } else {
+            t0.elapsed().as_secs_f64()
+        };
 
         // Shift and operator factor.
         let t1 = Instant::now();
-        let factor = choose_shift_and_factor(pencil, k, m, cfg)?;
+        let factor = factor_below_spectrum(pencil, k, m, cfg.shift)?;
         let sigma = factor.shift();
         let mut factor_seconds = t1.elapsed().as_secs_f64();
 
@@ -357,7 +386,9 @@ impl EigenSolver {
                 if c == 0 {
                     return Err(Error::invalid(
                         "mode selection",
-                        format!("no mode lies below {f_max_hz} Hz (Sturm count at that frequency is 0)"),
+                        format!(
+                            "no mode lies below {f_max_hz} Hz (Sturm count at that frequency is 0)"
+                        ),
                     ));
                 }
                 c
@@ -412,7 +443,10 @@ impl EigenSolver {
             };
             if check {
                 let last = values[nev - 1];
-                let scale = values.iter().fold(0.0f64, |a, v| a.max(v.abs())).max(1e-300);
+                let scale = values
+                    .iter()
+                    .fold(0.0f64, |a, v| a.max(v.abs()))
+                    .max(1e-300);
                 let mut sc = last + 1e-8 * last.abs().max(scale * 1e-6);
                 let count = loop {
                     match pencil.count_below(sc) {
@@ -505,25 +539,31 @@ fn check_config(cfg: &EigenConfig) -> Result<()> {
         ));
     }
     if cfg.block_size == 0 {
-        return Err(Error::invalid("eigen solver block size", "must be at least 1"));
+        return Err(Error::invalid(
+            "eigen solver block size",
+            "must be at least 1",
+        ));
     }
     if let Some(s) = cfg.shift
         && !s.is_finite()
     {
-        return Err(Error::invalid("eigen solver shift", format!("must be finite (got {s})")));
+        return Err(Error::invalid(
+            "eigen solver shift",
+            format!("must be finite (got {s})"),
+        ));
     }
     Ok(())
 }
 
 /// Factor `K − σM` at the requested shift, at 0, or at a small negative shift when `K` is
 /// singular; a clear error when `K` is indefinite.
-fn choose_shift_and_factor(
+pub(crate) fn factor_below_spectrum(
     pencil: &ShiftedPencil,
     k: &SparseSym,
     m: &SparseSym,
-    cfg: &EigenConfig,
+    shift: Option<f64>,
 ) -> Result<ShiftFactor> {
-    if let Some(s) = cfg.shift {
+    if let Some(s) = shift {
         return pencil.cholesky(s)?.map_err(|step| Error::invalid(
             "eigen solver shift",
             format!(
@@ -643,54 +683,118 @@ struct Ritz {
 }
 
 impl KrylovSchur<'_> {
-    fn op(&self, x: MatRef<'_, f64>, par: Par) -> Mat<f64> {
-        let mut y = sparse_times(self.m, x, par);
+    fn solve(&self, mut y: Mat<f64>) -> Mat<f64> {
         self.pencil.solve_in_place(self.factor, y.as_mut());
         y
     }
 
-    /// `x ← x − V (Vᵀ M x)`, twice; returns the accumulated coefficients `Vᵀ M x`.
-    fn orth_against(&self, v: MatRef<'_, f64>, mut x: MatMut<'_, f64>, par: Par) -> Mat<f64> {
+    /// `x ← x − V (Vᵀ M x)` twice, with `M V` stored so that no product with `M` is needed
+    /// (`mx` is updated alongside: `M x ← M x − M V c`); returns the coefficients `Vᵀ M x`.
+    fn orth_against(
+        &self,
+        v: MatRef<'_, f64>,
+        mv: MatRef<'_, f64>,
+        mut x: MatMut<'_, f64>,
+        mut mx: MatMut<'_, f64>,
+        par: Par,
+    ) -> Mat<f64> {
         let mut coef = Mat::<f64>::zeros(v.ncols(), x.ncols());
         if v.ncols() == 0 {
             return coef;
         }
         for _ in 0..2 {
-            let mx = sparse_times(self.m, x.as_ref(), par);
-            let c = v.transpose() * &mx;
+            let c = mv.transpose() * x.as_ref();
             matmul(x.as_mut(), Accum::Add, v, c.as_ref(), -1.0, par);
+            matmul(mx.as_mut(), Accum::Add, mv, c.as_ref(), -1.0, par);
             coef += &c;
         }
         coef
     }
 
-    fn m_norm(&self, x: MatRef<'_, f64>) -> Result<f64> {
-        let mut s = 0.0;
-        let col = x.col(0);
-        for j in 0..self.m.n() {
-            let (rows, vals) = self.m.col(j);
-            let mut acc = 0.0;
-            for (&i, &a) in rows.iter().zip(vals) {
-                acc += a * col[i];
-            }
-            s += acc * col[j];
-        }
-        if s < 0.0 {
-            return Err(Error::NotDefinite {
-                matrix: "mass matrix".into(),
-                required: "positive definite".into(),
-                detail: format!("a Lanczos vector has xᵀMx = {s:e} < 0"),
-            });
-        }
-        Ok(s.sqrt())
+    /// `‖x_c‖_M` of every column from `x` and `M x`.
+    fn block_norms(x: MatRef<'_, f64>, mx: MatRef<'_, f64>) -> Result<Vec<f64>> {
+        (0..x.ncols())
+            .map(|c| {
+                let s: f64 = (0..x.nrows()).map(|i| x[(i, c)] * mx[(i, c)]).sum();
+                if s < 0.0 {
+                    Err(Error::NotDefinite {
+                        matrix: "mass matrix".into(),
+                        required: "positive definite".into(),
+                        detail: format!("a Lanczos vector has xᵀMx = {s:e} < 0"),
+                    })
+                } else {
+                    Ok(s.sqrt())
+                }
+            })
+            .collect()
     }
 
-    /// M-orthonormalises the columns of `x` (already orthogonal to `v`) among themselves.
-    /// Returns `R` with `x_in = x_out R`; a column that is (numerically) dependent is replaced by
-    /// a fresh random direction orthogonal to everything, with a zero diagonal in `R`.
+    /// M-orthonormalises the columns of `x` (already orthogonal to `V`) among themselves by
+    /// Cholesky QR, twice, in the `M` inner product: `G = Xᵀ M X = L Lᵀ`, `X ← X L⁻ᵀ` (and
+    /// `M X` alike). Returns `R` (upper triangular) with `x_in = x_out R`. When the block is
+    /// close to rank deficient (a column keeps less than 10⁻⁶ of its norm) it falls back to
+    /// column-by-column Gram–Schmidt with deflation, and recomputes `M X`.
+    #[allow(clippy::too_many_arguments)]
     fn orthonormalize(
         &self,
         v: MatRef<'_, f64>,
+        mv: MatRef<'_, f64>,
+        x: &mut Mat<f64>,
+        mx: &mut Mat<f64>,
+        norms_in: &[f64],
+        rng: &mut SplitMix,
+        par: Par,
+    ) -> Result<Mat<f64>> {
+        let b = x.ncols();
+        let (x0, mx0) = (x.clone(), mx.clone());
+        let mut r_total = Mat::<f64>::identity(b, b);
+        let mut ok = true;
+        for pass in 0..2 {
+            let g = x.transpose() * &*mx;
+            let gs = Mat::from_fn(b, b, |i, j| 0.5 * (g[(i, j)] + g[(j, i)]));
+            let Ok(llt) = gs.llt(faer::Side::Lower) else {
+                ok = false;
+                break;
+            };
+            let l = llt.L();
+            if pass == 0 && (0..b).any(|c| l[(c, c)].is_nan() || l[(c, c)] <= 1e-6 * norms_in[c]) {
+                ok = false;
+                break;
+            }
+            // X ← X L⁻ᵀ  (solve L Yᵀ = Xᵀ), and M X alike.
+            for y in [&mut *x, &mut *mx] {
+                let mut yt = y.transpose().to_owned();
+                faer::linalg::triangular_solve::solve_lower_triangular_in_place(
+                    l,
+                    yt.as_mut(),
+                    par,
+                );
+                y.copy_from(yt.transpose());
+            }
+            let lt = Mat::from_fn(b, b, |i, j| if j >= i { l[(j, i)] } else { 0.0 });
+            r_total = &lt * &r_total;
+        }
+        if ok {
+            return Ok(r_total);
+        }
+        x.copy_from(&x0);
+        let _ = mx0;
+        let r = self.orthonormalize_columns(v, mv, x, norms_in, rng, par)?;
+        *mx = sparse_times(self.m, x.as_ref(), par);
+        Ok(r)
+    }
+
+    fn m_norm(&self, x: MatRef<'_, f64>, par: Par) -> Result<f64> {
+        let mx = sparse_times(self.m, x, par);
+        Ok(Self::block_norms(x, mx.as_ref())?[0])
+    }
+
+    /// Column-by-column M-Gram–Schmidt with deflation: a numerically dependent column is
+    /// replaced by a fresh random direction orthogonal to everything, with a zero diagonal in `R`.
+    fn orthonormalize_columns(
+        &self,
+        v: MatRef<'_, f64>,
+        mv: MatRef<'_, f64>,
         x: &mut Mat<f64>,
         norms_in: &[f64],
         rng: &mut SplitMix,
@@ -708,7 +812,14 @@ impl KrylovSchur<'_> {
                         let mut xc = x.subcols_mut(c, 1);
                         let mx = sparse_times(self.m, xc.as_ref(), par);
                         let s = prev.transpose() * &mx;
-                        matmul(xc.as_mut(), Accum::Add, prev.as_ref(), s.as_ref(), -1.0, par);
+                        matmul(
+                            xc.as_mut(),
+                            Accum::Add,
+                            prev.as_ref(),
+                            s.as_ref(),
+                            -1.0,
+                            par,
+                        );
                         if !fresh {
                             for d in 0..c {
                                 r[(d, c)] += s[(d, 0)];
@@ -716,7 +827,7 @@ impl KrylovSchur<'_> {
                         }
                     }
                 }
-                let nrm = self.m_norm(x.subcols(c, 1))?;
+                let nrm = self.m_norm(x.subcols(c, 1), par)?;
                 let reference = if fresh { 1.0 } else { norms_in[c] };
                 if nrm > 1e-10 * reference && nrm > 0.0 {
                     if !fresh {
@@ -739,8 +850,9 @@ impl KrylovSchur<'_> {
                     x[(i, c)] = rng.next();
                 }
                 let mut xc = x.subcols_mut(c, 1);
-                let _ = self.orth_against(v, xc.as_mut(), par);
-                let nrm0 = self.m_norm(xc.as_ref())?;
+                let mut mxc = sparse_times(self.m, xc.as_ref(), par);
+                let _ = self.orth_against(v, mv, xc.as_mut(), mxc.as_mut(), par);
+                let nrm0 = self.m_norm(xc.as_ref(), par)?;
                 for i in 0..n {
                     xc[(i, 0)] /= nrm0.max(f64::MIN_POSITIVE);
                 }
@@ -753,42 +865,60 @@ impl KrylovSchur<'_> {
         let par = faer::get_global_parallelism();
         let (n, b, nv, nev) = (self.pencil.n(), self.block, self.basis, self.nev);
         let mut rng = SplitMix::new(self.seed);
+        // The basis V, M V, the projection H = Vᵀ M Op V and the coupling B of V to the next
+        // block W: Op V = V H + W B.
         let mut v = Mat::<f64>::zeros(n, nv);
+        let mut mv = Mat::<f64>::zeros(n, nv);
         let mut h = Mat::<f64>::zeros(nv, nv);
         let mut bc = Mat::<f64>::zeros(b, nv);
         let mut applications = 0;
 
         // Starting block: Op applied to a random block (purges directions Op cannot reach).
         let x0 = Mat::from_fn(n, b, |_, _| rng.next());
-        let mut w = self.op(x0.as_ref(), par);
+        let mut w = self.solve(sparse_times(self.m, x0.as_ref(), par));
         applications += b;
-        let norms: Vec<f64> = (0..b)
-            .map(|c| self.m_norm(w.subcols(c, 1)))
-            .collect::<Result<_>>()?;
-        self.orthonormalize(v.subcols(0, 0), &mut w, &norms, &mut rng, par)?;
+        let mut mw = sparse_times(self.m, w.as_ref(), par);
+        let norms = Self::block_norms(w.as_ref(), mw.as_ref())?;
+        let empty = v.subcols(0, 0);
+        self.orthonormalize(empty, empty, &mut w, &mut mw, &norms, &mut rng, par)?;
         let mut j = 0;
         let mut restarts = 0;
         loop {
             // Expand to the full basis.
             while j + b <= nv {
                 v.subcols_mut(j, b).copy_from(&w);
+                mv.subcols_mut(j, b).copy_from(&mw);
                 // Rows of H for the new block against the old columns: the old coupling.
                 for r in 0..b {
                     for c in 0..j {
                         h[(j + r, c)] = bc[(r, c)];
                     }
                 }
-                let mut x = self.op(w.as_ref(), par);
+                let mut x = self.solve(mw.clone());
                 applications += b;
-                let norms: Vec<f64> = (0..b)
-                    .map(|c| self.m_norm(x.subcols(c, 1)))
-                    .collect::<Result<_>>()?;
-                let coef = self.orth_against(v.subcols(0, j + b), x.as_mut(), par);
+                let mut mx = sparse_times(self.m, x.as_ref(), par);
+                let norms = Self::block_norms(x.as_ref(), mx.as_ref())?;
+                let coef = self.orth_against(
+                    v.subcols(0, j + b),
+                    mv.subcols(0, j + b),
+                    x.as_mut(),
+                    mx.as_mut(),
+                    par,
+                );
                 h.submatrix_mut(0, j, j + b, b).copy_from(&coef);
-                let r = self.orthonormalize(v.subcols(0, j + b), &mut x, &norms, &mut rng, par)?;
+                let r = self.orthonormalize(
+                    v.subcols(0, j + b),
+                    mv.subcols(0, j + b),
+                    &mut x,
+                    &mut mx,
+                    &norms,
+                    &mut rng,
+                    par,
+                )?;
                 bc.fill(0.0);
                 bc.submatrix_mut(0, j, b, b).copy_from(&r);
                 w = x;
+                mw = mx;
                 j += b;
             }
             // Rayleigh–Ritz on the symmetric projection.
@@ -835,6 +965,10 @@ impl KrylovSchur<'_> {
             let keep = ((nev + j) / 2).max(nev).min(j - b);
             let vk = v.subcols(0, j) * y.subcols(0, keep);
             v.subcols_mut(0, keep).copy_from(&vk);
+            drop(vk);
+            let mvk = mv.subcols(0, j) * y.subcols(0, keep);
+            mv.subcols_mut(0, keep).copy_from(&mvk);
+            drop(mvk);
             h.fill(0.0);
             for c in 0..keep {
                 h[(c, c)] = theta[c];

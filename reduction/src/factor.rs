@@ -10,8 +10,8 @@
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::linalg::cholesky::{
-    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymbolicCholeskyRaw,
-    SymmetricOrdering, factorize_symbolic_cholesky,
+    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering,
+    factorize_symbolic_cholesky,
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Side};
@@ -192,8 +192,13 @@ impl ShiftedPencil {
     }
 
     fn matrix<'a>(&'a self, vals: &'a [f64]) -> SparseColMatRef<'a, usize, f64> {
-        let pattern =
-            SymbolicSparseColMatRef::new_checked(self.n, self.n, &self.col_ptr, None, &self.row_idx);
+        let pattern = SymbolicSparseColMatRef::new_checked(
+            self.n,
+            self.n,
+            &self.col_ptr,
+            None,
+            &self.row_idx,
+        );
         SparseColMatRef::new(pattern, vals)
     }
 
@@ -243,7 +248,10 @@ impl ShiftedPencil {
     pub fn solve_in_place(&self, factor: &ShiftFactor, rhs: MatMut<'_, f64>) {
         let par = faer::get_global_parallelism();
         let llt = LltRef::<'_, usize, f64>::new(&self.symbolic, &factor.values);
-        let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(rhs.ncols(), par));
+        let mut mem = MemBuffer::new(
+            self.symbolic
+                .solve_in_place_scratch::<f64>(rhs.ncols(), par),
+        );
         llt.solve_in_place_with_conj(Conj::No, rhs, par, MemStack::new(&mut mem));
     }
 

@@ -7,11 +7,24 @@
 //!   restarts on a sparse Cholesky factor of `K − σM` (symbolic analysis reused across parameter
 //!   values), checked by residuals and a Sturm sequence count;
 //! - [`factor`]: the shifted pencil `K − σM` with its reusable symbolic analysis;
+//! - [`modal`]: ports (elements, excitation, sensors), modal participation and the residual
+//!   flexibility of the truncated modes at the ports (the feedthrough `D_L`, `D_NL` of eq. 10);
+//! - [`state_space`]: the diagonal complex-modal state-space form ([`ModalSystem`]) and the
+//!   receptances evaluated from it.
 //!
 //! Units are SI; eigenvalues `λ = ω²` in rad²/s², frequencies in Hz where named `*_hz`.
 
 pub mod eigen;
 pub mod factor;
+pub mod modal;
+pub mod state_space;
 
-pub use eigen::{EigenConfig, EigenMethod, EigenProgress, EigenSolver, EigenStats, ModeSelection, Modes};
+pub use eigen::{
+    EigenConfig, EigenMethod, EigenProgress, EigenSolver, EigenStats, ModeSelection, Modes,
+};
 pub use factor::{ShiftFactor, ShiftedPencil};
+pub use modal::{
+    EffectiveMass, Port, PortKind, ReducedModel, ReductionConfig, damping_ratios, effective_masses,
+    model_ports, reduce, reduce_with,
+};
+pub use state_space::{ModalSystem, Response};

@@ -1,0 +1,355 @@
+//! The reduced model: modes, ports (where forces enter and responses are read), and the
+//! residual flexibility of the truncated modes at those ports.
+//!
+//! A *port* is a generalized coordinate `u = wᵀ q`: one DOF, the relative motion of two DOFs
+//! (a nonlinear element between them), or a weighted direction. A force `g` on the port acts on
+//! the structure as `g w`. Inputs (excitation, element forces) and outputs (sensors, element
+//! coordinates) are all ports, so one symmetric matrix holds every feedthrough term.
+//!
+//! Residual flexibility (the static contribution of the modes left out):
+//!
+//! `R = Wᵀ (K − σM)⁻¹ W − Φ_Pᵀ diag(1 / (λ_r − σ)) Φ_P = Σ_{r truncated} Φ_P,r Φ_P,rᵀ / (λ_r − σ)`
+//!
+//! with `Φ_P = Wᵀ Φ` the port participations, from one solve per port with the factor the eigen
+//! solver already holds (`σ = 0` unless `K` is singular, then a small negative shift). It is the
+//! displacement feedthrough `D_L`, `D_NL` of thesis eq. (10).
+
+use crate::eigen::{EigenConfig, EigenProgress, EigenSolver, Modes};
+use crate::factor::ShiftedPencil;
+use faer::Mat;
+use nlsim_kernel::{Component, Coupling, Damping, Error, Model, Result};
+
+/// What a port stands for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PortKind {
+    /// A nonlinear element: its coordinate is an output, its force an input.
+    Element,
+    /// A force input point.
+    Excitation,
+    /// A response output point.
+    Sensor,
+    /// A DOF asked for explicitly.
+    Dof,
+}
+
+impl PortKind {
+    /// Lower-case name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            PortKind::Element => "element",
+            PortKind::Excitation => "excitation",
+            PortKind::Sensor => "sensor",
+            PortKind::Dof => "dof",
+        }
+    }
+}
+
+/// A generalized coordinate `u = Σ wᵢ q_{dofᵢ}`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Port {
+    /// Name: the element, excitation or sensor name, or the DOF label.
+    pub name: String,
+    /// What it stands for.
+    pub kind: PortKind,
+    /// DOF indices.
+    pub dofs: Vec<usize>,
+    /// Weights, one per DOF (dimensionless).
+    pub weights: Vec<f64>,
+}
+
+impl Port {
+    /// A port on one DOF.
+    pub fn dof(name: impl Into<String>, kind: PortKind, dof: usize) -> Self {
+        Port {
+            name: name.into(),
+            kind,
+            dofs: vec![dof],
+            weights: vec![1.0],
+        }
+    }
+
+    /// A port on an element coupling.
+    pub fn coupling(name: impl Into<String>, kind: PortKind, c: &Coupling) -> Self {
+        Port {
+            name: name.into(),
+            kind,
+            dofs: c.dofs().to_vec(),
+            weights: c.weights().to_vec(),
+        }
+    }
+
+    /// `wᵀ x` for a vector over all DOFs.
+    pub fn project(&self, x: &[f64]) -> f64 {
+        self.dofs
+            .iter()
+            .zip(&self.weights)
+            .map(|(&d, &w)| w * x[d])
+            .sum()
+    }
+}
+
+/// The ports of a model: its nonlinear elements, excitation points and sensors, in that order,
+/// then `extra_dofs`.
+pub fn model_ports(model: &Model, extra_dofs: &[usize]) -> Result<Vec<Port>> {
+    let mut ports = Vec::new();
+    for e in model.elements() {
+        ports.push(Port::coupling(e.name(), PortKind::Element, e.coupling()));
+    }
+    for x in model.excitation() {
+        ports.push(Port::dof(&x.name, PortKind::Excitation, x.dof));
+    }
+    for s in model.sensors() {
+        ports.push(Port::dof(&s.name, PortKind::Sensor, s.dof));
+    }
+    for &d in extra_dofs {
+        if d >= model.n_dofs() {
+            return Err(Error::DofIndexOutOfRange {
+                what: "extra output DOF of the reduction".into(),
+                index: d,
+                n: model.n_dofs(),
+            });
+        }
+        ports.push(Port::dof(model.dofs().describe(d), PortKind::Dof, d));
+    }
+    Ok(ports)
+}
+
+/// Settings of [`reduce`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReductionConfig {
+    /// Which modes and how to compute them.
+    pub eigen: EigenConfig,
+    /// Add the residual flexibility of the truncated modes at the ports.
+    pub residual_flexibility: bool,
+    /// DOFs to read out besides the model's elements, excitation and sensors.
+    pub extra_dofs: Vec<usize>,
+}
+
+impl Default for ReductionConfig {
+    fn default() -> Self {
+        ReductionConfig {
+            eigen: EigenConfig::default(),
+            residual_flexibility: true,
+            extra_dofs: Vec::new(),
+        }
+    }
+}
+
+/// A model reduced to its lowest modes plus residual flexibility at its ports.
+#[derive(Debug, Clone)]
+pub struct ReducedModel {
+    /// The retained modes (mass-normalised).
+    pub modes: Modes,
+    /// The ports, in the order of the rows of [`ReducedModel::participation`].
+    pub ports: Vec<Port>,
+    /// `Φ_P = Wᵀ Φ`: modal participation of each port (ports × modes; m/√kg).
+    pub participation: Mat<f64>,
+    /// Residual flexibility of the truncated modes at the ports (ports × ports, symmetric;
+    /// m/N); zero when switched off.
+    pub residual: Mat<f64>,
+    /// Shift `σ` (rad²/s²) at which the residual flexibility was evaluated.
+    pub residual_shift: f64,
+    /// The damping model of the structure.
+    pub damping: Damping,
+    /// Seconds spent on the residual flexibility (solves and projection).
+    pub residual_seconds: f64,
+}
+
+impl ReducedModel {
+    /// Index of the port named `name`.
+    pub fn port_index(&self, name: &str) -> Result<usize> {
+        self.ports
+            .iter()
+            .position(|p| p.name == name)
+            .ok_or_else(|| {
+                Error::invalid(
+                    "port name",
+                    format!(
+                        "no port '{name}'; the reduced model has: {}",
+                        self.ports
+                            .iter()
+                            .map(|p| p.name.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                )
+            })
+    }
+
+    /// Number of retained modes.
+    pub fn n_modes(&self) -> usize {
+        self.modes.len()
+    }
+}
+
+/// Reduces `model`: modes, ports, residual flexibility.
+pub fn reduce(model: &Model, cfg: &ReductionConfig) -> Result<ReducedModel> {
+    reduce_with(model, cfg, &mut EigenSolver::new(), &mut |_| {})
+}
+
+/// As [`reduce`], with a solver that keeps its symbolic analysis across calls (parameter
+/// studies) and a progress callback for the eigen solve.
+pub fn reduce_with(
+    model: &Model,
+    cfg: &ReductionConfig,
+    solver: &mut EigenSolver,
+    progress: &mut dyn FnMut(&EigenProgress),
+) -> Result<ReducedModel> {
+    let ports = model_ports(model, &cfg.extra_dofs)?;
+    let modes = solver
+        .solve_with_progress(model.stiffness(), model.mass(), &cfg.eigen, progress)
+        .map_err(|e| name_dofs(e, model))?;
+    let n_ports = ports.len();
+    let n_modes = modes.len();
+    let participation = Mat::from_fn(n_ports, n_modes, |p, r| {
+        let port = &ports[p];
+        port.dofs
+            .iter()
+            .zip(&port.weights)
+            .map(|(&d, &w)| w * modes.vectors[(d, r)])
+            .sum()
+    });
+    let t = std::time::Instant::now();
+    let (residual, residual_shift) = if cfg.residual_flexibility && n_ports > 0 {
+        residual_flexibility(model, solver, &modes, &ports, &participation)?
+    } else {
+        (Mat::zeros(n_ports, n_ports), 0.0)
+    };
+    Ok(ReducedModel {
+        modes,
+        ports,
+        participation,
+        residual,
+        residual_shift,
+        damping: model.damping().clone(),
+        residual_seconds: t.elapsed().as_secs_f64(),
+    })
+}
+
+/// Replaces `DOF index i` in an error message of the eigen solver by the DOF label.
+fn name_dofs(e: Error, model: &Model) -> Error {
+    match e {
+        Error::MasslessDofs { count, listed } => {
+            let listed = listed
+                .split(", ")
+                .map(|s| {
+                    s.strip_prefix("DOF index ")
+                        .and_then(|i| i.parse::<usize>().ok())
+                        .map_or(s.to_string(), |i| model.dofs().describe(i))
+                })
+                .collect::<Vec<_>>()
+                .join(", ");
+            Error::MasslessDofs { count, listed }
+        }
+        other => other,
+    }
+}
+
+fn residual_flexibility(
+    model: &Model,
+    solver: &EigenSolver,
+    modes: &Modes,
+    ports: &[Port],
+    participation: &Mat<f64>,
+) -> Result<(Mat<f64>, f64)> {
+    let n = model.n_dofs();
+    let mut w = Mat::<f64>::zeros(n, ports.len());
+    for (p, port) in ports.iter().enumerate() {
+        for (&d, &wt) in port.dofs.iter().zip(&port.weights) {
+            w[(d, p)] += wt;
+        }
+    }
+    // The eigen solve's factor when it ran Lanczos; otherwise factor here (small models).
+    let own;
+    let (pencil, factor) = match solver.pencil_and_factor() {
+        Some(pf) => pf,
+        None => {
+            let p = ShiftedPencil::new(model.stiffness(), model.mass())?;
+            let f = crate::eigen::factor_below_spectrum(&p, model.stiffness(), model.mass(), None)?;
+            own = (p, f);
+            (&own.0, &own.1)
+        }
+    };
+    let sigma = factor.shift();
+    let mut x = w.clone();
+    pencil.solve_in_place(factor, x.as_mut());
+    let mut r = w.transpose() * &x;
+    for r_mode in 0..modes.len() {
+        let s = 1.0 / (modes.eigenvalues[r_mode] - sigma);
+        for a in 0..ports.len() {
+            for b in 0..ports.len() {
+                r[(a, b)] -= participation[(a, r_mode)] * participation[(b, r_mode)] * s;
+            }
+        }
+    }
+    // Symmetrise against round-off.
+    let rs = Mat::from_fn(ports.len(), ports.len(), |a, b| {
+        0.5 * (r[(a, b)] + r[(b, a)])
+    });
+    Ok((rs, sigma))
+}
+
+/// Effective modal masses in one translational direction.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EffectiveMass {
+    /// The direction (`ux`, `uy`, `uz`, or `u` for scalar models).
+    pub component: Component,
+    /// `Γ_r² = (φ_rᵀ M r)²` per retained mode (kg), `r` the unit rigid translation.
+    pub per_mode: Vec<f64>,
+    /// `rᵀ M r` (kg): the sum over all modes.
+    pub total: f64,
+}
+
+/// Effective masses of `modes` in every translational direction the model has.
+pub fn effective_masses(model: &Model, modes: &Modes) -> Vec<EffectiveMass> {
+    let n = model.n_dofs();
+    let mut out = Vec::new();
+    for comp in [Component::Ux, Component::Uy, Component::Uz, Component::U] {
+        let r: Vec<f64> = (0..n)
+            .map(|i| f64::from(u8::from(model.dofs().label(i).component == comp)))
+            .collect();
+        if r.iter().all(|&v| v == 0.0) {
+            continue;
+        }
+        let mut mr = vec![0.0; n];
+        model.mass().mul_vec(&r, &mut mr);
+        let total: f64 = r.iter().zip(&mr).map(|(a, b)| a * b).sum();
+        let per_mode = (0..modes.len())
+            .map(|c| {
+                let g: f64 = (0..n).map(|i| modes.vectors[(i, c)] * mr[i]).sum();
+                g * g
+            })
+            .collect();
+        out.push(EffectiveMass {
+            component: comp,
+            per_mode,
+            total,
+        });
+    }
+    out
+}
+
+/// Viscous damping ratio `ζ_r` of each mode: exact for proportional damping
+/// (`α/(2ω) + βω/2`, or the modal table), and `φ_rᵀ V φ_r / (2 ω_r)` for an explicit matrix
+/// (the diagonal of the modal damping matrix; the off-diagonal coupling is left out). Rigid-body
+/// modes get `NaN` unless the damping is mass-proportional only.
+pub fn damping_ratios(modes: &Modes, damping: &Damping) -> Vec<f64> {
+    let omega = modes.omega();
+    (0..modes.len())
+        .map(|r| {
+            let w = omega[r];
+            let c = match damping {
+                Damping::None => 0.0,
+                Damping::Rayleigh { alpha, beta } => alpha + beta * w * w,
+                Damping::Modal(md) => return md.zeta(r, w / (2.0 * std::f64::consts::PI)),
+                Damping::Matrix(v) => {
+                    let col: Vec<f64> = (0..modes.vectors.nrows())
+                        .map(|i| modes.vectors[(i, r)])
+                        .collect();
+                    v.bilinear(&col, &col)
+                }
+            };
+            if w > 0.0 { c / (2.0 * w) } else { f64::NAN }
+        })
+        .collect()
+}

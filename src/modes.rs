@@ -1,0 +1,270 @@
+//! `nlsim modes`: the mode table (frequencies, damping, effective masses, residuals) on the
+//! terminal, and the modes written to HDF5 (shapes included) or CSV (the table).
+//!
+//! HDF5 layout (`docs/file-formats.md`): group `/modes` with attributes `model`, `method`,
+//! `shift_rad2_s2`, `tolerance`, `sturm_count`; datasets `frequency_hz`, `eigenvalue_rad2_s2`,
+//! `damping_ratio`, `residual`, `effective_mass_<dir>_kg` (attribute `total_kg`), and `shapes`
+//! (modes × DOFs, mass-normalised, m/√kg); dataset `/dofs/labels` (strings such as `12:uz`).
+
+use crate::error::{Error, Result};
+use hdf5_metno as hdf5;
+use nlsim_kernel::Model;
+use nlsim_reduction::{EffectiveMass, EigenConfig, EigenMethod, Modes};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Modes with what the table shows about them.
+#[derive(Debug, Clone)]
+pub struct ModeReport {
+    /// The modes.
+    pub modes: Modes,
+    /// Damping ratio per mode ([`nlsim_reduction::damping_ratios`]).
+    pub damping: Vec<f64>,
+    /// Effective masses per translational direction.
+    pub effective: Vec<EffectiveMass>,
+    /// The solver settings used.
+    pub config: EigenConfig,
+}
+
+impl ModeReport {
+    /// Collects damping ratios and effective masses for `modes` of `model`.
+    pub fn new(model: &Model, modes: Modes, config: EigenConfig) -> Self {
+        let damping = nlsim_reduction::damping_ratios(&modes, model.damping());
+        let effective = nlsim_reduction::effective_masses(model, &modes);
+        ModeReport {
+            modes,
+            damping,
+            effective,
+            config,
+        }
+    }
+}
+
+/// The mode table and a line on how the solve went, as aligned text.
+pub fn format_table(r: &ModeReport) -> String {
+    let mut s = String::new();
+    let f = r.modes.frequencies_hz();
+    let _ = write!(
+        s,
+        "  {:>5} {:>14} {:>10}",
+        "mode", "frequency Hz", "damping"
+    );
+    for e in &r.effective {
+        let _ = write!(s, " {:>9}", format!("meff {}", e.component));
+    }
+    let _ = writeln!(s, " {:>10}", "residual");
+    for i in 0..r.modes.len() {
+        let _ = write!(s, "  {:>5} {:>14.6} {:>10.5}", i + 1, f[i], r.damping[i]);
+        for e in &r.effective {
+            let _ = write!(s, " {:>8.2}%", 100.0 * e.per_mode[i] / e.total);
+        }
+        let _ = writeln!(s, " {:>10.2e}", r.modes.residuals[i]);
+    }
+    for e in &r.effective {
+        let sum: f64 = e.per_mode.iter().sum();
+        let _ = writeln!(
+            s,
+            "  effective mass {}: {:.2}% of {:.6} kg in these modes",
+            e.component,
+            100.0 * sum / e.total,
+            e.total
+        );
+    }
+    let st = &r.modes.stats;
+    match st.method {
+        EigenMethod::Dense => {
+            let _ = writeln!(
+                s,
+                "  solver: dense (small model), {:.3} s",
+                st.iteration_seconds + st.check_seconds
+            );
+        }
+        EigenMethod::Lanczos => {
+            let _ = writeln!(
+                s,
+                "  solver: shift-invert block Lanczos, shift {:.4e} rad²/s², block {}, basis {}, \
+                 {} restarts, {} solves, factor {:.1} M values",
+                st.shift,
+                st.block_size,
+                st.basis_size,
+                st.restarts,
+                st.operator_applications,
+                st.factor_nnz as f64 * 1e-6
+            );
+            let _ = writeln!(
+                s,
+                "  time: analysis {:.2} s, factorisation {:.2} s, iteration {:.2} s, checks {:.2} s",
+                st.analysis_seconds, st.factor_seconds, st.iteration_seconds, st.check_seconds
+            );
+            if let Some((count, at)) = st.sturm {
+                let _ = writeln!(
+                    s,
+                    "  Sturm check: {count} eigenvalues below {:.6} Hz, as found",
+                    at.max(0.0).sqrt() / (2.0 * std::f64::consts::PI)
+                );
+            }
+        }
+    }
+    let _ = writeln!(s, "  largest backward error {:.2e}", st.max_residual);
+    s
+}
+
+/// Writes the modes to `path`: HDF5 for `.h5`/`.hdf5`, CSV (the table) for `.csv`. The file is
+/// written next to its destination and renamed into place, so a failed run leaves no partial
+/// file and an existing one untouched.
+pub fn write_modes(path: &Path, model: &Model, r: &ModeReport) -> Result<()> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    let tmp = temp_path(path);
+    let res = match ext.as_deref() {
+        Some("csv") => write_csv(&tmp, r),
+        Some("h5" | "hdf5") => write_hdf5(&tmp, model, r),
+        _ => {
+            return Err(Error::Usage(format!(
+                "{}: unknown output format; name the file .h5 (HDF5, with mode shapes) or .csv \
+                 (the table)",
+                path.display()
+            )));
+        }
+    };
+    if let Err(e) = res {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e);
+    }
+    std::fs::rename(&tmp, path).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+fn temp_path(path: &Path) -> PathBuf {
+    let mut name = path
+        .file_name()
+        .map(|n| n.to_os_string())
+        .unwrap_or_default();
+    name.push(format!(".tmp-{}", std::process::id()));
+    path.with_file_name(name)
+}
+
+fn write_csv(path: &Path, r: &ModeReport) -> Result<()> {
+    let mut s = String::from("mode,frequency_hz,eigenvalue_rad2_s2,damping_ratio");
+    for e in &r.effective {
+        let _ = write!(s, ",effective_mass_{}_kg", e.component);
+    }
+    s.push_str(",residual\n");
+    let f = r.modes.frequencies_hz();
+    for i in 0..r.modes.len() {
+        let _ = write!(
+            s,
+            "{},{:.12e},{:.12e},{:.6e}",
+            i + 1,
+            f[i],
+            r.modes.eigenvalues[i],
+            r.damping[i]
+        );
+        for e in &r.effective {
+            let _ = write!(s, ",{:.9e}", e.per_mode[i]);
+        }
+        let _ = writeln!(s, ",{:.3e}", r.modes.residuals[i]);
+    }
+    std::fs::write(path, s).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+fn h5err(path: &Path) -> impl Fn(hdf5::Error) -> Error + '_ {
+    move |e| Error::Hdf5 {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    }
+}
+
+fn write_hdf5(path: &Path, model: &Model, r: &ModeReport) -> Result<()> {
+    let err = h5err(path);
+    let file = hdf5::File::create(path).map_err(&err)?;
+    let g = file.create_group("modes").map_err(&err)?;
+    let put = |name: &str, data: &[f64]| -> Result<hdf5::Dataset> {
+        g.new_dataset_builder()
+            .with_data(data)
+            .create(name)
+            .map_err(&err)
+    };
+    put("frequency_hz", &r.modes.frequencies_hz())?;
+    put("eigenvalue_rad2_s2", &r.modes.eigenvalues)?;
+    put("damping_ratio", &r.damping)?;
+    put("residual", &r.modes.residuals)?;
+    for e in &r.effective {
+        let d = put(&format!("effective_mass_{}_kg", e.component), &e.per_mode)?;
+        d.new_attr::<f64>()
+            .create("total_kg")
+            .and_then(|a| a.write_scalar(&e.total))
+            .map_err(&err)?;
+    }
+    let (n, m) = (r.modes.vectors.nrows(), r.modes.vectors.ncols());
+    // Row-major modes × DOFs: mode r is the contiguous column r of the column-major matrix.
+    let mut raw = Vec::with_capacity(n * m);
+    for c in 0..m {
+        raw.extend((0..n).map(|i| r.modes.vectors[(i, c)]));
+    }
+    let shapes = g
+        .new_dataset::<f64>()
+        .shape((m, n))
+        .chunk((1, n.clamp(1, 1 << 16)))
+        .shuffle()
+        .deflate(4)
+        .create("shapes")
+        .map_err(&err)?;
+    shapes.write_raw(&raw).map_err(&err)?;
+    let st = &r.modes.stats;
+    let attr_str = |name: &str, v: &str| -> Result<()> {
+        let s: hdf5::types::VarLenUnicode = v.parse().map_err(|e| Error::Hdf5 {
+            path: path.to_path_buf(),
+            message: format!("attribute {name}: {e}"),
+        })?;
+        g.new_attr::<hdf5::types::VarLenUnicode>()
+            .create(name)
+            .and_then(|a| a.write_scalar(&s))
+            .map_err(&err)
+    };
+    attr_str("model", model.name())?;
+    attr_str(
+        "method",
+        match st.method {
+            EigenMethod::Dense => "dense",
+            EigenMethod::Lanczos => "shift-invert block Lanczos",
+        },
+    )?;
+    for (name, v) in [
+        ("shift_rad2_s2", st.shift),
+        ("tolerance", r.config.tol),
+        ("max_residual", st.max_residual),
+    ] {
+        g.new_attr::<f64>()
+            .create(name)
+            .and_then(|a| a.write_scalar(&v))
+            .map_err(&err)?;
+    }
+    if let Some((count, _)) = st.sturm {
+        g.new_attr::<u64>()
+            .create("sturm_count")
+            .and_then(|a| a.write_scalar(&(count as u64)))
+            .map_err(&err)?;
+    }
+    let labels: Vec<hdf5::types::VarLenUnicode> = (0..model.n_dofs())
+        .map(|i| {
+            model
+                .dofs()
+                .describe(i)
+                .parse()
+                .expect("DOF labels are plain ASCII")
+        })
+        .collect();
+    file.create_group("dofs")
+        .and_then(|d| d.new_dataset_builder().with_data(&labels).create("labels"))
+        .map_err(&err)?;
+    file.flush().map_err(&err)?;
+    Ok(())
+}
