@@ -88,6 +88,23 @@ impl Port {
     }
 }
 
+/// Index of the port named `name` in `ports`; the error lists the names there are.
+pub fn port_index(ports: &[Port], name: &str) -> Result<usize> {
+    ports.iter().position(|p| p.name == name).ok_or_else(|| {
+        Error::invalid(
+            "port name",
+            format!(
+                "no port '{name}'; the ports are: {}",
+                ports
+                    .iter()
+                    .map(|p| p.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        )
+    })
+}
+
 /// The ports of a model: its nonlinear elements, excitation points and sensors, in that order,
 /// then `extra_dofs`.
 pub fn model_ports(model: &Model, extra_dofs: &[usize]) -> Result<Vec<Port>> {
@@ -158,22 +175,7 @@ pub struct ReducedModel {
 impl ReducedModel {
     /// Index of the port named `name`.
     pub fn port_index(&self, name: &str) -> Result<usize> {
-        self.ports
-            .iter()
-            .position(|p| p.name == name)
-            .ok_or_else(|| {
-                Error::invalid(
-                    "port name",
-                    format!(
-                        "no port '{name}'; the reduced model has: {}",
-                        self.ports
-                            .iter()
-                            .map(|p| p.name.as_str())
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ),
-                )
-            })
+        port_index(&self.ports, name)
     }
 
     /// Number of retained modes.

@@ -254,22 +254,7 @@ impl ModalSystem {
 
     /// Index of the port named `name`.
     pub fn port_index(&self, name: &str) -> Result<usize> {
-        self.ports
-            .iter()
-            .position(|p| p.name == name)
-            .ok_or_else(|| {
-                Error::invalid(
-                    "port name",
-                    format!(
-                        "no port '{name}'; the system has: {}",
-                        self.ports
-                            .iter()
-                            .map(|p| p.name.as_str())
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ),
-                )
-            })
+        crate::modal::port_index(&self.ports, name)
     }
 
     /// Frequency response between ports at `omega` (rad/s): `H[o, i]` for every `o` in
