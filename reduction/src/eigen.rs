@@ -881,6 +881,7 @@ impl KrylovSchur<'_> {
         let norms = Self::block_norms(w.as_ref(), mw.as_ref())?;
         let empty = v.subcols(0, 0);
         self.orthonormalize(empty, empty, &mut w, &mut mw, &norms, &mut rng, par)?;
+        mw = sparse_times(self.m, w.as_ref(), par);
         let mut j = 0;
         let mut restarts = 0;
         loop {
@@ -917,8 +918,12 @@ impl KrylovSchur<'_> {
                 )?;
                 bc.fill(0.0);
                 bc.submatrix_mut(0, j, b, b).copy_from(&r);
+                // `M W` enters the stored `M V` and every later orthogonalisation: compute it
+                // afresh rather than keep the updated `M X`, whose round-off grows with the
+                // condition of the block's Cholesky factor and would build up in `M V`.
+                drop(mx);
+                mw = sparse_times(self.m, x.as_ref(), par);
                 w = x;
-                mw = mx;
                 j += b;
             }
             // Rayleigh–Ritz on the symmetric projection.

@@ -288,3 +288,17 @@ fn sturm_check_catches_a_missed_multiple_eigenvalue_and_the_retry_finds_it() {
     let (count, _) = modes.stats.sturm.unwrap();
     assert_eq!(count, 13);
 }
+
+#[test]
+fn many_modes_converge_in_few_restarts() {
+    // Regression: with `M V` kept by updates instead of recomputed, round-off built up in the
+    // stored `M V` and 200 modes of the 30 600-DOF bracket never converged. 150 modes of the
+    // 4 680-DOF bracket exercise the same large basis.
+    let (k, m) = bracket(2, true);
+    let modes = EigenSolver::new()
+        .solve(&k, &m, &lanczos(ModeSelection::Lowest(150)))
+        .unwrap();
+    assert!(modes.stats.restarts <= 6, "{:?}", modes.stats);
+    assert_eq!(modes.stats.sturm.unwrap().0, 150);
+    assert!(modes.stats.max_residual < 1e-9, "{:?}", modes.stats);
+}
