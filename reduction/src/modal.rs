@@ -182,6 +182,24 @@ impl ReducedModel {
     pub fn n_modes(&self) -> usize {
         self.modes.len()
     }
+
+    /// Modal coordinates `η = Φᵀ M q` of a physical vector `q` (the projection onto the
+    /// retained mass-normalised modes); `mass` is the model's `M`.
+    pub fn modal_coordinates(&self, mass: &nlsim_kernel::SparseSym, q: &[f64]) -> Result<Vec<f64>> {
+        let n = self.modes.vectors.nrows();
+        if mass.n() != n || q.len() != n {
+            return Err(Error::DimensionMismatch {
+                what: "physical vector projected onto the modes".into(),
+                expected: n,
+                found: if mass.n() != n { mass.n() } else { q.len() },
+            });
+        }
+        let mut mq = vec![0.0; n];
+        mass.mul_vec(q, &mut mq);
+        Ok((0..self.n_modes())
+            .map(|r| (0..n).map(|i| self.modes.vectors[(i, r)] * mq[i]).sum())
+            .collect())
+    }
 }
 
 /// Reduces `model`: modes, ports, residual flexibility.

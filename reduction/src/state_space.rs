@@ -35,6 +35,9 @@ pub struct ModalSystem {
     pub accel_feedthrough: Mat<f64>,
     /// The ports (names and DOFs), in row/column order.
     pub ports: Vec<Port>,
+    /// Initial-condition map (states × 2 modes): `z(0) = initial · [η(0); η̇(0)]` for modal
+    /// displacements `η` (√kg m) and velocities `η̇` of the retained modes.
+    pub initial: Mat<c64>,
 }
 
 /// Which response quantity.
@@ -80,7 +83,8 @@ impl ModalSystem {
             .collect();
         let phi = &reduced.participation;
         let accel_feedthrough = phi * phi.transpose();
-        let (poles, weights, input, output) = if let Damping::Matrix(v) = &reduced.damping {
+        let (poles, weights, input, output, initial) = if let Damping::Matrix(v) = &reduced.damping
+        {
             Self::coupled(reduced, v, &lambda)?
         } else {
             let mut poles = Vec::with_capacity(m);
@@ -132,7 +136,27 @@ impl ModalSystem {
             let output = Mat::from_fn(np, states.len(), |p, s| {
                 c64::new(phi[(p, states[s].0)], 0.0)
             });
-            (poles, weights, input, output)
+            // A pair (w = 2): η = 2 Re z, η̇ = 2 Re(λ z). A real pair a, b: η = z_a + z_b,
+            // η̇ = a z_a + b z_b.
+            let mut initial = Mat::<c64>::zeros(states.len(), 2 * m);
+            let mut s = 0;
+            while s < states.len() {
+                let r = states[s].0;
+                let l = poles[s];
+                if weights[s] == 2.0 {
+                    initial[(s, r)] = c64::new(0.5, 0.5 * l.re / l.im);
+                    initial[(s, m + r)] = c64::new(0.0, -0.5 / l.im);
+                    s += 1;
+                } else {
+                    let (a, b) = (l.re, poles[s + 1].re);
+                    initial[(s, r)] = c64::new(-b / (a - b), 0.0);
+                    initial[(s, m + r)] = c64::new(1.0 / (a - b), 0.0);
+                    initial[(s + 1, r)] = c64::new(-a / (b - a), 0.0);
+                    initial[(s + 1, m + r)] = c64::new(1.0 / (b - a), 0.0);
+                    s += 2;
+                }
+            }
+            (poles, weights, input, output, initial)
         };
         Ok(ModalSystem {
             poles,
@@ -142,6 +166,7 @@ impl ModalSystem {
             feedthrough: reduced.residual.clone(),
             accel_feedthrough,
             ports: reduced.ports.clone(),
+            initial,
         })
     }
 
@@ -151,7 +176,7 @@ impl ModalSystem {
         reduced: &ReducedModel,
         v: &nlsim_kernel::SparseSym,
         lambda: &[f64],
-    ) -> Result<(Vec<c64>, Vec<f64>, Mat<c64>, Mat<c64>)> {
+    ) -> Result<(Vec<c64>, Vec<f64>, Mat<c64>, Mat<c64>, Mat<c64>)> {
         let m = lambda.len();
         let np = reduced.ports.len();
         if let Some(r) = lambda.iter().position(|&l| l <= 0.0) {
@@ -207,6 +232,17 @@ impl ModalSystem {
         });
         let lu = t.partial_piv_lu();
         let tib = faer::linalg::solvers::Solve::solve(&lu, &b);
+        // [η; η̇] ↦ the state [Ω η; η̇] ↦ T⁻¹ of it.
+        let to_state = Mat::from_fn(2 * m, 2 * m, |i, j| {
+            if i != j {
+                c64::new(0.0, 0.0)
+            } else if i < m {
+                c64::new(omega[i], 0.0)
+            } else {
+                c64::new(1.0, 0.0)
+            }
+        });
+        let tinit = faer::linalg::solvers::Solve::solve(&lu, &to_state);
         let cfull = Mat::from_fn(np, 2 * m, |p, j| {
             (0..m)
                 .map(|r| t[(r, j)] * (pp[(p, r)] / omega[r]))
@@ -226,6 +262,7 @@ impl ModalSystem {
             }
         }
         let input = Mat::from_fn(keep.len(), np, |s, p| tib[(keep[s], p)]);
+        let mut initial = Mat::from_fn(keep.len(), 2 * m, |s, j| tinit[(keep[s], j)]);
         let output = Mat::from_fn(np, keep.len(), |p, s| cfull[(p, keep[s])]);
         // A real pole's products c̃ b̃ are real up to round-off; drop the imaginary dust.
         let mut input = input;
@@ -242,9 +279,41 @@ impl ModalSystem {
                     output[(p, s)] = c64::new((output[(p, s)] / phase).re, 0.0);
                     input[(s, p)] = c64::new((input[(s, p)] * phase).re, 0.0);
                 }
+                for j in 0..2 * m {
+                    initial[(s, j)] = c64::new((initial[(s, j)] * phase).re, 0.0);
+                }
             }
         }
-        Ok((poles, weights, input, output))
+        Ok((poles, weights, input, output, initial))
+    }
+
+    /// Diagonal states `z(0)` for modal displacements `eta` (√kg m) and velocities `eta_dot`
+    /// (√kg m/s) of the retained modes (e.g. from [`crate::ReducedModel::modal_coordinates`]).
+    pub fn initial_states(&self, eta: &[f64], eta_dot: &[f64]) -> Result<Vec<c64>> {
+        let m = self.initial.ncols() / 2;
+        for (what, v) in [("modal displacements", eta), ("modal velocities", eta_dot)] {
+            if v.len() != m {
+                return Err(Error::DimensionMismatch {
+                    what: format!("initial {what} (one per retained mode)"),
+                    expected: m,
+                    found: v.len(),
+                });
+            }
+            if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+                return Err(Error::NonFinite {
+                    what: format!("initial {what}"),
+                    location: format!("mode {}", i + 1),
+                    value: v[i],
+                });
+            }
+        }
+        Ok((0..self.n_states())
+            .map(|s| {
+                (0..m).fold(c64::new(0.0, 0.0), |acc, r| {
+                    acc + self.initial[(s, r)] * eta[r] + self.initial[(s, m + r)] * eta_dot[r]
+                })
+            })
+            .collect())
     }
 
     /// Number of stored states (conjugate pairs count once).

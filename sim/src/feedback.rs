@@ -1,0 +1,239 @@
+//! The algebraic loop on the nonlinear ports: find the element forces `f` with
+//! `f = g(d_pred − S_d f, v_pred − S_v f)`, where `S_d`, `S_v` are the (small, precomputed)
+//! sensitivities of the port displacements and velocities to the element forces at the end of
+//! the step. Damped Newton in `n_NL` unknowns, allocation-free.
+
+use crate::plant::ElementPort;
+
+/// Newton settings of the nonlinear feedback loop.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NewtonConfig {
+    /// Iteration limit per solve.
+    pub max_iterations: usize,
+    /// Relative force tolerance: `|r_i| ≤ rtol (|f_i| + |g_i|)` (plus a tiny absolute floor).
+    pub rtol: f64,
+}
+
+impl Default for NewtonConfig {
+    fn default() -> Self {
+        NewtonConfig {
+            max_iterations: 50,
+            rtol: 1e-12,
+        }
+    }
+}
+
+/// Why the loop failed.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct LoopFailure {
+    pub iterations: usize,
+    pub residual: f64,
+    pub element: usize,
+    pub displacement: f64,
+}
+
+/// Work buffers of the loop for `n` elements.
+#[derive(Debug, Clone)]
+pub(crate) struct Feedback {
+    n: usize,
+    d: Vec<f64>,
+    v: Vec<f64>,
+    g: Vec<f64>,
+    gu: Vec<f64>,
+    gv: Vec<f64>,
+    r: Vec<f64>,
+    trial: Vec<f64>,
+    step: Vec<f64>,
+    jac: Vec<f64>,
+    /// Displacements of the last solution.
+    pub last_d: Vec<f64>,
+    /// Velocities of the last solution.
+    pub last_v: Vec<f64>,
+}
+
+impl Feedback {
+    pub fn new(n: usize) -> Self {
+        Feedback {
+            n,
+            d: vec![0.0; n],
+            v: vec![0.0; n],
+            g: vec![0.0; n],
+            gu: vec![0.0; n],
+            gv: vec![0.0; n],
+            r: vec![0.0; n],
+            trial: vec![0.0; n],
+            step: vec![0.0; n],
+            jac: vec![0.0; n * n],
+            last_d: vec![0.0; n],
+            last_v: vec![0.0; n],
+        }
+    }
+
+    /// Residual `r = f − g(d(f), v(f))` into `self.r`; returns `‖r‖∞` and whether every
+    /// component meets the tolerance.
+    #[allow(clippy::too_many_arguments)]
+    fn residual(
+        &mut self,
+        elements: &[ElementPort],
+        states: &[Vec<f64>],
+        d_pred: &[f64],
+        v_pred: &[f64],
+        sd: &[f64],
+        sv: &[f64],
+        f: &[f64],
+        rtol: f64,
+    ) -> (f64, bool) {
+        let n = self.n;
+        let mut norm = 0.0f64;
+        let mut ok = true;
+        for i in 0..n {
+            let (mut d, mut v) = (d_pred[i], v_pred[i]);
+            for j in 0..n {
+                d -= sd[i * n + j] * f[j];
+                v -= sv[i * n + j] * f[j];
+            }
+            let e = elements[i].element.law().eval(d, v, &states[i]);
+            self.d[i] = d;
+            self.v[i] = v;
+            self.g[i] = e.force;
+            self.gu[i] = e.df_du;
+            self.gv[i] = e.df_dv;
+            let r = f[i] - e.force;
+            self.r[i] = r;
+            norm = norm.max(r.abs());
+            if !(r.abs() <= rtol * (f[i].abs() + e.force.abs()) + 1e-300) {
+                ok = false;
+            }
+        }
+        (norm, ok)
+    }
+
+    /// Solves the loop in place: `f` holds the initial guess and receives the solution.
+    /// Returns the number of Newton iterations.
+    #[allow(clippy::too_many_arguments)]
+    pub fn solve(
+        &mut self,
+        elements: &[ElementPort],
+        states: &[Vec<f64>],
+        d_pred: &[f64],
+        v_pred: &[f64],
+        sd: &[f64],
+        sv: &[f64],
+        f: &mut [f64],
+        cfg: &NewtonConfig,
+    ) -> Result<usize, LoopFailure> {
+        let n = self.n;
+        if n == 0 {
+            return Ok(0);
+        }
+        let (mut norm, mut ok) = self.residual(elements, states, d_pred, v_pred, sd, sv, f, cfg.rtol);
+        let mut it = 0;
+        while !ok {
+            if it >= cfg.max_iterations || !norm.is_finite() {
+                let worst = (0..n)
+                    .max_by(|&a, &b| self.r[a].abs().total_cmp(&self.r[b].abs()))
+                    .unwrap_or(0);
+                return Err(LoopFailure {
+                    iterations: it,
+                    residual: norm,
+                    element: worst,
+                    displacement: self.d[worst],
+                });
+            }
+            it += 1;
+            // J = I + diag(g_u) S_d + diag(g_v) S_v; solve J Δ = −r.
+            for i in 0..n {
+                for j in 0..n {
+                    self.jac[i * n + j] = f64::from(u8::from(i == j))
+                        + self.gu[i] * sd[i * n + j]
+                        + self.gv[i] * sv[i * n + j];
+                }
+                self.step[i] = -self.r[i];
+            }
+            if !dense_solve(&mut self.jac, &mut self.step, n) {
+                // Singular tangent: fall back to the fixed-point update f ← g.
+                for i in 0..n {
+                    self.step[i] = -self.r[i];
+                }
+            }
+            // Backtracking on ‖r‖∞.
+            let mut alpha = 1.0;
+            self.trial.copy_from_slice(f);
+            loop {
+                for i in 0..n {
+                    f[i] = self.trial[i] + alpha * self.step[i];
+                }
+                let (nn, okn) =
+                    self.residual(elements, states, d_pred, v_pred, sd, sv, f, cfg.rtol);
+                if okn || nn <= (1.0 - 1e-4 * alpha) * norm || alpha < 1e-6 {
+                    norm = nn;
+                    ok = okn;
+                    break;
+                }
+                alpha *= 0.5;
+            }
+        }
+        self.last_d.copy_from_slice(&self.d);
+        self.last_v.copy_from_slice(&self.v);
+        Ok(it)
+    }
+}
+
+/// Gaussian elimination with partial pivoting on a row-major `n × n` matrix; `false` when
+/// singular.
+fn dense_solve(a: &mut [f64], b: &mut [f64], n: usize) -> bool {
+    if n == 1 {
+        if a[0] == 0.0 || !a[0].is_finite() {
+            return false;
+        }
+        b[0] /= a[0];
+        return true;
+    }
+    for c in 0..n {
+        let p = (c..n)
+            .max_by(|&x, &y| a[x * n + c].abs().total_cmp(&a[y * n + c].abs()))
+            .unwrap_or(c);
+        if a[p * n + c] == 0.0 || !a[p * n + c].is_finite() {
+            return false;
+        }
+        if p != c {
+            for j in 0..n {
+                a.swap(c * n + j, p * n + j);
+            }
+            b.swap(c, p);
+        }
+        for r in c + 1..n {
+            let m = a[r * n + c] / a[c * n + c];
+            for j in c..n {
+                a[r * n + j] -= m * a[c * n + j];
+            }
+            b[r] -= m * b[c];
+        }
+    }
+    for c in (0..n).rev() {
+        let mut s = b[c];
+        for j in c + 1..n {
+            s -= a[c * n + j] * b[j];
+        }
+        b[c] = s / a[c * n + c];
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::dense_solve;
+
+    #[test]
+    fn dense_solve_pivots() {
+        let mut a = vec![0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 3.0, 0.0, 1.0];
+        let x = [1.0, -2.0, 0.5];
+        let mut b: Vec<f64> = (0..3)
+            .map(|i| (0..3).map(|j| a[i * 3 + j] * x[j]).sum())
+            .collect();
+        assert!(dense_solve(&mut a, &mut b, 3));
+        for i in 0..3 {
+            assert!((b[i] - x[i]).abs() < 1e-14);
+        }
+    }
+}

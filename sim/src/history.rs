@@ -1,0 +1,255 @@
+//! Load cases (what a run is asked to do) and time histories (what it returns).
+
+use crate::plant::{Plant, order};
+use crate::signal::Signal;
+use faer::c64;
+use nlsim_kernel::{Error, Quantity, Result};
+
+/// The state the structure starts from.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub enum InitialState {
+    /// At rest: all states zero.
+    #[default]
+    Rest,
+    /// Given diagonal states `z(0)` (e.g. [`TimeHistory::final_state`] of an earlier run).
+    States(Vec<c64>),
+    /// Modal displacements `η` (√kg m) and velocities `η̇` (√kg m/s) of the retained modes,
+    /// e.g. `η = Φᵀ M q₀` from `ReducedModel::modal_coordinates`.
+    Modal {
+        /// Modal displacements.
+        displacement: Vec<f64>,
+        /// Modal velocities.
+        velocity: Vec<f64>,
+    },
+}
+
+/// One run: forces at the plant's inputs, initial state, element parameter overrides.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadCase {
+    /// Name of the case (for reports and batch files).
+    pub name: String,
+    /// One force signal per plant input, in the order of [`Plant::inputs`].
+    pub forces: Vec<Signal>,
+    /// Initial state.
+    pub initial: InitialState,
+    /// Element parameters set for this run only: `(element.param, value)`.
+    pub parameters: Vec<(String, f64)>,
+}
+
+impl LoadCase {
+    /// A case named `name` with the given forces, from rest, nominal parameters.
+    pub fn new(name: impl Into<String>, forces: Vec<Signal>) -> Self {
+        LoadCase {
+            name: name.into(),
+            forces,
+            initial: InitialState::Rest,
+            parameters: Vec::new(),
+        }
+    }
+
+    /// Checks the case against `plant` and returns the initial states and the plant with the
+    /// case's parameters applied.
+    pub(crate) fn prepare(&self, plant: &Plant) -> Result<(Vec<c64>, Plant)> {
+        if self.forces.len() != plant.inputs.len() {
+            return Err(Error::DimensionMismatch {
+                what: format!(
+                    "force signals of load case '{}' (one per input: {})",
+                    self.name,
+                    plant
+                        .inputs
+                        .iter()
+                        .map(|(n, _)| n.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+                expected: plant.inputs.len(),
+                found: self.forces.len(),
+            });
+        }
+        for (s, (name, _)) in self.forces.iter().zip(&plant.inputs) {
+            s.validate(&format!("load case '{}', input '{name}'", self.name))?;
+        }
+        let ns = plant.n_states();
+        let z0 = match &self.initial {
+            InitialState::Rest => vec![c64::new(0.0, 0.0); ns],
+            InitialState::States(z) => {
+                if z.len() != ns {
+                    return Err(Error::DimensionMismatch {
+                        what: format!("initial states of load case '{}'", self.name),
+                        expected: ns,
+                        found: z.len(),
+                    });
+                }
+                if let Some(i) = z.iter().position(|v| !(v.re.is_finite() && v.im.is_finite())) {
+                    return Err(Error::NonFinite {
+                        what: format!("initial states of load case '{}'", self.name),
+                        location: format!("state {}", i + 1),
+                        value: z[i].re + z[i].im,
+                    });
+                }
+                z.clone()
+            }
+            InitialState::Modal {
+                displacement,
+                velocity,
+            } => plant.system.initial_states(displacement, velocity)?,
+        };
+        let mut p = plant.clone();
+        for (name, v) in &self.parameters {
+            p.set_parameter(name, *v)?;
+        }
+        Ok((z0, p))
+    }
+}
+
+/// A contact event located inside a step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContactEvent {
+    /// Time of the event (s).
+    pub time: f64,
+    /// Element index in [`Plant::elements`].
+    pub element: usize,
+    /// `true` when contact closes, `false` when it opens.
+    pub closing: bool,
+}
+
+/// Counters and timings of a run.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct RunStats {
+    /// Integration steps taken (accepted).
+    pub steps: usize,
+    /// Steps rejected by the error control (adaptive methods).
+    pub rejected_steps: usize,
+    /// Right-hand-side evaluations (Runge–Kutta) or linear solves (Newmark).
+    pub evaluations: usize,
+    /// Newton iterations of the nonlinear loop, summed over the run.
+    pub newton_iterations: usize,
+    /// Largest Newton iteration count of one step.
+    pub max_newton_iterations: usize,
+    /// Located contact events (FOH with event location).
+    pub events: Vec<ContactEvent>,
+    /// Wall time of the run (s).
+    pub seconds: f64,
+}
+
+/// One sampled output.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Series {
+    /// Name (sensor or port name).
+    pub name: String,
+    /// Quantity.
+    pub quantity: Quantity,
+    /// Values at `t = k dt` (m, m/s or m/s²).
+    pub values: Vec<f64>,
+}
+
+/// The result of a run: outputs, element forces and coordinates, input forces, all sampled at
+/// `t = k dt`, `k = 0..n_samples`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TimeHistory {
+    /// Method that produced it (`foh`, `rk45`, …).
+    pub method: String,
+    /// Name of the load case.
+    pub case: String,
+    /// Sample interval (s).
+    pub dt: f64,
+    /// Requested outputs.
+    pub outputs: Vec<Series>,
+    /// Input forces `(name, samples)` (N).
+    pub inputs: Vec<(String, Vec<f64>)>,
+    /// Element names.
+    pub element_names: Vec<String>,
+    /// Element coordinates `u` (m), one series per element.
+    pub element_displacements: Vec<Vec<f64>>,
+    /// Element velocities `u̇` (m/s).
+    pub element_velocities: Vec<Vec<f64>>,
+    /// Element forces `g` (N; positive resists positive `u`).
+    pub element_forces: Vec<Vec<f64>>,
+    /// Diagonal states at the last sample (to continue the run).
+    pub final_state: Vec<c64>,
+    /// Counters and timings.
+    pub stats: RunStats,
+}
+
+impl TimeHistory {
+    /// Number of samples.
+    pub fn n_samples(&self) -> usize {
+        self.inputs
+            .first()
+            .map(|i| i.1.len())
+            .or_else(|| self.outputs.first().map(|o| o.values.len()))
+            .or_else(|| self.element_forces.first().map(|o| o.len()))
+            .unwrap_or(0)
+    }
+
+    /// Sample times (s).
+    pub fn times(&self) -> Vec<f64> {
+        (0..self.n_samples()).map(|k| k as f64 * self.dt).collect()
+    }
+
+    /// The output named `name`.
+    pub fn output(&self, name: &str) -> Result<&Series> {
+        self.outputs.iter().find(|o| o.name == name).ok_or_else(|| {
+            Error::invalid(
+                format!("output '{name}'"),
+                format!(
+                    "the run has outputs {}",
+                    self.outputs
+                        .iter()
+                        .map(|o| o.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            )
+        })
+    }
+}
+
+/// Adds the rate terms of the residual flexibility to velocity and acceleration outputs:
+/// `D u̇` and `D ü` with `u` the port forces (inputs and `−g` at element ports), by central
+/// differences of the samples (one-sided at the ends). Displacements already hold `D u`.
+pub(crate) fn add_residual_rates(plant: &Plant, h: &mut TimeHistory) {
+    let n = h.n_samples();
+    if n < 3 {
+        return;
+    }
+    let ports = plant.input_ports();
+    let forces: Vec<Vec<f64>> = h
+        .inputs
+        .iter()
+        .map(|(_, v)| v.clone())
+        .chain(
+            h.element_forces
+                .iter()
+                .map(|g| g.iter().map(|x| -x).collect()),
+        )
+        .collect();
+    let dt = h.dt;
+    for (spec, out) in plant.outputs.iter().zip(h.outputs.iter_mut()) {
+        let ord = order(spec.quantity);
+        if ord == 0 {
+            continue;
+        }
+        for (q, u) in forces.iter().enumerate() {
+            let d = plant.system.feedthrough[(spec.port, ports[q])];
+            if d == 0.0 {
+                continue;
+            }
+            for k in 0..n {
+                let rate = if ord == 1 {
+                    if k == 0 {
+                        (u[1] - u[0]) / dt
+                    } else if k == n - 1 {
+                        (u[n - 1] - u[n - 2]) / dt
+                    } else {
+                        (u[k + 1] - u[k - 1]) / (2.0 * dt)
+                    }
+                } else {
+                    let m = k.clamp(1, n - 2);
+                    (u[m + 1] - 2.0 * u[m] + u[m - 1]) / (dt * dt)
+                };
+                out.values[k] += d * rate;
+            }
+        }
+    }
+}

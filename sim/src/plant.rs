@@ -1,0 +1,243 @@
+//! The simulated plant: the diagonal modal system of the reduced model, the nonlinear
+//! elements fed back at their ports, the excitation inputs and the requested outputs.
+
+use faer::c64;
+use nlsim_kernel::{Error, Law, Model, NonlinearElement, Quantity, Result};
+use nlsim_reduction::{ModalSystem, PortKind};
+
+/// A nonlinear element fed back at a port of the modal system.
+#[derive(Debug, Clone)]
+pub struct ElementPort {
+    /// The element (its coupling is already folded into the port).
+    pub element: NonlinearElement,
+    /// Port index in [`ModalSystem::ports`].
+    pub port: usize,
+}
+
+/// A requested output: a quantity at a port.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OutputSpec {
+    /// Name (the sensor's name for model sensors).
+    pub name: String,
+    /// Port index in [`ModalSystem::ports`].
+    pub port: usize,
+    /// Displacement (m), velocity (m/s) or acceleration (m/s²).
+    pub quantity: Quantity,
+}
+
+/// The plant of a time simulation (thesis eq. 10 in diagonal coordinates).
+#[derive(Debug, Clone)]
+pub struct Plant {
+    /// The diagonal modal system (poles, `b̃`, `c̃`, feedthrough).
+    pub system: ModalSystem,
+    /// Nonlinear elements and their ports.
+    pub elements: Vec<ElementPort>,
+    /// Excitation inputs: `(name, port index)`; a load case gives one force signal each.
+    pub inputs: Vec<(String, usize)>,
+    /// Outputs written at every sample.
+    pub outputs: Vec<OutputSpec>,
+}
+
+impl Plant {
+    /// The plant of `model` reduced to `system`: the model's elements (matched to their ports
+    /// by name), its excitation points as inputs, and its sensors as outputs.
+    pub fn from_model(model: &Model, system: &ModalSystem) -> Result<Self> {
+        let mut elements = Vec::new();
+        for e in model.elements() {
+            let port = system.port_index(e.name())?;
+            if system.ports[port].kind != PortKind::Element {
+                return Err(Error::invalid(
+                    format!("element '{}'", e.name()),
+                    "its name matches a port that is not an element port",
+                ));
+            }
+            elements.push(ElementPort {
+                element: e.clone(),
+                port,
+            });
+        }
+        let inputs = model
+            .excitation()
+            .iter()
+            .map(|x| Ok((x.name.clone(), system.port_index(&x.name)?)))
+            .collect::<Result<Vec<_>>>()?;
+        let outputs = model
+            .sensors()
+            .iter()
+            .map(|s| {
+                Ok(OutputSpec {
+                    name: s.name.clone(),
+                    port: system.port_index(&s.name)?,
+                    quantity: s.quantity,
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Self::new(system.clone(), elements, inputs, outputs)
+    }
+
+    /// A plant from its parts; checks port indices and element parameters.
+    pub fn new(
+        system: ModalSystem,
+        elements: Vec<ElementPort>,
+        inputs: Vec<(String, usize)>,
+        outputs: Vec<OutputSpec>,
+    ) -> Result<Self> {
+        let np = system.ports.len();
+        let check = |what: String, p: usize| {
+            if p >= np {
+                Err(Error::invalid(
+                    what,
+                    format!("port index {p} is out of range (the system has {np} ports)"),
+                ))
+            } else {
+                Ok(())
+            }
+        };
+        for e in &elements {
+            check(format!("element '{}'", e.element.name()), e.port)?;
+            e.element.law().validate(e.element.name())?;
+        }
+        for (name, p) in &inputs {
+            check(format!("input '{name}'"), *p)?;
+        }
+        for o in &outputs {
+            check(format!("output '{}'", o.name), o.port)?;
+        }
+        if let Some(s) = system
+            .poles
+            .iter()
+            .position(|l| !(l.re.is_finite() && l.im.is_finite()) || l.re > 0.0)
+        {
+            return Err(Error::invalid(
+                "modal system",
+                format!(
+                    "state {} has pole {} (unstable or not finite)",
+                    s + 1,
+                    system.poles[s]
+                ),
+            ));
+        }
+        Ok(Plant {
+            system,
+            elements,
+            inputs,
+            outputs,
+        })
+    }
+
+    /// Sets element parameter `name` (`element.param`, e.g. `tip_spring.k3`) to `value`.
+    pub fn set_parameter(&mut self, name: &str, value: f64) -> Result<()> {
+        let (el, par) = name.split_once('.').ok_or_else(|| {
+            Error::invalid(
+                format!("parameter '{name}'"),
+                "expected element.parameter, e.g. tip_spring.k3",
+            )
+        })?;
+        let e = self
+            .elements
+            .iter_mut()
+            .find(|e| e.element.name() == el)
+            .ok_or_else(|| {
+                Error::invalid(
+                    format!("parameter '{name}'"),
+                    format!("the plant has no element '{el}'"),
+                )
+            })?;
+        let law = e.element.law();
+        let i = (0..law.n_params())
+            .find(|&i| law.param_name(i) == par)
+            .ok_or_else(|| {
+                Error::invalid(
+                    format!("parameter '{name}'"),
+                    format!(
+                        "element '{el}' ({}) has parameters {}",
+                        law.kind(),
+                        (0..law.n_params())
+                            .map(|i| law.param_name(i))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                )
+            })?;
+        e.element.set_param(i, value)
+    }
+
+    /// Number of diagonal states.
+    pub fn n_states(&self) -> usize {
+        self.system.n_states()
+    }
+
+    /// Index of the input named `name`.
+    pub fn input_index(&self, name: &str) -> Result<usize> {
+        self.inputs
+            .iter()
+            .position(|(n, _)| n == name)
+            .ok_or_else(|| {
+                Error::invalid(
+                    format!("excitation '{name}'"),
+                    format!(
+                        "the plant's inputs are: {}",
+                        self.inputs
+                            .iter()
+                            .map(|(n, _)| n.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                )
+            })
+    }
+
+    /// True when an element has a kink that the integrators treat as an event (clearance).
+    pub fn has_events(&self) -> bool {
+        self.elements
+            .iter()
+            .any(|e| matches!(e.element.law(), Law::Clearance { .. }))
+    }
+
+    /// The port index of every force input in global input order: excitation inputs first,
+    /// then element ports.
+    pub(crate) fn input_ports(&self) -> Vec<usize> {
+        self.inputs
+            .iter()
+            .map(|(_, p)| *p)
+            .chain(self.elements.iter().map(|e| e.port))
+            .collect()
+    }
+
+    /// `Σ_s w_s Re(c̃_{p,s} λ_s^o z_s)`: the modal part of the response of port `port` (index
+    /// in the system's ports) for diagonal states `z`, `o` = 0, 1, 2 for displacement, velocity,
+    /// acceleration. The feedthrough of the port forces is not included.
+    pub fn modal_response(&self, port: usize, quantity: Quantity, z: &[c64]) -> f64 {
+        let sys = &self.system;
+        let order = order(quantity);
+        (0..sys.n_states())
+            .map(|s| sys.weights[s] * (sys.output[(port, s)] * sys.poles[s].powi(order as i32) * z[s]).re)
+            .sum()
+    }
+
+    /// Feedthrough of port force `q` into the `order`-th derivative of port `p`'s response:
+    /// `D` for displacement, `Σ w Re(c̃ b̃)` (zero for a mechanical system) for velocity and
+    /// `Σ w Re(c̃ λ b̃) = Φ_P Φ_Pᵀ` for acceleration.
+    pub(crate) fn feedthrough(&self, p: usize, q: usize, order: u32) -> f64 {
+        let sys = &self.system;
+        if order == 0 {
+            return sys.feedthrough[(p, q)];
+        }
+        (0..sys.n_states())
+            .map(|s| {
+                sys.weights[s]
+                    * (sys.output[(p, s)] * sys.poles[s].powi(order as i32 - 1) * sys.input[(s, q)])
+                        .re
+            })
+            .sum()
+    }
+}
+
+/// Response order of a quantity: 0 displacement, 1 velocity, 2 acceleration.
+pub(crate) fn order(q: Quantity) -> u32 {
+    match q {
+        Quantity::Displacement => 0,
+        Quantity::Velocity => 1,
+        Quantity::Acceleration => 2,
+    }
+}

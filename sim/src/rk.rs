@@ -1,0 +1,565 @@
+//! Runge–Kutta references on the same diagonal system the hold integrator uses:
+//! `ż = Λ z + b̃ u(t)`, with the element forces solved from the port responses at every
+//! stage (`f = g(y(z) − D f)`, a loop only when the residual flexibility couples them).
+//!
+//! - [`rk45`]: Dormand–Prince 5(4) with MATLAB ODE45's error control (mixed test
+//!   `|e_i| ≤ max(rtol·|y_i|, atol)` in the max norm, step factor `0.8 err^{−1/5}` within
+//!   `[0.1, 5]`, max step a tenth of the span), and its free 4th-order dense output for the
+//!   samples. The defaults are ODE45's (`rtol 1e-3`, `atol 1e-6`). `atol` applies to the
+//!   diagonal states (about the modal displacement in √kg m): when the response is smaller
+//!   than `atol` the defaults are off by tens of percent, so scale it to the response.
+//! - [`rk4`]: classic fixed-step fourth order.
+//!
+//! The force signals are evaluated at the exact stage times (no hold).
+
+use crate::feedback::{Feedback, NewtonConfig};
+use crate::foh::loop_error;
+use crate::history::{LoadCase, RunStats, Series, TimeHistory, add_residual_rates};
+use crate::plant::{Plant, order};
+use faer::c64;
+use nlsim_kernel::{Error, Result};
+
+/// Settings of [`rk45`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rk45Config {
+    /// Relative tolerance (ODE45 default 1e-3).
+    pub rtol: f64,
+    /// Absolute tolerance on the diagonal states (ODE45 default 1e-6).
+    pub atol: f64,
+    /// Largest step (s); `None` for a tenth of the time span (ODE45's default).
+    pub max_step: Option<f64>,
+    /// Step limit, after which the run fails.
+    pub max_steps: usize,
+    /// Newton settings of the element loop.
+    pub newton: NewtonConfig,
+}
+
+impl Default for Rk45Config {
+    fn default() -> Self {
+        Rk45Config {
+            rtol: 1e-3,
+            atol: 1e-6,
+            max_step: None,
+            max_steps: 100_000_000,
+            newton: NewtonConfig::default(),
+        }
+    }
+}
+
+/// Settings of [`rk4`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rk4Config {
+    /// RK4 steps per sample interval.
+    pub substeps: usize,
+    /// Newton settings of the element loop.
+    pub newton: NewtonConfig,
+}
+
+impl Default for Rk4Config {
+    fn default() -> Self {
+        Rk4Config {
+            substeps: 1,
+            newton: NewtonConfig::default(),
+        }
+    }
+}
+
+/// The right-hand side and the sampled outputs.
+struct Rhs<'a> {
+    plant: &'a Plant,
+    case: &'a LoadCase,
+    ports: Vec<usize>,
+    /// `(port, order)` rows: element displacement, element velocity, outputs.
+    rows: Vec<(usize, u32)>,
+    row_c: Vec<c64>,
+    feed: Vec<f64>,
+    sd: Vec<f64>,
+    sv: Vec<f64>,
+    fb: Feedback,
+    f: Vec<f64>,
+    u: Vec<f64>,
+    dp: Vec<f64>,
+    vp: Vec<f64>,
+    states: Vec<Vec<f64>>,
+    newton: NewtonConfig,
+    iterations: usize,
+    max_iterations: usize,
+    evaluations: usize,
+}
+
+impl<'a> Rhs<'a> {
+    fn new(plant: &'a Plant, case: &'a LoadCase, newton: NewtonConfig) -> Self {
+        let sys = &plant.system;
+        let ns = sys.n_states();
+        let ne = plant.inputs.len();
+        let nn = plant.elements.len();
+        let ports = plant.input_ports();
+        let mut rows: Vec<(usize, u32)> = plant.elements.iter().map(|e| (e.port, 0)).collect();
+        rows.extend(plant.elements.iter().map(|e| (e.port, 1)));
+        rows.extend(plant.outputs.iter().map(|o| (o.port, order(o.quantity))));
+        let mut row_c = Vec::with_capacity(rows.len() * ns);
+        for &(p, o) in &rows {
+            for s in 0..ns {
+                row_c.push(sys.output[(p, s)] * sys.poles[s].powi(o as i32) * sys.weights[s]);
+            }
+        }
+        let nq = ne + nn;
+        let mut feed = vec![0.0; rows.len() * nq];
+        for (r, &(p, o)) in rows.iter().enumerate() {
+            for q in 0..nq {
+                feed[r * nq + q] = plant.feedthrough(p, ports[q], o);
+            }
+        }
+        let mut sd = vec![0.0; nn * nn];
+        let mut sv = vec![0.0; nn * nn];
+        for i in 0..nn {
+            for m in 0..nn {
+                sd[i * nn + m] = feed[i * nq + ne + m];
+                sv[i * nn + m] = feed[(nn + i) * nq + ne + m];
+            }
+        }
+        Rhs {
+            plant,
+            case,
+            ports,
+            rows,
+            row_c,
+            feed,
+            sd,
+            sv,
+            fb: Feedback::new(nn),
+            f: vec![0.0; nn],
+            u: vec![0.0; nq],
+            dp: vec![0.0; nn],
+            vp: vec![0.0; nn],
+            states: plant
+                .elements
+                .iter()
+                .map(|e| vec![0.0; e.element.law().n_states()])
+                .collect(),
+            newton,
+            iterations: 0,
+            max_iterations: 0,
+            evaluations: 0,
+        }
+    }
+
+    fn row(&self, r: usize, z: &[c64]) -> f64 {
+        let ns = z.len();
+        let rc = &self.row_c[r * ns..(r + 1) * ns];
+        rc.iter().zip(z).map(|(c, z)| (c * z).re).sum()
+    }
+
+    /// Solves the element loop at `(t, z)`; leaves the port forces in `self.u`.
+    fn forces(&mut self, t: f64, z: &[c64]) -> Result<()> {
+        let ne = self.plant.inputs.len();
+        let nn = self.plant.elements.len();
+        let nq = ne + nn;
+        for q in 0..ne {
+            self.u[q] = self.case.forces[q].eval(t);
+        }
+        for i in 0..nn {
+            self.dp[i] = self.row(i, z)
+                + (0..ne).map(|q| self.feed[i * nq + q] * self.u[q]).sum::<f64>();
+            self.vp[i] = self.row(nn + i, z)
+                + (0..ne)
+                    .map(|q| self.feed[(nn + i) * nq + q] * self.u[q])
+                    .sum::<f64>();
+        }
+        let it = self
+            .fb
+            .solve(
+                &self.plant.elements,
+                &self.states,
+                &self.dp,
+                &self.vp,
+                &self.sd,
+                &self.sv,
+                &mut self.f,
+                &self.newton,
+            )
+            .map_err(|e| loop_error(e, &self.plant.elements, 0, t))?;
+        self.iterations += it;
+        self.max_iterations = self.max_iterations.max(it);
+        for i in 0..nn {
+            self.u[ne + i] = -self.f[i];
+        }
+        Ok(())
+    }
+
+    /// `dz = Λ z + b̃ u(t, z)`.
+    fn eval(&mut self, t: f64, z: &[c64], dz: &mut [c64]) -> Result<()> {
+        self.evaluations += 1;
+        self.forces(t, z)?;
+        let sys = &self.plant.system;
+        for (s, d) in dz.iter_mut().enumerate() {
+            let mut v = sys.poles[s] * z[s];
+            for (q, &p) in self.ports.iter().enumerate() {
+                v += sys.input[(s, p)] * self.u[q];
+            }
+            *d = v;
+        }
+        Ok(())
+    }
+
+    /// Writes sample `k` at `(t, z)` and commits element history.
+    fn sample(&mut self, k: usize, t: f64, z: &[c64], rec: &mut Record) -> Result<()> {
+        self.forces(t, z)?;
+        let ne = self.plant.inputs.len();
+        let nn = self.plant.elements.len();
+        let nq = ne + nn;
+        for q in 0..ne {
+            rec.inputs[q][k] = self.u[q];
+        }
+        for i in 0..nn {
+            rec.f[i][k] = self.f[i];
+            rec.d[i][k] = self.fb.last_d[i];
+            rec.v[i][k] = self.fb.last_v[i];
+            let (d, v) = (self.fb.last_d[i], self.fb.last_v[i]);
+            self.plant.elements[i]
+                .element
+                .law()
+                .commit_state(d, v, &mut self.states[i]);
+        }
+        for o in 0..self.plant.outputs.len() {
+            let r = 2 * nn + o;
+            rec.out[o][k] =
+                self.row(r, z) + (0..nq).map(|q| self.feed[r * nq + q] * self.u[q]).sum::<f64>();
+        }
+        let _ = &self.rows;
+        Ok(())
+    }
+}
+
+struct Record {
+    inputs: Vec<Vec<f64>>,
+    f: Vec<Vec<f64>>,
+    d: Vec<Vec<f64>>,
+    v: Vec<Vec<f64>>,
+    out: Vec<Vec<f64>>,
+}
+
+impl Record {
+    fn new(plant: &Plant, n: usize) -> Self {
+        let nn = plant.elements.len();
+        Record {
+            inputs: vec![vec![0.0; n]; plant.inputs.len()],
+            f: vec![vec![0.0; n]; nn],
+            d: vec![vec![0.0; n]; nn],
+            v: vec![vec![0.0; n]; nn],
+            out: vec![vec![0.0; n]; plant.outputs.len()],
+        }
+    }
+
+    fn finish(
+        self,
+        plant: &Plant,
+        method: &str,
+        case: &LoadCase,
+        dt: f64,
+        final_state: Vec<c64>,
+        stats: RunStats,
+    ) -> TimeHistory {
+        let mut h = TimeHistory {
+            method: method.into(),
+            case: case.name.clone(),
+            dt,
+            outputs: plant
+                .outputs
+                .iter()
+                .zip(self.out)
+                .map(|(o, v)| Series {
+                    name: o.name.clone(),
+                    quantity: o.quantity,
+                    values: v,
+                })
+                .collect(),
+            inputs: plant
+                .inputs
+                .iter()
+                .map(|(n, _)| n.clone())
+                .zip(self.inputs)
+                .collect(),
+            element_names: plant
+                .elements
+                .iter()
+                .map(|e| e.element.name().to_string())
+                .collect(),
+            element_displacements: self.d,
+            element_velocities: self.v,
+            element_forces: self.f,
+            final_state,
+            stats,
+        };
+        add_residual_rates(plant, &mut h);
+        h
+    }
+}
+
+fn check_grid(dt: f64) -> Result<()> {
+    if !(dt > 0.0 && dt.is_finite()) {
+        return Err(Error::invalid(
+            "sample interval",
+            format!("{dt} s must be positive and finite"),
+        ));
+    }
+    Ok(())
+}
+
+// Dormand–Prince 5(4) coefficients.
+const C: [f64; 7] = [0.0, 0.2, 0.3, 0.8, 8.0 / 9.0, 1.0, 1.0];
+const A: [[f64; 6]; 7] = [
+    [0.0; 6],
+    [0.2, 0.0, 0.0, 0.0, 0.0, 0.0],
+    [3.0 / 40.0, 9.0 / 40.0, 0.0, 0.0, 0.0, 0.0],
+    [44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0, 0.0, 0.0, 0.0],
+    [
+        19372.0 / 6561.0,
+        -25360.0 / 2187.0,
+        64448.0 / 6561.0,
+        -212.0 / 729.0,
+        0.0,
+        0.0,
+    ],
+    [
+        9017.0 / 3168.0,
+        -355.0 / 33.0,
+        46732.0 / 5247.0,
+        49.0 / 176.0,
+        -5103.0 / 18656.0,
+        0.0,
+    ],
+    [
+        35.0 / 384.0,
+        0.0,
+        500.0 / 1113.0,
+        125.0 / 192.0,
+        -2187.0 / 6784.0,
+        11.0 / 84.0,
+    ],
+];
+/// Error weights `b − b̂`.
+const E: [f64; 7] = [
+    71.0 / 57600.0,
+    0.0,
+    -71.0 / 16695.0,
+    71.0 / 1920.0,
+    -17253.0 / 339200.0,
+    22.0 / 525.0,
+    -1.0 / 40.0,
+];
+/// Dense output weights.
+const D: [f64; 7] = [
+    -12715105075.0 / 11282082432.0,
+    0.0,
+    87487479700.0 / 32700410799.0,
+    -10690763975.0 / 1880347072.0,
+    701980252875.0 / 199316789632.0,
+    -1453857185.0 / 822651844.0,
+    69997945.0 / 29380423.0,
+];
+
+/// Dormand–Prince RK45 on the plant's diagonal system, sampled every `dt` for `n_steps`
+/// intervals. `stats.steps`/`rejected_steps` count the adaptive steps.
+pub fn rk45(
+    plant: &Plant,
+    case: &LoadCase,
+    dt: f64,
+    n_steps: usize,
+    cfg: &Rk45Config,
+) -> Result<TimeHistory> {
+    check_grid(dt)?;
+    if !(cfg.rtol > 0.0 && cfg.atol > 0.0) {
+        return Err(Error::invalid(
+            "RK45 tolerances",
+            format!("rtol {} and atol {} must be positive", cfg.rtol, cfg.atol),
+        ));
+    }
+    let start = std::time::Instant::now();
+    let (z0, plant) = case.prepare(plant)?;
+    let ns = plant.n_states();
+    let n = n_steps + 1;
+    let t_end = n_steps as f64 * dt;
+    let hmax = cfg.max_step.unwrap_or(0.1 * t_end).max(1e-300);
+    let mut rhs = Rhs::new(&plant, case, cfg.newton);
+    let mut rec = Record::new(&plant, n);
+    let mut stats = RunStats::default();
+    let mut z = z0;
+    rhs.sample(0, 0.0, &z, &mut rec)?;
+    let mut k = vec![vec![c64::new(0.0, 0.0); ns]; 7];
+    let mut ytmp = vec![c64::new(0.0, 0.0); ns];
+    let mut ynew = vec![c64::new(0.0, 0.0); ns];
+    let mut t = 0.0;
+    rhs.eval(t, &z, &mut k[0])?;
+    // ODE45's initial step.
+    let threshold = cfg.atol / cfg.rtol;
+    let rh = z
+        .iter()
+        .zip(&k[0])
+        .map(|(y, f)| {
+            (f.re.abs() / y.re.abs().max(threshold)).max(f.im.abs() / y.im.abs().max(threshold))
+        })
+        .fold(0.0, f64::max)
+        / (0.8 * cfg.rtol.powf(0.2));
+    let mut h = hmax;
+    if h * rh > 1.0 {
+        h = 1.0 / rh;
+    }
+    let mut next = 1;
+    while next < n {
+        if stats.steps + stats.rejected_steps >= cfg.max_steps {
+            return Err(Error::Numerical {
+                what: format!("RK45 at t = {t:.6e} s"),
+                detail: format!(
+                    "step limit {} reached (step {h:.3e} s); the problem is stiff for an explicit \
+                     method or the tolerances are too tight",
+                    cfg.max_steps
+                ),
+            });
+        }
+        let hmin = 16.0 * f64::EPSILON * t.abs().max(1e-300);
+        h = h.min(hmax).min(t_end - t).max(hmin);
+        for st in 1..7 {
+            for s in 0..ns {
+                let mut acc = z[s];
+                for j in 0..st {
+                    if A[st][j] != 0.0 {
+                        acc += k[j][s] * (h * A[st][j]);
+                    }
+                }
+                ytmp[s] = acc;
+            }
+            let tt = t + C[st] * h;
+            let (head, tail) = k.split_at_mut(st);
+            let _ = head;
+            rhs.eval(tt, &ytmp, &mut tail[0])?;
+            if st == 6 {
+                ynew.copy_from_slice(&ytmp);
+            }
+        }
+        // Error estimate, ODE45's mixed test in the max norm.
+        let mut err = 0.0f64;
+        for s in 0..ns {
+            let mut e = c64::new(0.0, 0.0);
+            for j in 0..7 {
+                if E[j] != 0.0 {
+                    e += k[j][s] * (h * E[j]);
+                }
+            }
+            let sc_re = (cfg.rtol * z[s].re.abs().max(ynew[s].re.abs())).max(cfg.atol);
+            let sc_im = (cfg.rtol * z[s].im.abs().max(ynew[s].im.abs())).max(cfg.atol);
+            err = err.max(e.re.abs() / sc_re).max(e.im.abs() / sc_im);
+        }
+        if !err.is_finite() {
+            return Err(Error::Numerical {
+                what: format!("RK45 at t = {t:.6e} s"),
+                detail: "the error estimate is not finite: the run diverged".into(),
+            });
+        }
+        if err > 1.0 {
+            stats.rejected_steps += 1;
+            if h <= hmin {
+                return Err(Error::Numerical {
+                    what: format!("RK45 at t = {t:.6e} s"),
+                    detail: "the step fell below the round-off limit".into(),
+                });
+            }
+            h *= (0.8 * err.powf(-0.2)).max(0.1);
+            continue;
+        }
+        stats.steps += 1;
+        let t_new = t + h;
+        // Samples inside (t, t_new]: 4th-order dense output.
+        while next < n && (next as f64 * dt) <= t_new * (1.0 + 1e-14) {
+            let ts = next as f64 * dt;
+            let th = ((ts - t) / h).clamp(0.0, 1.0);
+            for s in 0..ns {
+                let r2 = ynew[s] - z[s];
+                let r3 = k[0][s] * h - r2;
+                let r4 = r2 - k[6][s] * h - r3;
+                let mut r5 = c64::new(0.0, 0.0);
+                for j in 0..7 {
+                    if D[j] != 0.0 {
+                        r5 += k[j][s] * (h * D[j]);
+                    }
+                }
+                ytmp[s] = z[s] + (r2 + (r3 + (r4 + r5 * (1.0 - th)) * th) * (1.0 - th)) * th;
+            }
+            rhs.sample(next, ts, &ytmp, &mut rec)?;
+            next += 1;
+        }
+        t = t_new;
+        z.copy_from_slice(&ynew);
+        // First-same-as-last.
+        let (first, rest) = k.split_at_mut(1);
+        first[0].copy_from_slice(&rest[5]);
+        let grow = if err == 0.0 {
+            5.0
+        } else {
+            (0.8 * err.powf(-0.2)).clamp(0.1, 5.0)
+        };
+        h *= grow;
+    }
+    stats.evaluations = rhs.evaluations;
+    stats.newton_iterations = rhs.iterations;
+    stats.max_newton_iterations = rhs.max_iterations;
+    stats.seconds = start.elapsed().as_secs_f64();
+    Ok(rec.finish(&plant, "rk45", case, dt, z, stats))
+}
+
+/// Classic fourth-order Runge–Kutta with `cfg.substeps` steps per sample interval `dt`.
+pub fn rk4(
+    plant: &Plant,
+    case: &LoadCase,
+    dt: f64,
+    n_steps: usize,
+    cfg: &Rk4Config,
+) -> Result<TimeHistory> {
+    check_grid(dt)?;
+    if cfg.substeps == 0 {
+        return Err(Error::invalid("RK4 substeps", "must be at least 1"));
+    }
+    let start = std::time::Instant::now();
+    let (z0, plant) = case.prepare(plant)?;
+    let ns = plant.n_states();
+    let n = n_steps + 1;
+    let mut rhs = Rhs::new(&plant, case, cfg.newton);
+    let mut rec = Record::new(&plant, n);
+    let mut stats = RunStats::default();
+    let mut z = z0;
+    rhs.sample(0, 0.0, &z, &mut rec)?;
+    let h = dt / cfg.substeps as f64;
+    let mut k = vec![vec![c64::new(0.0, 0.0); ns]; 4];
+    let mut y = vec![c64::new(0.0, 0.0); ns];
+    for step in 0..n_steps {
+        for sub in 0..cfg.substeps {
+            let t = step as f64 * dt + sub as f64 * h;
+            rhs.eval(t, &z, &mut k[0])?;
+            for (st, (cf, tf)) in [(0.5, 0.5), (0.5, 0.5), (1.0, 1.0)].into_iter().enumerate() {
+                for s in 0..ns {
+                    y[s] = z[s] + k[st][s] * (h * cf);
+                }
+                let (_, tail) = k.split_at_mut(st + 1);
+                rhs.eval(t + tf * h, &y, &mut tail[0])?;
+            }
+            for s in 0..ns {
+                z[s] += (k[0][s] + (k[1][s] + k[2][s]) * 2.0 + k[3][s]) * (h / 6.0);
+            }
+            stats.steps += 1;
+        }
+        if z.iter().any(|v| !(v.re.is_finite() && v.im.is_finite())) {
+            return Err(Error::Numerical {
+                what: format!("RK4 at step {} (t = {:.6e} s)", step + 1, (step + 1) as f64 * dt),
+                detail: "the state is not finite: the step exceeds the stability limit of the \
+                         fastest retained mode"
+                    .into(),
+            });
+        }
+        rhs.sample(step + 1, (step + 1) as f64 * dt, &z, &mut rec)?;
+    }
+    stats.evaluations = rhs.evaluations;
+    stats.newton_iterations = rhs.iterations;
+    stats.max_newton_iterations = rhs.max_iterations;
+    stats.seconds = start.elapsed().as_secs_f64();
+    Ok(rec.finish(&plant, "rk4", case, dt, z, stats))
+}
