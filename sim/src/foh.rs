@@ -274,7 +274,7 @@ impl Simulator {
             .iter()
             .map(|e| vec![0.0; e.element.law().n_states()])
             .collect();
-        let mut fb = Feedback::new(nn);
+        let mut fb = Feedback::new(&plant);
         let mut stats = RunStats::default();
         let mut f = vec![0.0; nn];
         let mut d_pred = vec![0.0; nn];
@@ -754,7 +754,11 @@ fn crossing(elements: &[ElementPort], a: &[f64], b: &[f64]) -> Option<usize> {
 
 pub(crate) fn loop_error(e: LoopFailure, elements: &[ElementPort], step: usize, t: f64) -> Error {
     Error::Numerical {
-        what: format!("nonlinear feedback loop at step {step} (t = {t:.6e} s)"),
+        what: if step == usize::MAX {
+            format!("nonlinear feedback loop at t = {t:.6e} s")
+        } else {
+            format!("nonlinear feedback loop at step {step} (t = {t:.6e} s)")
+        },
         detail: format!(
             "Newton did not converge in {} iterations: force residual {:.3e} N at element '{}' \
              (u = {:.6e} m); try a smaller time step",

@@ -215,6 +215,20 @@ impl Plant {
             .sum()
     }
 
+    /// Static flexibility of port `p` (m/N): the receptance at zero frequency,
+    /// `Σ_s w Re(c̃ b̃ / (−λ)) + D`; infinite with a rigid-body mode.
+    pub fn static_flexibility(&self, p: usize) -> f64 {
+        let sys = &self.system;
+        let mut f = sys.feedthrough[(p, p)];
+        for s in 0..sys.n_states() {
+            if sys.poles[s].norm() == 0.0 {
+                return f64::INFINITY;
+            }
+            f += sys.weights[s] * (sys.output[(p, s)] * sys.input[(s, p)] / (-sys.poles[s])).re;
+        }
+        f
+    }
+
     /// Feedthrough of port force `q` into the `order`-th derivative of port `p`'s response:
     /// `D` for displacement, `Σ w Re(c̃ b̃)` (zero for a mechanical system) for velocity and
     /// `Σ w Re(c̃ λ b̃) = Φ_P Φ_Pᵀ` for acceleration.

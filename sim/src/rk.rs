@@ -127,7 +127,7 @@ impl<'a> Rhs<'a> {
             feed,
             sd,
             sv,
-            fb: Feedback::new(nn),
+            fb: Feedback::new(plant),
             f: vec![0.0; nn],
             u: vec![0.0; nq],
             dp: vec![0.0; nn],
@@ -178,7 +178,7 @@ impl<'a> Rhs<'a> {
                 &mut self.f,
                 &self.newton,
             )
-            .map_err(|e| loop_error(e, &self.plant.elements, 0, t))?;
+            .map_err(|e| loop_error(e, &self.plant.elements, usize::MAX, t))?;
         self.iterations += it;
         self.max_iterations = self.max_iterations.max(it);
         for i in 0..nn {

@@ -1,0 +1,354 @@
+//! Nonlinear checks: FOH against tight RK45 references (order of convergence, steady states
+//! on both stable Duffing branches), contact events on the bump-stop beam, batches.
+
+use faer::c64;
+use nlsim_fixtures::{DUFFING_FIG3, duffing_fig3, duffing_first_order_amplitudes, ecl_beam};
+use nlsim_kernel::{Damping, Model, Quantity};
+use nlsim_reduction::modal::{ReducedModel, ReductionConfig, reduce};
+use nlsim_reduction::{EigenConfig, ModalSystem, ModeSelection};
+use nlsim_sim::{
+    FohConfig, InitialState, LoadCase, OutputSpec, Plant, Rk45Config, Signal, Simulator, TimeHistory,
+    rk45, run_batch,
+};
+use std::f64::consts::PI;
+
+fn reduced(model: &Model, modes: usize) -> ReducedModel {
+    let cfg = ReductionConfig {
+        eigen: EigenConfig {
+            selection: ModeSelection::Lowest(modes),
+            ..EigenConfig::default()
+        },
+        ..ReductionConfig::default()
+    };
+    reduce(model, &cfg).unwrap()
+}
+
+/// The model's plant plus the element coordinate as a displacement output `u`.
+fn plant_of(model: &Model, red: &ReducedModel) -> Plant {
+    let sys = ModalSystem::new(red).unwrap();
+    let mut p = Plant::from_model(model, &sys).unwrap();
+    let port = p.elements[0].port;
+    p.outputs.push(OutputSpec {
+        name: "u".into(),
+        port,
+        quantity: Quantity::Displacement,
+    });
+    p
+}
+
+fn tight() -> Rk45Config {
+    Rk45Config {
+        rtol: 1e-12,
+        atol: 1e-18,
+        ..Rk45Config::default()
+    }
+}
+
+fn max_diff(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+}
+
+fn peak(a: &[f64]) -> f64 {
+    a.iter().fold(0.0f64, |m, x| m.max(x.abs()))
+}
+
+/// Samples of `h`'s output `name` at every `stride`-th sample.
+fn every(h: &TimeHistory, name: &str, stride: usize) -> Vec<f64> {
+    h.output(name).unwrap().values.iter().step_by(stride).copied().collect()
+}
+
+/// Errors of FOH at T, T/2, T/4, T/8 against the reference sampled at T/8, on a common grid.
+fn convergence(plant: &Plant, case: &LoadCase, dt: f64, n: usize) -> Vec<f64> {
+    let reference = rk45(plant, case, dt / 8.0, 8 * n, &tight()).unwrap();
+    let r = every(&reference, "u", 8);
+    let scale = peak(&r);
+    assert!(scale > 0.0);
+    [1usize, 2, 4, 8]
+        .iter()
+        .map(|&d| {
+            let sim = Simulator::new(plant, &FohConfig::new(dt / d as f64)).unwrap();
+            let h = sim.run(case, n * d).unwrap();
+            max_diff(&every(&h, "u", d), &r) / scale
+        })
+        .collect()
+}
+
+fn assert_second_order(errs: &[f64], what: &str) {
+    for w in errs.windows(2).skip(1) {
+        let order = (w[0] / w[1]).log2();
+        assert!(
+            (1.8..2.3).contains(&order),
+            "{what}: observed order {order:.2} (errors {errs:?})"
+        );
+    }
+}
+
+#[test]
+fn duffing_foh_converges_at_second_order_to_rk45() {
+    let fx = duffing_fig3();
+    let red = reduced(&fx.model, 1);
+    let plant = plant_of(&fx.model, &red);
+    let case = LoadCase::new("sine", vec![Signal::sine(2.0, 29.5)]);
+    // 0.4 s of the transient from rest, T = 1/(29.5 · 32).
+    let dt = 1.0 / (29.5 * 32.0);
+    let errs = convergence(&plant, &case, dt, (0.4 / dt) as usize);
+    assert_second_order(&errs, "Duffing");
+    assert!(errs[3] < 1e-4, "finest error {:e}", errs[3]);
+}
+
+#[test]
+fn cubic_tip_beam_foh_converges_at_second_order_to_rk45() {
+    let fx = ecl_beam();
+    let red = reduced(&fx.model, 6);
+    let plant = plant_of(&fx.model, &red);
+    // Near the first bending mode, strong enough for the cubic spring to matter.
+    let case = LoadCase::new("sine", vec![Signal::sine(2.0, 24.0)]);
+    let dt = 1.0 / 4000.0;
+    let errs = convergence(&plant, &case, dt, 800);
+    assert_second_order(&errs, "cubic-tip beam");
+    // The spring is active: its force is a sizeable part of the drive.
+    let sim = Simulator::new(&plant, &FohConfig::new(dt)).unwrap();
+    let h = sim.run(&case, 800).unwrap();
+    assert!(peak(&h.element_forces[0]) > 0.05, "cubic force {}", peak(&h.element_forces[0]));
+}
+
+/// Steady-state amplitude of `u` over the last `periods` periods.
+fn steady_amplitude(h: &TimeHistory, samples_per_period: usize, periods: usize) -> f64 {
+    let v = &h.output("u").unwrap().values;
+    peak(&v[v.len() - samples_per_period * periods..])
+}
+
+#[test]
+fn duffing_steady_states_on_both_stable_branches_agree_with_rk45() {
+    let (m, c, k, p) = DUFFING_FIG3;
+    let fx = duffing_fig3();
+    let red = reduced(&fx.model, 1);
+    let plant = plant_of(&fx.model, &red);
+    let f_hz = 30.0;
+    let w = 2.0 * PI * f_hz;
+    let roots = duffing_first_order_amplitudes(m, c, k, p, 2.0, w);
+    assert_eq!(roots.len(), 3, "30 Hz is inside the three-solution region: {roots:?}");
+    let spp = 128;
+    let dt = 1.0 / (f_hz * spp as f64);
+    // 25 s: the free transient decays by e^{−ζ ω_n t} = e^{−7}.
+    let n = (25.0 / dt) as usize;
+    for (branch, &a) in [(0usize, &roots[0]), (2, &roots[2])] {
+        // Start on the first-order HB solution q = Re(Q e^{iωt}) of the sine force −2i.
+        let q = c64::new(0.0, -2.0) / c64::new(k - m * w * w + 0.75 * p * a * a, w * c);
+        let (q0, v0) = (q.re, (c64::new(0.0, w) * q).re);
+        let eta = red.modal_coordinates(fx.model.mass(), &[q0]).unwrap();
+        let eta_dot = red.modal_coordinates(fx.model.mass(), &[v0]).unwrap();
+        let mut case = LoadCase::new("sine", vec![Signal::sine(2.0, f_hz)]);
+        case.initial = InitialState::Modal {
+            displacement: eta,
+            velocity: eta_dot,
+        };
+        let foh = Simulator::new(&plant, &FohConfig::new(dt)).unwrap().run(&case, n).unwrap();
+        let rk = rk45(&plant, &case, dt, n, &tight()).unwrap();
+        let (af, ar) = (steady_amplitude(&foh, spp, 5), steady_amplitude(&rk, spp, 5));
+        // FOH bias at θ = 2π/128: ≈ θ²/12 = 2e-4, amplified near resonance.
+        assert!((af - ar).abs() <= 2e-3 * ar, "branch {branch}: FOH {af:e} vs RK45 {ar:e}");
+        // Both stay on the branch they started on (first-order HB neglects the 3rd harmonic).
+        assert!((ar - a).abs() <= 0.03 * a, "branch {branch}: RK45 {ar:e} vs HB1 {a:e}");
+    }
+}
+
+fn bumpstop(damped: bool) -> (Model, ReducedModel, Plant) {
+    let mut model = nlsim_fixtures::build("bumpstop_cantilever", &[]).unwrap().model;
+    if !damped {
+        model.set_damping(Damping::None).unwrap();
+    }
+    let red = reduced(&model, 8);
+    let plant = plant_of(&model, &red);
+    (model, red, plant)
+}
+
+#[test]
+fn bumpstop_contact_onset_is_located() {
+    let (_, _, plant) = bumpstop(true);
+    let sys = &plant.system;
+    let f1 = sys.poles[0].im / (2.0 * PI);
+    let amp = 0.4;
+    let case = LoadCase::new("sine", vec![Signal::sine(amp, f1)]);
+    // Exact linear response until the first contact: for sin ωt from rest,
+    // z_s(t) = b̃ F/(2i) [(e^{iωt} − e^{λt})/(iω − λ) − (e^{−iωt} − e^{λt})/(−iω − λ)].
+    let w = 2.0 * PI * f1;
+    let (shaker, tip) = (plant.inputs[0].1, plant.elements[0].port);
+    let gap = 1e-3;
+    let y = |t: f64| -> f64 {
+        let mut y = sys.feedthrough[(tip, shaker)] * amp * (w * t).sin();
+        for s in 0..sys.n_states() {
+            let l = sys.poles[s];
+            let iw = c64::new(0.0, w);
+            let el = (l * t).exp();
+            let z = sys.input[(s, shaker)] * amp / c64::new(0.0, 2.0)
+                * (((iw * t).exp() - el) / (iw - l) - ((-iw * t).exp() - el) / (-iw - l));
+            y += sys.weights[s] * (sys.output[(tip, s)] * z).re;
+        }
+        y
+    };
+    let mut t = 0.0;
+    let step = 1e-4;
+    while y(t) < gap {
+        t += step;
+        assert!(t < 5.0, "no contact within 5 s");
+    }
+    let (mut lo, mut hi) = (t - step, t);
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if y(mid) < gap { lo = mid } else { hi = mid }
+    }
+    let t_exact = 0.5 * (lo + hi);
+    let mut errs = Vec::new();
+    for spp in [40.0, 80.0, 160.0] {
+        let dt = 1.0 / (f1 * spp);
+        let sim = Simulator::new(&plant, &FohConfig::new(dt)).unwrap();
+        let h = sim.run(&case, ((t_exact + 0.05) / dt) as usize).unwrap();
+        let first = h.stats.events.first().expect("a contact event");
+        assert!(first.closing);
+        errs.push((first.time - t_exact).abs() / dt);
+    }
+    // The event time inherits the FOH's O(T²) response error: in units of T it falls as T.
+    assert!(errs[2] < 0.01, "onset error {errs:?} (in steps)");
+    assert!(errs[0] / errs[2] > 2.5, "onset error falls with T: {errs:?}");
+}
+
+#[test]
+fn bumpstop_events_restore_second_order() {
+    let (_, _, plant) = bumpstop(true);
+    let f1 = plant.system.poles[0].im / (2.0 * PI);
+    let case = LoadCase::new("sine", vec![Signal::sine(0.6, f1)]);
+    let dt = 1.0 / (f1 * 50.0);
+    let n = (0.5 / dt) as usize;
+    let reference = rk45(&plant, &case, dt / 8.0, 8 * n, &tight()).unwrap();
+    let r = every(&reference, "u", 8);
+    let scale = peak(&r);
+    assert!(scale > 1.1e-3, "the stop (gap 1 mm) is hit: peak {scale:e}");
+    let errs = |events: bool| -> Vec<f64> {
+        [1usize, 2, 4, 8]
+            .iter()
+            .map(|&d| {
+                let mut cfg = FohConfig::new(dt / d as f64);
+                cfg.locate_events = events;
+                let h = Simulator::new(&plant, &cfg).unwrap().run(&case, n * d).unwrap();
+                max_diff(&every(&h, "u", d), &r) / scale
+            })
+            .collect()
+    };
+    let with = errs(true);
+    let without = errs(false);
+    assert_second_order(&with, "bump stop with events");
+    // The contact force is continuous (a kink in stiffness), so a fixed step keeps second
+    // order too, with a larger constant; locating the events is never worse and clearly
+    // better on the coarse step.
+    for (w, wo) in with.iter().zip(&without) {
+        assert!(*w <= 1.05 * wo, "with {with:?}, without {without:?}");
+    }
+    assert!(with[0] < 0.8 * without[0], "with {with:?}, without {without:?}");
+}
+
+#[test]
+fn bumpstop_energy_is_conserved_without_damping() {
+    let (_, red, plant) = bumpstop(false);
+    let sys = &plant.system;
+    let tip = plant.elements[0].port;
+    let m = red.n_modes();
+    // A tip impulse of 0.05 N s: η̇ = Φ_tip · I. The tip then hits the stop about twice a
+    // period, exciting the higher modes at every impact.
+    let eta_dot: Vec<f64> = (0..m).map(|r| red.participation[(tip, r)] * 0.05).collect();
+    let f1 = sys.poles[0].im / (2.0 * PI);
+    let (k, gap) = (2e5, 1e-3);
+    let d = sys.feedthrough[(tip, tip)];
+    // Conserved: Σ ½(η̇² + ω²η²) + ½ k (u − gap)₊² + ½ D g², with u = y − D g the port
+    // displacement and g the contact force (undamped proportional form: one state per mode,
+    // η = 2 Re z, η̇ = 2 Re(λ z)).
+    let energy = |z: &[c64]| -> f64 {
+        let mut e = 0.0;
+        for r in 0..m {
+            let (eta, etad) = (2.0 * z[r].re, 2.0 * (sys.poles[r] * z[r]).re);
+            e += 0.5 * (etad * etad + sys.poles[r].im.powi(2) * eta * eta);
+        }
+        let y0 = plant.modal_response(tip, Quantity::Displacement, z);
+        let g = (k * (y0 - gap) / (1.0 + k * d)).max(0.0);
+        let u = y0 - d * g;
+        e + 0.5 * k * (u - gap).max(0.0).powi(2) + 0.5 * d * g * g
+    };
+    let z0 = sys.initial_states(&vec![0.0; m], &eta_dot).unwrap();
+    let e0 = energy(&z0);
+    let mut drifts = Vec::new();
+    for spp in [100usize, 200, 400, 800] {
+        let sim = Simulator::new(&plant, &FohConfig::new(1.0 / (f1 * spp as f64))).unwrap();
+        let mut z = z0.clone();
+        let mut contacts = 0;
+        let mut worst = 0.0f64;
+        // 40 periods, restarted from the final state every period to read the energy.
+        for _ in 0..40 {
+            let mut case = LoadCase::new("free", vec![Signal::Zero]);
+            case.initial = InitialState::States(z.clone());
+            let h = sim.run(&case, spp).unwrap();
+            contacts += h.stats.events.iter().filter(|e| e.closing).count();
+            assert!(h.stats.max_newton_iterations <= 10);
+            z = h.final_state.clone();
+            worst = worst.max((energy(&z) - e0).abs() / e0);
+        }
+        assert!(contacts >= 40, "the tip hits the stop: {contacts} contacts");
+        drifts.push(worst);
+    }
+    // The drift comes from the held contact force over the impacts: it falls with the step
+    // (about as T²) and stays bounded, no energy is pumped in.
+    for w in drifts.windows(2) {
+        assert!(w[1] < 0.5 * w[0], "energy drift falls with T: {drifts:?}");
+    }
+    assert!(drifts[3] < 2e-3, "energy drift at 800 samples per period: {drifts:?}");
+}
+
+#[test]
+fn bumpstop_forced_run_has_no_chattering() {
+    let (_, _, plant) = bumpstop(true);
+    let f1 = plant.system.poles[0].im / (2.0 * PI);
+    let case = LoadCase::new("sine", vec![Signal::sine(1.0, f1)]);
+    let dt = 1.0 / (f1 * 64.0);
+    let periods = 150;
+    let h = Simulator::new(&plant, &FohConfig::new(dt))
+        .unwrap()
+        .run(&case, 64 * periods)
+        .unwrap();
+    let closings = h.stats.events.iter().filter(|e| e.closing).count();
+    assert!(closings >= periods / 2, "it hits the stop: {closings}");
+    assert!(closings <= 2 * periods, "no chattering: {closings} closings in {periods} periods");
+    assert!(h.stats.max_newton_iterations <= 10);
+    let u = &h.output("u").unwrap().values;
+    assert!(peak(u) < 5e-3, "bounded: {:e}", peak(u));
+}
+
+#[test]
+fn batch_is_bit_identical_for_any_thread_count() {
+    let fx = ecl_beam();
+    let red = reduced(&fx.model, 6);
+    let plant = plant_of(&fx.model, &red);
+    let sim = Simulator::new(&plant, &FohConfig::new(1.0 / 4000.0)).unwrap();
+    let cases: Vec<LoadCase> = (0..6)
+        .map(|i| {
+            let mut c = LoadCase::new(format!("k3 #{i}"), vec![Signal::sine(1.0 + 0.2 * i as f64, 24.0)]);
+            c.parameters.push(("tip_spring.k3".into(), 6e9 * (1.0 + i as f64)));
+            c
+        })
+        .collect();
+    let run = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| run_batch(&sim, &cases, 2000))
+    };
+    let (a, b) = (run(1), run(3));
+    for (x, y) in a.iter().zip(&b) {
+        let (x, y) = (x.as_ref().unwrap(), y.as_ref().unwrap());
+        assert_eq!(x.outputs, y.outputs);
+        assert_eq!(x.element_forces, y.element_forces);
+    }
+    // The parameter reached the runs: a stiffer spring, a smaller tip response.
+    let single = sim.run(&cases[5], 2000).unwrap();
+    assert_eq!(single.outputs, a[5].as_ref().unwrap().outputs);
+    assert_ne!(a[0].as_ref().unwrap().outputs, a[1].as_ref().unwrap().outputs);
+}
