@@ -520,6 +520,24 @@ pub fn rk4(
         return Err(Error::invalid("RK4 substeps", "must be at least 1"));
     }
     let start = std::time::Instant::now();
+    let h = dt / cfg.substeps as f64;
+    // RK4's stability region reaches |λh| = 2√2 on the imaginary axis (and about 2.78 along
+    // it for light damping): refuse a step beyond it rather than diverge.
+    if let Some(l) = plant
+        .system
+        .poles
+        .iter()
+        .find(|l| (**l * h).norm() > 2.78)
+    {
+        return Err(Error::invalid(
+            "RK4 step",
+            format!(
+                "h = {h:.3e} s exceeds the stability limit 2.78/|λ| = {:.3e} s of the pole at                  {:.1} Hz; use more substeps or fewer modes",
+                2.78 / l.norm(),
+                l.norm() / (2.0 * std::f64::consts::PI)
+            ),
+        ));
+    }
     let (z0, plant) = case.prepare(plant)?;
     let ns = plant.n_states();
     let n = n_steps + 1;
@@ -528,7 +546,6 @@ pub fn rk4(
     let mut stats = RunStats::default();
     let mut z = z0;
     rhs.sample(0, 0.0, &z, &mut rec)?;
-    let h = dt / cfg.substeps as f64;
     let mut k = vec![vec![c64::new(0.0, 0.0); ns]; 4];
     let mut y = vec![c64::new(0.0, 0.0); ns];
     for step in 0..n_steps {
@@ -550,9 +567,7 @@ pub fn rk4(
         if z.iter().any(|v| !(v.re.is_finite() && v.im.is_finite())) {
             return Err(Error::Numerical {
                 what: format!("RK4 at step {} (t = {:.6e} s)", step + 1, (step + 1) as f64 * dt),
-                detail: "the state is not finite: the step exceeds the stability limit of the \
-                         fastest retained mode"
-                    .into(),
+                detail: "the state is not finite: the run diverged".into(),
             });
         }
         rhs.sample(step + 1, (step + 1) as f64 * dt, &z, &mut rec)?;

@@ -1,0 +1,139 @@
+//! The references against each other and bad input: Newmark/HHT on the unreduced model vs FOH
+//! on the reduced one, RK4, and the error paths.
+
+use nlsim_fixtures::ecl_beam;
+use nlsim_kernel::{Damping, Model, Quantity, Sensor};
+use nlsim_reduction::modal::{ReductionConfig, reduce};
+use nlsim_reduction::{EigenConfig, ModalSystem, ModeSelection};
+use nlsim_sim::{
+    FohConfig, Hold, LoadCase, Newmark, NewmarkConfig, NewtonConfig, Plant, Rk4Config, Signal,
+    Simulator, rk4,
+};
+
+fn beam_with_tip_displacement() -> Model {
+    let mut model = ecl_beam().model;
+    let tip = model.excitation()[0].dof;
+    model
+        .add_sensor(Sensor {
+            name: "tip_d".into(),
+            dof: tip,
+            quantity: Quantity::Displacement,
+        })
+        .unwrap();
+    model
+}
+
+fn foh_plant(model: &Model, modes: usize) -> Plant {
+    let cfg = ReductionConfig {
+        eigen: EigenConfig {
+            selection: ModeSelection::Lowest(modes),
+            ..EigenConfig::default()
+        },
+        ..ReductionConfig::default()
+    };
+    let red = reduce(model, &cfg).unwrap();
+    Plant::from_model(model, &ModalSystem::new(&red).unwrap()).unwrap()
+}
+
+fn max_rel(a: &[f64], b: &[f64]) -> f64 {
+    let p = b.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max) / p
+}
+
+#[test]
+fn newmark_on_the_full_model_converges_to_foh_on_the_reduced_one() {
+    let model = beam_with_tip_displacement();
+    // 20 modes + residual flexibility: the reduced model is converged far below the 24 Hz drive.
+    let plant = foh_plant(&model, 20);
+    let case = LoadCase::new("sine", vec![Signal::sine(2.0, 24.0)]);
+    let dt = 1.0 / 24_000.0;
+    let n = 2400;
+    let foh = Simulator::new(&plant, &FohConfig::new(dt)).unwrap().run(&case, n).unwrap();
+    let reference = &foh.output("tip_d").unwrap().values;
+    let mut errs = Vec::new();
+    for sub in [1usize, 2, 4] {
+        let mut cfg = NewmarkConfig::new(dt * 10.0);
+        cfg.substeps = sub;
+        let nm = Newmark::new(&model, &cfg).unwrap();
+        let h = nm.run(&case, n / 10).unwrap();
+        assert!(h.stats.max_newton_iterations >= 2, "the cubic spring needs Newton");
+        let r: Vec<f64> = reference.iter().step_by(10).copied().collect();
+        errs.push(max_rel(&h.output("tip_d").unwrap().values, &r));
+    }
+    // Newmark's period error is O((ωh)²): second order.
+    for w in errs.windows(2) {
+        let order = (w[0] / w[1]).log2();
+        assert!((1.8..2.3).contains(&order), "Newmark order {order:.2}: {errs:?}");
+    }
+    assert!(errs[2] < 2e-3, "{errs:?}");
+    // HHT-α (α = −0.1) is second order too and agrees to the same level.
+    let mut cfg = NewmarkConfig::new(dt * 10.0);
+    cfg.substeps = 4;
+    cfg.alpha = -0.1;
+    let h = Newmark::new(&model, &cfg).unwrap().run(&case, n / 10).unwrap();
+    let r: Vec<f64> = reference.iter().step_by(10).copied().collect();
+    assert!(max_rel(&h.output("tip_d").unwrap().values, &r) < 3e-3);
+    assert_eq!(h.method, "hht");
+}
+
+#[test]
+fn rk4_agrees_with_foh() {
+    let model = beam_with_tip_displacement();
+    let plant = foh_plant(&model, 6);
+    let case = LoadCase::new("sine", vec![Signal::sine(2.0, 24.0)]);
+    let dt = 1.0 / 20_000.0;
+    let foh = Simulator::new(&plant, &FohConfig::new(dt / 4.0)).unwrap().run(&case, 8000).unwrap();
+    let r = rk4(&plant, &case, dt, 2000, &Rk4Config::default()).unwrap();
+    let a: Vec<f64> = foh.output("tip_d").unwrap().values.iter().step_by(4).copied().collect();
+    assert!(max_rel(&a, &r.output("tip_d").unwrap().values) < 1e-4);
+    // Beyond its stability limit (|λ h| ≈ 2.8 for the fastest mode) RK4 says so.
+    let fast = plant.system.poles.iter().fold(0.0f64, |m, l| m.max(l.norm()));
+    let err = rk4(&plant, &case, 4.0 / fast, 2000, &Rk4Config::default()).unwrap_err();
+    assert!(err.to_string().contains("stability limit"), "{err}");
+}
+
+#[test]
+fn bad_input_gets_clear_errors() {
+    let model = beam_with_tip_displacement();
+    let plant = foh_plant(&model, 6);
+    let msg = |e: nlsim_kernel::Error| e.to_string();
+    assert!(msg(Simulator::new(&plant, &FohConfig::new(0.0)).unwrap_err()).contains("time step"));
+    assert!(msg(Simulator::new(&plant, &FohConfig::new(f64::NAN)).unwrap_err()).contains("time step"));
+    let sim = Simulator::new(&plant, &FohConfig::new(1e-4)).unwrap();
+    // Wrong number of signals.
+    let e = msg(sim.run(&LoadCase::new("two", vec![Signal::Zero, Signal::Zero]), 10).unwrap_err());
+    assert!(e.contains("one per input: shaker"), "{e}");
+    // NaN in a signal names the sample.
+    let bad = LoadCase::new(
+        "nan",
+        vec![Signal::Sampled {
+            rate_hz: 1e4,
+            values: vec![0.0, 1.0, f64::NAN],
+        }],
+    );
+    let e = msg(sim.run(&bad, 10).unwrap_err());
+    assert!(e.contains("sample 2"), "{e}");
+    // Unknown parameter.
+    let mut c = LoadCase::new("p", vec![Signal::Zero]);
+    c.parameters.push(("tip_spring.k9".into(), 1.0));
+    let e = msg(sim.run(&c, 10).unwrap_err());
+    assert!(e.contains("has parameters k3"), "{e}");
+    // A Newton that cannot converge names the step and time.
+    let mut cfg = FohConfig::new(1e-4);
+    cfg.newton = NewtonConfig {
+        max_iterations: 1,
+        rtol: 1e-15,
+    };
+    let sim = Simulator::new(&plant, &cfg).unwrap();
+    let e = msg(sim.run(&LoadCase::new("hard", vec![Signal::sine(50.0, 24.0)]), 2000).unwrap_err());
+    assert!(e.contains("step") && e.contains("t = ") && e.contains("tip_spring"), "{e}");
+    // Modal damping has no matrix for the unreduced reference.
+    let mut m2 = model.clone();
+    m2.set_damping(Damping::Modal(nlsim_kernel::ModalDamping::uniform(0.01))).unwrap();
+    let e = Newmark::new(&m2, &NewmarkConfig::new(1e-4)).err().map(msg).unwrap_or_default();
+    assert!(e.contains("modal damping"), "{e}");
+    // ZOH/LSOH are accepted but do not locate events.
+    let mut cfg = FohConfig::new(1e-4);
+    cfg.hold = Hold::Lsoh;
+    assert!(Simulator::new(&plant, &cfg).is_ok());
+}
