@@ -15,6 +15,7 @@
 pub mod error;
 pub mod modes;
 pub mod mtx;
+pub mod simulate;
 pub mod spec;
 pub mod summary;
 
@@ -22,4 +23,5 @@ pub use error::{Error, Result};
 pub use nlsim_fixtures as fixtures;
 pub use nlsim_kernel as kernel;
 pub use nlsim_reduction as reduction;
+pub use nlsim_sim as sim;
 pub use spec::{LoadedModel, load_model, parse_model_file};

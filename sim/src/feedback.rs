@@ -62,7 +62,11 @@ impl Feedback {
             .iter()
             .map(|e| {
                 let flex = plant.static_flexibility(e.port);
-                if flex.is_finite() && flex > 0.0 { 1.0 / flex } else { 0.0 }
+                if flex.is_finite() && flex > 0.0 {
+                    1.0 / flex
+                } else {
+                    0.0
+                }
             })
             .collect();
         Feedback {
@@ -142,7 +146,8 @@ impl Feedback {
         if n == 0 {
             return Ok(0);
         }
-        let (mut norm, mut ok) = self.residual(elements, states, d_pred, v_pred, sd, sv, f, cfg.rtol);
+        let (mut norm, mut ok) =
+            self.residual(elements, states, d_pred, v_pred, sd, sv, f, cfg.rtol);
         let mut it = 0;
         while !ok {
             if it >= cfg.max_iterations || !norm.is_finite() {

@@ -154,8 +154,12 @@ impl Simulator {
             for (c, col) in cols.iter().enumerate() {
                 let v = match *col {
                     Column::Input(i, j) => g[tap_index(j).expect("tap")] * sys.input[(s, ports[i])],
-                    Column::Element(n, 0) => (g[tap_index(0).expect("tap")] + phi * g1) * sys.input[(s, ports[ne + n])],
-                    Column::Element(n, j) => g[tap_index(j).expect("tap")] * sys.input[(s, ports[ne + n])],
+                    Column::Element(n, 0) => {
+                        (g[tap_index(0).expect("tap")] + phi * g1) * sys.input[(s, ports[ne + n])]
+                    }
+                    Column::Element(n, j) => {
+                        g[tap_index(j).expect("tap")] * sys.input[(s, ports[ne + n])]
+                    }
                 };
                 blk[2 + 2 * c][l] = v.re;
                 blk[3 + 2 * c][l] = v.im;
@@ -287,12 +291,26 @@ impl Simulator {
             rp[r] = (0..ns).map(|s| (self.row_c[r * ns + s] * z0[s]).re).sum();
         }
         for i in 0..nn {
-            d_pred[i] = rp[i] + (0..ne).map(|q| self.feed[i * nq + q] * e[q][0]).sum::<f64>();
-            v_pred[i] =
-                rp[nn + i] + (0..ne).map(|q| self.feed[(nn + i) * nq + q] * e[q][0]).sum::<f64>();
+            d_pred[i] = rp[i]
+                + (0..ne)
+                    .map(|q| self.feed[i * nq + q] * e[q][0])
+                    .sum::<f64>();
+            v_pred[i] = rp[nn + i]
+                + (0..ne)
+                    .map(|q| self.feed[(nn + i) * nq + q] * e[q][0])
+                    .sum::<f64>();
         }
         let it = fb
-            .solve(elements, &states, &d_pred, &v_pred, &self.sd0, &self.sv0, &mut f, &self.cfg.newton)
+            .solve(
+                elements,
+                &states,
+                &d_pred,
+                &v_pred,
+                &self.sd0,
+                &self.sv0,
+                &mut f,
+                &self.cfg.newton,
+            )
             .map_err(|e| loop_error(e, elements, 0, 0.0))?;
         stats.newton_iterations += it;
         stats.max_newton_iterations = stats.max_newton_iterations.max(it);
@@ -311,7 +329,10 @@ impl Simulator {
         }
         for o in 0..no {
             let r = 2 * nn + o;
-            out[o][0] = rp[r] + (0..nq).map(|q| self.feed[r * nq + q] * u_next[q]).sum::<f64>();
+            out[o][0] = rp[r]
+                + (0..nq)
+                    .map(|q| self.feed[r * nq + q] * u_next[q])
+                    .sum::<f64>();
         }
 
         // ẑ0 = z0 − Γ1 u_NL(0) = z0 + Γ1 b̃ f0, in blocks.
@@ -337,7 +358,11 @@ impl Simulator {
                 vals[c] = match *col {
                     Column::Input(i, j) => {
                         let idx = k as i64 + j as i64;
-                        if idx < 0 { e_minus[i] } else { e[i][idx as usize] }
+                        if idx < 0 {
+                            e_minus[i]
+                        } else {
+                            e[i][idx as usize]
+                        }
                     }
                     Column::Element(i, j) => {
                         let idx = (k as i64 + j as i64).max(0) as usize;
@@ -380,13 +405,31 @@ impl Simulator {
             }
             let t1 = (k + 1) as f64 * dt;
             let it = fb
-                .solve(elements, &states, &d_pred, &v_pred, &self.sd, &self.sv, &mut f, &self.cfg.newton)
+                .solve(
+                    elements,
+                    &states,
+                    &d_pred,
+                    &v_pred,
+                    &self.sd,
+                    &self.sv,
+                    &mut f,
+                    &self.cfg.newton,
+                )
                 .or_else(|_| {
                     // Retry from the last force before giving up.
                     for i in 0..nn {
                         f[i] = f_hist[i][k];
                     }
-                    fb.solve(elements, &states, &d_pred, &v_pred, &self.sd, &self.sv, &mut f, &self.cfg.newton)
+                    fb.solve(
+                        elements,
+                        &states,
+                        &d_pred,
+                        &v_pred,
+                        &self.sd,
+                        &self.sv,
+                        &mut f,
+                        &self.cfg.newton,
+                    )
                 })
                 .map_err(|e| loop_error(e, elements, k + 1, t1))?;
             stats.newton_iterations += it;
@@ -394,8 +437,12 @@ impl Simulator {
             let mut d_new: Vec<f64> = fb.last_d.clone();
             let mut v_new: Vec<f64> = fb.last_v.clone();
             if events_on
-                && crossing(elements, &(0..nn).map(|i| d_hist[i][k]).collect::<Vec<_>>(), &d_new)
-                    .is_some()
+                && crossing(
+                    elements,
+                    &(0..nn).map(|i| d_hist[i][k]).collect::<Vec<_>>(),
+                    &d_new,
+                )
+                .is_some()
             {
                 self.event_step(
                     k, &e, &f_hist, &d_hist, &zr, &zi, &mut zr2, &mut zi2, &mut f, &mut d_new,
@@ -436,7 +483,11 @@ impl Simulator {
             }
             if let Some(bad) = (0..nn).find(|&i| !d_new[i].is_finite()) {
                 return Err(Error::Numerical {
-                    what: format!("{} integration at step {} (t = {t1:.6e} s)", self.cfg.hold, k + 1),
+                    what: format!(
+                        "{} integration at step {} (t = {t1:.6e} s)",
+                        self.cfg.hold,
+                        k + 1
+                    ),
                     detail: format!(
                         "the response of element '{}' is not finite: the run diverged",
                         elements[bad].element.name()
@@ -476,7 +527,10 @@ impl Simulator {
                 })
                 .collect(),
             inputs: plant.inputs.iter().map(|(n, _)| n.clone()).zip(e).collect(),
-            element_names: elements.iter().map(|e| e.element.name().to_string()).collect(),
+            element_names: elements
+                .iter()
+                .map(|e| e.element.name().to_string())
+                .collect(),
             element_displacements: d_hist,
             element_velocities: v_hist,
             element_forces: f_hist,
@@ -530,7 +584,9 @@ impl Simulator {
         let mut guess: Vec<f64> = f.to_vec();
         for _event in 0..8 {
             let h_full = dt - tau;
-            let end = self.substep(ev, fb, elements, states, &ua, h_full, &e_end, &guess, stats, k)?;
+            let end = self.substep(
+                ev, fb, elements, states, &ua, h_full, &e_end, &guess, stats, k,
+            )?;
             let Some(_) = crossing(elements, &da, &end.d) else {
                 break;
             };
@@ -554,7 +610,8 @@ impl Simulator {
                             h = 0.5 * (lo.0 + hi.0);
                         }
                         let eh: Vec<f64> = (0..ne).map(|q| e_at(q, tau + h)).collect();
-                        let r = self.substep(ev, fb, elements, states, &ua, h, &eh, &guess, stats, k)?;
+                        let r =
+                            self.substep(ev, fb, elements, states, &ua, h, &eh, &guess, stats, k)?;
                         let p = side.psi(r.d[i]);
                         if (p > 0.0) == (pa > 0.0) {
                             lo = (h, p);
@@ -599,7 +656,9 @@ impl Simulator {
         // Final piece to t_{k+1}.
         let h_last = dt - tau;
         let end = if h_last > 1e-11 * dt {
-            self.substep(ev, fb, elements, states, &ua, h_last, &e_end, &guess, stats, k)?
+            self.substep(
+                ev, fb, elements, states, &ua, h_last, &e_end, &guess, stats, k,
+            )?
         } else {
             SubstepEnd {
                 f: ua[ne..].iter().map(|x| -x).collect(),
@@ -669,16 +728,29 @@ impl Simulator {
             for (row, pred, sens) in [(i, &mut dp, &mut sd), (nn + i, &mut vp, &mut sv)] {
                 let rc = &self.row_c[row * ns..(row + 1) * ns];
                 pred[i] = (0..ns).map(|s| (rc[s] * ev.zb[s]).re).sum::<f64>()
-                    + (0..ne).map(|q| self.feed[row * nq + q] * e_to[q]).sum::<f64>();
+                    + (0..ne)
+                        .map(|q| self.feed[row * nq + q] * e_to[q])
+                        .sum::<f64>();
                 for m in 0..nn {
-                    sens[i * nn + m] = (0..ns).map(|s| (rc[s] * ev.g1b[s * nn + m]).re).sum::<f64>()
+                    sens[i * nn + m] = (0..ns)
+                        .map(|s| (rc[s] * ev.g1b[s * nn + m]).re)
+                        .sum::<f64>()
                         + self.feed[row * nq + ne + m];
                 }
             }
         }
         let mut f = guess.to_vec();
         let it = fb
-            .solve(elements, states, &dp, &vp, &sd, &sv, &mut f, &self.cfg.newton)
+            .solve(
+                elements,
+                states,
+                &dp,
+                &vp,
+                &sd,
+                &sv,
+                &mut f,
+                &self.cfg.newton,
+            )
             .map_err(|e| loop_error(e, elements, k + 1, k as f64 * self.cfg.dt + h))?;
         stats.newton_iterations += it;
         for s in 0..ns {
@@ -732,7 +804,10 @@ impl Side {
 fn sides(law: &Law) -> impl Iterator<Item = Side> {
     let v: [Option<Side>; 2] = match law {
         Law::Clearance { k1, k2, e1, e2, .. } => [
-            (*k1 != 0.0).then_some(Side { sign: 1.0, gap: *e1 }),
+            (*k1 != 0.0).then_some(Side {
+                sign: 1.0,
+                gap: *e1,
+            }),
             (*k2 != 0.0).then_some(Side {
                 sign: -1.0,
                 gap: *e2,
@@ -764,9 +839,7 @@ pub(crate) fn loop_error(e: LoopFailure, elements: &[ElementPort], step: usize, 
              (u = {:.6e} m); try a smaller time step",
             e.iterations,
             e.residual,
-            elements
-                .get(e.element)
-                .map_or("?", |x| x.element.name()),
+            elements.get(e.element).map_or("?", |x| x.element.name()),
             e.displacement
         ),
     }

@@ -80,7 +80,10 @@ impl LoadCase {
                         found: z.len(),
                     });
                 }
-                if let Some(i) = z.iter().position(|v| !(v.re.is_finite() && v.im.is_finite())) {
+                if let Some(i) = z
+                    .iter()
+                    .position(|v| !(v.re.is_finite() && v.im.is_finite()))
+                {
                     return Err(Error::NonFinite {
                         what: format!("initial states of load case '{}'", self.name),
                         location: format!("state {}", i + 1),

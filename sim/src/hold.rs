@@ -161,7 +161,10 @@ mod tests {
             let a = phi_functions(d * 0.4999999);
             let b = phi_functions(d * 0.5000001);
             for k in 0..4 {
-                assert!((a[k] - b[k]).norm() <= 1e-6 * a[k].norm(), "φ_{k} at angle {ang}");
+                assert!(
+                    (a[k] - b[k]).norm() <= 1e-6 * a[k].norm(),
+                    "φ_{k} at angle {ang}"
+                );
             }
         }
         // φ_2(x) = (eˣ − 1 − x)/x² for a large x.
@@ -179,7 +182,10 @@ mod tests {
             let expect = c64::new((theta / 2.0).cos(), -(theta / 2.0).sin()) * sinc;
             assert!((zoh - expect).norm() < 1e-14, "ZOH at {theta}");
             let foh = reconstruction_gain(Hold::Foh, theta);
-            assert!((foh - c64::new(sinc * sinc, 0.0)).norm() < 1e-14, "FOH at {theta}");
+            assert!(
+                (foh - c64::new(sinc * sinc, 0.0)).norm() < 1e-14,
+                "FOH at {theta}"
+            );
         }
     }
 
@@ -187,7 +193,11 @@ mod tests {
     fn step_coefficients_match_quadrature() {
         // g_j = ∫_0^h e^{λ(h−τ)} L_j(τ/h) dτ by composite Simpson with 2000 panels.
         for hold in [Hold::Zoh, Hold::Foh, Hold::Lsoh] {
-            for lambda in [c64::new(-0.3, 150.0), c64::new(-2000.0, 0.0), c64::new(-1e-3, 1e-3)] {
+            for lambda in [
+                c64::new(-0.3, 150.0),
+                c64::new(-2000.0, 0.0),
+                c64::new(-1e-3, 1e-3),
+            ] {
                 let h = 1e-3;
                 let (phi, g) = step_coefficients(hold, lambda, h);
                 assert!((phi - (lambda * h).exp()).norm() < 1e-15);

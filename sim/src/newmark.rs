@@ -18,7 +18,9 @@ use crate::history::{InitialState, LoadCase, RunStats, Series, TimeHistory};
 use faer::Mat;
 use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::Llt;
-use nlsim_kernel::{Coupling, Damping, Error, Model, NonlinearElement, Quantity, Result, SparseSym};
+use nlsim_kernel::{
+    Coupling, Damping, Error, Model, NonlinearElement, Quantity, Result, SparseSym,
+};
 
 /// Settings of the Newmark/HHT reference.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -83,7 +85,10 @@ impl Newmark {
         if !(cfg.dt > 0.0 && cfg.dt.is_finite()) || cfg.substeps == 0 {
             return Err(Error::invalid(
                 "Newmark step",
-                format!("dt = {} s and {} substeps must be positive", cfg.dt, cfg.substeps),
+                format!(
+                    "dt = {} s and {} substeps must be positive",
+                    cfg.dt, cfg.substeps
+                ),
             ));
         }
         if !(-1.0 / 3.0..=0.0).contains(&cfg.alpha) {
@@ -133,19 +138,17 @@ impl Newmark {
                 )?;
             }
         }
-        let llt = keff.cholesky().map_err(|i| {
-            Error::NotDefinite {
-                matrix: "Newmark effective stiffness".into(),
-                required: "positive definite".into(),
-                detail: format!(
-                    "Cholesky failed at DOF {}",
-                    if i == usize::MAX {
-                        "?".to_string()
-                    } else {
-                        model.dofs().describe(i)
-                    }
-                ),
-            }
+        let llt = keff.cholesky().map_err(|i| Error::NotDefinite {
+            matrix: "Newmark effective stiffness".into(),
+            required: "positive definite".into(),
+            detail: format!(
+                "Cholesky failed at DOF {}",
+                if i == usize::MAX {
+                    "?".to_string()
+                } else {
+                    model.dofs().describe(i)
+                }
+            ),
         })?;
         let n = model.n_dofs();
         let elements: Vec<NonlinearElement> = model.elements().to_vec();
@@ -158,7 +161,12 @@ impl Newmark {
             }
         }
         llt.solve_in_place(y.as_mut());
-        let wty = Mat::from_fn(nn, nn, |i, j| coupling_dot(elements[i].coupling(), y.col(j).try_as_col_major().expect("contiguous").as_slice()));
+        let wty = Mat::from_fn(nn, nn, |i, j| {
+            coupling_dot(
+                elements[i].coupling(),
+                y.col(j).try_as_col_major().expect("contiguous").as_slice(),
+            )
+        });
         let inputs = model
             .excitation()
             .iter()
@@ -242,7 +250,9 @@ impl Newmark {
             let law = e.law().clone();
             let i = (0..law.n_params())
                 .find(|&i| law.param_name(i) == par)
-                .ok_or_else(|| Error::invalid(format!("parameter '{name}'"), "no such parameter"))?;
+                .ok_or_else(|| {
+                    Error::invalid(format!("parameter '{name}'"), "no such parameter")
+                })?;
             e.set_param(i, *v)?;
         }
         let n = self.m.n();
@@ -335,7 +345,16 @@ impl Newmark {
             }
         };
         record(
-            0, &d, &v, &a, &g, &mut rec_out, &mut rec_in, &mut rec_d, &mut rec_v, &mut rec_f,
+            0,
+            &d,
+            &v,
+            &a,
+            &g,
+            &mut rec_out,
+            &mut rec_in,
+            &mut rec_d,
+            &mut rec_v,
+            &mut rec_f,
         );
         let mut col = Mat::<f64>::zeros(n, 1);
         for step in 0..n_steps {
@@ -363,7 +382,8 @@ impl Newmark {
                     }
                     self.m.mul_vec(&a, &mut ma);
                     for i in 0..n {
-                        r[i] = (1.0 + alpha) * f_next[i] - alpha * f_now[i]
+                        r[i] = (1.0 + alpha) * f_next[i]
+                            - alpha * f_now[i]
                             - ma[i]
                             - (1.0 + alpha) * p_new[i]
                             + alpha * p_old[i];
@@ -375,11 +395,17 @@ impl Newmark {
                     self.keff.solve_in_place(col.as_mut());
                     stats.evaluations += 1;
                     if nn > 0 && kappa.iter().any(|&k| k != 0.0) {
-                        let xs = col.col(0).try_as_col_major().expect("contiguous").as_slice().to_vec();
+                        let xs = col
+                            .col(0)
+                            .try_as_col_major()
+                            .expect("contiguous")
+                            .as_slice()
+                            .to_vec();
                         for j in 0..nn {
                             wtx[j] = kappa[j] * coupling_dot(elements[j].coupling(), &xs);
                             for m in 0..nn {
-                                small[(j, m)] = f64::from(u8::from(j == m)) + kappa[j] * self.wty[(j, m)];
+                                small[(j, m)] =
+                                    f64::from(u8::from(j == m)) + kappa[j] * self.wty[(j, m)];
                             }
                         }
                         let lu = small.partial_piv_lu();
@@ -440,7 +466,15 @@ impl Newmark {
                 stats.steps += 1;
             }
             record(
-                step + 1, &d, &v, &a, &g, &mut rec_out, &mut rec_in, &mut rec_d, &mut rec_v,
+                step + 1,
+                &d,
+                &v,
+                &a,
+                &g,
+                &mut rec_out,
+                &mut rec_in,
+                &mut rec_d,
+                &mut rec_v,
                 &mut rec_f,
             );
         }
@@ -459,7 +493,12 @@ impl Newmark {
                     values,
                 })
                 .collect(),
-            inputs: self.inputs.iter().map(|(n, _)| n.clone()).zip(rec_in).collect(),
+            inputs: self
+                .inputs
+                .iter()
+                .map(|(n, _)| n.clone())
+                .zip(rec_in)
+                .collect(),
             element_names: elements.iter().map(|e| e.name().to_string()).collect(),
             element_displacements: rec_d,
             element_velocities: rec_v,
@@ -471,5 +510,9 @@ impl Newmark {
 }
 
 fn coupling_dot(c: &Coupling, x: &[f64]) -> f64 {
-    c.dofs().iter().zip(c.weights()).map(|(&d, &w)| w * x[d]).sum()
+    c.dofs()
+        .iter()
+        .zip(c.weights())
+        .map(|(&d, &w)| w * x[d])
+        .sum()
 }

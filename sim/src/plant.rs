@@ -211,7 +211,9 @@ impl Plant {
         let sys = &self.system;
         let order = order(quantity);
         (0..sys.n_states())
-            .map(|s| sys.weights[s] * (sys.output[(port, s)] * sys.poles[s].powi(order as i32) * z[s]).re)
+            .map(|s| {
+                sys.weights[s] * (sys.output[(port, s)] * sys.poles[s].powi(order as i32) * z[s]).re
+            })
             .sum()
     }
 

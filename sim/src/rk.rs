@@ -160,7 +160,9 @@ impl<'a> Rhs<'a> {
         }
         for i in 0..nn {
             self.dp[i] = self.row(i, z)
-                + (0..ne).map(|q| self.feed[i * nq + q] * self.u[q]).sum::<f64>();
+                + (0..ne)
+                    .map(|q| self.feed[i * nq + q] * self.u[q])
+                    .sum::<f64>();
             self.vp[i] = self.row(nn + i, z)
                 + (0..ne)
                     .map(|q| self.feed[(nn + i) * nq + q] * self.u[q])
@@ -223,8 +225,10 @@ impl<'a> Rhs<'a> {
         }
         for o in 0..self.plant.outputs.len() {
             let r = 2 * nn + o;
-            rec.out[o][k] =
-                self.row(r, z) + (0..nq).map(|q| self.feed[r * nq + q] * self.u[q]).sum::<f64>();
+            rec.out[o][k] = self.row(r, z)
+                + (0..nq)
+                    .map(|q| self.feed[r * nq + q] * self.u[q])
+                    .sum::<f64>();
         }
         let _ = &self.rows;
         Ok(())
@@ -419,6 +423,7 @@ pub fn rk45(
         }
         let hmin = 16.0 * f64::EPSILON * t.abs().max(1e-300);
         h = h.min(hmax).min(t_end - t).max(hmin);
+        let mut stage_failed = None;
         for st in 1..7 {
             for s in 0..ns {
                 let mut acc = z[s];
@@ -430,12 +435,24 @@ pub fn rk45(
                 ytmp[s] = acc;
             }
             let tt = t + C[st] * h;
-            let (head, tail) = k.split_at_mut(st);
-            let _ = head;
-            rhs.eval(tt, &ytmp, &mut tail[0])?;
+            let (_, tail) = k.split_at_mut(st);
+            // A trial step far too long can drive a stage so far out that the element loop
+            // has no solution nearby: that is a rejected step, not a failed run.
+            if let Err(e) = rhs.eval(tt, &ytmp, &mut tail[0]) {
+                stage_failed = Some(e);
+                break;
+            }
             if st == 6 {
                 ynew.copy_from_slice(&ytmp);
             }
+        }
+        if let Some(e) = stage_failed {
+            stats.rejected_steps += 1;
+            if h <= hmin {
+                return Err(e);
+            }
+            h *= 0.25;
+            continue;
         }
         // Error estimate, ODE45's mixed test in the max norm.
         let mut err = 0.0f64;
@@ -523,12 +540,7 @@ pub fn rk4(
     let h = dt / cfg.substeps as f64;
     // RK4's stability region reaches |λh| = 2√2 on the imaginary axis (and about 2.78 along
     // it for light damping): refuse a step beyond it rather than diverge.
-    if let Some(l) = plant
-        .system
-        .poles
-        .iter()
-        .find(|l| (**l * h).norm() > 2.78)
-    {
+    if let Some(l) = plant.system.poles.iter().find(|l| (**l * h).norm() > 2.78) {
         return Err(Error::invalid(
             "RK4 step",
             format!(
@@ -566,7 +578,11 @@ pub fn rk4(
         }
         if z.iter().any(|v| !(v.re.is_finite() && v.im.is_finite())) {
             return Err(Error::Numerical {
-                what: format!("RK4 at step {} (t = {:.6e} s)", step + 1, (step + 1) as f64 * dt),
+                what: format!(
+                    "RK4 at step {} (t = {:.6e} s)",
+                    step + 1,
+                    (step + 1) as f64 * dt
+                ),
                 detail: "the state is not finite: the run diverged".into(),
             });
         }

@@ -334,6 +334,11 @@ mod tests {
             rate_hz: 10.0,
             values: vec![0.0, f64::NAN],
         };
-        assert!(bad.validate("x").unwrap_err().to_string().contains("sample 1"));
+        assert!(
+            bad.validate("x")
+                .unwrap_err()
+                .to_string()
+                .contains("sample 1")
+        );
     }
 }

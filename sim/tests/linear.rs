@@ -58,7 +58,12 @@ fn foh_is_exact_for_piecewise_linear_input() {
     let n = 3000;
     // A force made of ramps that start at sample instants: 0 → 1 N over 40 steps, down to
     // −0.5 N over 60 steps, back to 0 over 30 steps, then zero.
-    let kinks = [(0usize, 1.0 / 40.0), (40, -1.5 / 60.0 - 1.0 / 40.0), (100, 0.5 / 30.0 + 1.5 / 60.0), (130, -0.5 / 30.0)];
+    let kinks = [
+        (0usize, 1.0 / 40.0),
+        (40, -1.5 / 60.0 - 1.0 / 40.0),
+        (100, 0.5 / 30.0 + 1.5 / 60.0),
+        (130, -0.5 / 30.0),
+    ];
     let mut values = vec![0.0; n + 1];
     for (k, v) in values.iter_mut().enumerate() {
         *v = kinks
@@ -67,7 +72,13 @@ fn foh_is_exact_for_piecewise_linear_input() {
             .sum();
     }
     assert!(values[130].abs() < 1e-14 && (values[40] - 1.0).abs() < 1e-14);
-    let case = LoadCase::new("ramps", vec![Signal::Sampled { rate_hz: 1.0 / dt, values: values.clone() }]);
+    let case = LoadCase::new(
+        "ramps",
+        vec![Signal::Sampled {
+            rate_hz: 1.0 / dt,
+            values: values.clone(),
+        }],
+    );
     let sim = Simulator::new(&plant, &FohConfig::new(dt)).unwrap();
     let h = sim.run(&case, n).unwrap();
     // Exact: each ramp β (t − t_j)₊ (β in N per step) drives state s with
@@ -101,7 +112,10 @@ fn foh_is_exact_for_piecewise_linear_input() {
         peak = peak.max(y.abs());
     }
     assert!(peak > 1e-6, "the test drives the beam: peak {peak}");
-    assert!(worst <= 1e-11 * peak, "FOH vs exact: {worst:e} of peak {peak:e}");
+    assert!(
+        worst <= 1e-11 * peak,
+        "FOH vs exact: {worst:e} of peak {peak:e}"
+    );
 }
 
 /// A single mode `q̈ + 2ζω q̇ + ω² q = u` in diagonal form.

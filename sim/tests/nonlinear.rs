@@ -7,8 +7,8 @@ use nlsim_kernel::{Damping, Model, Quantity};
 use nlsim_reduction::modal::{ReducedModel, ReductionConfig, reduce};
 use nlsim_reduction::{EigenConfig, ModalSystem, ModeSelection};
 use nlsim_sim::{
-    FohConfig, InitialState, LoadCase, OutputSpec, Plant, Rk45Config, Signal, Simulator, TimeHistory,
-    rk45, run_batch,
+    FohConfig, InitialState, LoadCase, OutputSpec, Plant, Rk45Config, Signal, Simulator,
+    TimeHistory, rk45, run_batch,
 };
 use std::f64::consts::PI;
 
@@ -45,7 +45,10 @@ fn tight() -> Rk45Config {
 }
 
 fn max_diff(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
 }
 
 fn peak(a: &[f64]) -> f64 {
@@ -54,7 +57,13 @@ fn peak(a: &[f64]) -> f64 {
 
 /// Samples of `h`'s output `name` at every `stride`-th sample.
 fn every(h: &TimeHistory, name: &str, stride: usize) -> Vec<f64> {
-    h.output(name).unwrap().values.iter().step_by(stride).copied().collect()
+    h.output(name)
+        .unwrap()
+        .values
+        .iter()
+        .step_by(stride)
+        .copied()
+        .collect()
 }
 
 /// Errors of FOH at T, T/2, T/4, T/8 against the reference sampled at T/8, on a common grid.
@@ -109,7 +118,11 @@ fn cubic_tip_beam_foh_converges_at_second_order_to_rk45() {
     // The spring is active: its force is a sizeable part of the drive.
     let sim = Simulator::new(&plant, &FohConfig::new(dt)).unwrap();
     let h = sim.run(&case, 800).unwrap();
-    assert!(peak(&h.element_forces[0]) > 0.05, "cubic force {}", peak(&h.element_forces[0]));
+    assert!(
+        peak(&h.element_forces[0]) > 0.05,
+        "cubic force {}",
+        peak(&h.element_forces[0])
+    );
 }
 
 /// Steady-state amplitude of `u` over the last `periods` periods.
@@ -127,7 +140,11 @@ fn duffing_steady_states_on_both_stable_branches_agree_with_rk45() {
     let f_hz = 30.0;
     let w = 2.0 * PI * f_hz;
     let roots = duffing_first_order_amplitudes(m, c, k, p, 2.0, w);
-    assert_eq!(roots.len(), 3, "30 Hz is inside the three-solution region: {roots:?}");
+    assert_eq!(
+        roots.len(),
+        3,
+        "30 Hz is inside the three-solution region: {roots:?}"
+    );
     let spp = 128;
     let dt = 1.0 / (f_hz * spp as f64);
     // 25 s: the free transient decays by e^{−ζ ω_n t} = e^{−7}.
@@ -143,18 +160,32 @@ fn duffing_steady_states_on_both_stable_branches_agree_with_rk45() {
             displacement: eta,
             velocity: eta_dot,
         };
-        let foh = Simulator::new(&plant, &FohConfig::new(dt)).unwrap().run(&case, n).unwrap();
+        let foh = Simulator::new(&plant, &FohConfig::new(dt))
+            .unwrap()
+            .run(&case, n)
+            .unwrap();
         let rk = rk45(&plant, &case, dt, n, &tight()).unwrap();
-        let (af, ar) = (steady_amplitude(&foh, spp, 5), steady_amplitude(&rk, spp, 5));
+        let (af, ar) = (
+            steady_amplitude(&foh, spp, 5),
+            steady_amplitude(&rk, spp, 5),
+        );
         // FOH bias at θ = 2π/128: ≈ θ²/12 = 2e-4, amplified near resonance.
-        assert!((af - ar).abs() <= 2e-3 * ar, "branch {branch}: FOH {af:e} vs RK45 {ar:e}");
+        assert!(
+            (af - ar).abs() <= 2e-3 * ar,
+            "branch {branch}: FOH {af:e} vs RK45 {ar:e}"
+        );
         // Both stay on the branch they started on (first-order HB neglects the 3rd harmonic).
-        assert!((ar - a).abs() <= 0.03 * a, "branch {branch}: RK45 {ar:e} vs HB1 {a:e}");
+        assert!(
+            (ar - a).abs() <= 0.03 * a,
+            "branch {branch}: RK45 {ar:e} vs HB1 {a:e}"
+        );
     }
 }
 
 fn bumpstop(damped: bool) -> (Model, ReducedModel, Plant) {
-    let mut model = nlsim_fixtures::build("bumpstop_cantilever", &[]).unwrap().model;
+    let mut model = nlsim_fixtures::build("bumpstop_cantilever", &[])
+        .unwrap()
+        .model;
     if !damped {
         model.set_damping(Damping::None).unwrap();
     }
@@ -210,7 +241,10 @@ fn bumpstop_contact_onset_is_located() {
     }
     // The event time inherits the FOH's O(T²) response error: in units of T it falls as T.
     assert!(errs[2] < 0.01, "onset error {errs:?} (in steps)");
-    assert!(errs[0] / errs[2] > 2.5, "onset error falls with T: {errs:?}");
+    assert!(
+        errs[0] / errs[2] > 2.5,
+        "onset error falls with T: {errs:?}"
+    );
 }
 
 #[test]
@@ -230,7 +264,10 @@ fn bumpstop_events_restore_second_order() {
             .map(|&d| {
                 let mut cfg = FohConfig::new(dt / d as f64);
                 cfg.locate_events = events;
-                let h = Simulator::new(&plant, &cfg).unwrap().run(&case, n * d).unwrap();
+                let h = Simulator::new(&plant, &cfg)
+                    .unwrap()
+                    .run(&case, n * d)
+                    .unwrap();
                 max_diff(&every(&h, "u", d), &r) / scale
             })
             .collect()
@@ -244,7 +281,10 @@ fn bumpstop_events_restore_second_order() {
     for (w, wo) in with.iter().zip(&without) {
         assert!(*w <= 1.05 * wo, "with {with:?}, without {without:?}");
     }
-    assert!(with[0] < 0.8 * without[0], "with {with:?}, without {without:?}");
+    assert!(
+        with[0] < 0.8 * without[0],
+        "with {with:?}, without {without:?}"
+    );
 }
 
 #[test]
@@ -299,7 +339,10 @@ fn bumpstop_energy_is_conserved_without_damping() {
     for w in drifts.windows(2) {
         assert!(w[1] < 0.5 * w[0], "energy drift falls with T: {drifts:?}");
     }
-    assert!(drifts[3] < 2e-3, "energy drift at 800 samples per period: {drifts:?}");
+    assert!(
+        drifts[3] < 2e-3,
+        "energy drift at 800 samples per period: {drifts:?}"
+    );
 }
 
 #[test]
@@ -315,7 +358,10 @@ fn bumpstop_forced_run_has_no_chattering() {
         .unwrap();
     let closings = h.stats.events.iter().filter(|e| e.closing).count();
     assert!(closings >= periods / 2, "it hits the stop: {closings}");
-    assert!(closings <= 2 * periods, "no chattering: {closings} closings in {periods} periods");
+    assert!(
+        closings <= 2 * periods,
+        "no chattering: {closings} closings in {periods} periods"
+    );
     assert!(h.stats.max_newton_iterations <= 10);
     let u = &h.output("u").unwrap().values;
     assert!(peak(u) < 5e-3, "bounded: {:e}", peak(u));
@@ -329,8 +375,12 @@ fn batch_is_bit_identical_for_any_thread_count() {
     let sim = Simulator::new(&plant, &FohConfig::new(1.0 / 4000.0)).unwrap();
     let cases: Vec<LoadCase> = (0..6)
         .map(|i| {
-            let mut c = LoadCase::new(format!("k3 #{i}"), vec![Signal::sine(1.0 + 0.2 * i as f64, 24.0)]);
-            c.parameters.push(("tip_spring.k3".into(), 6e9 * (1.0 + i as f64)));
+            let mut c = LoadCase::new(
+                format!("k3 #{i}"),
+                vec![Signal::sine(1.0 + 0.2 * i as f64, 24.0)],
+            );
+            c.parameters
+                .push(("tip_spring.k3".into(), 6e9 * (1.0 + i as f64)));
             c
         })
         .collect();
@@ -350,5 +400,8 @@ fn batch_is_bit_identical_for_any_thread_count() {
     // The parameter reached the runs: a stiffer spring, a smaller tip response.
     let single = sim.run(&cases[5], 2000).unwrap();
     assert_eq!(single.outputs, a[5].as_ref().unwrap().outputs);
-    assert_ne!(a[0].as_ref().unwrap().outputs, a[1].as_ref().unwrap().outputs);
+    assert_ne!(
+        a[0].as_ref().unwrap().outputs,
+        a[1].as_ref().unwrap().outputs
+    );
 }

@@ -37,7 +37,11 @@ fn foh_plant(model: &Model, modes: usize) -> Plant {
 
 fn max_rel(a: &[f64], b: &[f64]) -> f64 {
     let p = b.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max) / p
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+        / p
 }
 
 #[test]
@@ -48,7 +52,10 @@ fn newmark_on_the_full_model_converges_to_foh_on_the_reduced_one() {
     let case = LoadCase::new("sine", vec![Signal::sine(2.0, 24.0)]);
     let dt = 1.0 / 24_000.0;
     let n = 2400;
-    let foh = Simulator::new(&plant, &FohConfig::new(dt)).unwrap().run(&case, n).unwrap();
+    let foh = Simulator::new(&plant, &FohConfig::new(dt))
+        .unwrap()
+        .run(&case, n)
+        .unwrap();
     let reference = &foh.output("tip_d").unwrap().values;
     let mut errs = Vec::new();
     for sub in [1usize, 2, 4] {
@@ -56,21 +63,30 @@ fn newmark_on_the_full_model_converges_to_foh_on_the_reduced_one() {
         cfg.substeps = sub;
         let nm = Newmark::new(&model, &cfg).unwrap();
         let h = nm.run(&case, n / 10).unwrap();
-        assert!(h.stats.max_newton_iterations >= 2, "the cubic spring needs Newton");
+        assert!(
+            h.stats.max_newton_iterations >= 2,
+            "the cubic spring needs Newton"
+        );
         let r: Vec<f64> = reference.iter().step_by(10).copied().collect();
         errs.push(max_rel(&h.output("tip_d").unwrap().values, &r));
     }
     // Newmark's period error is O((ωh)²): second order.
     for w in errs.windows(2) {
         let order = (w[0] / w[1]).log2();
-        assert!((1.8..2.3).contains(&order), "Newmark order {order:.2}: {errs:?}");
+        assert!(
+            (1.8..2.3).contains(&order),
+            "Newmark order {order:.2}: {errs:?}"
+        );
     }
     assert!(errs[2] < 2e-3, "{errs:?}");
     // HHT-α (α = −0.1) is second order too and agrees to the same level.
     let mut cfg = NewmarkConfig::new(dt * 10.0);
     cfg.substeps = 4;
     cfg.alpha = -0.1;
-    let h = Newmark::new(&model, &cfg).unwrap().run(&case, n / 10).unwrap();
+    let h = Newmark::new(&model, &cfg)
+        .unwrap()
+        .run(&case, n / 10)
+        .unwrap();
     let r: Vec<f64> = reference.iter().step_by(10).copied().collect();
     assert!(max_rel(&h.output("tip_d").unwrap().values, &r) < 3e-3);
     assert_eq!(h.method, "hht");
@@ -82,12 +98,26 @@ fn rk4_agrees_with_foh() {
     let plant = foh_plant(&model, 6);
     let case = LoadCase::new("sine", vec![Signal::sine(2.0, 24.0)]);
     let dt = 1.0 / 20_000.0;
-    let foh = Simulator::new(&plant, &FohConfig::new(dt / 4.0)).unwrap().run(&case, 8000).unwrap();
+    let foh = Simulator::new(&plant, &FohConfig::new(dt / 4.0))
+        .unwrap()
+        .run(&case, 8000)
+        .unwrap();
     let r = rk4(&plant, &case, dt, 2000, &Rk4Config::default()).unwrap();
-    let a: Vec<f64> = foh.output("tip_d").unwrap().values.iter().step_by(4).copied().collect();
+    let a: Vec<f64> = foh
+        .output("tip_d")
+        .unwrap()
+        .values
+        .iter()
+        .step_by(4)
+        .copied()
+        .collect();
     assert!(max_rel(&a, &r.output("tip_d").unwrap().values) < 1e-4);
     // Beyond its stability limit (|λ h| ≈ 2.8 for the fastest mode) RK4 says so.
-    let fast = plant.system.poles.iter().fold(0.0f64, |m, l| m.max(l.norm()));
+    let fast = plant
+        .system
+        .poles
+        .iter()
+        .fold(0.0f64, |m, l| m.max(l.norm()));
     let err = rk4(&plant, &case, 4.0 / fast, 2000, &Rk4Config::default()).unwrap_err();
     assert!(err.to_string().contains("stability limit"), "{err}");
 }
@@ -98,10 +128,14 @@ fn bad_input_gets_clear_errors() {
     let plant = foh_plant(&model, 6);
     let msg = |e: nlsim_kernel::Error| e.to_string();
     assert!(msg(Simulator::new(&plant, &FohConfig::new(0.0)).unwrap_err()).contains("time step"));
-    assert!(msg(Simulator::new(&plant, &FohConfig::new(f64::NAN)).unwrap_err()).contains("time step"));
+    assert!(
+        msg(Simulator::new(&plant, &FohConfig::new(f64::NAN)).unwrap_err()).contains("time step")
+    );
     let sim = Simulator::new(&plant, &FohConfig::new(1e-4)).unwrap();
     // Wrong number of signals.
-    let e = msg(sim.run(&LoadCase::new("two", vec![Signal::Zero, Signal::Zero]), 10).unwrap_err());
+    let e = msg(sim
+        .run(&LoadCase::new("two", vec![Signal::Zero, Signal::Zero]), 10)
+        .unwrap_err());
     assert!(e.contains("one per input: shaker"), "{e}");
     // NaN in a signal names the sample.
     let bad = LoadCase::new(
@@ -125,12 +159,21 @@ fn bad_input_gets_clear_errors() {
         rtol: 1e-15,
     };
     let sim = Simulator::new(&plant, &cfg).unwrap();
-    let e = msg(sim.run(&LoadCase::new("hard", vec![Signal::sine(50.0, 24.0)]), 2000).unwrap_err());
-    assert!(e.contains("step") && e.contains("t = ") && e.contains("tip_spring"), "{e}");
+    let e = msg(sim
+        .run(&LoadCase::new("hard", vec![Signal::sine(50.0, 24.0)]), 2000)
+        .unwrap_err());
+    assert!(
+        e.contains("step") && e.contains("t = ") && e.contains("tip_spring"),
+        "{e}"
+    );
     // Modal damping has no matrix for the unreduced reference.
     let mut m2 = model.clone();
-    m2.set_damping(Damping::Modal(nlsim_kernel::ModalDamping::uniform(0.01))).unwrap();
-    let e = Newmark::new(&m2, &NewmarkConfig::new(1e-4)).err().map(msg).unwrap_or_default();
+    m2.set_damping(Damping::Modal(nlsim_kernel::ModalDamping::uniform(0.01)))
+        .unwrap();
+    let e = Newmark::new(&m2, &NewmarkConfig::new(1e-4))
+        .err()
+        .map(msg)
+        .unwrap_or_default();
     assert!(e.contains("modal damping"), "{e}");
     // ZOH/LSOH are accepted but do not locate events.
     let mut cfg = FohConfig::new(1e-4);

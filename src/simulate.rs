@@ -1,0 +1,404 @@
+//! `nlsim simulate`: excitation specs, running a method, writing time histories (HDF5 or CSV).
+//! The file layouts are documented in `docs/file-formats.md`.
+
+use crate::error::{Error, Result};
+use faer::c64;
+use hdf5_metno as hdf5;
+use nlsim_kernel::Model;
+use nlsim_sim::{Harmonic, Signal, TimeHistory};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Parses an excitation spec (see `nlsim simulate --help`):
+///
+/// - `none`
+/// - `sine:freq=HZ[,amp=N][,phase=DEG]`
+/// - `multisine:freq=HZ,h1=N[@DEG],h2=…,h1/3=…` — harmonic `hK` at `K·freq`, `h1/K` at
+///   `freq/K` (thesis eq. 12), amplitude in N and optional phase in degrees
+/// - `sweep:f0=HZ,f1=HZ[,amp=N][,duration=S][,log=true]`
+/// - `file:PATH[,rate=HZ]` — one force per line (N); `#` comments; default rate: the run's
+///
+/// `amp` defaults to `default_amp` (the excitation point's nominal amplitude), a sweep's
+/// duration to `duration`, a file's rate to `rate`.
+pub fn parse_excitation(spec: &str, default_amp: f64, duration: f64, rate: f64) -> Result<Signal> {
+    let (kind, rest) = spec.split_once(':').unwrap_or((spec, ""));
+    let usage = |msg: String| Error::Usage(format!("--excitation '{spec}': {msg}"));
+    let mut kv: Vec<(String, String)> = Vec::new();
+    if kind != "file" {
+        for part in rest.split(',').filter(|p| !p.trim().is_empty()) {
+            let (k, v) = part
+                .split_once('=')
+                .ok_or_else(|| usage(format!("'{part}' is not key=value")))?;
+            kv.push((k.trim().to_string(), v.trim().to_string()));
+        }
+    }
+    let num = |k: &str, v: &str| -> Result<f64> {
+        v.parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| usage(format!("{k}={v} is not a finite number")))
+    };
+    let take = |kv: &[(String, String)], k: &str| -> Result<Option<f64>> {
+        kv.iter()
+            .find(|(key, _)| key == k)
+            .map(|(_, v)| num(k, v))
+            .transpose()
+    };
+    let allow = |kv: &[(String, String)], keys: &[&str]| -> Result<()> {
+        if let Some((k, _)) = kv.iter().find(|(k, _)| !keys.contains(&k.as_str())) {
+            return Err(usage(format!(
+                "unknown key '{k}' (expected {})",
+                keys.join(", ")
+            )));
+        }
+        Ok(())
+    };
+    let signal = match kind {
+        "none" | "zero" => Signal::Zero,
+        "sine" => {
+            allow(&kv, &["freq", "amp", "phase"])?;
+            Signal::Sine {
+                amplitude: take(&kv, "amp")?.unwrap_or(default_amp),
+                freq_hz: take(&kv, "freq")?.ok_or_else(|| usage("needs freq=HZ".into()))?,
+                phase: take(&kv, "phase")?.unwrap_or(0.0).to_radians(),
+            }
+        }
+        "multisine" => {
+            let fundamental_hz = take(&kv, "freq")?.ok_or_else(|| usage("needs freq=HZ".into()))?;
+            let mut harmonics = Vec::new();
+            for (k, v) in kv.iter().filter(|(k, _)| k != "freq") {
+                let ratio = if let Some(sub) = k.strip_prefix("h1/") {
+                    let n: u32 =
+                        sub.parse().ok().filter(|&n| n >= 2).ok_or_else(|| {
+                            usage(format!("'{k}': sub-harmonic order must be ≥ 2"))
+                        })?;
+                    1.0 / n as f64
+                } else if let Some(sup) = k.strip_prefix('h') {
+                    let n: u32 = sup.parse().ok().filter(|&n| n >= 1).ok_or_else(|| {
+                        usage(format!("unknown key '{k}' (expected freq, hK, h1/K)"))
+                    })?;
+                    n as f64
+                } else {
+                    return Err(usage(format!(
+                        "unknown key '{k}' (expected freq, hK, h1/K)"
+                    )));
+                };
+                let (mag, phase) = match v.split_once('@') {
+                    Some((m, p)) => (num(k, m)?, num(k, p)?.to_radians()),
+                    None => (num(k, v)?, 0.0),
+                };
+                // Phase 0 is a sine, as for `sine`: F = −i·mag·e^{iφ}.
+                harmonics.push(Harmonic {
+                    ratio,
+                    amplitude: c64::new(0.0, -mag) * c64::new(phase.cos(), phase.sin()),
+                });
+            }
+            if harmonics.is_empty() {
+                harmonics.push(Harmonic {
+                    ratio: 1.0,
+                    amplitude: c64::new(0.0, -default_amp),
+                });
+            }
+            Signal::MultiSine {
+                fundamental_hz,
+                harmonics,
+            }
+        }
+        "sweep" => {
+            allow(&kv, &["f0", "f1", "amp", "duration", "log"])?;
+            let log = match kv.iter().find(|(k, _)| k == "log").map(|(_, v)| v.as_str()) {
+                None | Some("false") => false,
+                Some("true") => true,
+                Some(other) => return Err(usage(format!("log={other}: expected true or false"))),
+            };
+            let kv2: Vec<(String, String)> =
+                kv.iter().filter(|(k, _)| k != "log").cloned().collect();
+            Signal::Sweep {
+                amplitude: take(&kv2, "amp")?.unwrap_or(default_amp),
+                f0_hz: take(&kv2, "f0")?.ok_or_else(|| usage("needs f0=HZ".into()))?,
+                f1_hz: take(&kv2, "f1")?.ok_or_else(|| usage("needs f1=HZ".into()))?,
+                duration: take(&kv2, "duration")?.unwrap_or(duration),
+                logarithmic: log,
+            }
+        }
+        "file" => {
+            let (path, opts) = match rest.rsplit_once(",rate=") {
+                Some((p, r)) => (p, Some(num("rate", r)?)),
+                None => (rest, None),
+            };
+            read_force_file(Path::new(path), opts.unwrap_or(rate))?
+        }
+        other => {
+            return Err(usage(format!(
+                "unknown kind '{other}' (expected none, sine, multisine, sweep or file)"
+            )));
+        }
+    };
+    signal
+        .validate(&format!("--excitation '{spec}'"))
+        .map_err(|e| Error::Usage(e.to_string()))?;
+    Ok(signal)
+}
+
+/// Reads one force (N) per line; blank lines and `#` comments are skipped.
+fn read_force_file(path: &Path, rate_hz: f64) -> Result<Signal> {
+    let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let mut values = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let l = line.split('#').next().unwrap_or("").trim();
+        if l.is_empty() {
+            continue;
+        }
+        let v: f64 = l
+            .parse()
+            .ok()
+            .filter(|x: &f64| x.is_finite())
+            .ok_or_else(|| {
+                Error::Usage(format!(
+                    "{}:{}: '{l}' is not a finite force value (one number in N per line)",
+                    path.display(),
+                    i + 1
+                ))
+            })?;
+        values.push(v);
+    }
+    if values.is_empty() {
+        return Err(Error::Usage(format!("{}: no force values", path.display())));
+    }
+    Ok(Signal::Sampled { rate_hz, values })
+}
+
+/// Unit of a quantity.
+fn unit(q: nlsim_kernel::Quantity) -> &'static str {
+    match q {
+        nlsim_kernel::Quantity::Displacement => "m",
+        nlsim_kernel::Quantity::Velocity => "m/s",
+        nlsim_kernel::Quantity::Acceleration => "m/s^2",
+    }
+}
+
+/// What is stored with the data.
+#[derive(Debug, Clone)]
+pub struct RunInfo {
+    /// Model spec as given on the command line.
+    pub model_spec: String,
+    /// Method name.
+    pub method: String,
+    /// Excitation specs, one per input.
+    pub excitation: Vec<String>,
+    /// Retained modes (0 for the unreduced Newmark).
+    pub modes: usize,
+}
+
+/// Writes a time history: HDF5 for `.h5`/`.hdf5`, CSV for `.csv`, atomically (temporary file,
+/// then rename).
+pub fn write_history(path: &Path, model: &Model, h: &TimeHistory, info: &RunInfo) -> Result<()> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    let tmp = temp_path(path);
+    let res = match ext.as_deref() {
+        Some("csv") => write_csv(&tmp, h, info),
+        Some("h5" | "hdf5") => write_hdf5(&tmp, model, h, info),
+        _ => return Err(Error::Usage(format!("{}: {}", path.display(), FORMAT_HINT))),
+    };
+    if let Err(e) = res {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e);
+    }
+    std::fs::rename(&tmp, path).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// The usage hint for an unknown output extension.
+pub const FORMAT_HINT: &str = "unknown output format; name the file .h5 (HDF5) or .csv";
+
+fn temp_path(path: &Path) -> PathBuf {
+    let mut name = path
+        .file_name()
+        .map(|n| n.to_os_string())
+        .unwrap_or_default();
+    name.push(format!(".tmp-{}", std::process::id()));
+    path.with_file_name(name)
+}
+
+fn write_csv(path: &Path, h: &TimeHistory, info: &RunInfo) -> Result<()> {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "# nlsim {} simulate: model {}, method {}, dt {:e} s, excitation {}",
+        env!("CARGO_PKG_VERSION"),
+        info.model_spec,
+        info.method,
+        h.dt,
+        info.excitation.join("; ")
+    );
+    s.push_str("time_s");
+    for o in &h.outputs {
+        let _ = write!(
+            s,
+            ",{}_{}_{}",
+            o.name,
+            o.quantity.as_str(),
+            unit(o.quantity).replace('/', "_per_").replace("^2", "2")
+        );
+    }
+    for (name, _) in &h.inputs {
+        let _ = write!(s, ",{name}_force_N");
+    }
+    for name in &h.element_names {
+        let _ = write!(s, ",{name}_u_m,{name}_force_N");
+    }
+    s.push('\n');
+    for k in 0..h.n_samples() {
+        let _ = write!(s, "{:.9e}", k as f64 * h.dt);
+        for o in &h.outputs {
+            let _ = write!(s, ",{:.9e}", o.values[k]);
+        }
+        for (_, v) in &h.inputs {
+            let _ = write!(s, ",{:.9e}", v[k]);
+        }
+        for e in 0..h.element_names.len() {
+            let _ = write!(
+                s,
+                ",{:.9e},{:.9e}",
+                h.element_displacements[e][k], h.element_forces[e][k]
+            );
+        }
+        s.push('\n');
+    }
+    std::fs::write(path, s).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+fn write_hdf5(path: &Path, model: &Model, h: &TimeHistory, info: &RunInfo) -> Result<()> {
+    let err = |e: hdf5::Error| Error::Hdf5 {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    };
+    let file = hdf5::File::create(path).map_err(err)?;
+    let n = h.n_samples();
+    let chunk = n.clamp(1, 1 << 14);
+    let series = |g: &hdf5::Group, name: &str, data: &[f64], unit: &str| -> Result<()> {
+        let d = g
+            .new_dataset::<f64>()
+            .shape(data.len())
+            .chunk(chunk.min(data.len().max(1)))
+            .shuffle()
+            .deflate(4)
+            .create(name)
+            .map_err(err)?;
+        d.write_raw(data).map_err(err)?;
+        str_attr(&d, "unit", unit).map_err(err)
+    };
+    let root = file.as_group().map_err(err)?;
+    str_attr(&root, "nlsim_version", env!("CARGO_PKG_VERSION")).map_err(err)?;
+    str_attr(&root, "model", &info.model_spec).map_err(err)?;
+    str_attr(&root, "model_name", model.name()).map_err(err)?;
+    str_attr(&root, "method", &info.method).map_err(err)?;
+    str_attr(&root, "case", &h.case).map_err(err)?;
+    f64_attr(&root, "dt_s", h.dt).map_err(err)?;
+    f64_attr(&root, "modes", info.modes as f64).map_err(err)?;
+    f64_attr(&root, "wall_seconds", h.stats.seconds).map_err(err)?;
+    let times: Vec<f64> = h.times();
+    series(&root, "time", &times, "s")?;
+    let g = file.create_group("outputs").map_err(err)?;
+    for o in &h.outputs {
+        series(&g, &o.name, &o.values, unit(o.quantity))?;
+        let d = g.dataset(&o.name).map_err(err)?;
+        str_attr(&d, "quantity", o.quantity.as_str()).map_err(err)?;
+    }
+    let g = file.create_group("inputs").map_err(err)?;
+    for ((name, v), spec) in h.inputs.iter().zip(&info.excitation) {
+        series(&g, name, v, "N")?;
+        let d = g.dataset(name).map_err(err)?;
+        str_attr(&d, "excitation", spec).map_err(err)?;
+    }
+    let g = file.create_group("elements").map_err(err)?;
+    for (e, name) in h.element_names.iter().enumerate() {
+        let ge = g.create_group(name).map_err(err)?;
+        series(&ge, "displacement", &h.element_displacements[e], "m")?;
+        series(&ge, "velocity", &h.element_velocities[e], "m/s")?;
+        series(&ge, "force", &h.element_forces[e], "N")?;
+    }
+    let g = file.create_group("events").map_err(err)?;
+    let t: Vec<f64> = h.stats.events.iter().map(|e| e.time).collect();
+    let el: Vec<u32> = h.stats.events.iter().map(|e| e.element as u32).collect();
+    let cl: Vec<u8> = h.stats.events.iter().map(|e| u8::from(e.closing)).collect();
+    g.new_dataset_builder()
+        .with_data(&t)
+        .create("time")
+        .map_err(err)?;
+    g.new_dataset_builder()
+        .with_data(&el)
+        .create("element")
+        .map_err(err)?;
+    g.new_dataset_builder()
+        .with_data(&cl)
+        .create("closing")
+        .map_err(err)?;
+    file.flush().map_err(err)?;
+    Ok(())
+}
+
+fn str_attr(loc: &hdf5::Location, name: &str, v: &str) -> hdf5::Result<()> {
+    let s: hdf5::types::VarLenUnicode = v.parse().unwrap_or_else(|_| "?".parse().expect("ascii"));
+    loc.new_attr::<hdf5::types::VarLenUnicode>()
+        .create(name)?
+        .write_scalar(&s)
+}
+
+fn f64_attr(loc: &hdf5::Location, name: &str, v: f64) -> hdf5::Result<()> {
+    loc.new_attr::<f64>().create(name)?.write_scalar(&v)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn excitation_specs() {
+        let s = parse_excitation("sine:freq=25,amp=3", 1.0, 1.0, 1000.0).unwrap();
+        assert_eq!(
+            s,
+            Signal::Sine {
+                amplitude: 3.0,
+                freq_hz: 25.0,
+                phase: 0.0
+            }
+        );
+        let s = parse_excitation("sine:freq=25", 0.2, 1.0, 1000.0).unwrap();
+        assert!(matches!(s, Signal::Sine { amplitude, .. } if amplitude == 0.2));
+        let s =
+            parse_excitation("multisine:freq=10,h1=2,h3=0.1@90,h1/3=0.05", 1.0, 1.0, 1e3).unwrap();
+        let Signal::MultiSine { harmonics, .. } = s else {
+            panic!()
+        };
+        assert_eq!(harmonics.len(), 3);
+        assert!((harmonics[2].ratio - 1.0 / 3.0).abs() < 1e-15);
+        let s = parse_excitation("sweep:f0=5,f1=50,log=true", 1.0, 2.0, 1e3).unwrap();
+        assert!(matches!(s, Signal::Sweep { duration, logarithmic: true, .. } if duration == 2.0));
+        for bad in [
+            "sine",
+            "sine:freq=x",
+            "sine:frq=3",
+            "chirp:f=1",
+            "multisine:freq=1,h1/1=2",
+            "sweep:f0=1",
+            "sweep:f0=1,f1=2,log=maybe",
+            "sine:freq=-3",
+        ] {
+            let e = parse_excitation(bad, 1.0, 1.0, 1e3).unwrap_err();
+            assert!(matches!(e, Error::Usage(_)), "{bad}: {e}");
+            assert!(e.to_string().contains(bad), "{bad}: {e}");
+        }
+    }
+}
