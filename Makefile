@@ -17,3 +17,4 @@ bench:
 	@scripts/ensure-deps.sh
 	cargo bench -p nlsim-bench --bench kernel -- --quick --noplot
 	cargo bench -p nlsim-bench --bench reduction -- --quick --noplot
+	cargo bench -p nlsim-bench --bench sim -- --quick --noplot

@@ -35,9 +35,12 @@ pub struct ModalSystem {
     pub accel_feedthrough: Mat<f64>,
     /// The ports (names and DOFs), in row/column order.
     pub ports: Vec<Port>,
-    /// Initial-condition map (states × 2 modes): `z(0) = initial · [η(0); η̇(0)]` for modal
-    /// displacements `η` (√kg m) and velocities `η̇` of the retained modes.
-    pub initial: Mat<c64>,
+    /// Initial-condition map `z(0) = G · [η(0); η̇(0)]` for modal displacements `η` (√kg m)
+    /// and velocities `η̇` of the retained modes, as the nonzeros `(state, column, G_ij)` of
+    /// `G` (states × 2 modes; two per state for proportional damping).
+    pub initial: Vec<(usize, usize, c64)>,
+    /// Number of retained modes.
+    pub n_modes: usize,
 }
 
 /// Which response quantity.
@@ -138,21 +141,21 @@ impl ModalSystem {
             });
             // A pair (w = 2): η = 2 Re z, η̇ = 2 Re(λ z). A real pair a, b: η = z_a + z_b,
             // η̇ = a z_a + b z_b.
-            let mut initial = Mat::<c64>::zeros(states.len(), 2 * m);
+            let mut initial = Vec::with_capacity(2 * states.len());
             let mut s = 0;
             while s < states.len() {
                 let r = states[s].0;
                 let l = poles[s];
                 if weights[s] == 2.0 {
-                    initial[(s, r)] = c64::new(0.5, 0.5 * l.re / l.im);
-                    initial[(s, m + r)] = c64::new(0.0, -0.5 / l.im);
+                    initial.push((s, r, c64::new(0.5, 0.5 * l.re / l.im)));
+                    initial.push((s, m + r, c64::new(0.0, -0.5 / l.im)));
                     s += 1;
                 } else {
                     let (a, b) = (l.re, poles[s + 1].re);
-                    initial[(s, r)] = c64::new(-b / (a - b), 0.0);
-                    initial[(s, m + r)] = c64::new(1.0 / (a - b), 0.0);
-                    initial[(s + 1, r)] = c64::new(-a / (b - a), 0.0);
-                    initial[(s + 1, m + r)] = c64::new(1.0 / (b - a), 0.0);
+                    initial.push((s, r, c64::new(-b / (a - b), 0.0)));
+                    initial.push((s, m + r, c64::new(1.0 / (a - b), 0.0)));
+                    initial.push((s + 1, r, c64::new(-a / (b - a), 0.0)));
+                    initial.push((s + 1, m + r, c64::new(1.0 / (b - a), 0.0)));
                     s += 2;
                 }
             }
@@ -167,6 +170,7 @@ impl ModalSystem {
             accel_feedthrough,
             ports: reduced.ports.clone(),
             initial,
+            n_modes: m,
         })
     }
 
@@ -176,7 +180,13 @@ impl ModalSystem {
         reduced: &ReducedModel,
         v: &nlsim_kernel::SparseSym,
         lambda: &[f64],
-    ) -> Result<(Vec<c64>, Vec<f64>, Mat<c64>, Mat<c64>, Mat<c64>)> {
+    ) -> Result<(
+        Vec<c64>,
+        Vec<f64>,
+        Mat<c64>,
+        Mat<c64>,
+        Vec<(usize, usize, c64)>,
+    )> {
         let m = lambda.len();
         let np = reduced.ports.len();
         if let Some(r) = lambda.iter().position(|&l| l <= 0.0) {
@@ -284,13 +294,21 @@ impl ModalSystem {
                 }
             }
         }
-        Ok((poles, weights, input, output, initial))
+        let mut sparse = Vec::new();
+        for s in 0..initial.nrows() {
+            for j in 0..2 * m {
+                if initial[(s, j)] != c64::new(0.0, 0.0) {
+                    sparse.push((s, j, initial[(s, j)]));
+                }
+            }
+        }
+        Ok((poles, weights, input, output, sparse))
     }
 
     /// Diagonal states `z(0)` for modal displacements `eta` (√kg m) and velocities `eta_dot`
     /// (√kg m/s) of the retained modes (e.g. from [`crate::ReducedModel::modal_coordinates`]).
     pub fn initial_states(&self, eta: &[f64], eta_dot: &[f64]) -> Result<Vec<c64>> {
-        let m = self.initial.ncols() / 2;
+        let m = self.n_modes;
         for (what, v) in [("modal displacements", eta), ("modal velocities", eta_dot)] {
             if v.len() != m {
                 return Err(Error::DimensionMismatch {
@@ -307,13 +325,11 @@ impl ModalSystem {
                 });
             }
         }
-        Ok((0..self.n_states())
-            .map(|s| {
-                (0..m).fold(c64::new(0.0, 0.0), |acc, r| {
-                    acc + self.initial[(s, r)] * eta[r] + self.initial[(s, m + r)] * eta_dot[r]
-                })
-            })
-            .collect())
+        let mut z = vec![c64::new(0.0, 0.0); self.n_states()];
+        for &(s, j, g) in &self.initial {
+            z[s] += g * if j < m { eta[j] } else { eta_dot[j - m] };
+        }
+        Ok(z)
     }
 
     /// Number of stored states (conjugate pairs count once).

@@ -251,8 +251,9 @@ impl Simulator {
         progress: &mut dyn FnMut(usize, usize),
     ) -> Result<TimeHistory> {
         let start = std::time::Instant::now();
-        let (z0, plant) = case.prepare(&self.plant)?;
-        let elements = &plant.elements;
+        let (z0, elements) = case.prepare(&self.plant)?;
+        let elements = &elements[..];
+        let plant = &self.plant;
         let dt = self.cfg.dt;
         let (ns, nb, stride) = (self.ns, self.nblocks, self.stride);
         let ne = plant.inputs.len();
@@ -278,13 +279,16 @@ impl Simulator {
             .iter()
             .map(|e| vec![0.0; e.element.law().n_states()])
             .collect();
-        let mut fb = Feedback::new(&plant);
+        let mut fb = Feedback::new(plant);
         let mut stats = RunStats::default();
         let mut f = vec![0.0; nn];
         let mut d_pred = vec![0.0; nn];
         let mut v_pred = vec![0.0; nn];
         let mut rp = vec![0.0; nr];
         let mut u_next = vec![0.0; nq];
+        let mut d_new = vec![0.0; nn];
+        let mut v_new = vec![0.0; nn];
+        let mut d_old = vec![0.0; nn];
 
         // t = 0: the loop with the feedthrough only.
         for r in 0..nr {
@@ -434,16 +438,12 @@ impl Simulator {
                 .map_err(|e| loop_error(e, elements, k + 1, t1))?;
             stats.newton_iterations += it;
             stats.max_newton_iterations = stats.max_newton_iterations.max(it);
-            let mut d_new: Vec<f64> = fb.last_d.clone();
-            let mut v_new: Vec<f64> = fb.last_v.clone();
-            if events_on
-                && crossing(
-                    elements,
-                    &(0..nn).map(|i| d_hist[i][k]).collect::<Vec<_>>(),
-                    &d_new,
-                )
-                .is_some()
-            {
+            d_new.copy_from_slice(&fb.last_d);
+            v_new.copy_from_slice(&fb.last_v);
+            for i in 0..nn {
+                d_old[i] = d_hist[i][k];
+            }
+            if events_on && crossing(elements, &d_old, &d_new).is_some() {
                 self.event_step(
                     k, &e, &f_hist, &d_hist, &zr, &zi, &mut zr2, &mut zi2, &mut f, &mut d_new,
                     &mut v_new, &states, &mut ev, &mut fb, &mut stats, elements,
@@ -537,7 +537,7 @@ impl Simulator {
             final_state,
             stats,
         };
-        add_residual_rates(&plant, &mut h);
+        add_residual_rates(plant, &mut h);
         Ok(h)
     }
 

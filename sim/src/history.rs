@@ -47,9 +47,12 @@ impl LoadCase {
         }
     }
 
-    /// Checks the case against `plant` and returns the initial states and the plant with the
-    /// case's parameters applied.
-    pub(crate) fn prepare(&self, plant: &Plant) -> Result<(Vec<c64>, Plant)> {
+    /// Checks the case against `plant` and returns the initial states and the plant's elements
+    /// with the case's parameters applied.
+    pub(crate) fn prepare(
+        &self,
+        plant: &Plant,
+    ) -> Result<(Vec<c64>, Vec<crate::plant::ElementPort>)> {
         if self.forces.len() != plant.inputs.len() {
             return Err(Error::DimensionMismatch {
                 what: format!(
@@ -97,11 +100,11 @@ impl LoadCase {
                 velocity,
             } => plant.system.initial_states(displacement, velocity)?,
         };
-        let mut p = plant.clone();
+        let mut elements = plant.elements.clone();
         for (name, v) in &self.parameters {
-            p.set_parameter(name, *v)?;
+            crate::plant::set_element_parameter(&mut elements, name, *v)?;
         }
-        Ok((z0, p))
+        Ok((z0, elements))
     }
 }
 

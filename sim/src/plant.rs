@@ -127,39 +127,7 @@ impl Plant {
 
     /// Sets element parameter `name` (`element.param`, e.g. `tip_spring.k3`) to `value`.
     pub fn set_parameter(&mut self, name: &str, value: f64) -> Result<()> {
-        let (el, par) = name.split_once('.').ok_or_else(|| {
-            Error::invalid(
-                format!("parameter '{name}'"),
-                "expected element.parameter, e.g. tip_spring.k3",
-            )
-        })?;
-        let e = self
-            .elements
-            .iter_mut()
-            .find(|e| e.element.name() == el)
-            .ok_or_else(|| {
-                Error::invalid(
-                    format!("parameter '{name}'"),
-                    format!("the plant has no element '{el}'"),
-                )
-            })?;
-        let law = e.element.law();
-        let i = (0..law.n_params())
-            .find(|&i| law.param_name(i) == par)
-            .ok_or_else(|| {
-                Error::invalid(
-                    format!("parameter '{name}'"),
-                    format!(
-                        "element '{el}' ({}) has parameters {}",
-                        law.kind(),
-                        (0..law.n_params())
-                            .map(|i| law.param_name(i))
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ),
-                )
-            })?;
-        e.element.set_param(i, value)
+        set_element_parameter(&mut self.elements, name, value)
     }
 
     /// Number of diagonal states.
@@ -256,4 +224,44 @@ pub(crate) fn order(q: Quantity) -> u32 {
         Quantity::Velocity => 1,
         Quantity::Acceleration => 2,
     }
+}
+
+/// Sets parameter `name` (`element.param`) of the element it names in `elements`.
+pub(crate) fn set_element_parameter(
+    elements: &mut [ElementPort],
+    name: &str,
+    value: f64,
+) -> Result<()> {
+    let (el, par) = name.split_once('.').ok_or_else(|| {
+        Error::invalid(
+            format!("parameter '{name}'"),
+            "expected element.parameter, e.g. tip_spring.k3",
+        )
+    })?;
+    let e = elements
+        .iter_mut()
+        .find(|e| e.element.name() == el)
+        .ok_or_else(|| {
+            Error::invalid(
+                format!("parameter '{name}'"),
+                format!("the plant has no element '{el}'"),
+            )
+        })?;
+    let law = e.element.law();
+    let i = (0..law.n_params())
+        .find(|&i| law.param_name(i) == par)
+        .ok_or_else(|| {
+            Error::invalid(
+                format!("parameter '{name}'"),
+                format!(
+                    "element '{el}' ({}) has parameters {}",
+                    law.kind(),
+                    (0..law.n_params())
+                        .map(|i| law.param_name(i))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            )
+        })?;
+    e.element.set_param(i, value)
 }

@@ -67,6 +67,7 @@ impl Default for Rk4Config {
 /// The right-hand side and the sampled outputs.
 struct Rhs<'a> {
     plant: &'a Plant,
+    elements: Vec<crate::plant::ElementPort>,
     case: &'a LoadCase,
     ports: Vec<usize>,
     /// `(port, order)` rows: element displacement, element velocity, outputs.
@@ -88,7 +89,12 @@ struct Rhs<'a> {
 }
 
 impl<'a> Rhs<'a> {
-    fn new(plant: &'a Plant, case: &'a LoadCase, newton: NewtonConfig) -> Self {
+    fn new(
+        plant: &'a Plant,
+        elements: Vec<crate::plant::ElementPort>,
+        case: &'a LoadCase,
+        newton: NewtonConfig,
+    ) -> Self {
         let sys = &plant.system;
         let ns = sys.n_states();
         let ne = plant.inputs.len();
@@ -120,6 +126,7 @@ impl<'a> Rhs<'a> {
         }
         Rhs {
             plant,
+            elements,
             case,
             ports,
             rows,
@@ -171,7 +178,7 @@ impl<'a> Rhs<'a> {
         let it = self
             .fb
             .solve(
-                &self.plant.elements,
+                &self.elements,
                 &self.states,
                 &self.dp,
                 &self.vp,
@@ -180,7 +187,7 @@ impl<'a> Rhs<'a> {
                 &mut self.f,
                 &self.newton,
             )
-            .map_err(|e| loop_error(e, &self.plant.elements, usize::MAX, t))?;
+            .map_err(|e| loop_error(e, &self.elements, usize::MAX, t))?;
         self.iterations += it;
         self.max_iterations = self.max_iterations.max(it);
         for i in 0..nn {
@@ -218,7 +225,7 @@ impl<'a> Rhs<'a> {
             rec.d[i][k] = self.fb.last_d[i];
             rec.v[i][k] = self.fb.last_v[i];
             let (d, v) = (self.fb.last_d[i], self.fb.last_v[i]);
-            self.plant.elements[i]
+            self.elements[i]
                 .element
                 .law()
                 .commit_state(d, v, &mut self.states[i]);
@@ -380,13 +387,13 @@ pub fn rk45(
         ));
     }
     let start = std::time::Instant::now();
-    let (z0, plant) = case.prepare(plant)?;
+    let (z0, elements) = case.prepare(plant)?;
     let ns = plant.n_states();
     let n = n_steps + 1;
     let t_end = n_steps as f64 * dt;
     let hmax = cfg.max_step.unwrap_or(0.1 * t_end).max(1e-300);
-    let mut rhs = Rhs::new(&plant, case, cfg.newton);
-    let mut rec = Record::new(&plant, n);
+    let mut rhs = Rhs::new(plant, elements, case, cfg.newton);
+    let mut rec = Record::new(plant, n);
     let mut stats = RunStats::default();
     let mut z = z0;
     rhs.sample(0, 0.0, &z, &mut rec)?;
@@ -521,7 +528,7 @@ pub fn rk45(
     stats.newton_iterations = rhs.iterations;
     stats.max_newton_iterations = rhs.max_iterations;
     stats.seconds = start.elapsed().as_secs_f64();
-    Ok(rec.finish(&plant, "rk45", case, dt, z, stats))
+    Ok(rec.finish(plant, "rk45", case, dt, z, stats))
 }
 
 /// Classic fourth-order Runge–Kutta with `cfg.substeps` steps per sample interval `dt`.
@@ -550,11 +557,11 @@ pub fn rk4(
             ),
         ));
     }
-    let (z0, plant) = case.prepare(plant)?;
+    let (z0, elements) = case.prepare(plant)?;
     let ns = plant.n_states();
     let n = n_steps + 1;
-    let mut rhs = Rhs::new(&plant, case, cfg.newton);
-    let mut rec = Record::new(&plant, n);
+    let mut rhs = Rhs::new(plant, elements, case, cfg.newton);
+    let mut rec = Record::new(plant, n);
     let mut stats = RunStats::default();
     let mut z = z0;
     rhs.sample(0, 0.0, &z, &mut rec)?;
@@ -592,5 +599,5 @@ pub fn rk4(
     stats.newton_iterations = rhs.iterations;
     stats.max_newton_iterations = rhs.max_iterations;
     stats.seconds = start.elapsed().as_secs_f64();
-    Ok(rec.finish(&plant, "rk4", case, dt, z, stats))
+    Ok(rec.finish(plant, "rk4", case, dt, z, stats))
 }

@@ -130,7 +130,8 @@ fn sdof_plant(f_hz: f64, zeta: f64) -> Plant {
         feedthrough: Mat::zeros(1, 1),
         accel_feedthrough: Mat::zeros(1, 1),
         ports: vec![Port::dof("x", PortKind::Dof, 0)],
-        initial: Mat::zeros(1, 2),
+        initial: Vec::new(),
+        n_modes: 1,
     };
     Plant::new(
         sys,
