@@ -416,6 +416,10 @@ mod cli {
             "{out}"
         );
         assert!(out.contains("not built yet"));
+        assert!(
+            out.contains("[3/8] time response") && out.contains("FOH vs RK45 max difference"),
+            "{out}"
+        );
     }
 }
 
@@ -557,5 +561,191 @@ mod modes {
             std::fs::read_to_string(d.join("dofs.txt")).unwrap(),
             "1:u\n2:u\n"
         );
+    }
+}
+
+mod simulate {
+    use super::*;
+    use hdf5_metno as hdf5;
+
+    /// `nlsim simulate` on the bump-stop beam: FOH to HDF5 and RK45 to CSV agree, the file
+    /// layout is as documented, contact events are recorded.
+    #[test]
+    fn foh_to_hdf5_and_rk45_to_csv_agree() {
+        let d = scratch("simulate");
+        let h5 = d.join("foh.h5");
+        let args = |method: &str, out: &Path| -> Vec<String> {
+            [
+                "simulate",
+                "bumpstop_cantilever",
+                "--duration",
+                "0.5",
+                "--rate",
+                "8000",
+                "--method",
+                method,
+                "--modes",
+                "8",
+                "--rtol",
+                "1e-9",
+                "--atol",
+                "1e-15",
+                "--excitation",
+                "shaker=sine:freq=23.6,amp=0.6",
+                "--out",
+                out.to_str().unwrap(),
+            ]
+            .iter()
+            .map(|s| s.to_string())
+            .collect()
+        };
+        let a: Vec<String> = args("foh", &h5);
+        let (rc, out, err) = nlsim(&a.iter().map(String::as_str).collect::<Vec<_>>());
+        assert_eq!(rc, 0, "{err}");
+        assert!(
+            out.contains("ns per mode-step") && out.contains("contact events"),
+            "{out}"
+        );
+        let csv = d.join("rk.csv");
+        let a: Vec<String> = args("rk45", &csv);
+        let (rc, _, err) = nlsim(&a.iter().map(String::as_str).collect::<Vec<_>>());
+        assert_eq!(rc, 0, "{err}");
+        let file = hdf5::File::open(&h5).unwrap();
+        let t: Vec<f64> = file.dataset("time").unwrap().read_raw().unwrap();
+        assert_eq!(t.len(), 4001);
+        let u: Vec<f64> = file
+            .dataset("elements/stop/displacement")
+            .unwrap()
+            .read_raw()
+            .unwrap();
+        let events: Vec<f64> = file.dataset("events/time").unwrap().read_raw().unwrap();
+        assert!(!events.is_empty(), "the stop is hit");
+        assert!(u.iter().cloned().fold(0.0, f64::max) > 1e-3);
+        let method: hdf5::types::VarLenUnicode =
+            file.attr("method").unwrap().read_scalar().unwrap();
+        assert_eq!(method.as_str(), "foh");
+        let text = std::fs::read_to_string(&csv).unwrap();
+        let mut lines = text.lines();
+        assert!(lines.next().unwrap().starts_with("# nlsim"));
+        let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+        let col = header.iter().position(|h| *h == "stop_u_m").unwrap();
+        let rk: Vec<f64> = lines
+            .map(|l| l.split(',').nth(col).unwrap().parse().unwrap())
+            .collect();
+        assert_eq!(rk.len(), u.len());
+        let peak = rk.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let diff = rk
+            .iter()
+            .zip(&u)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        // The FOH's error on this run is C·T² with C from sim/tests/nonlinear.rs
+        // (bumpstop_events_restore_second_order: 7e-2 at 50 samples per period, same drive):
+        // at 339 samples per period about 1.5e-3 of the peak.
+        assert!(diff < 5e-3 * peak, "FOH vs RK45: {diff:e} of {peak:e}");
+        let left: Vec<_> = std::fs::read_dir(&d).unwrap().collect();
+        assert_eq!(left.len(), 2, "no temporary files");
+    }
+
+    #[test]
+    fn simulate_errors_print_one_line() {
+        let cases: &[(&[&str], i32, &str)] = &[
+            (
+                &["simulate", "ecl_beam", "--duration", "0", "--rate", "100"],
+                2,
+                "--duration",
+            ),
+            (
+                &[
+                    "simulate",
+                    "ecl_beam",
+                    "--duration",
+                    "1",
+                    "--rate",
+                    "100",
+                    "--out",
+                    "x.txt",
+                ],
+                2,
+                "unknown output format",
+            ),
+            (
+                &[
+                    "simulate",
+                    "ecl_beam",
+                    "--duration",
+                    "1",
+                    "--rate",
+                    "100",
+                    "--excitation",
+                    "chirp:f=3",
+                ],
+                2,
+                "unknown kind 'chirp'",
+            ),
+            (
+                &[
+                    "simulate",
+                    "ecl_beam",
+                    "--duration",
+                    "1",
+                    "--rate",
+                    "100",
+                    "--excitation",
+                    "nope=sine:freq=3",
+                ],
+                2,
+                "no excitation point 'nope'",
+            ),
+            (
+                &[
+                    "simulate",
+                    "ecl_beam",
+                    "--duration",
+                    "1",
+                    "--rate",
+                    "100",
+                    "--set",
+                    "tip_spring.k9=1",
+                ],
+                1,
+                "k9",
+            ),
+            (
+                &[
+                    "simulate",
+                    "ecl_beam",
+                    "--duration",
+                    "1",
+                    "--rate",
+                    "100",
+                    "--excitation",
+                    "file:/nonexistent/f.txt",
+                ],
+                1,
+                "/nonexistent/f.txt",
+            ),
+            (
+                &[
+                    "simulate",
+                    "ecl_beam",
+                    "--duration",
+                    "0.1",
+                    "--rate",
+                    "100",
+                    "--method",
+                    "rk4",
+                    "--modes",
+                    "20",
+                ],
+                1,
+                "stability limit",
+            ),
+        ];
+        for (args, code, needle) in cases {
+            let (rc, _, err) = nlsim(args);
+            assert_eq!(rc, *code, "{args:?}: {err}");
+            assert!(err.contains(needle), "{args:?}: {err}");
+            assert_eq!(err.trim().lines().count(), 1, "{args:?}: {err}");
+        }
     }
 }

@@ -103,7 +103,7 @@ impl Simulator {
                 format!("{} s must be positive and finite", cfg.dt),
             ));
         }
-        if cfg.newton.max_iterations == 0 || !(cfg.newton.rtol > 0.0) {
+        if cfg.newton.max_iterations == 0 || cfg.newton.rtol.is_nan() || cfg.newton.rtol <= 0.0 {
             return Err(Error::invalid(
                 "Newton settings",
                 "need at least one iteration and a positive tolerance",

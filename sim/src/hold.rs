@@ -190,6 +190,19 @@ mod tests {
     }
 
     #[test]
+    fn lsoh_leading_errors() {
+        // K̂ = 1 − iθ³/24 − θ⁴/60 + O(θ⁵) (docs/time-domain.md).
+        for theta in [0.05f64, 0.1, 0.2] {
+            let k = reconstruction_gain(Hold::Lsoh, theta);
+            let expect = c64::new(1.0 - theta.powi(4) / 60.0, -theta.powi(3) / 24.0);
+            assert!(
+                (k - expect).norm() < 0.1 * theta.powi(5),
+                "θ = {theta}: {k} vs {expect}"
+            );
+        }
+    }
+
+    #[test]
     fn step_coefficients_match_quadrature() {
         // g_j = ∫_0^h e^{λ(h−τ)} L_j(τ/h) dτ by composite Simpson with 2000 panels.
         for hold in [Hold::Zoh, Hold::Foh, Hold::Lsoh] {
