@@ -15,6 +15,7 @@
 pub mod error;
 pub mod modes;
 pub mod mtx;
+pub mod output;
 pub mod simulate;
 pub mod spec;
 pub mod summary;

@@ -7,11 +7,12 @@
 //! (modes × DOFs, mass-normalised, m/√kg); dataset `/dofs/labels` (strings such as `12:uz`).
 
 use crate::error::{Error, Result};
+use crate::output::Format;
 use hdf5_metno as hdf5;
 use nlsim_kernel::Model;
 use nlsim_reduction::{EffectiveMass, EigenConfig, EigenMethod, Modes};
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Modes with what the table shows about them.
 #[derive(Debug, Clone)]
@@ -113,40 +114,14 @@ pub fn format_table(r: &ModeReport) -> String {
 /// written next to its destination and renamed into place, so a failed run leaves no partial
 /// file and an existing one untouched.
 pub fn write_modes(path: &Path, model: &Model, r: &ModeReport) -> Result<()> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    let tmp = temp_path(path);
-    let res = match ext.as_deref() {
-        Some("csv") => write_csv(&tmp, r),
-        Some("h5" | "hdf5") => write_hdf5(&tmp, model, r),
-        _ => {
-            return Err(Error::Usage(format!(
-                "{}: unknown output format; name the file .h5 (HDF5, with mode shapes) or .csv \
-                 (the table)",
-                path.display()
-            )));
-        }
-    };
-    if let Err(e) = res {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(e);
-    }
-    std::fs::rename(&tmp, path).map_err(|source| Error::Io {
-        path: path.to_path_buf(),
-        source,
+    crate::output::write_atomically(path, HINT, |tmp, format| match format {
+        Format::Csv => write_csv(tmp, r),
+        Format::Hdf5 => write_hdf5(tmp, model, r),
     })
 }
 
-fn temp_path(path: &Path) -> PathBuf {
-    let mut name = path
-        .file_name()
-        .map(|n| n.to_os_string())
-        .unwrap_or_default();
-    name.push(format!(".tmp-{}", std::process::id()));
-    path.with_file_name(name)
-}
+/// What each output format of `nlsim modes` holds, for the usage error.
+pub const HINT: &str = ".h5 (HDF5, with mode shapes) or .csv (the table)";
 
 fn write_csv(path: &Path, r: &ModeReport) -> Result<()> {
     let mut s = String::from("mode,frequency_hz,eigenvalue_rad2_s2,damping_ratio");

@@ -2,12 +2,13 @@
 //! The file layouts are documented in `docs/file-formats.md`.
 
 use crate::error::{Error, Result};
+use crate::output::Format;
 use faer::c64;
 use hdf5_metno as hdf5;
 use nlsim_kernel::Model;
 use nlsim_sim::{Harmonic, Signal, TimeHistory};
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Parses an excitation spec (see `nlsim simulate --help`):
 ///
@@ -196,37 +197,14 @@ pub struct RunInfo {
 /// Writes a time history: HDF5 for `.h5`/`.hdf5`, CSV for `.csv`, atomically (temporary file,
 /// then rename).
 pub fn write_history(path: &Path, model: &Model, h: &TimeHistory, info: &RunInfo) -> Result<()> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    let tmp = temp_path(path);
-    let res = match ext.as_deref() {
-        Some("csv") => write_csv(&tmp, h, info),
-        Some("h5" | "hdf5") => write_hdf5(&tmp, model, h, info),
-        _ => return Err(Error::Usage(format!("{}: {}", path.display(), FORMAT_HINT))),
-    };
-    if let Err(e) = res {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(e);
-    }
-    std::fs::rename(&tmp, path).map_err(|source| Error::Io {
-        path: path.to_path_buf(),
-        source,
+    crate::output::write_atomically(path, HINT, |tmp, format| match format {
+        Format::Csv => write_csv(tmp, h, info),
+        Format::Hdf5 => write_hdf5(tmp, model, h, info),
     })
 }
 
-/// The usage hint for an unknown output extension.
-pub const FORMAT_HINT: &str = "unknown output format; name the file .h5 (HDF5) or .csv";
-
-fn temp_path(path: &Path) -> PathBuf {
-    let mut name = path
-        .file_name()
-        .map(|n| n.to_os_string())
-        .unwrap_or_default();
-    name.push(format!(".tmp-{}", std::process::id()));
-    path.with_file_name(name)
-}
+/// What each output format of `nlsim simulate` holds, for the usage error.
+pub const HINT: &str = ".h5 (HDF5) or .csv";
 
 fn write_csv(path: &Path, h: &TimeHistory, info: &RunInfo) -> Result<()> {
     let mut s = String::new();

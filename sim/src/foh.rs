@@ -24,7 +24,7 @@
 use crate::feedback::{Feedback, LoopFailure, NewtonConfig};
 use crate::history::{ContactEvent, LoadCase, RunStats, Series, TimeHistory, add_residual_rates};
 use crate::hold::{Hold, step_coefficients};
-use crate::plant::{ElementPort, Plant, order};
+use crate::plant::{ElementPort, Plant, Responses};
 use faer::c64;
 use nlsim_kernel::{Error, Law, Result};
 use pulp::{Arch, Simd, WithSimd};
@@ -75,22 +75,15 @@ pub struct Simulator {
     stride: usize,
     coeffs: Vec<Block>,
     cols: Vec<Column>,
-    /// `(port, order)` per row: element displacements, element velocities, outputs.
-    rows: Vec<(usize, u32)>,
-    /// `w_s c̃_{p,s} λ_s^order` per row (rows × states).
-    row_c: Vec<c64>,
+    /// Port responses: rows, modal coefficients, feedthrough, `t = 0` loop sensitivities.
+    resp: Responses,
     /// `Σ_s Re(row_c Γ1 b̃_NL)` (rows × elements).
     corr: Vec<f64>,
-    /// Feedthrough (rows × (inputs + elements)).
-    feed: Vec<f64>,
     /// `Γ1 b̃_NL` (states × elements).
     g1n: Vec<c64>,
     /// Loop sensitivities of a step (elements × elements): displacement and velocity.
     sd: Vec<f64>,
     sv: Vec<f64>,
-    /// Loop sensitivities at `t = 0` (feedthrough only).
-    sd0: Vec<f64>,
-    sv0: Vec<f64>,
     arch: Arch,
 }
 
@@ -113,7 +106,8 @@ impl Simulator {
         let ns = sys.n_states();
         let ne = plant.inputs.len();
         let nn = plant.elements.len();
-        let ports = plant.input_ports();
+        let resp = Responses::new(plant);
+        let ports = &resp.ports;
         let taps = cfg.hold.taps();
         let mut cols = Vec::new();
         for i in 0..ne {
@@ -126,21 +120,10 @@ impl Simulator {
                 cols.push(Column::Element(n, j));
             }
         }
-        let mut rows = Vec::new();
-        for e in &plant.elements {
-            rows.push((e.port, 0));
-        }
-        for e in &plant.elements {
-            rows.push((e.port, 1));
-        }
-        for o in &plant.outputs {
-            rows.push((o.port, order(o.quantity)));
-        }
-        let nr = rows.len();
+        let nr = resp.rows.len();
         let nb = ns.div_ceil(LANES);
         let stride = 2 + 2 * cols.len() + 2 * nr;
         let mut coeffs = vec![[0.0; LANES]; nb * stride];
-        let mut row_c = vec![c64::new(0.0, 0.0); nr * ns];
         let mut g1n = vec![c64::new(0.0, 0.0); ns * nn];
         let tap_index = |j: i32| taps.iter().position(|&t| t == j);
         for s in 0..ns {
@@ -164,9 +147,8 @@ impl Simulator {
                 blk[2 + 2 * c][l] = v.re;
                 blk[3 + 2 * c][l] = v.im;
             }
-            for (r, &(p, o)) in rows.iter().enumerate() {
-                let c = sys.output[(p, s)] * sys.poles[s].powi(o as i32) * sys.weights[s];
-                row_c[r * ns + s] = c;
+            for r in 0..nr {
+                let c = resp.coefficients(r)[s];
                 blk[2 + 2 * cols.len() + 2 * r][l] = c.re;
                 blk[3 + 2 * cols.len() + 2 * r][l] = -c.im;
             }
@@ -177,30 +159,19 @@ impl Simulator {
         let mut corr = vec![0.0; nr * nn];
         for r in 0..nr {
             for n in 0..nn {
-                corr[r * nn + n] = (0..ns)
-                    .map(|s| (row_c[r * ns + s] * g1n[s * nn + n]).re)
+                corr[r * nn + n] = resp
+                    .coefficients(r)
+                    .iter()
+                    .enumerate()
+                    .map(|(s, c)| (c * g1n[s * nn + n]).re)
                     .sum();
             }
         }
-        let nq = ne + nn;
-        let mut feed = vec![0.0; nr * nq];
-        for (r, &(p, o)) in rows.iter().enumerate() {
-            for q in 0..nq {
-                feed[r * nq + q] = plant.feedthrough(p, ports[q], o);
-            }
-        }
-        let mut sd = vec![0.0; nn * nn];
-        let mut sv = vec![0.0; nn * nn];
-        let mut sd0 = vec![0.0; nn * nn];
-        let mut sv0 = vec![0.0; nn * nn];
-        for i in 0..nn {
-            for m in 0..nn {
-                sd0[i * nn + m] = feed[i * nq + ne + m];
-                sv0[i * nn + m] = feed[(nn + i) * nq + ne + m];
-                sd[i * nn + m] = corr[i * nn + m] + sd0[i * nn + m];
-                sv[i * nn + m] = corr[(nn + i) * nn + m] + sv0[i * nn + m];
-            }
-        }
+        // A step's loop sensitivities: the hold's Γ1 path plus the feedthrough.
+        let sd: Vec<f64> = (0..nn * nn).map(|im| corr[im] + resp.sd0[im]).collect();
+        let sv: Vec<f64> = (0..nn * nn)
+            .map(|im| corr[nn * nn + im] + resp.sv0[im])
+            .collect();
         Ok(Simulator {
             plant: plant.clone(),
             cfg: *cfg,
@@ -209,15 +180,11 @@ impl Simulator {
             stride,
             coeffs,
             cols,
-            rows,
-            row_c,
+            resp,
             corr,
-            feed,
             g1n,
             sd,
             sv,
-            sd0,
-            sv0,
             arch: Arch::new(),
         })
     }
@@ -235,7 +202,7 @@ impl Simulator {
     /// Floating-point operations of one state update per state (for rate reports): the
     /// complex product `φ z` (6), 4 per input column and 4 per accumulated response.
     pub fn flops_per_state_step(&self) -> usize {
-        6 + 4 * self.cols.len() + 4 * self.rows.len()
+        6 + 4 * self.cols.len() + 4 * self.resp.rows.len()
     }
 
     /// Runs `case` for `n_steps` steps (`n_steps + 1` samples).
@@ -259,7 +226,7 @@ impl Simulator {
         let ne = plant.inputs.len();
         let nn = elements.len();
         let nq = ne + nn;
-        let nr = self.rows.len();
+        let nr = self.resp.rows.len();
         let no = plant.outputs.len();
         let n = n_steps + 1;
         let events_on = self.cfg.locate_events && self.cfg.hold == Hold::Foh && plant.has_events();
@@ -291,18 +258,16 @@ impl Simulator {
         let mut d_old = vec![0.0; nn];
 
         // t = 0: the loop with the feedthrough only.
+        let resp = &self.resp;
+        for q in 0..ne {
+            u_next[q] = e[q][0];
+        }
         for r in 0..nr {
-            rp[r] = (0..ns).map(|s| (self.row_c[r * ns + s] * z0[s]).re).sum();
+            rp[r] = resp.modal(r, &z0);
         }
         for i in 0..nn {
-            d_pred[i] = rp[i]
-                + (0..ne)
-                    .map(|q| self.feed[i * nq + q] * e[q][0])
-                    .sum::<f64>();
-            v_pred[i] = rp[nn + i]
-                + (0..ne)
-                    .map(|q| self.feed[(nn + i) * nq + q] * e[q][0])
-                    .sum::<f64>();
+            d_pred[i] = rp[i] + resp.feed_ext(i, &u_next);
+            v_pred[i] = rp[nn + i] + resp.feed_ext(nn + i, &u_next);
         }
         let it = fb
             .solve(
@@ -310,8 +275,8 @@ impl Simulator {
                 &states,
                 &d_pred,
                 &v_pred,
-                &self.sd0,
-                &self.sv0,
+                &resp.sd0,
+                &resp.sv0,
                 &mut f,
                 &self.cfg.newton,
             )
@@ -325,18 +290,12 @@ impl Simulator {
             let law = elements[i].element.law();
             law.commit_state(fb.last_d[i], fb.last_v[i], &mut states[i]);
         }
-        for q in 0..ne {
-            u_next[q] = e[q][0];
-        }
         for i in 0..nn {
             u_next[ne + i] = -f[i];
         }
         for o in 0..no {
             let r = 2 * nn + o;
-            out[o][0] = rp[r]
-                + (0..nq)
-                    .map(|q| self.feed[r * nq + q] * u_next[q])
-                    .sum::<f64>();
+            out[o][0] = rp[r] + resp.feed(r, &u_next);
         }
 
         // ẑ0 = z0 − Γ1 u_NL(0) = z0 + Γ1 b̃ f0, in blocks.
@@ -354,7 +313,7 @@ impl Simulator {
         let mut zi2 = zi.clone();
         let mut acc = vec![[0.0; LANES]; nr];
         let mut vals = vec![0.0; self.cols.len()];
-        let mut ev = EventScratch::new(ns, nn, nq);
+        let mut ev = EventScratch::new(ns, nn);
         let report = (n_steps / 200).max(1);
 
         for k in 0..n_steps {
@@ -391,25 +350,25 @@ impl Simulator {
             for r in 0..nr {
                 rp[r] = acc[r].iter().sum();
             }
+            for q in 0..ne {
+                u_next[q] = e[q][k + 1];
+            }
             for i in 0..nn {
-                d_pred[i] = rp[i]
-                    + (0..ne)
-                        .map(|q| self.feed[i * nq + q] * e[q][k + 1])
-                        .sum::<f64>();
-                v_pred[i] = rp[nn + i]
-                    + (0..ne)
-                        .map(|q| self.feed[(nn + i) * nq + q] * e[q][k + 1])
-                        .sum::<f64>();
-                // Extrapolated initial guess.
-                f[i] = if k > 0 {
-                    2.0 * f_hist[i][k] - f_hist[i][k - 1]
-                } else {
-                    f_hist[i][k]
-                };
+                d_pred[i] = rp[i] + resp.feed_ext(i, &u_next);
+                v_pred[i] = rp[nn + i] + resp.feed_ext(nn + i, &u_next);
             }
             let t1 = (k + 1) as f64 * dt;
-            let it = fb
-                .solve(
+            // Newton from the extrapolated force, then once more from the last one.
+            let mut solved = Ok(0);
+            for guess in 0..2 {
+                for i in 0..nn {
+                    f[i] = if guess == 0 && k > 0 {
+                        2.0 * f_hist[i][k] - f_hist[i][k - 1]
+                    } else {
+                        f_hist[i][k]
+                    };
+                }
+                solved = fb.solve(
                     elements,
                     &states,
                     &d_pred,
@@ -418,24 +377,12 @@ impl Simulator {
                     &self.sv,
                     &mut f,
                     &self.cfg.newton,
-                )
-                .or_else(|_| {
-                    // Retry from the last force before giving up.
-                    for i in 0..nn {
-                        f[i] = f_hist[i][k];
-                    }
-                    fb.solve(
-                        elements,
-                        &states,
-                        &d_pred,
-                        &v_pred,
-                        &self.sd,
-                        &self.sv,
-                        &mut f,
-                        &self.cfg.newton,
-                    )
-                })
-                .map_err(|e| loop_error(e, elements, k + 1, t1))?;
+                );
+                if solved.is_ok() {
+                    break;
+                }
+            }
+            let it = solved.map_err(|e| loop_error(e, elements, k + 1, t1))?;
             stats.newton_iterations += it;
             stats.max_newton_iterations = stats.max_newton_iterations.max(it);
             d_new.copy_from_slice(&fb.last_d);
@@ -448,17 +395,10 @@ impl Simulator {
                     k, &e, &f_hist, &d_hist, &zr, &zi, &mut zr2, &mut zi2, &mut f, &mut d_new,
                     &mut v_new, &states, &mut ev, &mut fb, &mut stats, elements,
                 )?;
+                // event_step leaves ẑ[k+1] in ev.za.
                 for r in 0..nr {
-                    rp[r] = (0..ns)
-                        .map(|s| {
-                            let z = c64::new(zr2[s / LANES][s % LANES], zi2[s / LANES][s % LANES]);
-                            (self.row_c[r * ns + s] * z).re
-                        })
-                        .sum();
+                    rp[r] = resp.modal(r, &ev.za);
                 }
-            }
-            for q in 0..ne {
-                u_next[q] = e[q][k + 1];
             }
             for i in 0..nn {
                 u_next[ne + i] = -f[i];
@@ -472,12 +412,9 @@ impl Simulator {
             }
             for o in 0..no {
                 let r = 2 * nn + o;
-                let mut y = rp[r];
+                let mut y = rp[r] + resp.feed(r, &u_next);
                 for i in 0..nn {
                     y += self.corr[r * nn + i] * u_next[ne + i];
-                }
-                for q in 0..nq {
-                    y += self.feed[r * nq + q] * u_next[q];
                 }
                 out[o][k + 1] = y;
             }
@@ -672,12 +609,13 @@ impl Simulator {
         f.copy_from_slice(&end.f);
         d_new.copy_from_slice(&end.d);
         v_new.copy_from_slice(&end.v);
-        // ẑ[k+1] = z[k+1] + Γ1 b̃ f[k+1].
+        // ẑ[k+1] = z[k+1] + Γ1 b̃ f[k+1], into the blocks and ev.za.
         for s in 0..ns {
             let mut z = ev.zb[s];
             for i in 0..nn {
                 z += self.g1n[s * nn + i] * f[i];
             }
+            ev.za[s] = z;
             zr_out[s / LANES][s % LANES] = z.re;
             zi_out[s / LANES][s % LANES] = z.im;
         }
@@ -704,7 +642,7 @@ impl Simulator {
         let (ns, nn) = (self.ns, elements.len());
         let ne = e_to.len();
         let nq = ne + nn;
-        let ports = self.plant.input_ports();
+        let ports = &self.resp.ports;
         for s in 0..ns {
             let (phi, g) = step_coefficients(Hold::Foh, sys.poles[s], h);
             let mut bu = c64::new(0.0, 0.0);
@@ -726,16 +664,15 @@ impl Simulator {
         let mut vp = vec![0.0; nn];
         for i in 0..nn {
             for (row, pred, sens) in [(i, &mut dp, &mut sd), (nn + i, &mut vp, &mut sv)] {
-                let rc = &self.row_c[row * ns..(row + 1) * ns];
-                pred[i] = (0..ns).map(|s| (rc[s] * ev.zb[s]).re).sum::<f64>()
-                    + (0..ne)
-                        .map(|q| self.feed[row * nq + q] * e_to[q])
-                        .sum::<f64>();
+                let rc = self.resp.coefficients(row);
+                pred[i] = self.resp.modal(row, &ev.zb) + self.resp.feed_ext(row, e_to);
                 for m in 0..nn {
-                    sens[i * nn + m] = (0..ns)
-                        .map(|s| (rc[s] * ev.g1b[s * nn + m]).re)
+                    sens[i * nn + m] = rc
+                        .iter()
+                        .enumerate()
+                        .map(|(s, c)| (c * ev.g1b[s * nn + m]).re)
                         .sum::<f64>()
-                        + self.feed[row * nq + ne + m];
+                        + self.resp.feed[row * nq + ne + m];
                 }
             }
         }
@@ -779,7 +716,7 @@ struct EventScratch {
 }
 
 impl EventScratch {
-    fn new(ns: usize, nn: usize, _nq: usize) -> Self {
+    fn new(ns: usize, nn: usize) -> Self {
         EventScratch {
             za: vec![c64::new(0.0, 0.0); ns],
             zb: vec![c64::new(0.0, 0.0); ns],

@@ -317,16 +317,7 @@ impl Newmark {
         let mut rec_d = vec![vec![0.0; ns]; nn];
         let mut rec_v = vec![vec![0.0; ns]; nn];
         let mut rec_f = vec![vec![0.0; ns]; nn];
-        let record = |k: usize,
-                      d: &[f64],
-                      v: &[f64],
-                      a: &[f64],
-                      g: &[f64],
-                      rec_out: &mut Vec<Vec<f64>>,
-                      rec_in: &mut Vec<Vec<f64>>,
-                      rec_d: &mut Vec<Vec<f64>>,
-                      rec_v: &mut Vec<Vec<f64>>,
-                      rec_f: &mut Vec<Vec<f64>>| {
+        let mut record = |k: usize, d: &[f64], v: &[f64], a: &[f64], g: &[f64]| {
             let t = k as f64 * self.cfg.dt;
             for (o, (_, dof, q)) in self.outputs.iter().enumerate() {
                 rec_out[o][k] = match q {
@@ -344,18 +335,15 @@ impl Newmark {
                 rec_f[j][k] = g[j];
             }
         };
-        record(
-            0,
-            &d,
-            &v,
-            &a,
-            &g,
-            &mut rec_out,
-            &mut rec_in,
-            &mut rec_d,
-            &mut rec_v,
-            &mut rec_f,
-        );
+        record(0, &d, &v, &a, &g);
+        // Newmark's a_{n+1}, v_{n+1} from d_{n+1} and the previous step.
+        let kinematics =
+            |d: &[f64], dn: &[f64], vn: &[f64], an: &[f64], a: &mut [f64], v: &mut [f64]| {
+                for i in 0..d.len() {
+                    a[i] = c0 * (d[i] - dn[i]) - c0 * h * vn[i] - c3 * an[i];
+                    v[i] = vn[i] + h * ((1.0 - gamma) * an[i] + gamma * a[i]);
+                }
+            };
         let mut col = Mat::<f64>::zeros(n, 1);
         for step in 0..n_steps {
             for sub in 0..self.cfg.substeps {
@@ -368,10 +356,7 @@ impl Newmark {
                 // Predictor: d_{n+1} = d_n (a constant-displacement start).
                 let mut converged = false;
                 for it in 0..self.cfg.newton.max_iterations {
-                    for i in 0..n {
-                        a[i] = c0 * (d[i] - dn[i]) - c0 * h * vn[i] - c3 * an[i];
-                        v[i] = vn[i] + h * ((1.0 - gamma) * an[i] + gamma * a[i]);
-                    }
+                    kinematics(&d, &dn, &vn, &an, &mut a, &mut v);
                     self.linear_internal(&d, &v, &mut p_new, &mut tmp);
                     for (j, e) in elements.iter().enumerate() {
                         let c = e.coupling();
@@ -399,10 +384,9 @@ impl Newmark {
                             .col(0)
                             .try_as_col_major()
                             .expect("contiguous")
-                            .as_slice()
-                            .to_vec();
+                            .as_slice();
                         for j in 0..nn {
-                            wtx[j] = kappa[j] * coupling_dot(elements[j].coupling(), &xs);
+                            wtx[j] = kappa[j] * coupling_dot(elements[j].coupling(), xs);
                             for m in 0..nn {
                                 small[(j, m)] =
                                     f64::from(u8::from(j == m)) + kappa[j] * self.wty[(j, m)];
@@ -451,10 +435,7 @@ impl Newmark {
                     });
                 }
                 // Final kinematics and internal force at the converged d.
-                for i in 0..n {
-                    a[i] = c0 * (d[i] - dn[i]) - c0 * h * vn[i] - c3 * an[i];
-                    v[i] = vn[i] + h * ((1.0 - gamma) * an[i] + gamma * a[i]);
-                }
+                kinematics(&d, &dn, &vn, &an, &mut a, &mut v);
                 self.linear_internal(&d, &v, &mut p_old, &mut tmp);
                 for (j, e) in elements.iter().enumerate() {
                     let c = e.coupling();
@@ -465,18 +446,7 @@ impl Newmark {
                 }
                 stats.steps += 1;
             }
-            record(
-                step + 1,
-                &d,
-                &v,
-                &a,
-                &g,
-                &mut rec_out,
-                &mut rec_in,
-                &mut rec_d,
-                &mut rec_v,
-                &mut rec_f,
-            );
+            record(step + 1, &d, &v, &a, &g);
         }
         stats.seconds = start.elapsed().as_secs_f64();
         Ok(TimeHistory {

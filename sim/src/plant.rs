@@ -217,6 +217,91 @@ impl Plant {
     }
 }
 
+/// The port responses the integrators evaluate: rows `(port, order)` for the element
+/// displacements, the element velocities and the outputs, in that order; their modal
+/// coefficients `w_s c̃_{p,s} λ_s^order` (rows × states) and feedthrough of the port forces
+/// (rows × inputs, inputs = excitations then elements); and the loop sensitivities of the
+/// element rows to the element forces through the feedthrough alone.
+#[derive(Debug, Clone)]
+pub(crate) struct Responses {
+    /// Port of every force input: excitations, then elements.
+    pub ports: Vec<usize>,
+    pub rows: Vec<(usize, u32)>,
+    pub row_c: Vec<c64>,
+    pub feed: Vec<f64>,
+    pub sd0: Vec<f64>,
+    pub sv0: Vec<f64>,
+    ns: usize,
+    ne: usize,
+}
+
+impl Responses {
+    pub fn new(plant: &Plant) -> Self {
+        let sys = &plant.system;
+        let ns = sys.n_states();
+        let ne = plant.inputs.len();
+        let nn = plant.elements.len();
+        let nq = ne + nn;
+        let ports = plant.input_ports();
+        let mut rows: Vec<(usize, u32)> = plant.elements.iter().map(|e| (e.port, 0)).collect();
+        rows.extend(plant.elements.iter().map(|e| (e.port, 1)));
+        rows.extend(plant.outputs.iter().map(|o| (o.port, order(o.quantity))));
+        let mut row_c = Vec::with_capacity(rows.len() * ns);
+        let mut feed = Vec::with_capacity(rows.len() * nq);
+        for &(p, o) in &rows {
+            for s in 0..ns {
+                row_c.push(sys.output[(p, s)] * sys.poles[s].powi(o as i32) * sys.weights[s]);
+            }
+            feed.extend(ports.iter().map(|&q| plant.feedthrough(p, q, o)));
+        }
+        let sens = |first_row: usize| -> Vec<f64> {
+            (0..nn * nn)
+                .map(|im| feed[(first_row + im / nn) * nq + ne + im % nn])
+                .collect()
+        };
+        let (sd0, sv0) = (sens(0), sens(nn));
+        Responses {
+            ports,
+            rows,
+            row_c,
+            feed,
+            sd0,
+            sv0,
+            ns,
+            ne,
+        }
+    }
+
+    /// Modal coefficients of row `r`.
+    pub fn coefficients(&self, r: usize) -> &[c64] {
+        &self.row_c[r * self.ns..(r + 1) * self.ns]
+    }
+
+    /// `Σ_s Re(row_c z_s)`: the modal part of row `r` for states `z`.
+    pub fn modal(&self, r: usize, z: &[c64]) -> f64 {
+        self.coefficients(r)
+            .iter()
+            .zip(z)
+            .map(|(c, z)| (c * z).re)
+            .sum()
+    }
+
+    /// Feedthrough of the first `u.len()` inputs into row `r`.
+    pub fn feed(&self, r: usize, u: &[f64]) -> f64 {
+        let nq = self.ports.len();
+        self.feed[r * nq..r * nq + u.len()]
+            .iter()
+            .zip(u)
+            .map(|(f, u)| f * u)
+            .sum()
+    }
+
+    /// Feedthrough of the excitation inputs `e` into row `r`.
+    pub fn feed_ext(&self, r: usize, e: &[f64]) -> f64 {
+        self.feed(r, &e[..self.ne])
+    }
+}
+
 /// Response order of a quantity: 0 displacement, 1 velocity, 2 acceleration.
 pub(crate) fn order(q: Quantity) -> u32 {
     match q {

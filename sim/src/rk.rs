@@ -15,7 +15,7 @@
 use crate::feedback::{Feedback, NewtonConfig};
 use crate::foh::loop_error;
 use crate::history::{LoadCase, RunStats, Series, TimeHistory, add_residual_rates};
-use crate::plant::{Plant, order};
+use crate::plant::{Plant, Responses};
 use faer::c64;
 use nlsim_kernel::{Error, Result};
 
@@ -69,13 +69,7 @@ struct Rhs<'a> {
     plant: &'a Plant,
     elements: Vec<crate::plant::ElementPort>,
     case: &'a LoadCase,
-    ports: Vec<usize>,
-    /// `(port, order)` rows: element displacement, element velocity, outputs.
-    rows: Vec<(usize, u32)>,
-    row_c: Vec<c64>,
-    feed: Vec<f64>,
-    sd: Vec<f64>,
-    sv: Vec<f64>,
+    resp: Responses,
     fb: Feedback,
     f: Vec<f64>,
     u: Vec<f64>,
@@ -95,48 +89,16 @@ impl<'a> Rhs<'a> {
         case: &'a LoadCase,
         newton: NewtonConfig,
     ) -> Self {
-        let sys = &plant.system;
-        let ns = sys.n_states();
-        let ne = plant.inputs.len();
         let nn = plant.elements.len();
-        let ports = plant.input_ports();
-        let mut rows: Vec<(usize, u32)> = plant.elements.iter().map(|e| (e.port, 0)).collect();
-        rows.extend(plant.elements.iter().map(|e| (e.port, 1)));
-        rows.extend(plant.outputs.iter().map(|o| (o.port, order(o.quantity))));
-        let mut row_c = Vec::with_capacity(rows.len() * ns);
-        for &(p, o) in &rows {
-            for s in 0..ns {
-                row_c.push(sys.output[(p, s)] * sys.poles[s].powi(o as i32) * sys.weights[s]);
-            }
-        }
-        let nq = ne + nn;
-        let mut feed = vec![0.0; rows.len() * nq];
-        for (r, &(p, o)) in rows.iter().enumerate() {
-            for q in 0..nq {
-                feed[r * nq + q] = plant.feedthrough(p, ports[q], o);
-            }
-        }
-        let mut sd = vec![0.0; nn * nn];
-        let mut sv = vec![0.0; nn * nn];
-        for i in 0..nn {
-            for m in 0..nn {
-                sd[i * nn + m] = feed[i * nq + ne + m];
-                sv[i * nn + m] = feed[(nn + i) * nq + ne + m];
-            }
-        }
+        let resp = Responses::new(plant);
         Rhs {
             plant,
             elements,
             case,
-            ports,
-            rows,
-            row_c,
-            feed,
-            sd,
-            sv,
+            u: vec![0.0; resp.ports.len()],
+            resp,
             fb: Feedback::new(plant),
             f: vec![0.0; nn],
-            u: vec![0.0; nq],
             dp: vec![0.0; nn],
             vp: vec![0.0; nn],
             states: plant
@@ -151,29 +113,16 @@ impl<'a> Rhs<'a> {
         }
     }
 
-    fn row(&self, r: usize, z: &[c64]) -> f64 {
-        let ns = z.len();
-        let rc = &self.row_c[r * ns..(r + 1) * ns];
-        rc.iter().zip(z).map(|(c, z)| (c * z).re).sum()
-    }
-
     /// Solves the element loop at `(t, z)`; leaves the port forces in `self.u`.
     fn forces(&mut self, t: f64, z: &[c64]) -> Result<()> {
         let ne = self.plant.inputs.len();
         let nn = self.plant.elements.len();
-        let nq = ne + nn;
         for q in 0..ne {
             self.u[q] = self.case.forces[q].eval(t);
         }
         for i in 0..nn {
-            self.dp[i] = self.row(i, z)
-                + (0..ne)
-                    .map(|q| self.feed[i * nq + q] * self.u[q])
-                    .sum::<f64>();
-            self.vp[i] = self.row(nn + i, z)
-                + (0..ne)
-                    .map(|q| self.feed[(nn + i) * nq + q] * self.u[q])
-                    .sum::<f64>();
+            self.dp[i] = self.resp.modal(i, z) + self.resp.feed_ext(i, &self.u);
+            self.vp[i] = self.resp.modal(nn + i, z) + self.resp.feed_ext(nn + i, &self.u);
         }
         let it = self
             .fb
@@ -182,8 +131,8 @@ impl<'a> Rhs<'a> {
                 &self.states,
                 &self.dp,
                 &self.vp,
-                &self.sd,
-                &self.sv,
+                &self.resp.sd0,
+                &self.resp.sv0,
                 &mut self.f,
                 &self.newton,
             )
@@ -203,7 +152,7 @@ impl<'a> Rhs<'a> {
         let sys = &self.plant.system;
         for (s, d) in dz.iter_mut().enumerate() {
             let mut v = sys.poles[s] * z[s];
-            for (q, &p) in self.ports.iter().enumerate() {
+            for (q, &p) in self.resp.ports.iter().enumerate() {
                 v += sys.input[(s, p)] * self.u[q];
             }
             *d = v;
@@ -216,7 +165,6 @@ impl<'a> Rhs<'a> {
         self.forces(t, z)?;
         let ne = self.plant.inputs.len();
         let nn = self.plant.elements.len();
-        let nq = ne + nn;
         for q in 0..ne {
             rec.inputs[q][k] = self.u[q];
         }
@@ -232,12 +180,8 @@ impl<'a> Rhs<'a> {
         }
         for o in 0..self.plant.outputs.len() {
             let r = 2 * nn + o;
-            rec.out[o][k] = self.row(r, z)
-                + (0..nq)
-                    .map(|q| self.feed[r * nq + q] * self.u[q])
-                    .sum::<f64>();
+            rec.out[o][k] = self.resp.modal(r, z) + self.resp.feed(r, &self.u);
         }
-        let _ = &self.rows;
         Ok(())
     }
 }

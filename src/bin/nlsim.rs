@@ -210,14 +210,7 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             };
             if let Some(path) = out {
                 // Refuse an unknown format before the (possibly long) solve.
-                let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
-                if !["h5", "hdf5", "csv"].contains(&ext.to_ascii_lowercase().as_str()) {
-                    return Err(nlsim::Error::Usage(format!(
-                        "{}: unknown output format; name the file .h5 (HDF5, with mode shapes) \
-                         or .csv (the table)",
-                        path.display()
-                    )));
-                }
+                nlsim::output::Format::of(path, nlsim::modes::HINT)?;
             }
             let loaded = nlsim::load_model(model)?;
             // Symmetry, finiteness, massless DOFs; definiteness shows in the factorisation.
@@ -580,18 +573,8 @@ fn simulate(
         )));
     }
     if let Some(path) = out {
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .unwrap_or("")
-            .to_ascii_lowercase();
-        if !["h5", "hdf5", "csv"].contains(&ext.as_str()) {
-            return Err(usage(format!(
-                "{}: {}",
-                path.display(),
-                nlsim::simulate::FORMAT_HINT
-            )));
-        }
+        // Refuse an unknown format before the run.
+        nlsim::output::Format::of(path, nlsim::simulate::HINT)?;
     }
     let dt = 1.0 / o.rate;
     let say = |s: String| {

@@ -1,0 +1,62 @@
+//! What every result writer shares: the format chosen by the file extension, and atomic
+//! writes (a temporary file beside the destination, renamed into place when complete, so a
+//! failed or killed run leaves no partial file and an existing one untouched).
+
+use crate::error::{Error, Result};
+use std::path::{Path, PathBuf};
+
+/// Result file format, from the extension.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    /// `.csv`
+    Csv,
+    /// `.h5` or `.hdf5`
+    Hdf5,
+}
+
+impl Format {
+    /// The format of `path`, or a usage error naming it with `hint` (what each format holds).
+    pub fn of(path: &Path, hint: &str) -> Result<Self> {
+        match path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .as_deref()
+        {
+            Some("csv") => Ok(Format::Csv),
+            Some("h5" | "hdf5") => Ok(Format::Hdf5),
+            _ => Err(Error::Usage(format!(
+                "{}: unknown output format; name the file {hint}",
+                path.display()
+            ))),
+        }
+    }
+}
+
+/// Writes `path` through `write(temporary path, format)`, then renames it into place; the
+/// temporary file is removed on failure.
+pub fn write_atomically(
+    path: &Path,
+    hint: &str,
+    write: impl FnOnce(&Path, Format) -> Result<()>,
+) -> Result<()> {
+    let format = Format::of(path, hint)?;
+    let tmp = temp_path(path);
+    if let Err(e) = write(&tmp, format) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e);
+    }
+    std::fs::rename(&tmp, path).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+fn temp_path(path: &Path) -> PathBuf {
+    let mut name = path
+        .file_name()
+        .map(|n| n.to_os_string())
+        .unwrap_or_default();
+    name.push(format!(".tmp-{}", std::process::id()));
+    path.with_file_name(name)
+}
