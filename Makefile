@@ -18,3 +18,4 @@ bench:
 	cargo bench -p nlsim-bench --bench kernel -- --quick --noplot
 	cargo bench -p nlsim-bench --bench reduction -- --quick --noplot
 	cargo bench -p nlsim-bench --bench sim -- --quick --noplot
+	cargo bench -p nlsim-bench --bench hb -- --quick --noplot

@@ -13,6 +13,7 @@
 //! ```
 
 pub mod error;
+pub mod frf;
 pub mod modes;
 pub mod mtx;
 pub mod output;
@@ -22,6 +23,7 @@ pub mod summary;
 
 pub use error::{Error, Result};
 pub use nlsim_fixtures as fixtures;
+pub use nlsim_hb as hb;
 pub use nlsim_kernel as kernel;
 pub use nlsim_reduction as reduction;
 pub use nlsim_sim as sim;

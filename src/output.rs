@@ -3,6 +3,7 @@
 //! failed or killed run leaves no partial file and an existing one untouched).
 
 use crate::error::{Error, Result};
+use hdf5_metno as hdf5;
 use std::path::{Path, PathBuf};
 
 /// Result file format, from the extension.
@@ -59,4 +60,26 @@ fn temp_path(path: &Path) -> PathBuf {
         .unwrap_or_default();
     name.push(format!(".tmp-{}", std::process::id()));
     path.with_file_name(name)
+}
+
+/// SI unit of a response quantity, as written in file headers and attributes.
+pub fn unit(q: nlsim_kernel::Quantity) -> &'static str {
+    match q {
+        nlsim_kernel::Quantity::Displacement => "m",
+        nlsim_kernel::Quantity::Velocity => "m/s",
+        nlsim_kernel::Quantity::Acceleration => "m/s^2",
+    }
+}
+
+/// Writes a string attribute (non-ASCII-safe text; `?` if it cannot be stored).
+pub(crate) fn str_attr(loc: &hdf5::Location, name: &str, v: &str) -> hdf5::Result<()> {
+    let s: hdf5::types::VarLenUnicode = v.parse().unwrap_or_else(|_| "?".parse().expect("ascii"));
+    loc.new_attr::<hdf5::types::VarLenUnicode>()
+        .create(name)?
+        .write_scalar(&s)
+}
+
+/// Writes a scalar `f64` attribute.
+pub(crate) fn f64_attr(loc: &hdf5::Location, name: &str, v: f64) -> hdf5::Result<()> {
+    loc.new_attr::<f64>().create(name)?.write_scalar(&v)
 }

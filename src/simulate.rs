@@ -2,7 +2,7 @@
 //! The file layouts are documented in `docs/file-formats.md`.
 
 use crate::error::{Error, Result};
-use crate::output::Format;
+use crate::output::{Format, f64_attr, str_attr, unit};
 use faer::c64;
 use hdf5_metno as hdf5;
 use nlsim_kernel::Model;
@@ -173,14 +173,6 @@ fn read_force_file(path: &Path, rate_hz: f64) -> Result<Signal> {
 }
 
 /// Unit of a quantity.
-fn unit(q: nlsim_kernel::Quantity) -> &'static str {
-    match q {
-        nlsim_kernel::Quantity::Displacement => "m",
-        nlsim_kernel::Quantity::Velocity => "m/s",
-        nlsim_kernel::Quantity::Acceleration => "m/s^2",
-    }
-}
-
 /// What is stored with the data.
 #[derive(Debug, Clone)]
 pub struct RunInfo {
@@ -325,17 +317,6 @@ fn write_hdf5(path: &Path, model: &Model, h: &TimeHistory, info: &RunInfo) -> Re
         .map_err(err)?;
     file.flush().map_err(err)?;
     Ok(())
-}
-
-fn str_attr(loc: &hdf5::Location, name: &str, v: &str) -> hdf5::Result<()> {
-    let s: hdf5::types::VarLenUnicode = v.parse().unwrap_or_else(|_| "?".parse().expect("ascii"));
-    loc.new_attr::<hdf5::types::VarLenUnicode>()
-        .create(name)?
-        .write_scalar(&s)
-}
-
-fn f64_attr(loc: &hdf5::Location, name: &str, v: f64) -> hdf5::Result<()> {
-    loc.new_attr::<f64>().create(name)?.write_scalar(&v)
 }
 
 #[cfg(test)]

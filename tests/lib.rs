@@ -749,3 +749,165 @@ mod simulate {
         }
     }
 }
+
+mod frf_cli {
+    use super::*;
+    use faer::c64;
+    use hdf5_metno as hdf5;
+
+    #[test]
+    fn continuation_to_hdf5_matches_the_closed_form_and_plots() {
+        let d = scratch("frf");
+        let h5 = d.join("duffing.h5");
+        let (code, out, err) = nlsim(&[
+            "frf",
+            "duffing_fig3",
+            "--from",
+            "27",
+            "--to",
+            "36",
+            "--harmonics",
+            "1",
+            "--out",
+            h5.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{err}");
+        assert_eq!(out.matches("fold at").count(), 2, "{out}");
+        let file = hdf5::File::open(&h5).unwrap();
+        let hz: Vec<f64> = file.dataset("frequency").unwrap().read_raw().unwrap();
+        let stable: Vec<i8> = file.dataset("stable").unwrap().read_raw().unwrap();
+        let y: Vec<c64> = file
+            .dataset("sensors/mass/response")
+            .unwrap()
+            .read_raw()
+            .unwrap();
+        assert_eq!(y.len(), 2 * hz.len());
+        assert!(stable.contains(&0) && stable.contains(&1));
+        let (m, c, k, p) = nlsim::fixtures::DUFFING_FIG3;
+        for (i, f) in hz.iter().enumerate() {
+            let roots = nlsim::fixtures::duffing_first_order_amplitudes(
+                m,
+                c,
+                k,
+                p,
+                2.0,
+                2.0 * std::f64::consts::PI * f,
+            );
+            let a = y[2 * i + 1].norm();
+            // 1e-6: square-root sensitivity at the fold points (see hb/tests/duffing.rs).
+            assert!(
+                roots.iter().any(|r| (r - a).abs() < 1e-6 * r),
+                "{f} Hz: {a} vs {roots:?}"
+            );
+        }
+        let svg = std::fs::read_to_string(d.join("duffing.svg")).unwrap();
+        assert!(svg.contains("<svg") && svg.contains("unstable"));
+        let left: Vec<_> = std::fs::read_dir(&d).unwrap().collect();
+        assert_eq!(left.len(), 2, "no temporary files");
+    }
+
+    #[test]
+    fn stepped_sine_to_csv_shows_one_jump() {
+        let d = scratch("frf-csv");
+        let csv = d.join("up.csv");
+        let (code, out, err) = nlsim(&[
+            "frf",
+            "duffing_fig3",
+            "--from",
+            "27",
+            "--to",
+            "36",
+            "--mode",
+            "step-up",
+            "--points",
+            "120",
+            "--harmonics",
+            "3",
+            "--out",
+            csv.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{err}");
+        assert_eq!(out.matches("jump at").count(), 1, "{out}");
+        let text = std::fs::read_to_string(&csv).unwrap();
+        let rows: Vec<&str> = text.lines().filter(|l| !l.starts_with('#')).collect();
+        assert_eq!(rows.len(), 121);
+        assert!(rows[0].starts_with("frequency_hz,level,stable,kind,"));
+        assert_eq!(rows[0].split(',').count(), 5 + 2 * 4);
+        let jumps = rows[1..]
+            .iter()
+            .filter(|r| r.split(',').nth(3) == Some("3"))
+            .count();
+        assert_eq!(jumps, 1);
+    }
+
+    #[test]
+    fn frf_errors_print_one_line() {
+        let cases: &[(&[&str], i32, &str)] = &[
+            (
+                &["frf", "duffing_fig3", "--from", "0", "--to", "30"],
+                2,
+                "--from",
+            ),
+            (
+                &["frf", "duffing_fig3", "--from", "30", "--to", "30"],
+                2,
+                "equal",
+            ),
+            (
+                &[
+                    "frf",
+                    "duffing_fig3",
+                    "--from",
+                    "20",
+                    "--to",
+                    "30",
+                    "--out",
+                    "x.txt",
+                ],
+                2,
+                "unknown output format",
+            ),
+            (
+                &[
+                    "frf",
+                    "duffing_fig3",
+                    "--from",
+                    "20",
+                    "--to",
+                    "30",
+                    "--harmonics",
+                    "2",
+                    "--subharmonic",
+                    "3",
+                ],
+                2,
+                "above H = 2",
+            ),
+            (
+                &[
+                    "frf",
+                    "duffing_fig3",
+                    "--from",
+                    "20",
+                    "--to",
+                    "30",
+                    "--set",
+                    "spring.k9=1",
+                ],
+                1,
+                "k9",
+            ),
+            (
+                &["frf", "no_such_model", "--from", "20", "--to", "30"],
+                1,
+                "no_such_model",
+            ),
+        ];
+        for (args, want, text) in cases {
+            let (code, _, err) = nlsim(args);
+            assert_eq!(code, *want, "{args:?}: {err}");
+            assert_eq!(err.lines().count(), 1, "{args:?}: {err}");
+            assert!(err.contains(text), "{args:?}: {err}");
+        }
+    }
+}

@@ -183,6 +183,46 @@ impl ReducedModel {
         self.modes.len()
     }
 
+    /// The modal damping matrix `C̃ = Φᵀ V Φ` of the retained mass-normalised modes (modes ×
+    /// modes; 1/s), so that each mode obeys `η̈ + C̃ η̇ + Ω² η = Φ_Pᵀ f` (thesis eq. 9 in modal
+    /// coordinates). Diagonal for proportional damping: `c_r = α + β ω_r²` (Rayleigh) or
+    /// `2 ζ_r ω_r` (modal); a damping matrix `V` is projected and symmetrised.
+    pub fn modal_damping_matrix(&self) -> Mat<f64> {
+        let m = self.n_modes();
+        let lambda = &self.modes.eigenvalues;
+        let diag = |c: &dyn Fn(usize, f64) -> f64| {
+            Mat::from_fn(m, m, |r, s| {
+                if r == s {
+                    c(r, lambda[r].max(0.0))
+                } else {
+                    0.0
+                }
+            })
+        };
+        match &self.damping {
+            Damping::None => Mat::zeros(m, m),
+            Damping::Rayleigh { alpha, beta } => diag(&|_, l| alpha + beta * l),
+            Damping::Modal(md) => diag(&|r, l| {
+                let w = l.sqrt();
+                2.0 * md.zeta(r, w / (2.0 * std::f64::consts::PI)) * w
+            }),
+            Damping::Matrix(v) => {
+                let phi = &self.modes.vectors;
+                let mut vphi = Mat::<f64>::zeros(phi.nrows(), m);
+                faer::sparse::linalg::matmul::sparse_dense_matmul(
+                    vphi.as_mut(),
+                    faer::Accum::Replace,
+                    v.as_faer(),
+                    phi.as_ref(),
+                    1.0,
+                    faer::get_global_parallelism(),
+                );
+                let vt = phi.transpose() * &vphi;
+                Mat::from_fn(m, m, |r, s| 0.5 * (vt[(r, s)] + vt[(s, r)]))
+            }
+        }
+    }
+
     /// Modal coordinates `η = Φᵀ M q` of a physical vector `q` (the projection onto the
     /// retained mass-normalised modes); `mass` is the model's `M`.
     pub fn modal_coordinates(&self, mass: &nlsim_kernel::SparseSym, q: &[f64]) -> Result<Vec<f64>> {

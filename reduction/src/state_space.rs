@@ -86,9 +86,9 @@ impl ModalSystem {
             .collect();
         let phi = &reduced.participation;
         let accel_feedthrough = phi * phi.transpose();
-        let (poles, weights, input, output, initial) = if let Damping::Matrix(v) = &reduced.damping
+        let (poles, weights, input, output, initial) = if let Damping::Matrix(_) = &reduced.damping
         {
-            Self::coupled(reduced, v, &lambda)?
+            Self::coupled(reduced, &lambda)?
         } else {
             let mut poles = Vec::with_capacity(m);
             let mut weights = Vec::with_capacity(m);
@@ -178,7 +178,6 @@ impl ModalSystem {
     #[allow(clippy::type_complexity)]
     fn coupled(
         reduced: &ReducedModel,
-        v: &nlsim_kernel::SparseSym,
         lambda: &[f64],
     ) -> Result<(
         Vec<c64>,
@@ -199,18 +198,8 @@ impl ModalSystem {
                 ),
             ));
         }
-        let phi = &reduced.modes.vectors;
         // Ṽ = Φᵀ V Φ
-        let mut vphi = Mat::<f64>::zeros(phi.nrows(), m);
-        faer::sparse::linalg::matmul::sparse_dense_matmul(
-            vphi.as_mut(),
-            faer::Accum::Replace,
-            v.as_faer(),
-            phi.as_ref(),
-            1.0,
-            faer::get_global_parallelism(),
-        );
-        let vt = phi.transpose() * &vphi;
+        let vt = reduced.modal_damping_matrix();
         let omega: Vec<f64> = lambda.iter().map(|l| l.sqrt()).collect();
         // A' = [[0, Ω], [−Ω, −Ṽ]] on the state [Ω q; q̇], scaled to unit norm for faer.
         let mut a = Mat::<f64>::zeros(2 * m, 2 * m);
@@ -218,7 +207,7 @@ impl ModalSystem {
             a[(r, m + r)] = omega[r];
             a[(m + r, r)] = -omega[r];
             for c in 0..m {
-                a[(m + r, m + c)] = -0.5 * (vt[(r, c)] + vt[(c, r)]);
+                a[(m + r, m + c)] = -vt[(r, c)];
             }
         }
         let s = a.norm_max();

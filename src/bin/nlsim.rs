@@ -116,12 +116,70 @@ enum Command {
         #[arg(long)]
         set: Vec<String>,
     },
+    /// Multi-harmonic nonlinear FRF by harmonic balance (condensed on the nonlinear DOFs):
+    /// continuation through folds with Hill stability, or a stepped sine up or down as a test
+    /// would run it; writes every harmonic at every sensor and an SVG plot.
+    Frf {
+        /// Model file (.toml) or built-in model, e.g. `duffing_fig3`.
+        model: String,
+        /// Start frequency (Hz).
+        #[arg(long)]
+        from: f64,
+        /// End frequency (Hz).
+        #[arg(long)]
+        to: f64,
+        /// Harmonics H of the base frequency Ω/ν kept.
+        #[arg(long, default_value_t = 7)]
+        harmonics: usize,
+        /// Sub-harmonic order ν: base frequency Ω/ν (1: none).
+        #[arg(long, default_value_t = 1)]
+        subharmonic: usize,
+        /// Force amplitude (N) at the fundamental on every excitation point (default: the
+        /// model's nominal amplitudes).
+        #[arg(long)]
+        force: Option<f64>,
+        /// Continuation (through folds, unstable parts included) or a stepped sine.
+        #[arg(long, value_enum, default_value = "continuation")]
+        mode: FrfMode,
+        /// Frequencies of a stepped sine (evenly spaced).
+        #[arg(long, default_value_t = 400)]
+        points: usize,
+        /// Retained modes of the reduced model.
+        #[arg(long, default_value_t = 20)]
+        modes: usize,
+        /// Leave out the residual flexibility of the truncated modes.
+        #[arg(long)]
+        no_residual: bool,
+        /// Skip Hill stability (faster; no stable/unstable distinction).
+        #[arg(long)]
+        no_stability: bool,
+        /// Output file: .h5 (HDF5) or .csv.
+        #[arg(long)]
+        out: Option<std::path::PathBuf>,
+        /// SVG plot of the amplitude against frequency (default: beside --out, .svg).
+        #[arg(long)]
+        plot: Option<std::path::PathBuf>,
+        /// Element parameter overrides, e.g. `--set spring.k3=2e15` (repeatable).
+        #[arg(long)]
+        set: Vec<String>,
+    },
     /// Run the pipeline on a built-in model and print a readable summary.
     Demo {
         /// Model to run on (default: the ECL benchmark beam).
         #[arg(long, default_value = "ecl_beam")]
         model: String,
     },
+}
+
+/// How `nlsim frf` sweeps.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum FrfMode {
+    /// Pseudo-arclength continuation: every branch through the folds, stability per point.
+    Continuation,
+    /// Stepped sine upwards, each point from the last (jumps down past the upper fold).
+    StepUp,
+    /// Stepped sine downwards (jumps up past the lower fold).
+    StepDown,
 }
 
 /// Time integration methods of `nlsim simulate`.
@@ -293,6 +351,37 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             };
             simulate(model, &opts, out.as_deref(), cli.quiet)
         }
+        Command::Frf {
+            model,
+            from,
+            to,
+            harmonics,
+            subharmonic,
+            force,
+            mode,
+            points,
+            modes,
+            no_residual,
+            no_stability,
+            out,
+            plot,
+            set,
+        } => {
+            let o = FrfOptions {
+                from_hz: *from,
+                to_hz: *to,
+                harmonics: *harmonics,
+                subharmonic: *subharmonic,
+                force: *force,
+                mode: *mode,
+                points: *points,
+                modes: *modes,
+                residual: !no_residual,
+                stability: !no_stability,
+                set,
+            };
+            frf(model, &o, out.as_deref(), plot.as_deref(), cli.quiet)
+        }
         Command::Demo { model } => demo(model, cli.quiet),
     }
 }
@@ -414,6 +503,89 @@ fn demo_time_response(
     Ok(())
 }
 
+/// Stage 4 of the demo: multi-harmonic FRFs by harmonic balance around the first resonance:
+/// continuation with stability, and stepped sines up and down that show the jump.
+fn demo_frf(
+    model: &nlsim::kernel::Model,
+    reduced: &nlsim::reduction::ReducedModel,
+    say: &dyn Fn(&str),
+) -> nlsim::Result<()> {
+    use nlsim::hb::{ContinuationConfig, HarmonicSet, HbConfig, HbSystem, PointKind};
+    use std::f64::consts::PI;
+    if model.elements().is_empty() || model.excitation().is_empty() || model.sensors().is_empty() {
+        say(
+            "[4/8] multi-harmonic FRFs: the model needs an element, an excitation and a sensor; skipped",
+        );
+        return Ok(());
+    }
+    let sys = HbSystem::from_model(model, reduced, HarmonicSet::new(7, 1)?, HbConfig::default())?;
+    let f1 = reduced.modes.frequencies_hz()[0];
+    let (lo, hi) = (0.85 * f1, 1.5 * f1);
+    let t = Instant::now();
+    let cont = nlsim::hb::continuation(
+        &sys,
+        &ContinuationConfig::frequency(lo, hi),
+        None,
+        &mut |_| {},
+    )?;
+    let t_cont = t.elapsed().as_secs_f64();
+    let n = 200;
+    let grid = |a: f64, b: f64| -> Vec<f64> {
+        (0..n)
+            .map(|i| 2.0 * PI * (a + (b - a) * i as f64 / (n - 1) as f64))
+            .collect()
+    };
+    let t = Instant::now();
+    let up = nlsim::hb::stepped_sine(&sys, &grid(lo, hi), 1.0, false, &mut |_| {})?;
+    let down = nlsim::hb::stepped_sine(&sys, &grid(hi, lo), 1.0, false, &mut |_| {})?;
+    let t_step = t.elapsed().as_secs_f64();
+    let hz = |p: &nlsim::hb::SolutionPoint| p.omega / (2.0 * PI);
+    let list = |kind: PointKind, b: &nlsim::hb::Branch| -> String {
+        let v: Vec<String> = b
+            .points
+            .iter()
+            .filter(|p| p.kind == kind)
+            .map(|p| format!("{:.3} Hz", hz(p)))
+            .collect();
+        if v.is_empty() {
+            "none".into()
+        } else {
+            v.join(", ")
+        }
+    };
+    say(&format!(
+        "[4/8] multi-harmonic FRFs {lo:.2}–{hi:.2} Hz, H = 7 ({} unknowns): continuation {} points \
+         in {:.2} s with Hill stability ({} unstable), folds at {}; stepped sines of {n} points \
+         in {:.3} s: up jumps at {}, down at {}",
+        sys.n_unknowns(),
+        cont.points.len(),
+        t_cont,
+        cont.points
+            .iter()
+            .filter(|p| p.stable() == Some(false))
+            .count(),
+        list(PointKind::Fold, &cont),
+        t_step,
+        list(PointKind::Jump, &up),
+        list(PointKind::Jump, &down)
+    ));
+    let dir = std::path::Path::new("nlsim-report");
+    std::fs::create_dir_all(dir).map_err(|source| nlsim::Error::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let plot = dir.join(format!("frf_{}.svg", model.name()));
+    nlsim::frf::plot_svg(
+        &plot,
+        &sys,
+        &cont,
+        0,
+        &format!("{}: harmonic balance, H = 7", model.name()),
+    )?;
+    say(&format!("  plot: {}", plot.display()));
+    Ok(())
+}
+
 /// The thesis pipeline, stage by stage; stages not built yet say so.
 fn demo(model: &str, quiet: bool) -> nlsim::Result<()> {
     let say = |s: &str| {
@@ -488,11 +660,9 @@ fn demo(model: &str, quiet: bool) -> nlsim::Result<()> {
     say("");
     demo_time_response(&loaded.model, &reduced, &system, &say)?;
     say("");
+    demo_frf(&loaded.model, &reduced, &say)?;
+    say("");
     let stages = [
-        (
-            "[4/8] multi-harmonic FRFs with the jump",
-            "harmonic balance (issue 5)",
-        ),
         (
             "[5/8] pre-test planning (Fisher information)",
             "calibration",
@@ -546,6 +716,260 @@ fn progress_line(quiet: bool, what: &'static str) -> impl FnMut(usize, usize) {
     }
 }
 
+/// Options of `nlsim frf`.
+struct FrfOptions<'a> {
+    from_hz: f64,
+    to_hz: f64,
+    harmonics: usize,
+    subharmonic: usize,
+    force: Option<f64>,
+    mode: FrfMode,
+    points: usize,
+    modes: usize,
+    residual: bool,
+    stability: bool,
+    set: &'a [String],
+}
+
+/// Applies `--set element.param=value` overrides.
+fn apply_sets(model: &mut nlsim::kernel::Model, sets: &[String]) -> nlsim::Result<()> {
+    for s in sets {
+        let (name, v) = s.split_once('=').ok_or_else(|| {
+            nlsim::Error::Usage(format!("--set '{s}': expected element.param=value"))
+        })?;
+        let v: f64 = v
+            .trim()
+            .parse()
+            .map_err(|_| nlsim::Error::Usage(format!("--set '{s}': '{v}' is not a number")))?;
+        model.set_param_by_name(name.trim(), v)?;
+    }
+    Ok(())
+}
+
+fn frf(
+    spec: &str,
+    o: &FrfOptions<'_>,
+    out: Option<&std::path::Path>,
+    plot: Option<&std::path::Path>,
+    quiet: bool,
+) -> nlsim::Result<()> {
+    use nlsim::hb::{ContinuationConfig, HarmonicSet, HbConfig, HbSystem, PointKind};
+    use std::f64::consts::PI;
+    let usage = |m: String| nlsim::Error::Usage(m);
+    for (what, v) in [("--from", o.from_hz), ("--to", o.to_hz)] {
+        if !(v > 0.0 && v.is_finite()) {
+            return Err(usage(format!(
+                "{what} {v} must be a positive frequency in Hz"
+            )));
+        }
+    }
+    if o.from_hz == o.to_hz {
+        return Err(usage("--from and --to are equal".into()));
+    }
+    if o.points < 2 {
+        return Err(usage("--points must be at least 2".into()));
+    }
+    if let Some(f) = o.force
+        && !f.is_finite()
+    {
+        return Err(usage(format!("--force {f} is not a finite number")));
+    }
+    if let Some(path) = out {
+        nlsim::output::Format::of(path, nlsim::frf::HINT)?;
+    }
+    let plot_path = plot
+        .map(|p| p.to_path_buf())
+        .or_else(|| out.map(|p| p.with_extension("svg")));
+    if let Some(p) = &plot_path
+        && p.extension().and_then(|e| e.to_str()) != Some("svg")
+    {
+        return Err(usage(format!(
+            "--plot {}: name the plot FILE.svg",
+            p.display()
+        )));
+    }
+    let set = HarmonicSet::new(o.harmonics, o.subharmonic)
+        .map_err(|e| usage(format!("--harmonics/--subharmonic: {e}")))?;
+    let say = |s: String| {
+        if !quiet {
+            println!("{s}");
+        }
+    };
+    let loaded = nlsim::load_model(spec)?;
+    let mut model = loaded.model;
+    model.validate(&ValidationConfig {
+        check_definiteness: false,
+        ..Default::default()
+    })?;
+    apply_sets(&mut model, o.set)?;
+    if model.elements().is_empty() {
+        return Err(usage(format!(
+            "model '{spec}' has no nonlinear element: its FRF is linear (see `nlsim modes`)"
+        )));
+    }
+    if model.excitation().is_empty() {
+        return Err(usage(format!(
+            "model '{spec}' has no excitation point to force"
+        )));
+    }
+    if model.sensors().is_empty() {
+        return Err(usage(format!("model '{spec}' has no sensor to report")));
+    }
+    let n_modes = o.modes.min(model.n_dofs());
+    if n_modes == 0 {
+        return Err(usage("--modes must be at least 1".into()));
+    }
+    let t0 = Instant::now();
+    let reduced = nlsim::reduction::reduce(
+        &model,
+        &nlsim::reduction::ReductionConfig {
+            eigen: EigenConfig {
+                selection: ModeSelection::Lowest(n_modes),
+                ..EigenConfig::default()
+            },
+            residual_flexibility: o.residual,
+            ..Default::default()
+        },
+    )?;
+    let red_s = t0.elapsed().as_secs_f64();
+    let mut sys = HbSystem::from_model(&model, &reduced, set, HbConfig::default())?;
+    if let Some(f) = o.force {
+        for t in &mut sys.forcing.terms {
+            t.amplitude = nlsim::hb::harmonics::c64::new(f, 0.0);
+        }
+    }
+    let mode_name = match o.mode {
+        FrfMode::Continuation => "continuation",
+        FrfMode::StepUp => "step-up",
+        FrfMode::StepDown => "step-down",
+    };
+    say(format!(
+        "frf {}: {mode_name} {:.4}–{:.4} Hz, H = {} harmonics of Ω/{}, {} modes{} (reduced in          {red_s:.2} s), {} unknowns, AFT samples {:?}",
+        model.name(),
+        o.from_hz,
+        o.to_hz,
+        set.h,
+        set.nu,
+        n_modes,
+        if o.residual {
+            " + residual flexibility"
+        } else {
+            ""
+        },
+        sys.n_unknowns(),
+        sys.aft_samples()
+    ));
+    for x in &sys.forcing.terms {
+        say(format!(
+            "  force {:<10} {:.4e} N at harmonic {} (Ω)",
+            sys.inputs[x.input].0,
+            x.amplitude.norm(),
+            nlsim::frf::harmonic_label(x.harmonic, set.nu)
+        ));
+    }
+    let show = !quiet && std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let t1 = Instant::now();
+    let mut count = 0usize;
+    let mut progress = |p: &nlsim::hb::SolutionPoint| {
+        count += 1;
+        if show {
+            eprint!(
+                "\r  {count} points, at {:.4} Hz, {:.1} s ",
+                p.omega / (2.0 * PI),
+                t1.elapsed().as_secs_f64()
+            );
+        }
+    };
+    let branch = match o.mode {
+        FrfMode::Continuation => {
+            let mut cfg = ContinuationConfig::frequency(o.from_hz, o.to_hz);
+            cfg.stability = o.stability;
+            nlsim::hb::continuation(&sys, &cfg, None, &mut progress)?
+        }
+        FrfMode::StepUp | FrfMode::StepDown => {
+            let (a, b) = if o.mode == FrfMode::StepUp {
+                (o.from_hz.min(o.to_hz), o.from_hz.max(o.to_hz))
+            } else {
+                (o.from_hz.max(o.to_hz), o.from_hz.min(o.to_hz))
+            };
+            let omegas: Vec<f64> = (0..o.points)
+                .map(|i| 2.0 * PI * (a + (b - a) * i as f64 / (o.points - 1) as f64))
+                .collect();
+            nlsim::hb::stepped_sine(&sys, &omegas, 1.0, o.stability, &mut progress)?
+        }
+    };
+    if show {
+        eprintln!();
+    }
+    let secs = t1.elapsed().as_secs_f64();
+    let n = branch.points.len();
+    let unstable = branch
+        .points
+        .iter()
+        .filter(|p| p.stable() == Some(false))
+        .count();
+    say(format!(
+        "  {n} points in {secs:.3} s ({:.3} ms per point){}; {unstable} unstable",
+        1e3 * secs / n as f64,
+        if branch.complete {
+            ""
+        } else {
+            " — stopped at the point limit before the end"
+        }
+    ));
+    for p in branch
+        .points
+        .iter()
+        .filter(|p| matches!(p.kind, PointKind::Fold | PointKind::Jump))
+    {
+        say(format!(
+            "  {} at {:.5} Hz",
+            if p.kind == PointKind::Fold {
+                "fold"
+            } else {
+                "jump"
+            },
+            p.omega / (2.0 * PI)
+        ));
+    }
+    for bp in &branch.branch_points {
+        say(format!(
+            "  branch point near {:.5} Hz",
+            bp.omega / (2.0 * PI)
+        ));
+    }
+    let y = nlsim::frf::responses(&sys, &branch);
+    for (s, sen) in sys.sensors.iter().enumerate() {
+        let (i, a) = (0..n)
+            .map(|i| (i, y[i][(s, set.nu)].norm()))
+            .fold((0, 0.0f64), |m, v| if v.1 > m.1 { v } else { m });
+        say(format!(
+            "  {:<12} peak |{}| at the fundamental {a:.5e} {} at {:.5} Hz",
+            sen.name,
+            sen.quantity.as_str(),
+            nlsim::output::unit(sen.quantity),
+            branch.points[i].omega / (2.0 * PI)
+        ));
+    }
+    let info = nlsim::frf::FrfInfo {
+        model_spec: spec.to_string(),
+        mode: mode_name.to_string(),
+        modes: n_modes,
+        residual: o.residual,
+        seconds: secs,
+    };
+    if let Some(path) = out {
+        nlsim::frf::write_frf(path, &sys, &branch, &info)?;
+        say(format!("  written to {}", path.display()));
+    }
+    if let Some(p) = plot_path {
+        let title = format!("{} — {mode_name}, H = {}", model.name(), set.h);
+        nlsim::frf::plot_svg(&p, &sys, &branch, 0, &title)?;
+        say(format!("  plot {}", p.display()));
+    }
+    Ok(())
+}
+
 fn simulate(
     spec: &str,
     o: &SimulateOptions<'_>,
@@ -588,16 +1012,7 @@ fn simulate(
         check_definiteness: false,
         ..Default::default()
     })?;
-    for s in o.set {
-        let (name, v) = s
-            .split_once('=')
-            .ok_or_else(|| usage(format!("--set '{s}': expected element.param=value")))?;
-        let v: f64 = v
-            .trim()
-            .parse()
-            .map_err(|_| usage(format!("--set '{s}': '{v}' is not a number")))?;
-        model.set_param_by_name(name.trim(), v)?;
-    }
+    apply_sets(&mut model, o.set)?;
     if model.excitation().is_empty() && !o.excitation.is_empty() {
         return Err(usage(format!(
             "model '{spec}' has no excitation points to drive"

@@ -1,0 +1,645 @@
+//! Following solution branches (thesis §3.2, Fig. 3).
+//!
+//! - [`continuation`]: pseudo-arclength continuation in the frequency `Ω` or the force level
+//!   `λ`, in scaled variables (`x` by the largest amplitude met so far, the parameter by the
+//!   span of the sweep). Predictor along the tangent of `[R_x R_p]`, corrector by Newton on
+//!   `R = 0` plus the arclength condition, steps grown after easy corrections and halved after
+//!   hard or failed ones or a sharp turn. Folds are where the tangent's parameter component
+//!   changes sign (located by the Illinois method along the arc); simple branch points are
+//!   where `det [R_x R_p; tᵀ]` changes sign.
+//! - [`stepped_sine`]: what a test does: frequency after frequency, each solved from the last
+//!   solution, so that past a fold the response jumps to the other branch.
+
+use crate::dense::{Lu, norm_inf};
+use crate::stability::Stability;
+use crate::system::HbSystem;
+use faer::Mat;
+use nlsim_kernel::{Error, Result};
+use std::f64::consts::PI;
+
+/// The continuation parameter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Parameter {
+    /// The fundamental frequency `Ω` (rad/s), at a fixed force level.
+    Frequency,
+    /// The force level `λ` (a factor on the forcing), at a fixed frequency.
+    ForceLevel,
+}
+
+/// What a solution point is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PointKind {
+    /// An ordinary point.
+    Regular,
+    /// A fold (turning point): the parameter is extremal along the branch.
+    Fold,
+    /// The end of the range.
+    End,
+    /// A stepped-sine point where the response left the branch it was on (past a fold):
+    /// the jump a test sees.
+    Jump,
+}
+
+/// A converged periodic solution.
+#[derive(Debug, Clone)]
+pub struct SolutionPoint {
+    /// Fundamental frequency `Ω` (rad/s).
+    pub omega: f64,
+    /// Force level `λ`.
+    pub scale: f64,
+    /// Condensed unknowns (element coefficients, real layout).
+    pub x: Vec<f64>,
+    /// Hill stability, when computed.
+    pub stability: Option<Stability>,
+    /// Fold, end or regular.
+    pub kind: PointKind,
+    /// Newton (corrector) iterations it took.
+    pub iterations: usize,
+}
+
+impl SolutionPoint {
+    /// `Some(true)` when stable, `None` when stability was not computed.
+    pub fn stable(&self) -> Option<bool> {
+        self.stability.as_ref().map(|s| s.stable)
+    }
+}
+
+/// A simple branch point between two solution points.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BranchPoint {
+    /// Indices of the points around it.
+    pub between: (usize, usize),
+    /// Interpolated frequency (rad/s).
+    pub omega: f64,
+    /// Interpolated force level.
+    pub scale: f64,
+}
+
+/// A followed branch.
+#[derive(Debug, Clone)]
+pub struct Branch {
+    /// The continuation parameter (frequency for stepped sines).
+    pub parameter: Parameter,
+    /// The points in order along the branch.
+    pub points: Vec<SolutionPoint>,
+    /// Simple branch points detected.
+    pub branch_points: Vec<BranchPoint>,
+    /// False when the run stopped at the point limit before the end of the range.
+    pub complete: bool,
+}
+
+impl Branch {
+    /// Indices of the fold points.
+    pub fn folds(&self) -> Vec<usize> {
+        self.points
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| p.kind == PointKind::Fold)
+            .map(|(i, _)| i)
+            .collect()
+    }
+}
+
+/// Settings of [`continuation`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct ContinuationConfig {
+    /// The parameter followed.
+    pub parameter: Parameter,
+    /// Start of the range (rad/s or level).
+    pub from: f64,
+    /// End of the range (rad/s or level); may be below `from` (downward).
+    pub to: f64,
+    /// The other quantity, held fixed: the force level for a frequency sweep, the frequency
+    /// (rad/s) for a force-level sweep.
+    pub fixed: f64,
+    /// First step, in scaled arclength (the parameter span is 1).
+    pub ds: f64,
+    /// Smallest step before giving up.
+    pub ds_min: f64,
+    /// Largest step.
+    pub ds_max: f64,
+    /// Most points (the branch is returned incomplete beyond).
+    pub max_points: usize,
+    /// Compute Hill stability at every point.
+    pub stability: bool,
+    /// Corrector iterations before the step is cut.
+    pub max_corrector: usize,
+}
+
+impl ContinuationConfig {
+    /// A frequency sweep from `from_hz` to `to_hz` at force level 1, with stability.
+    pub fn frequency(from_hz: f64, to_hz: f64) -> Self {
+        Self {
+            parameter: Parameter::Frequency,
+            from: 2.0 * PI * from_hz,
+            to: 2.0 * PI * to_hz,
+            fixed: 1.0,
+            ds: 5e-3,
+            ds_min: 1e-9,
+            ds_max: 0.02,
+            max_points: 5000,
+            stability: true,
+            max_corrector: 12,
+        }
+    }
+}
+
+/// A point in scaled variables with its tangent.
+struct State {
+    y: Vec<f64>,
+    t: Vec<f64>,
+    det_sign: f64,
+    iterations: usize,
+}
+
+struct Tracker<'a> {
+    sys: &'a HbSystem,
+    cfg: &'a ContinuationConfig,
+    xs: f64,
+    ps: f64,
+}
+
+impl Tracker<'_> {
+    fn omega_scale(&self, p: f64) -> (f64, f64) {
+        match self.cfg.parameter {
+            Parameter::Frequency => (p, self.cfg.fixed),
+            Parameter::ForceLevel => (self.cfg.fixed, p),
+        }
+    }
+
+    fn unscale(&self, y: &[f64]) -> (Vec<f64>, f64) {
+        let n = y.len() - 1;
+        (
+            y[..n].iter().map(|v| v * self.xs).collect(),
+            self.cfg.from + y[n] * self.ps,
+        )
+    }
+
+    /// Scaled residual, Jacobian `[R_x̂ | R_p̂]` (n × n+1).
+    fn eval(&self, y: &[f64]) -> (Vec<f64>, Mat<f64>) {
+        let sys = self.sys;
+        let n = y.len() - 1;
+        let (x, p) = self.unscale(y);
+        let (omega, scale) = self.omega_scale(p);
+        let rec = sys.receptances(omega, false);
+        let ev = sys.evaluate(&rec, &x, omega, scale, true);
+        let rp: Vec<f64> = match self.cfg.parameter {
+            Parameter::Frequency => sys.dr_domega(&x, omega, scale, &ev, &rec),
+            Parameter::ForceLevel => rec.b.iter().map(|b| -b).collect(),
+        };
+        let j = ev.jacobian.as_ref().expect("asked for");
+        let mut a = Mat::<f64>::zeros(n, n + 1);
+        for i in 0..n {
+            for c in 0..n {
+                a[(i, c)] = j[(i, c)];
+            }
+            a[(i, n)] = rp[i] * self.ps / self.xs;
+        }
+        (ev.r.iter().map(|r| r / self.xs).collect(), a)
+    }
+
+    fn where_(&self, y: &[f64]) -> String {
+        let (_, p) = self.unscale(y);
+        let (omega, scale) = self.omega_scale(p);
+        format!("{:.6} Hz, level {scale:.4}", omega / (2.0 * PI))
+    }
+
+    /// Tangent at a converged point, oriented along `prev` (or increasing parameter
+    /// towards `to` without one), and the sign of `det [J; tᵀ]`.
+    fn tangent(&self, a: &Mat<f64>, prev: Option<&[f64]>) -> Result<(Vec<f64>, f64)> {
+        let n = a.nrows();
+        let guide: Vec<f64> = match prev {
+            Some(t) => t.to_vec(),
+            None => {
+                let mut g = vec![0.0; n + 1];
+                g[n] = 1.0;
+                g
+            }
+        };
+        let mut aug = Mat::<f64>::zeros(n + 1, n + 1);
+        for i in 0..n {
+            for c in 0..=n {
+                aug[(i, c)] = a[(i, c)];
+            }
+        }
+        for c in 0..=n {
+            aug[(n, c)] = guide[c];
+        }
+        let lu = Lu::new(&aug, &|| "continuation tangent".to_string())?;
+        let mut rhs = vec![0.0; n + 1];
+        rhs[n] = 1.0;
+        let z = lu.solve(&rhs);
+        let norm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let t: Vec<f64> = z.iter().map(|v| v / norm).collect();
+        // det [J; tᵀ] has the sign of det [J; guideᵀ] since guide·t > 0.
+        Ok((t, lu.det_sign()))
+    }
+
+    /// Corrector from `pred` on `R = 0`, `t·(y − pred) = 0`.
+    fn correct(&self, pred: &[f64], t: &[f64]) -> Option<(Vec<f64>, Mat<f64>, usize)> {
+        let n = pred.len() - 1;
+        let mut y = pred.to_vec();
+        for it in 0..=self.cfg.max_corrector {
+            let (r, a) = self.eval(&y);
+            if r.iter().any(|v| !v.is_finite()) {
+                return None;
+            }
+            let rn = norm_inf(&r);
+            if rn <= self.sys.config.rtol * norm_inf(&y[..n]).max(1e-3) {
+                return Some((y, a, it));
+            }
+            if it == self.cfg.max_corrector {
+                return None;
+            }
+            let mut aug = Mat::<f64>::zeros(n + 1, n + 1);
+            for i in 0..n {
+                for c in 0..=n {
+                    aug[(i, c)] = a[(i, c)];
+                }
+            }
+            for c in 0..=n {
+                aug[(n, c)] = t[c];
+            }
+            let lu = Lu::new(&aug, &String::new).ok()?;
+            let mut rhs: Vec<f64> = r.iter().map(|v| -v).collect();
+            rhs.push(-(0..=n).map(|i| t[i] * (y[i] - pred[i])).sum::<f64>());
+            let d = lu.solve(&rhs);
+            y.iter_mut().zip(&d).for_each(|(a, b)| *a += b);
+        }
+        None
+    }
+
+    fn point(&self, s: &State, kind: PointKind) -> Result<SolutionPoint> {
+        let (x, p) = self.unscale(&s.y);
+        let (omega, scale) = self.omega_scale(p);
+        let stability = if self.cfg.stability {
+            Some(self.sys.stability(&x, omega)?)
+        } else {
+            None
+        };
+        Ok(SolutionPoint {
+            omega,
+            scale,
+            x,
+            stability,
+            kind,
+            iterations: s.iterations,
+        })
+    }
+}
+
+/// Follows the branch through `cfg.from` over `cfg.to`, from `start` (condensed unknowns at
+/// `from`; the linear response when `None`). `progress` sees every accepted point.
+pub fn continuation(
+    sys: &HbSystem,
+    cfg: &ContinuationConfig,
+    start: Option<&[f64]>,
+    progress: &mut dyn FnMut(&SolutionPoint),
+) -> Result<Branch> {
+    for (what, v) in [("from", cfg.from), ("to", cfg.to), ("fixed", cfg.fixed)] {
+        if !v.is_finite() {
+            return Err(Error::NonFinite {
+                what: "continuation range".into(),
+                location: what.into(),
+                value: v,
+            });
+        }
+    }
+    if cfg.from == cfg.to {
+        return Err(Error::invalid(
+            "continuation range",
+            "from and to are equal",
+        ));
+    }
+    if !(cfg.ds_min > 0.0 && cfg.ds_min <= cfg.ds && cfg.ds <= cfg.ds_max) {
+        return Err(Error::invalid(
+            "continuation steps",
+            format!(
+                "need 0 < ds_min ≤ ds ≤ ds_max (got {}, {}, {})",
+                cfg.ds_min, cfg.ds, cfg.ds_max
+            ),
+        ));
+    }
+    let (om0, sc0) = match cfg.parameter {
+        Parameter::Frequency => (cfg.from, cfg.fixed),
+        Parameter::ForceLevel => (cfg.fixed, cfg.from),
+    };
+    let guess = match start {
+        Some(x) => x.to_vec(),
+        None => sys.linear_guess(om0, sc0),
+    };
+    let (x0, rep) = sys.solve(om0, sc0, &guess)?;
+    let mut tr = Tracker {
+        sys,
+        cfg,
+        xs: norm_inf(&x0)
+            .max(norm_inf(&sys.linear_guess(om0, sc0)))
+            .max(1e-300),
+        ps: cfg.to - cfg.from,
+    };
+    let n = x0.len();
+    let mut y0: Vec<f64> = x0.iter().map(|v| v / tr.xs).collect();
+    y0.push(0.0);
+    let (_, a0) = tr.eval(&y0);
+    let (t0, d0) = tr.tangent(&a0, None)?;
+    let mut cur = State {
+        y: y0,
+        t: t0,
+        det_sign: d0,
+        iterations: rep.iterations,
+    };
+    let mut points = vec![tr.point(&cur, PointKind::Regular)?];
+    progress(&points[0]);
+    let mut branch_points = Vec::new();
+    let mut ds = cfg.ds;
+    loop {
+        if points.len() >= cfg.max_points {
+            return Ok(Branch {
+                parameter: cfg.parameter,
+                points,
+                branch_points,
+                complete: false,
+            });
+        }
+        let pred: Vec<f64> = cur.y.iter().zip(&cur.t).map(|(y, t)| y + ds * t).collect();
+        let attempt = tr.correct(&pred, &cur.t).and_then(|(y, a, it)| {
+            let (t, d) = tr.tangent(&a, Some(&cur.t)).ok()?;
+            let cos: f64 = t.iter().zip(&cur.t).map(|(a, b)| a * b).sum();
+            (cos > 0.95).then_some(State {
+                y,
+                t,
+                det_sign: d,
+                iterations: it,
+            })
+        });
+        let Some(next) = attempt else {
+            ds *= 0.5;
+            if ds < cfg.ds_min {
+                return Err(Error::Numerical {
+                    what: format!("continuation at {}", tr.where_(&cur.y)),
+                    detail: format!(
+                        "the corrector failed down to the smallest step {:.1e}; the branch may \
+                         have a non-smooth point there (try more AFT samples or harmonics)",
+                        cfg.ds_min
+                    ),
+                });
+            }
+            continue;
+        };
+        // Past the end of the range: finish on it exactly.
+        if next.y[n] >= 1.0 {
+            let frac = (1.0 - cur.y[n]) / (next.y[n] - cur.y[n]);
+            let guess: Vec<f64> = (0..n)
+                .map(|i| (cur.y[i] + frac * (next.y[i] - cur.y[i])) * tr.xs)
+                .collect();
+            let (om, sc) = tr.omega_scale(cfg.to);
+            let (x, rep) = sys.solve(om, sc, &guess)?;
+            let mut y: Vec<f64> = x.iter().map(|v| v / tr.xs).collect();
+            y.push(1.0);
+            let end = State {
+                y,
+                t: next.t.clone(),
+                det_sign: next.det_sign,
+                iterations: rep.iterations,
+            };
+            points.push(tr.point(&end, PointKind::End)?);
+            progress(points.last().expect("pushed"));
+            return Ok(Branch {
+                parameter: cfg.parameter,
+                points,
+                branch_points,
+                complete: true,
+            });
+        }
+        if next.y[n] < -0.05 {
+            // The branch turned back out of the range: it ends at its start side.
+            return Ok(Branch {
+                parameter: cfg.parameter,
+                points,
+                branch_points,
+                complete: true,
+            });
+        }
+        if next.t[n].signum() != cur.t[n].signum() && cur.t[n] != 0.0 {
+            let fold = locate_fold(&tr, &cur, ds)?;
+            points.push(tr.point(&fold, PointKind::Fold)?);
+            progress(points.last().expect("pushed"));
+        } else if next.det_sign != cur.det_sign {
+            let i = points.len() - 1;
+            let (_, p0) = tr.unscale(&cur.y);
+            let (_, p1) = tr.unscale(&next.y);
+            let (om, sc) = tr.omega_scale(0.5 * (p0 + p1));
+            branch_points.push(BranchPoint {
+                between: (i, i + 1),
+                omega: om,
+                scale: sc,
+            });
+        }
+        if next.iterations <= 3 {
+            ds = (ds * 1.5).min(cfg.ds_max);
+        } else if next.iterations > 6 {
+            ds *= 0.7;
+        }
+        // Rescale x when the amplitude grows, keeping the geometry of the step.
+        let amp = norm_inf(&next.y[..n]);
+        let mut next = next;
+        if amp > 1.0 {
+            for v in next.y[..n].iter_mut() {
+                *v /= amp;
+            }
+            tr.xs *= amp;
+            let (_, a) = tr.eval(&next.y);
+            let mut guide: Vec<f64> = next.t.clone();
+            guide[..n].iter_mut().for_each(|v| *v /= amp);
+            let (t, d) = tr.tangent(&a, Some(&guide))?;
+            next.t = t;
+            next.det_sign = d;
+        }
+        points.push(tr.point(&next, PointKind::Regular)?);
+        progress(points.last().expect("pushed"));
+        cur = next;
+    }
+}
+
+/// Finds the fold between `cur` and the point `ds` further along by the Illinois method on
+/// the tangent's parameter component.
+fn locate_fold(tr: &Tracker<'_>, cur: &State, ds: f64) -> Result<State> {
+    let n = cur.y.len() - 1;
+    let at = |s: f64| -> Option<State> {
+        let pred: Vec<f64> = cur.y.iter().zip(&cur.t).map(|(y, t)| y + s * t).collect();
+        let (y, a, it) = tr.correct(&pred, &cur.t)?;
+        let (t, d) = tr.tangent(&a, Some(&cur.t)).ok()?;
+        Some(State {
+            y,
+            t,
+            det_sign: d,
+            iterations: it,
+        })
+    };
+    let (mut a, mut fa) = (0.0, cur.t[n]);
+    let mut b = ds;
+    let mut best = at(b).ok_or_else(|| Error::Numerical {
+        what: format!("fold location near {}", tr.where_(&cur.y)),
+        detail: "the corrector failed".into(),
+    })?;
+    let mut fb = best.t[n];
+    let mut side = 0;
+    for _ in 0..60 {
+        if (b - a).abs() <= 1e-12 * ds.max(1e-300) || fb.abs() <= 1e-12 {
+            break;
+        }
+        let c = (a * fb - b * fa) / (fb - fa);
+        let Some(sc) = at(c) else { break };
+        let fc = sc.t[n];
+        if fc.signum() == fb.signum() {
+            b = c;
+            fb = fc;
+            if side == -1 {
+                fa *= 0.5;
+            }
+            side = -1;
+        } else {
+            a = c;
+            fa = fc;
+            if side == 1 {
+                fb *= 0.5;
+            }
+            side = 1;
+        }
+        best = sc;
+    }
+    Ok(best)
+}
+
+/// A stepped sine over `omegas` (rad/s, in test order, up or down) at force level `scale`:
+/// every point is solved from the previous solution, as a test dwells at each frequency.
+/// A step that Newton cannot take directly is split into 2, 4, … 16 sub-steps. Past a fold
+/// the branch ends: the point is then solved from other starts (the linear response, the
+/// last solution scaled down and up) and, when stability is computed, only a stable solution
+/// is preferred, since a test cannot dwell on an unstable one (an unstable one is kept,
+/// flagged, when no start gives a stable one). A point is a
+/// [`PointKind::Jump`] when it is not on the continuation of the last one: farther from the
+/// tangent prediction `x + (dx/dΩ) ΔΩ` than half its distance from `x`.
+pub fn stepped_sine(
+    sys: &HbSystem,
+    omegas: &[f64],
+    scale: f64,
+    stability: bool,
+    progress: &mut dyn FnMut(&SolutionPoint),
+) -> Result<Branch> {
+    let Some(&first) = omegas.first() else {
+        return Err(Error::invalid("stepped sine", "no frequency"));
+    };
+    let mut x = sys.linear_guess(first, scale);
+    let mut prev = first;
+    let mut points: Vec<SolutionPoint> = Vec::with_capacity(omegas.len());
+    let accept = |x: &[f64], om: f64| -> Result<Option<Option<Stability>>> {
+        if !stability {
+            return Ok(Some(None));
+        }
+        let st = sys.stability(x, om)?;
+        Ok(st.stable.then_some(Some(st)))
+    };
+    for &om in omegas {
+        // Along the branch: from the last solution, in sub-steps when needed. A converged
+        // but unstable solution is kept as the fallback.
+        let mut found = None;
+        let mut fallback = None;
+        let mut sub = 1usize;
+        while sub <= 16 && found.is_none() {
+            let mut xt = x.clone();
+            let mut rep = None;
+            for i in 1..=sub {
+                let w = prev + (om - prev) * i as f64 / sub as f64;
+                match sys.solve(w, scale, &xt) {
+                    Ok((xs, r)) => {
+                        xt = xs;
+                        rep = Some(r);
+                    }
+                    Err(_) => {
+                        rep = None;
+                        break;
+                    }
+                }
+            }
+            if let Some(r) = rep {
+                match accept(&xt, om)? {
+                    Some(st) => found = Some((xt, r, st, PointKind::Regular)),
+                    None => fallback = Some((xt, r, PointKind::Regular)),
+                }
+                break;
+            }
+            sub *= 2;
+        }
+        // Off the end of the branch: the jump.
+        if found.is_none() {
+            let lin = sys.linear_guess(om, scale);
+            let starts = std::iter::once(lin).chain(
+                [0.5, 2.0, 0.25, 4.0, 0.1, 10.0]
+                    .iter()
+                    .map(|f| x.iter().map(|v| v * f).collect()),
+            );
+            for start in starts {
+                if let Ok((xs, r)) = sys.solve(om, scale, &start) {
+                    match accept(&xs, om)? {
+                        Some(st) => {
+                            found = Some((xs, r, st, PointKind::Jump));
+                            break;
+                        }
+                        None => {
+                            fallback.get_or_insert((xs, r, PointKind::Jump));
+                        }
+                    }
+                }
+            }
+        }
+        // No stable solution anywhere: keep the converged one, flagged unstable, rather than
+        // lose the sweep.
+        if found.is_none()
+            && let Some((xs, r, kind)) = fallback
+        {
+            let st = sys.stability(&xs, om)?;
+            found = Some((xs, r, Some(st), kind));
+        }
+        let Some((xn, rep, st, kind)) = found else {
+            return Err(Error::Numerical {
+                what: format!("stepped sine at {:.6} Hz (level {scale})", om / (2.0 * PI)),
+                detail: "Newton converged from none of the last point, the linear response \
+                         or scaled starts; refine the frequency grid"
+                    .into(),
+            });
+        };
+        let kind = match kind {
+            PointKind::Regular if !points.is_empty() => {
+                let t = sys.dx_domega(&x, prev, scale)?;
+                let pred: Vec<f64> = x.iter().zip(&t).map(|(a, b)| a + b * (om - prev)).collect();
+                let off: f64 = xn.iter().zip(&pred).map(|(a, b)| (a - b).powi(2)).sum();
+                let step: f64 = xn.iter().zip(&x).map(|(a, b)| (a - b).powi(2)).sum();
+                if off > 0.25 * step && step > (1e-3 * norm_inf(&xn)).powi(2) {
+                    PointKind::Jump
+                } else {
+                    PointKind::Regular
+                }
+            }
+            k => k,
+        };
+        x = xn;
+        prev = om;
+        let p = SolutionPoint {
+            omega: om,
+            scale,
+            stability: st,
+            x: x.clone(),
+            kind,
+            iterations: rep.iterations,
+        };
+        progress(&p);
+        points.push(p);
+    }
+    Ok(Branch {
+        parameter: Parameter::Frequency,
+        points,
+        branch_points: Vec::new(),
+        complete: true,
+    })
+}

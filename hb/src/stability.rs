@@ -1,0 +1,198 @@
+//! Stability of periodic solutions by Hill's method (thesis §3.2).
+//!
+//! A perturbation `Δη(t) = e^{st} Σ_{k=−H..H} p_k e^{ikω0t}` of the modal coordinates obeys,
+//! harmonic by harmonic,
+//!
+//! `(s + ikω0)² p_k + (s + ikω0) C̃ p_k + Ω² p_k + Σ_l [T_{k−l} + (s + ilω0) Γ_{k−l}] p_l = 0`
+//!
+//! with `T_j`, `Γ_j` the Fourier coefficients of the projected element tangents
+//! `Φᵀ ∂g/∂u Φ`, `Φᵀ ∂g/∂u̇ Φ`. The quadratic eigenproblem in `s` is linearised to a
+//! companion matrix of size `2 m (2H+1)`; of its eigenvalues only `2m` are Floquet exponents,
+//! the rest being copies shifted by `ikω0` (exact copies for the untruncated problem). The
+//! exponents are picked as the `2m` eigenvalues of smallest imaginary part, the
+//! representatives in the band `|Im s| ≤ ω0/2`: the copies near the truncation edge are the
+//! least accurate, and a weight-in-the-central-harmonic criterion fails near resonance, where
+//! a perturbation at `ω_r ≈ ω0` lives in the harmonics `±1`. The solution is stable when
+//! every exponent has a negative real part.
+//!
+//! Modes that no element moves (zero participation at every element port, proportional
+//! damping) keep their linear poles and are left out. Modes above `(H+1) ω0` (and beyond
+//! [`crate::HbConfig::hill_max_modes`]) respond
+//! quasi-statically at every harmonic kept: they join the residual flexibility `D` of the
+//! ports, so that the element tangent seen by the dynamic modes is
+//! `K_eff(t) = (I + K_t(t) D_eff)⁻¹ K_t(t)`.
+
+use crate::system::HbSystem;
+use faer::linalg::solvers::Solve;
+use faer::{Mat, c64};
+use nlsim_kernel::{Error, Result};
+use std::f64::consts::PI;
+
+/// Floquet exponents of a periodic solution.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Stability {
+    /// The `2m` Floquet exponents `s` (1/s) of the `m` dynamic modes.
+    pub exponents: Vec<c64>,
+    /// Largest real part (1/s).
+    pub max_real: f64,
+    /// True when `max_real` is below `1e-6 ω0`.
+    pub stable: bool,
+    /// Modes kept dynamic (indices of the retained modes).
+    pub modes: Vec<usize>,
+}
+
+impl HbSystem {
+    /// Hill's method at solution `x` at fundamental `omega` (rad/s).
+    pub fn stability(&self, x: &[f64], omega: f64) -> Result<Stability> {
+        let set = self.set;
+        let nh = set.len();
+        let w0 = set.base(omega);
+        let lin = &self.linear;
+        let nm = lin.n_modes();
+        let cutoff = ((set.h + 1) as f64 * w0).powi(2);
+        let ne = self.elements.len();
+        // Modes that no element moves keep their linear (stable) poles: with proportional
+        // damping they decouple and are left out.
+        let reach: Vec<f64> = (0..nm)
+            .map(|r| {
+                self.element_ports
+                    .iter()
+                    .fold(0.0f64, |a, &p| a.max(lin.phi[(p, r)].abs()))
+            })
+            .collect();
+        let top = reach.iter().fold(0.0f64, |a, v| a.max(*v));
+        let coupled: Vec<usize> = (0..nm)
+            .filter(|&r| !lin.diagonal || reach[r] > 1e-9 * top)
+            .collect();
+        let mut dynamic: Vec<usize> = coupled
+            .iter()
+            .copied()
+            .filter(|&r| lin.w2[r] <= cutoff)
+            .take(self.config.hill_max_modes.max(1))
+            .collect();
+        if dynamic.is_empty() {
+            dynamic.push(coupled.first().copied().unwrap_or(0));
+        }
+        let m = dynamic.len();
+        // Quasi-static flexibility at the element ports: D + Σ_{r not dynamic} φ_r φ_rᵀ / ω_r².
+        let d = Mat::from_fn(ne, ne, |a, b| {
+            let (pa, pb) = (self.element_ports[a], self.element_ports[b]);
+            lin.residual[(pa, pb)]
+                + (0..nm)
+                    .filter(|r| !dynamic.contains(r))
+                    .map(|r| lin.phi[(pa, r)] * lin.phi[(pb, r)] / lin.w2[r])
+                    .sum::<f64>()
+        });
+        let quasi_static = d.norm_max() > 0.0;
+        // Element tangents on one common grid.
+        let plan = self.hill_plan();
+        let n = plan.n;
+        let mut kt = vec![vec![0.0; n]; ne];
+        let mut ct = vec![vec![0.0; n]; ne];
+        for e in 0..ne {
+            let r = plan.evaluate(self.elements[e].law(), &x[e * nh..(e + 1) * nh], w0, false);
+            kt[e] = r.stiffness;
+            ct[e] = r.damping;
+        }
+        // K_eff(t) per sample (elements × elements), then its harmonics 0..2H.
+        let jmax = 2 * set.h;
+        let mut keff = vec![vec![vec![0.0; n]; ne]; ne];
+        for i in 0..n {
+            if quasi_static {
+                let a = Mat::from_fn(ne, ne, |r, c| {
+                    f64::from(u8::from(r == c)) + kt[r][i] * d[(r, c)]
+                });
+                let k = Mat::from_fn(ne, ne, |r, c| if r == c { kt[r][i] } else { 0.0 });
+                let sol = a.partial_piv_lu().solve(&k);
+                for r in 0..ne {
+                    for c in 0..ne {
+                        keff[r][c][i] = sol[(r, c)];
+                    }
+                }
+            } else {
+                for r in 0..ne {
+                    keff[r][r][i] = kt[r][i];
+                }
+            }
+        }
+        let kh: Vec<Vec<Vec<c64>>> = keff
+            .iter()
+            .map(|row| row.iter().map(|s| plan.exponential(s, jmax)).collect())
+            .collect();
+        let ch: Vec<Vec<c64>> = ct.iter().map(|s| plan.exponential(s, jmax)).collect();
+        let phi = |e: usize, r: usize| lin.phi[(self.element_ports[e], dynamic[r])];
+        // T_j, Γ_j (m × m) for j = −2H..2H (index j + 2H); negative j by conjugation.
+        let coef = |j: isize, r: usize, s: usize, stiff: bool| -> c64 {
+            let (ja, conj) = (j.unsigned_abs(), j < 0);
+            let mut acc = c64::new(0.0, 0.0);
+            for a in 0..ne {
+                if stiff {
+                    for b in 0..ne {
+                        acc += kh[a][b][ja] * (phi(a, r) * phi(b, s));
+                    }
+                } else {
+                    acc += ch[a][ja] * (phi(a, r) * phi(a, s));
+                }
+            }
+            if conj { acc.conj() } else { acc }
+        };
+        // Dimensionless σ = s/ω0: σ² p + σ M1 p + M0 p = 0.
+        let hh = set.h as isize;
+        let nb = 2 * set.h + 1;
+        let size = m * nb;
+        let mut m0 = Mat::<c64>::zeros(size, size);
+        let mut m1 = Mat::<c64>::zeros(size, size);
+        let w02 = w0 * w0;
+        for bk in 0..nb {
+            let k = bk as isize - hh;
+            let ik = c64::new(0.0, k as f64);
+            for bl in 0..nb {
+                let l = bl as isize - hh;
+                let il = c64::new(0.0, l as f64);
+                for r in 0..m {
+                    for s in 0..m {
+                        let (row, col) = (bk * m + r, bl * m + s);
+                        let t = coef(k - l, r, s, true);
+                        let g = coef(k - l, r, s, false);
+                        let mut v0 = t * (1.0 / w02) + il * g * (1.0 / w0);
+                        let mut v1 = g * (1.0 / w0);
+                        if k == l {
+                            let c = lin.damping[(dynamic[r], dynamic[s])];
+                            v0 += ik * c * (1.0 / w0);
+                            v1 += c64::new(c / w0, 0.0);
+                            if r == s {
+                                v0 += c64::new(lin.w2[dynamic[r]] / w02, 0.0) + ik * ik;
+                                v1 += ik * 2.0;
+                            }
+                        }
+                        m0[(row, col)] = v0;
+                        m1[(row, col)] = v1;
+                    }
+                }
+            }
+        }
+        let mut a = Mat::<c64>::zeros(2 * size, 2 * size);
+        for i in 0..size {
+            a[(i, size + i)] = c64::new(1.0, 0.0);
+            for j in 0..size {
+                a[(size + i, j)] = -m0[(i, j)];
+                a[(size + i, size + j)] = -m1[(i, j)];
+            }
+        }
+        let evd = a.eigen().map_err(|e| Error::Numerical {
+            what: format!("Hill eigenproblem at {:.6} Hz", omega / (2.0 * PI)),
+            detail: format!("{e:?}"),
+        })?;
+        let s = evd.S();
+        let mut all: Vec<c64> = (0..2 * size).map(|i| s[i] * w0).collect();
+        all.sort_by(|a, b| a.im.abs().total_cmp(&b.im.abs()));
+        let exponents: Vec<c64> = all.into_iter().take(2 * m).collect();
+        let max_real = exponents.iter().fold(f64::NEG_INFINITY, |a, s| a.max(s.re));
+        Ok(Stability {
+            stable: max_real < 1e-6 * w0,
+            max_real,
+            exponents,
+            modes: dynamic,
+        })
+    }
+}

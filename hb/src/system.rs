@@ -1,0 +1,868 @@
+//! The harmonic balance system condensed on the nonlinear DOFs (thesis §3.2, paper I).
+//!
+//! Unknowns: the coefficients `x` of every element coordinate (`n_NL × (2H+1)` reals). Per
+//! harmonic `k` the reduced model's receptances give
+//!
+//! `R(x) = x + H_NL,NL(kω0) G(x) − λ H_NL,ext(kω0) F = 0`
+//!
+//! (the element forces `G` act on the structure with a minus sign; `λ` is the force level).
+//! Any sensor is recovered from the same receptances, `Y = λ H_s,ext F − H_s,NL G`.
+
+use crate::aft::{AftPlan, samples_for};
+use crate::dense::{Lu, norm_inf};
+use crate::harmonics::{Forcing, HarmonicSet};
+use crate::linear::{LinearParam, LinearPart};
+use faer::{Mat, c64};
+use nlsim_kernel::{Error, Model, NonlinearElement, Quantity, Result};
+use nlsim_reduction::{PortKind, ReducedModel};
+use std::f64::consts::PI;
+
+/// A response output: a quantity at a port.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SensorSpec {
+    /// The sensor's name.
+    pub name: String,
+    /// Port index of the reduced model.
+    pub port: usize,
+    /// Displacement (m), velocity (m/s) or acceleration (m/s²).
+    pub quantity: Quantity,
+}
+
+/// Settings of the harmonic balance solver.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HbConfig {
+    /// AFT samples per period for every element; `None` picks them per law
+    /// ([`crate::aft::samples_for`]).
+    pub aft_samples: Option<usize>,
+    /// Newton iterations before giving up.
+    pub max_iterations: usize,
+    /// Convergence: `‖R‖∞ ≤ rtol · max(‖x‖∞, ‖λ H F‖∞)`.
+    pub rtol: f64,
+    /// Most modes kept dynamic in Hill's method (the lowest, those below `(H+1) ω0`); the
+    /// others enter as quasi-static flexibility.
+    pub hill_max_modes: usize,
+}
+
+impl Default for HbConfig {
+    fn default() -> Self {
+        Self {
+            aft_samples: None,
+            max_iterations: 40,
+            rtol: 1e-10,
+            hill_max_modes: 16,
+        }
+    }
+}
+
+/// How a Newton solve went.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NewtonReport {
+    /// Iterations taken.
+    pub iterations: usize,
+    /// Final `‖R‖∞` (m).
+    pub residual: f64,
+}
+
+/// A model parameter for sensitivities.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ModelParam {
+    /// Parameter `param` of element `element` (indices into [`HbSystem::elements`] and the
+    /// law's parameter list).
+    Element {
+        /// Element index.
+        element: usize,
+        /// Parameter index of its law.
+        param: usize,
+    },
+    /// A linear parameter of the reduced model.
+    Linear(LinearParam),
+}
+
+/// Sensitivity of a solution to one parameter.
+#[derive(Debug, Clone)]
+pub struct Sensitivity {
+    /// Parameter name (`element.param`, `mode2.f`, …).
+    pub name: String,
+    /// `dx/dp` of the condensed unknowns.
+    pub dx: Vec<f64>,
+    /// `dY/dp` of every sensor (rows) and harmonic `k = 0..=H` (columns), in the sensor's unit
+    /// per parameter unit.
+    pub dy: Mat<c64>,
+}
+
+/// Receptances at the harmonics of one frequency, in the real coefficient layout.
+pub(crate) struct Receptances {
+    /// `H_NL,NL` (n_x × n_x).
+    pub a: Mat<f64>,
+    /// `H_NL,ext F` (n_x): the linear response to unit force level.
+    pub b: Vec<f64>,
+}
+
+/// One evaluation of the residual.
+pub(crate) struct Evaluation {
+    pub r: Vec<f64>,
+    pub g: Vec<f64>,
+    /// Per element `∂G_e/∂x_e`.
+    pub dg: Vec<Mat<f64>>,
+    /// Per element `∂g/∂u̇` samples (for `∂G/∂ω0`).
+    pub damping: Vec<Vec<f64>>,
+    pub jacobian: Option<Mat<f64>>,
+}
+
+/// The harmonic balance system of a reduced model with local nonlinearities.
+#[derive(Debug, Clone)]
+pub struct HbSystem {
+    /// The harmonics kept.
+    pub set: HarmonicSet,
+    /// Receptances of the reduced model.
+    pub linear: LinearPart,
+    /// The nonlinear elements (couplings folded into their ports).
+    pub elements: Vec<NonlinearElement>,
+    /// Port index of each element.
+    pub element_ports: Vec<usize>,
+    /// Excitation inputs `(name, port)`.
+    pub inputs: Vec<(String, usize)>,
+    /// Sensors recovered at every solution.
+    pub sensors: Vec<SensorSpec>,
+    /// The forcing at level `λ = 1`.
+    pub forcing: Forcing,
+    /// Settings.
+    pub config: HbConfig,
+    plans: Vec<AftPlan>,
+    hill_plan: AftPlan,
+}
+
+/// Expands per-harmonic complex matrices into the real coefficient layout
+/// (`rows·(2H+1) × cols·(2H+1)`): `h·(c − is)` ↦ `[[h_r, h_i], [−h_i, h_r]] [c; s]`.
+pub(crate) fn expand(set: &HarmonicSet, h: &[Mat<c64>]) -> Mat<f64> {
+    let nh = set.len();
+    let (nr, nc) = (h[0].nrows(), h[0].ncols());
+    let mut a = Mat::<f64>::zeros(nr * nh, nc * nh);
+    for i in 0..nr {
+        for j in 0..nc {
+            a[(i * nh, j * nh)] = h[0][(i, j)].re;
+            for k in 1..=set.h {
+                let z = h[k][(i, j)];
+                let (r, c) = (i * nh + 2 * k - 1, j * nh + 2 * k - 1);
+                a[(r, c)] = z.re;
+                a[(r, c + 1)] = z.im;
+                a[(r + 1, c)] = -z.im;
+                a[(r + 1, c + 1)] = z.re;
+            }
+        }
+    }
+    a
+}
+
+impl HbSystem {
+    /// The system of `model` reduced to `reduced`: the model's elements (matched to their
+    /// ports by name), its excitation points as inputs forced at the fundamental with their
+    /// nominal amplitudes, and its sensors.
+    pub fn from_model(
+        model: &Model,
+        reduced: &ReducedModel,
+        set: HarmonicSet,
+        config: HbConfig,
+    ) -> Result<Self> {
+        let mut elements = Vec::new();
+        let mut element_ports = Vec::new();
+        for e in model.elements() {
+            let port = reduced.port_index(e.name())?;
+            if reduced.ports[port].kind != PortKind::Element {
+                return Err(Error::invalid(
+                    format!("element '{}'", e.name()),
+                    "its name matches a port that is not an element port",
+                ));
+            }
+            elements.push(e.clone());
+            element_ports.push(port);
+        }
+        let inputs = model
+            .excitation()
+            .iter()
+            .map(|x| Ok((x.name.clone(), reduced.port_index(&x.name)?)))
+            .collect::<Result<Vec<_>>>()?;
+        let sensors = model
+            .sensors()
+            .iter()
+            .map(|s| {
+                Ok(SensorSpec {
+                    name: s.name.clone(),
+                    port: reduced.port_index(&s.name)?,
+                    quantity: s.quantity,
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let forcing = Forcing {
+            terms: model
+                .excitation()
+                .iter()
+                .enumerate()
+                .map(|(i, x)| crate::ForceTerm {
+                    input: i,
+                    harmonic: set.nu,
+                    amplitude: c64::new(x.amplitude, 0.0),
+                })
+                .collect(),
+        };
+        Self::new(
+            set,
+            LinearPart::from_reduced(reduced)?,
+            elements,
+            element_ports,
+            inputs,
+            sensors,
+            forcing,
+            config,
+        )
+    }
+
+    /// A system from its parts; validates ports, laws and forcing.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        set: HarmonicSet,
+        linear: LinearPart,
+        elements: Vec<NonlinearElement>,
+        element_ports: Vec<usize>,
+        inputs: Vec<(String, usize)>,
+        sensors: Vec<SensorSpec>,
+        forcing: Forcing,
+        config: HbConfig,
+    ) -> Result<Self> {
+        let np = linear.phi.nrows();
+        if elements.is_empty() {
+            return Err(Error::invalid(
+                "harmonic balance",
+                "the model has no nonlinear element; its FRF is linear (use `nlsim modes`)",
+            ));
+        }
+        let bad = |what: String, p: usize| {
+            Error::invalid(what, format!("port {p} is out of range ({np} ports)"))
+        };
+        for (e, &p) in elements.iter().zip(&element_ports) {
+            if p >= np {
+                return Err(bad(format!("element '{}'", e.name()), p));
+            }
+            e.law().validate(e.name())?;
+        }
+        for (n, p) in &inputs {
+            if *p >= np {
+                return Err(bad(format!("input '{n}'"), *p));
+            }
+        }
+        for s in &sensors {
+            if s.port >= np {
+                return Err(bad(format!("sensor '{}'", s.name), s.port));
+            }
+        }
+        forcing.validate(&set, inputs.len())?;
+        let plans = elements
+            .iter()
+            .map(|e| {
+                AftPlan::new(
+                    set,
+                    config.aft_samples.unwrap_or(samples_for(e.law(), &set)),
+                )
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let hill_n = plans.iter().map(|p| p.n).max().unwrap_or(4 * set.h + 2);
+        let hill_plan = AftPlan::new(set, hill_n)?;
+        Ok(Self {
+            set,
+            linear,
+            elements,
+            element_ports,
+            inputs,
+            sensors,
+            forcing,
+            config,
+            plans,
+            hill_plan,
+        })
+    }
+
+    /// Number of condensed unknowns, `n_NL (2H + 1)`.
+    pub fn n_unknowns(&self) -> usize {
+        self.elements.len() * self.set.len()
+    }
+
+    /// AFT samples per period of each element.
+    pub fn aft_samples(&self) -> Vec<usize> {
+        self.plans.iter().map(|p| p.n).collect()
+    }
+
+    /// Index of element `name`.
+    pub fn element_index(&self, name: &str) -> Result<usize> {
+        self.elements
+            .iter()
+            .position(|e| e.name() == name)
+            .ok_or_else(|| Error::invalid(format!("element '{name}'"), "no such element"))
+    }
+
+    /// Sets element parameter `element.param` (e.g. `spring.k3`).
+    pub fn set_parameter(&mut self, name: &str, value: f64) -> Result<()> {
+        let (el, p) = name.split_once('.').ok_or_else(|| {
+            Error::invalid(format!("parameter '{name}'"), "expected element.param")
+        })?;
+        let e = self.element_index(el)?;
+        let law = self.elements[e].law();
+        let i = (0..law.n_params())
+            .find(|&i| law.param_name(i) == p)
+            .ok_or_else(|| {
+                Error::invalid(
+                    format!("parameter '{name}'"),
+                    format!(
+                        "element '{el}' ({}) has parameters {}",
+                        law.kind(),
+                        (0..law.n_params())
+                            .map(|i| law.param_name(i))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                )
+            })?;
+        self.elements[e].set_param(i, value)
+    }
+
+    /// The forcing in the real layout (inputs × (2H+1)).
+    fn force_coefficients(&self) -> Vec<f64> {
+        let nh = self.set.len();
+        let mut f = vec![0.0; self.inputs.len() * nh];
+        for i in 0..self.inputs.len() {
+            for k in 0..=self.set.h {
+                let z = self.forcing.amplitude(i, k);
+                self.set.set_complex(&mut f[i * nh..(i + 1) * nh], k, z);
+            }
+        }
+        f
+    }
+
+    /// Per-harmonic receptances from `rows` to `cols` at fundamental `omega`; with `deriv`,
+    /// their derivative with respect to `Ω` instead.
+    fn harmonic_receptances(
+        &self,
+        omega: f64,
+        rows: &[usize],
+        cols: &[usize],
+        deriv: bool,
+    ) -> Vec<Mat<c64>> {
+        let w0 = self.set.base(omega);
+        (0..=self.set.h)
+            .map(|k| {
+                let w = k as f64 * w0;
+                if deriv {
+                    self.linear.receptance_domega(w, rows, cols)
+                        * faer::Scale(c64::new(k as f64 / self.set.nu as f64, 0.0))
+                } else {
+                    self.linear.receptance(w, rows, cols)
+                }
+            })
+            .collect()
+    }
+
+    fn input_ports(&self) -> Vec<usize> {
+        self.inputs.iter().map(|x| x.1).collect()
+    }
+
+    /// `H_NL,NL` and `H_NL,ext F` at `omega` (or their `Ω`-derivatives).
+    pub(crate) fn receptances(&self, omega: f64, deriv: bool) -> Receptances {
+        let a = expand(
+            &self.set,
+            &self.harmonic_receptances(omega, &self.element_ports, &self.element_ports, deriv),
+        );
+        let bm = expand(
+            &self.set,
+            &self.harmonic_receptances(omega, &self.element_ports, &self.input_ports(), deriv),
+        );
+        let f = self.force_coefficients();
+        let b = (0..bm.nrows())
+            .map(|i| (0..f.len()).map(|j| bm[(i, j)] * f[j]).sum())
+            .collect();
+        Receptances { a, b }
+    }
+
+    /// Element force coefficients and (optionally) their Jacobians at `x`.
+    pub(crate) fn evaluate(
+        &self,
+        rec: &Receptances,
+        x: &[f64],
+        omega: f64,
+        scale: f64,
+        jacobian: bool,
+    ) -> Evaluation {
+        let nh = self.set.len();
+        let n = self.n_unknowns();
+        let w0 = self.set.base(omega);
+        let mut g = vec![0.0; n];
+        let mut dg = Vec::with_capacity(self.elements.len());
+        let mut damping = Vec::with_capacity(self.elements.len());
+        for (e, el) in self.elements.iter().enumerate() {
+            let r = self.plans[e].evaluate(el.law(), &x[e * nh..(e + 1) * nh], w0, jacobian);
+            g[e * nh..(e + 1) * nh].copy_from_slice(&r.force);
+            if let Some(j) = r.jacobian {
+                dg.push(j);
+            }
+            damping.push(r.damping);
+        }
+        let mut r = vec![0.0; n];
+        for i in 0..n {
+            let ag: f64 = (0..n).map(|j| rec.a[(i, j)] * g[j]).sum();
+            r[i] = x[i] + ag - scale * rec.b[i];
+        }
+        let jacobian = jacobian.then(|| {
+            // J = I + A blockdiag(∂G_e/∂x_e)
+            let mut j = Mat::<f64>::identity(n, n);
+            for i in 0..n {
+                for (e, d) in dg.iter().enumerate() {
+                    for c in 0..nh {
+                        let s: f64 = (0..nh).map(|l| rec.a[(i, e * nh + l)] * d[(l, c)]).sum();
+                        j[(i, e * nh + c)] += s;
+                    }
+                }
+            }
+            j
+        });
+        Evaluation {
+            r,
+            g,
+            dg,
+            damping,
+            jacobian,
+        }
+    }
+
+    /// `∂R/∂Ω` at a solution (m s/rad).
+    pub(crate) fn dr_domega(
+        &self,
+        x: &[f64],
+        omega: f64,
+        scale: f64,
+        ev: &Evaluation,
+        rec: &Receptances,
+    ) -> Vec<f64> {
+        let nh = self.set.len();
+        let n = self.n_unknowns();
+        let d = self.receptances(omega, true);
+        // ∂G/∂Ω through the velocity u̇ = ω0 E' x: P diag(∂g/∂u̇) E' x / ν.
+        let w0 = self.set.base(omega);
+        let mut dg = vec![0.0; n];
+        for (e, plan) in self.plans.iter().enumerate() {
+            let c = &ev.damping[e];
+            if c.iter().all(|&v| v == 0.0) {
+                continue;
+            }
+            let (_, v) = plan.to_time(&x[e * nh..(e + 1) * nh], w0);
+            let s: Vec<f64> = v
+                .iter()
+                .zip(c)
+                .map(|(v, c)| c * v / w0 / self.set.nu as f64)
+                .collect();
+            dg[e * nh..(e + 1) * nh].copy_from_slice(&plan.to_freq(&s));
+        }
+        (0..n)
+            .map(|i| {
+                (0..n)
+                    .map(|j| d.a[(i, j)] * ev.g[j] + rec.a[(i, j)] * dg[j])
+                    .sum::<f64>()
+                    - scale * d.b[i]
+            })
+            .collect()
+    }
+
+    /// `dx/dΩ = −R_x⁻¹ R_Ω` along the branch through solution `x` (m s/rad).
+    pub fn dx_domega(&self, x: &[f64], omega: f64, scale: f64) -> Result<Vec<f64>> {
+        let rec = self.receptances(omega, false);
+        let ev = self.evaluate(&rec, x, omega, scale, true);
+        let rp = self.dr_domega(x, omega, scale, &ev, &rec);
+        let lu = Lu::new(ev.jacobian.as_ref().expect("asked for"), &|| {
+            format!("branch tangent at {:.6} Hz", omega / (2.0 * PI))
+        })?;
+        Ok(lu.solve(&rp).into_iter().map(|v| -v).collect())
+    }
+
+    /// The linear response `λ H_NL,ext F` at `omega`: the start of Newton at low level.
+    pub fn linear_guess(&self, omega: f64, scale: f64) -> Vec<f64> {
+        self.receptances(omega, false)
+            .b
+            .iter()
+            .map(|b| scale * b)
+            .collect()
+    }
+
+    /// Solves `R(x) = 0` at fundamental `omega` (rad/s) and force level `scale` by Newton
+    /// from `x0`, halving the step until `‖R‖` decreases. Errors name the frequency, the
+    /// iteration and the residual.
+    pub fn solve(&self, omega: f64, scale: f64, x0: &[f64]) -> Result<(Vec<f64>, NewtonReport)> {
+        if !(omega.is_finite() && omega > 0.0 && scale.is_finite()) {
+            return Err(Error::invalid(
+                "harmonic balance point",
+                format!(
+                    "needs a positive finite frequency and finite level (Ω = {omega}, λ = {scale})"
+                ),
+            ));
+        }
+        if x0.len() != self.n_unknowns() {
+            return Err(Error::DimensionMismatch {
+                what: "harmonic balance start vector".into(),
+                expected: self.n_unknowns(),
+                found: x0.len(),
+            });
+        }
+        let rec = self.receptances(omega, false);
+        let reference = norm_inf(&rec.b) * scale.abs();
+        let mut x = x0.to_vec();
+        let hz = omega / (2.0 * PI);
+        let mut rn = f64::INFINITY;
+        for it in 0..=self.config.max_iterations {
+            let ev = self.evaluate(&rec, &x, omega, scale, true);
+            rn = norm_inf(&ev.r);
+            let tol = self.config.rtol * norm_inf(&x).max(reference).max(1e-300);
+            if rn <= tol {
+                return Ok((
+                    x,
+                    NewtonReport {
+                        iterations: it,
+                        residual: rn,
+                    },
+                ));
+            }
+            if it == self.config.max_iterations {
+                break;
+            }
+            let lu = Lu::new(ev.jacobian.as_ref().expect("asked for"), &|| {
+                format!(
+                    "harmonic balance Newton at {hz:.6} Hz, iteration {}",
+                    it + 1
+                )
+            })?;
+            let neg: Vec<f64> = ev.r.iter().map(|v| -v).collect();
+            let dx = lu.solve(&neg);
+            let mut alpha = 1.0;
+            let mut accepted = false;
+            for _ in 0..16 {
+                let xt: Vec<f64> = x.iter().zip(&dx).map(|(a, d)| a + alpha * d).collect();
+                let rt = norm_inf(&self.evaluate(&rec, &xt, omega, scale, false).r);
+                if rt < (1.0 - 1e-4 * alpha) * rn {
+                    x = xt;
+                    accepted = true;
+                    break;
+                }
+                alpha *= 0.5;
+            }
+            if !accepted {
+                // Full step when no damped step decreases the residual (e.g. at a contact
+                // kink where ‖R‖ is not differentiable): Newton still progresses there.
+                x.iter_mut().zip(&dx).for_each(|(a, d)| *a += d);
+            }
+        }
+        Err(Error::Numerical {
+            what: format!("harmonic balance Newton at {hz:.6} Hz (level {scale})"),
+            detail: format!(
+                "no convergence in {} iterations: residual {rn:.3e} m against tolerance {:.1e} \
+                 relative; take smaller frequency steps or start closer",
+                self.config.max_iterations, self.config.rtol
+            ),
+        })
+    }
+
+    /// Complex amplitudes of every sensor (rows) at every harmonic `k = 0..=H` (columns) at
+    /// solution `x`, in the sensor's quantity (displacement m, velocity m/s, acceleration
+    /// m/s²): `Y_k = (ikω0)^p (λ H_s,ext F − H_s,NL G)_k`.
+    pub fn sensor_response(&self, x: &[f64], omega: f64, scale: f64) -> Mat<c64> {
+        let nh = self.set.len();
+        let rec = self.receptances(omega, false);
+        let ev = self.evaluate(&rec, x, omega, scale, false);
+        let y = self.recover(&self.sensor_ports(), omega, scale, &ev.g, false);
+        self.to_quantities(&y, omega, nh)
+    }
+
+    fn sensor_ports(&self) -> Vec<usize> {
+        self.sensors.iter().map(|s| s.port).collect()
+    }
+
+    /// `λ H_rows,ext F − H_rows,NL G` in the real layout (or its `Ω`-derivative's linear
+    /// part with `deriv`).
+    fn recover(&self, rows: &[usize], omega: f64, scale: f64, g: &[f64], deriv: bool) -> Vec<f64> {
+        let hs = expand(
+            &self.set,
+            &self.harmonic_receptances(omega, rows, &self.element_ports, deriv),
+        );
+        let he = expand(
+            &self.set,
+            &self.harmonic_receptances(omega, rows, &self.input_ports(), deriv),
+        );
+        let f = self.force_coefficients();
+        (0..hs.nrows())
+            .map(|i| {
+                scale * (0..f.len()).map(|j| he[(i, j)] * f[j]).sum::<f64>()
+                    - (0..g.len()).map(|j| hs[(i, j)] * g[j]).sum::<f64>()
+            })
+            .collect()
+    }
+
+    /// Real-layout displacements (sensors × (2H+1)) to complex amplitudes in each sensor's
+    /// quantity.
+    fn to_quantities(&self, y: &[f64], omega: f64, nh: usize) -> Mat<c64> {
+        let w0 = self.set.base(omega);
+        Mat::from_fn(self.sensors.len(), self.set.h + 1, |s, k| {
+            let z = self.set.complex(&y[s * nh..(s + 1) * nh], k);
+            let iw = c64::new(0.0, k as f64 * w0);
+            match self.sensors[s].quantity {
+                Quantity::Displacement => z,
+                Quantity::Velocity => iw * z,
+                Quantity::Acceleration => iw * iw * z,
+            }
+        })
+    }
+
+    /// Multi-harmonic FRFs `H_sν = Y_ν / F_ν` (thesis eq. 14) of every sensor (rows) at every
+    /// harmonic `k` (columns) forced on input `input`; NaN where that harmonic carries no
+    /// force.
+    pub fn frf(&self, x: &[f64], omega: f64, scale: f64, input: usize) -> Mat<c64> {
+        let y = self.sensor_response(x, omega, scale);
+        Mat::from_fn(y.nrows(), y.ncols(), |s, k| {
+            let f = self.forcing.amplitude(input, k) * scale;
+            if f == c64::new(0.0, 0.0) {
+                c64::new(f64::NAN, f64::NAN)
+            } else {
+                y[(s, k)] / f
+            }
+        })
+    }
+
+    /// Every parameter of the model: each element's law parameters, then the linear ones
+    /// (modal frequencies and damping ratios of every retained mode, the stiffness scale).
+    pub fn all_parameters(&self) -> Vec<ModelParam> {
+        let mut p: Vec<ModelParam> = self
+            .elements
+            .iter()
+            .enumerate()
+            .flat_map(|(e, el)| {
+                (0..el.law().n_params()).map(move |i| ModelParam::Element {
+                    element: e,
+                    param: i,
+                })
+            })
+            .collect();
+        for r in 0..self.linear.n_modes() {
+            p.push(ModelParam::Linear(LinearParam::ModalFrequency(r)));
+            p.push(ModelParam::Linear(LinearParam::DampingRatio(r)));
+        }
+        p.push(ModelParam::Linear(LinearParam::StiffnessScale));
+        p
+    }
+
+    /// Display name of parameter `p`.
+    pub fn parameter_name(&self, p: ModelParam) -> String {
+        match p {
+            ModelParam::Element { element, param } => self.elements[element].param_full_name(param),
+            ModelParam::Linear(l) => l.name(),
+        }
+    }
+
+    /// Sensitivities of the solution `x` at (`omega`, `scale`) to `params`, by implicit
+    /// differentiation of `R(x, p) = 0`: `dx/dp = −R_x⁻¹ R_p` with one factorisation of the
+    /// Jacobian for all parameters; then `dY/dp` of every sensor.
+    pub fn sensitivities(
+        &self,
+        x: &[f64],
+        omega: f64,
+        scale: f64,
+        params: &[ModelParam],
+    ) -> Result<Vec<Sensitivity>> {
+        let nh = self.set.len();
+        let n = self.n_unknowns();
+        let w0 = self.set.base(omega);
+        let rec = self.receptances(omega, false);
+        let ev = self.evaluate(&rec, x, omega, scale, true);
+        let hz = omega / (2.0 * PI);
+        let lu = Lu::new(ev.jacobian.as_ref().expect("asked for"), &|| {
+            format!("sensitivities at {hz:.6} Hz")
+        })?;
+        let sports = self.sensor_ports();
+        let hs = expand(
+            &self.set,
+            &self.harmonic_receptances(omega, &sports, &self.element_ports, false),
+        );
+        let f = self.force_coefficients();
+        let ports_nl = &self.element_ports;
+        let inputs = self.input_ports();
+        let mut out = Vec::with_capacity(params.len());
+        for &p in params {
+            // R_p and the explicit part of dY/dp (sensors, real layout).
+            let (rp, mut dy) = match p {
+                ModelParam::Element { element, param } => {
+                    let el = self.elements.get(element).ok_or_else(|| {
+                        Error::invalid("sensitivity parameter", format!("no element {element}"))
+                    })?;
+                    if param >= el.law().n_params() {
+                        return Err(Error::invalid(
+                            "sensitivity parameter",
+                            format!(
+                                "element '{}' has {} parameters",
+                                el.name(),
+                                el.law().n_params()
+                            ),
+                        ));
+                    }
+                    let d = self.plans[element].dparams(
+                        el.law(),
+                        &x[element * nh..(element + 1) * nh],
+                        w0,
+                    );
+                    let mut gp = vec![0.0; n];
+                    for l in 0..nh {
+                        gp[element * nh + l] = d[(l, param)];
+                    }
+                    let rp: Vec<f64> = (0..n)
+                        .map(|i| (0..n).map(|j| rec.a[(i, j)] * gp[j]).sum())
+                        .collect();
+                    let dy: Vec<f64> = (0..hs.nrows())
+                        .map(|i| -(0..n).map(|j| hs[(i, j)] * gp[j]).sum::<f64>())
+                        .collect();
+                    (rp, dy)
+                }
+                ModelParam::Linear(lp) => {
+                    let d = |rows: &[usize], cols: &[usize]| -> Result<Mat<f64>> {
+                        let h = (0..=self.set.h)
+                            .map(|k| self.linear.receptance_dparam(lp, k as f64 * w0, rows, cols))
+                            .collect::<Result<Vec<_>>>()?;
+                        Ok(expand(&self.set, &h))
+                    };
+                    let (da, db) = (d(ports_nl, ports_nl)?, d(ports_nl, &inputs)?);
+                    let (dsa, dsb) = (d(&sports, ports_nl)?, d(&sports, &inputs)?);
+                    let lin = |a: &Mat<f64>, b: &Mat<f64>, sign: f64| -> Vec<f64> {
+                        (0..a.nrows())
+                            .map(|i| {
+                                sign * ((0..n).map(|j| a[(i, j)] * ev.g[j]).sum::<f64>()
+                                    - scale * (0..f.len()).map(|j| b[(i, j)] * f[j]).sum::<f64>())
+                            })
+                            .collect()
+                    };
+                    (lin(&da, &db, 1.0), lin(&dsa, &dsb, -1.0))
+                }
+            };
+            let neg: Vec<f64> = rp.iter().map(|v| -v).collect();
+            let dx = lu.solve(&neg);
+            // Implicit part: −H_s,NL ∂G/∂x dx.
+            let mut gdx = vec![0.0; n];
+            for (e, dg) in ev.dg.iter().enumerate() {
+                for l in 0..nh {
+                    gdx[e * nh + l] = (0..nh).map(|c| dg[(l, c)] * dx[e * nh + c]).sum();
+                }
+            }
+            for (i, v) in dy.iter_mut().enumerate() {
+                *v -= (0..n).map(|j| hs[(i, j)] * gdx[j]).sum::<f64>();
+            }
+            out.push(Sensitivity {
+                name: self.parameter_name(p),
+                dy: self.to_quantities(&dy, omega, nh),
+                dx,
+            });
+        }
+        Ok(out)
+    }
+
+    /// Modal amplitudes `η_k = Z(kω0)⁻¹ Φ_Pᵀ (λ F_k − G_k)` (modes × harmonics `0..=H`) of the
+    /// solution `x`: the state of the full formulation, e.g. for initial conditions of a time
+    /// integration on the same periodic orbit.
+    pub fn modal_amplitudes(&self, x: &[f64], omega: f64, scale: f64) -> Mat<c64> {
+        let nh = self.set.len();
+        let rec = self.receptances(omega, false);
+        let ev = self.evaluate(&rec, x, omega, scale, false);
+        let w0 = self.set.base(omega);
+        let mut ports = self.input_ports();
+        ports.extend(&self.element_ports);
+        let mut eta = Mat::<c64>::zeros(self.linear.n_modes(), self.set.h + 1);
+        for k in 0..=self.set.h {
+            let mut u: Vec<c64> = (0..self.inputs.len())
+                .map(|i| self.forcing.amplitude(i, k) * scale)
+                .collect();
+            u.extend(
+                (0..self.elements.len()).map(|e| -self.set.complex(&ev.g[e * nh..(e + 1) * nh], k)),
+            );
+            let col = self.linear.modal_response(k as f64 * w0, &ports, &u);
+            for (r, z) in col.into_iter().enumerate() {
+                eta[(r, k)] = z;
+            }
+        }
+        eta
+    }
+
+    /// The full formulation on the modal coordinates (thesis eq. 9 balanced harmonic by
+    /// harmonic): `Z(kω0) η_k + Φ_NLᵀ G_k(Φ_NL η) − λ Φ_extᵀ F_k`, real layout (modes ×
+    /// (2H+1)), and its Jacobian. It has no residual flexibility: with `D = 0` its solutions
+    /// are those of the condensed residual.
+    pub fn modal_residual(&self, eta: &[f64], omega: f64, scale: f64) -> (Vec<f64>, Mat<f64>) {
+        let nh = self.set.len();
+        let m = self.linear.n_modes();
+        let w0 = self.set.base(omega);
+        let z: Vec<Mat<c64>> = (0..=self.set.h)
+            .map(|k| self.linear.dynamic_stiffness(k as f64 * w0))
+            .collect();
+        let zr = expand(&self.set, &z);
+        let ne = self.elements.len();
+        // Φ_NL (elements × modes) and Φ_ext.
+        let phi = |p: usize, r: usize| self.linear.phi[(p, r)];
+        let mut jac = zr.clone();
+        let mut res: Vec<f64> = (0..m * nh)
+            .map(|i| (0..m * nh).map(|j| zr[(i, j)] * eta[j]).sum())
+            .collect();
+        let f = self.force_coefficients();
+        for (i, (_, port)) in self.inputs.iter().enumerate() {
+            for r in 0..m {
+                for l in 0..nh {
+                    res[r * nh + l] -= scale * phi(*port, r) * f[i * nh + l];
+                }
+            }
+        }
+        for e in 0..ne {
+            let pe = self.element_ports[e];
+            let xe: Vec<f64> = (0..nh)
+                .map(|l| (0..m).map(|r| phi(pe, r) * eta[r * nh + l]).sum())
+                .collect();
+            let ev = self.plans[e].evaluate(self.elements[e].law(), &xe, w0, true);
+            let dg = ev.jacobian.expect("asked for");
+            for r in 0..m {
+                for l in 0..nh {
+                    res[r * nh + l] += phi(pe, r) * ev.force[l];
+                    for s in 0..m {
+                        for c in 0..nh {
+                            jac[(r * nh + l, s * nh + c)] += phi(pe, r) * dg[(l, c)] * phi(pe, s);
+                        }
+                    }
+                }
+            }
+        }
+        (res, jac)
+    }
+
+    /// Solves the full modal formulation by Newton from `eta0` (modes × (2H+1), real layout).
+    pub fn solve_modal(&self, omega: f64, scale: f64, eta0: &[f64]) -> Result<Vec<f64>> {
+        let mut eta = eta0.to_vec();
+        let hz = omega / (2.0 * PI);
+        for it in 0..self.config.max_iterations {
+            let (r, j) = self.modal_residual(&eta, omega, scale);
+            let lu = Lu::new(&j, &|| {
+                format!("modal harmonic balance at {hz:.6} Hz, iteration {it}")
+            })?;
+            let neg: Vec<f64> = r.iter().map(|v| -v).collect();
+            let d = lu.solve(&neg);
+            eta.iter_mut().zip(&d).for_each(|(a, b)| *a += b);
+            if norm_inf(&d) <= self.config.rtol * norm_inf(&eta).max(1e-300) {
+                return Ok(eta);
+            }
+        }
+        Err(Error::Numerical {
+            what: format!("modal harmonic balance Newton at {hz:.6} Hz"),
+            detail: format!(
+                "no convergence in {} iterations",
+                self.config.max_iterations
+            ),
+        })
+    }
+
+    pub(crate) fn hill_plan(&self) -> &AftPlan {
+        &self.hill_plan
+    }
+}
