@@ -62,12 +62,18 @@ pub fn harmonic_label(k: usize, nu: usize) -> String {
     }
 }
 
-/// Writes the FRF of `branch`: HDF5 for `.h5`/`.hdf5`, CSV for `.csv`, atomically.
-pub fn write_frf(path: &Path, sys: &HbSystem, branch: &Branch, info: &FrfInfo) -> Result<()> {
-    let y = responses(sys, branch);
+/// Writes the FRF of `branch` with its sensor responses `y` (from [`responses`]): HDF5 for
+/// `.h5`/`.hdf5`, CSV for `.csv`, atomically.
+pub fn write_frf(
+    path: &Path,
+    sys: &HbSystem,
+    branch: &Branch,
+    y: &[Mat<c64>],
+    info: &FrfInfo,
+) -> Result<()> {
     crate::output::write_atomically(path, HINT, |tmp, format| match format {
-        Format::Csv => write_csv(tmp, sys, branch, &y, info),
-        Format::Hdf5 => write_hdf5(tmp, sys, branch, &y, info),
+        Format::Csv => write_csv(tmp, sys, branch, y, info),
+        Format::Hdf5 => write_hdf5(tmp, sys, branch, y, info),
     })
 }
 
@@ -271,18 +277,18 @@ fn write_hdf5(
     Ok(())
 }
 
-/// Plots `|Y|` of sensor `sensor` at every harmonic carrying response (the fundamental
-/// thick) against frequency as SVG: stable parts solid, unstable parts red, folds and jumps
-/// marked. Written atomically.
+/// Plots `|Y|` of sensor `sensor` (responses `y` from [`responses`]) at every harmonic
+/// carrying response (the fundamental thick) against frequency as SVG: stable parts solid,
+/// unstable parts red, folds and jumps marked. Written atomically.
 pub fn plot_svg(
     path: &Path,
     sys: &HbSystem,
     branch: &Branch,
+    y: &[Mat<c64>],
     sensor: usize,
     title: &str,
 ) -> Result<()> {
     use plotters::prelude::*;
-    let y = responses(sys, branch);
     let hz: Vec<f64> = branch
         .points
         .iter()

@@ -13,7 +13,6 @@
 //! with `NLSIM_BENCH_LARGE=1`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use nlsim_fixtures::bracket::BracketConfig;
 use nlsim_hb::{HarmonicSet, HbConfig, HbSystem, stepped_sine};
 use nlsim_kernel::Model;
 use nlsim_reduction::modal::{ReductionConfig, reduce};
@@ -121,21 +120,7 @@ fn hb(c: &mut Criterion) {
         sizes.push(100_000);
     }
     for target in sizes {
-        let cfg = BracketConfig {
-            lumped_mass: false,
-            ..BracketConfig::for_target_dofs(target)
-        };
-        let mut model = nlsim_fixtures::bracket_fixture(&cfg, "cubic")
-            .unwrap()
-            .model;
-        let tip = model.excitation()[0].dof;
-        model
-            .add_sensor(nlsim_kernel::Sensor {
-                name: "tip_d".into(),
-                dof: tip,
-                quantity: nlsim_kernel::Quantity::Displacement,
-            })
-            .unwrap();
+        let model = nlsim_bench::bracket_with_tip_sensor(target);
         bench_model(c, &format!("bracket_{}dofs", model.n_dofs()), &model);
     }
 }

@@ -18,8 +18,7 @@
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use faer::{Mat, c64};
-use nlsim_fixtures::bracket::BracketConfig;
-use nlsim_kernel::{Coupling, Damping, Law, Model, NonlinearElement, Quantity, Sensor};
+use nlsim_kernel::{Coupling, Damping, Law, Model, NonlinearElement, Quantity};
 use nlsim_reduction::modal::{ReductionConfig, reduce};
 use nlsim_reduction::{EigenConfig, ModalSystem, ModeSelection, Port, PortKind};
 use nlsim_sim::{
@@ -151,21 +150,7 @@ struct Setup {
 }
 
 fn bracket_setup(target: usize) -> Setup {
-    let cfg = BracketConfig {
-        lumped_mass: false,
-        ..BracketConfig::for_target_dofs(target)
-    };
-    let mut model = nlsim_fixtures::bracket_fixture(&cfg, "cubic")
-        .unwrap()
-        .model;
-    let tip = model.excitation()[0].dof;
-    model
-        .add_sensor(Sensor {
-            name: "tip_d".into(),
-            dof: tip,
-            quantity: Quantity::Displacement,
-        })
-        .unwrap();
+    let mut model = nlsim_bench::bracket_with_tip_sensor(target);
     let rc = |m| ReductionConfig {
         eigen: EigenConfig {
             selection: ModeSelection::Lowest(m),

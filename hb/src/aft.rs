@@ -157,25 +157,13 @@ impl AftPlan {
         let mut g = vec![0.0; n];
         let mut kt = vec![0.0; n];
         let mut ct = vec![0.0; n];
-        let mut state = vec![0.0; law.n_states()];
-        let passes = if state.is_empty() { 1 } else { 16 };
-        for _ in 0..passes {
-            let start = state.clone();
-            for i in 0..n {
-                let e = law.eval(u[i], v[i], &state);
-                g[i] = e.force;
-                kt[i] = e.df_du;
-                ct[i] = e.df_dv;
-                law.commit_state(u[i], v[i], &mut state);
-            }
-            let scale = u.iter().fold(0.0f64, |m, a| m.max(a.abs()));
-            if start
-                .iter()
-                .zip(&state)
-                .all(|(a, b)| (a - b).abs() <= 1e-13 * scale)
-            {
-                break;
-            }
+        let mut state = periodic_start(law, &u, &v);
+        for i in 0..n {
+            let e = law.eval(u[i], v[i], &state);
+            g[i] = e.force;
+            kt[i] = e.df_du;
+            ct[i] = e.df_dv;
+            law.commit_state(u[i], v[i], &mut state);
         }
         let force = self.to_freq(&g);
         let jacobian = jacobian.then(|| {
@@ -199,22 +187,42 @@ impl AftPlan {
         let (u, v) = self.to_time(x, omega0);
         let np = law.n_params();
         let mut samples = Mat::<f64>::zeros(self.n, np);
-        let mut state = vec![0.0; law.n_states()];
+        let mut state = periodic_start(law, &u, &v);
         let mut out = vec![0.0; np];
-        let passes = if state.is_empty() { 1 } else { 16 };
-        for pass in 0..passes {
-            for i in 0..self.n {
-                if pass + 1 == passes {
-                    law.dforce_dparams(u[i], v[i], &state, &mut out);
-                    for (c, o) in out.iter().enumerate() {
-                        samples[(i, c)] = *o;
-                    }
-                }
-                law.commit_state(u[i], v[i], &mut state);
+        for i in 0..self.n {
+            law.dforce_dparams(u[i], v[i], &state, &mut out);
+            for (c, o) in out.iter().enumerate() {
+                samples[(i, c)] = *o;
             }
+            law.commit_state(u[i], v[i], &mut state);
         }
         &self.p * &samples
     }
+}
+
+/// The history state at the start of a period of the motion `(u, v)` once it repeats: marched
+/// from zero over at most 16 periods, until the state at the period's end equals the one at
+/// its start to 1e-13 of the motion. Empty for memoryless laws.
+fn periodic_start(law: &Law, u: &[f64], v: &[f64]) -> Vec<f64> {
+    let mut state = vec![0.0; law.n_states()];
+    if state.is_empty() {
+        return state;
+    }
+    let scale = u.iter().fold(0.0f64, |m, a| m.max(a.abs()));
+    for _ in 0..16 {
+        let start = state.clone();
+        for (&ui, &vi) in u.iter().zip(v) {
+            law.commit_state(ui, vi, &mut state);
+        }
+        if start
+            .iter()
+            .zip(&state)
+            .all(|(a, b)| (a - b).abs() <= 1e-13 * scale)
+        {
+            break;
+        }
+    }
+    state
 }
 
 #[cfg(test)]

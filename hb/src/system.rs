@@ -14,7 +14,7 @@ use crate::harmonics::{Forcing, HarmonicSet};
 use crate::linear::{LinearParam, LinearPart};
 use faer::{Mat, c64};
 use nlsim_kernel::{Error, Model, NonlinearElement, Quantity, Result};
-use nlsim_reduction::{PortKind, ReducedModel};
+use nlsim_reduction::ReducedModel;
 use std::f64::consts::PI;
 
 /// A response output: a quantity at a port.
@@ -164,35 +164,16 @@ impl HbSystem {
         set: HarmonicSet,
         config: HbConfig,
     ) -> Result<Self> {
-        let mut elements = Vec::new();
-        let mut element_ports = Vec::new();
-        for e in model.elements() {
-            let port = reduced.port_index(e.name())?;
-            if reduced.ports[port].kind != PortKind::Element {
-                return Err(Error::invalid(
-                    format!("element '{}'", e.name()),
-                    "its name matches a port that is not an element port",
-                ));
-            }
-            elements.push(e.clone());
-            element_ports.push(port);
-        }
-        let inputs = model
-            .excitation()
-            .iter()
-            .map(|x| Ok((x.name.clone(), reduced.port_index(&x.name)?)))
-            .collect::<Result<Vec<_>>>()?;
-        let sensors = model
-            .sensors()
-            .iter()
-            .map(|s| {
-                Ok(SensorSpec {
-                    name: s.name.clone(),
-                    port: reduced.port_index(&s.name)?,
-                    quantity: s.quantity,
-                })
+        let map = nlsim_reduction::model_port_map(model, &reduced.ports)?;
+        let sensors = map
+            .sensors
+            .into_iter()
+            .map(|(name, port, quantity)| SensorSpec {
+                name,
+                port,
+                quantity,
             })
-            .collect::<Result<Vec<_>>>()?;
+            .collect();
         let forcing = Forcing {
             terms: model
                 .excitation()
@@ -208,9 +189,9 @@ impl HbSystem {
         Self::new(
             set,
             LinearPart::from_reduced(reduced)?,
-            elements,
-            element_ports,
-            inputs,
+            model.elements().to_vec(),
+            map.elements,
+            map.inputs,
             sensors,
             forcing,
             config,

@@ -24,7 +24,7 @@ pub use eigen::{
 };
 pub use factor::{ShiftFactor, ShiftedPencil};
 pub use modal::{
-    EffectiveMass, Port, PortKind, ReducedModel, ReductionConfig, damping_ratios, effective_masses,
-    model_ports, reduce, reduce_with,
+    EffectiveMass, ModelPortMap, Port, PortKind, ReducedModel, ReductionConfig, damping_ratios,
+    effective_masses, model_port_map, model_ports, reduce, reduce_with,
 };
 pub use state_space::{ModalSystem, Response};

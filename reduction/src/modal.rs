@@ -131,6 +131,52 @@ pub fn model_ports(model: &Model, extra_dofs: &[usize]) -> Result<Vec<Port>> {
     Ok(ports)
 }
 
+/// Where a model's parts sit among `ports`: each element's port (checked to be an element
+/// port), each excitation point's `(name, port)` and each sensor's `(name, port, quantity)`,
+/// in the model's order. The simulator and the harmonic balance both start from it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModelPortMap {
+    /// Port of each nonlinear element.
+    pub elements: Vec<usize>,
+    /// `(name, port)` of each excitation point.
+    pub inputs: Vec<(String, usize)>,
+    /// `(name, port, quantity)` of each sensor.
+    pub sensors: Vec<(String, usize, nlsim_kernel::Quantity)>,
+}
+
+/// Matches `model`'s elements, excitation points and sensors to `ports` by name.
+pub fn model_port_map(model: &Model, ports: &[Port]) -> Result<ModelPortMap> {
+    let elements = model
+        .elements()
+        .iter()
+        .map(|e| {
+            let p = port_index(ports, e.name())?;
+            if ports[p].kind != PortKind::Element {
+                return Err(Error::invalid(
+                    format!("element '{}'", e.name()),
+                    "its name matches a port that is not an element port",
+                ));
+            }
+            Ok(p)
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let inputs = model
+        .excitation()
+        .iter()
+        .map(|x| Ok((x.name.clone(), port_index(ports, &x.name)?)))
+        .collect::<Result<Vec<_>>>()?;
+    let sensors = model
+        .sensors()
+        .iter()
+        .map(|s| Ok((s.name.clone(), port_index(ports, &s.name)?, s.quantity)))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(ModelPortMap {
+        elements,
+        inputs,
+        sensors,
+    })
+}
+
 /// Settings of [`reduce`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct ReductionConfig {

@@ -3,7 +3,7 @@
 
 use faer::c64;
 use nlsim_kernel::{Error, Law, Model, NonlinearElement, Quantity, Result};
-use nlsim_reduction::{ModalSystem, PortKind};
+use nlsim_reduction::ModalSystem;
 
 /// A nonlinear element fed back at a port of the modal system.
 #[derive(Debug, Clone)]
@@ -42,36 +42,26 @@ impl Plant {
     /// The plant of `model` reduced to `system`: the model's elements (matched to their ports
     /// by name), its excitation points as inputs, and its sensors as outputs.
     pub fn from_model(model: &Model, system: &ModalSystem) -> Result<Self> {
-        let mut elements = Vec::new();
-        for e in model.elements() {
-            let port = system.port_index(e.name())?;
-            if system.ports[port].kind != PortKind::Element {
-                return Err(Error::invalid(
-                    format!("element '{}'", e.name()),
-                    "its name matches a port that is not an element port",
-                ));
-            }
-            elements.push(ElementPort {
+        let map = nlsim_reduction::model_port_map(model, &system.ports)?;
+        let elements = model
+            .elements()
+            .iter()
+            .zip(map.elements)
+            .map(|(e, port)| ElementPort {
                 element: e.clone(),
                 port,
-            });
-        }
-        let inputs = model
-            .excitation()
-            .iter()
-            .map(|x| Ok((x.name.clone(), system.port_index(&x.name)?)))
-            .collect::<Result<Vec<_>>>()?;
-        let outputs = model
-            .sensors()
-            .iter()
-            .map(|s| {
-                Ok(OutputSpec {
-                    name: s.name.clone(),
-                    port: system.port_index(&s.name)?,
-                    quantity: s.quantity,
-                })
             })
-            .collect::<Result<Vec<_>>>()?;
+            .collect();
+        let outputs = map
+            .sensors
+            .into_iter()
+            .map(|(name, port, quantity)| OutputSpec {
+                name,
+                port,
+                quantity,
+            })
+            .collect();
+        let inputs = map.inputs;
         Self::new(system.clone(), elements, inputs, outputs)
     }
 

@@ -579,6 +579,7 @@ fn demo_frf(
         &plot,
         &sys,
         &cont,
+        &nlsim::frf::responses(&sys, &cont),
         0,
         &format!("{}: harmonic balance, H = 7", model.name()),
     )?;
@@ -731,6 +732,18 @@ struct FrfOptions<'a> {
     set: &'a [String],
 }
 
+/// Loads and validates a model for a run (definiteness shows in the factorisations) and
+/// applies its `--set` overrides.
+fn load_for_run(spec: &str, sets: &[String]) -> nlsim::Result<nlsim::kernel::Model> {
+    let mut model = nlsim::load_model(spec)?.model;
+    model.validate(&ValidationConfig {
+        check_definiteness: false,
+        ..Default::default()
+    })?;
+    apply_sets(&mut model, sets)?;
+    Ok(model)
+}
+
 /// Applies `--set element.param=value` overrides.
 fn apply_sets(model: &mut nlsim::kernel::Model, sets: &[String]) -> nlsim::Result<()> {
     for s in sets {
@@ -795,13 +808,7 @@ fn frf(
             println!("{s}");
         }
     };
-    let loaded = nlsim::load_model(spec)?;
-    let mut model = loaded.model;
-    model.validate(&ValidationConfig {
-        check_definiteness: false,
-        ..Default::default()
-    })?;
-    apply_sets(&mut model, o.set)?;
+    let model = load_for_run(spec, o.set)?;
     if model.elements().is_empty() {
         return Err(usage(format!(
             "model '{spec}' has no nonlinear element: its FRF is linear (see `nlsim modes`)"
@@ -959,12 +966,12 @@ fn frf(
         seconds: secs,
     };
     if let Some(path) = out {
-        nlsim::frf::write_frf(path, &sys, &branch, &info)?;
+        nlsim::frf::write_frf(path, &sys, &branch, &y, &info)?;
         say(format!("  written to {}", path.display()));
     }
     if let Some(p) = plot_path {
         let title = format!("{} — {mode_name}, H = {}", model.name(), set.h);
-        nlsim::frf::plot_svg(&p, &sys, &branch, 0, &title)?;
+        nlsim::frf::plot_svg(&p, &sys, &branch, &y, 0, &title)?;
         say(format!("  plot {}", p.display()));
     }
     Ok(())
@@ -1006,13 +1013,7 @@ fn simulate(
             println!("{s}");
         }
     };
-    let loaded = nlsim::load_model(spec)?;
-    let mut model = loaded.model;
-    model.validate(&ValidationConfig {
-        check_definiteness: false,
-        ..Default::default()
-    })?;
-    apply_sets(&mut model, o.set)?;
+    let model = load_for_run(spec, o.set)?;
     if model.excitation().is_empty() && !o.excitation.is_empty() {
         return Err(usage(format!(
             "model '{spec}' has no excitation points to drive"
