@@ -12,6 +12,7 @@ test:
 	cargo fmt --all -- --check
 	cargo clippy --workspace --all-targets -- -D warnings
 	cargo test --workspace
+	scripts/slurm-e2e.sh $${CARGO_TARGET_DIR:-target}/debug/nlsim
 
 bench:
 	@scripts/ensure-deps.sh

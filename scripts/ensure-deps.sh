@@ -3,9 +3,14 @@
 # exact command to run. Called by `make demo` and `make test`.
 set -euo pipefail
 
-# Debian packages the build needs: a C compiler for mimalloc, and the HDF5 library (with
-# pkg-config to find it) for the result files.
-APT_PACKAGES=(gcc libc6-dev libhdf5-dev pkg-config)
+# Debian packages the build needs: a C compiler for mimalloc, the HDF5 library (with
+# pkg-config to find it) for the result files, and a TrueType font for the text of PNG plots.
+APT_PACKAGES=(gcc libc6-dev libhdf5-dev pkg-config fonts-dejavu-core)
+# `make test` also reads every result file with h5py and runs the batch tool on a real
+# single-node SLURM (scripts/slurm-e2e.sh).
+if [ "${1:-}" = "--test" ]; then
+  APT_PACKAGES+=(python3-h5py slurm-wlm munge)
+fi
 
 say() { printf 'nlsim setup: %s\n' "$*" >&2; }
 

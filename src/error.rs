@@ -55,6 +55,9 @@ pub enum Error {
         /// What the HDF5 library reported.
         message: String,
     },
+    /// Part of a run failed and the rest was written (exit code 1), e.g. some batch jobs.
+    #[error("{0}")]
+    Failed(String),
     /// A command-line value is unusable (exit code 2).
     #[error("{0}")]
     Usage(String),

@@ -17,6 +17,8 @@ pub const HINT: &str = ".h5 (HDF5, complex harmonics) or .csv (one row per solut
 pub struct FrfInfo {
     /// The model spec as given on the command line.
     pub model_spec: String,
+    /// The model's own name.
+    pub model_name: String,
     /// `continuation`, `step-up` or `step-down`.
     pub mode: String,
     /// Retained modes.
@@ -144,90 +146,88 @@ fn write_hdf5(
     y: &[Mat<c64>],
     info: &FrfInfo,
 ) -> Result<()> {
-    let err = |e: hdf5::Error| Error::Hdf5 {
-        path: path.to_path_buf(),
-        message: e.to_string(),
-    };
-    let file = hdf5::File::create(path).map_err(err)?;
-    let root = file.as_group().map_err(err)?;
-    str_attr(&root, "nlsim_version", env!("CARGO_PKG_VERSION")).map_err(err)?;
-    str_attr(&root, "command", "frf").map_err(err)?;
-    str_attr(&root, "model", &info.model_spec).map_err(err)?;
-    str_attr(&root, "mode", &info.mode).map_err(err)?;
-    str_attr(
+    let err = crate::output::h5err(path);
+    let file = hdf5::File::create(path).map_err(&err)?;
+    let root = file.as_group().map_err(&err)?;
+    crate::output::provenance(
         &root,
-        "convention",
-        "q(t) = Re(sum_k Q_k exp(i k Omega t / nu)); harmonic k is at k/nu times the fundamental",
+        "frf",
+        &info.model_spec,
+        info.model_name.as_str(),
+        None,
     )
-    .map_err(err)?;
-    f64_attr(&root, "harmonics", sys.set.h as f64).map_err(err)?;
-    f64_attr(&root, "subharmonic_order", sys.set.nu as f64).map_err(err)?;
-    f64_attr(&root, "modes", info.modes as f64).map_err(err)?;
+    .map_err(&err)?;
+    str_attr(&root, "mode", &info.mode).map_err(&err)?;
+    f64_attr(&root, "modes", info.modes as f64).map_err(&err)?;
     f64_attr(
         &root,
         "residual_flexibility",
         f64::from(u8::from(info.residual)),
     )
-    .map_err(err)?;
-    f64_attr(&root, "wall_seconds", info.seconds).map_err(err)?;
+    .map_err(&err)?;
+    f64_attr(&root, "wall_seconds", info.seconds).map_err(&err)?;
+    write_group(&root, sys, branch, y).map_err(&err)?;
+    file.flush().map_err(&err)?;
+    Ok(())
+}
+
+/// Writes the FRF datasets of `branch` into `g` (the layout of `docs/file-formats.md`; used
+/// for `nlsim frf` files and for each job of an `nlsim batch` shard).
+pub(crate) fn write_group(
+    g: &hdf5::Group,
+    sys: &HbSystem,
+    branch: &Branch,
+    y: &[Mat<c64>],
+) -> hdf5::Result<()> {
+    str_attr(
+        g,
+        "convention",
+        "q(t) = Re(sum_k Q_k exp(i k Omega t / nu)); harmonic k is at k/nu times the fundamental",
+    )?;
+    f64_attr(g, "harmonics", sys.set.h as f64)?;
+    f64_attr(g, "subharmonic_order", sys.set.nu as f64)?;
     let n = branch.points.len();
-    let real = |g: &hdf5::Group, name: &str, data: &[f64], u: &str| -> Result<()> {
-        let d = g
-            .new_dataset_builder()
-            .with_data(data)
-            .create(name)
-            .map_err(err)?;
-        str_attr(&d, "unit", u).map_err(err)
+    let real = |g: &hdf5::Group, name: &str, data: &[f64], u: &str| -> hdf5::Result<()> {
+        let d = g.new_dataset_builder().with_data(data).create(name)?;
+        str_attr(&d, "unit", u)
     };
     let hz: Vec<f64> = branch
         .points
         .iter()
         .map(|p| p.omega / (2.0 * std::f64::consts::PI))
         .collect();
-    real(&root, "frequency", &hz, "Hz")?;
+    real(g, "frequency", &hz, "Hz")?;
     let level: Vec<f64> = branch.points.iter().map(|p| p.scale).collect();
-    real(&root, "level", &level, "1")?;
+    real(g, "level", &level, "1")?;
     let fl: Vec<f64> = branch
         .points
         .iter()
         .map(|p| p.stability.as_ref().map_or(f64::NAN, |s| s.max_real))
         .collect();
-    real(&root, "max_floquet_real", &fl, "1/s")?;
+    real(g, "max_floquet_real", &fl, "1/s")?;
     let st: Vec<i8> = branch.points.iter().map(stable_code).collect();
-    let d = root
-        .new_dataset_builder()
-        .with_data(&st)
-        .create("stable")
-        .map_err(err)?;
-    str_attr(&d, "legend", "1 stable, 0 unstable, -1 not computed").map_err(err)?;
+    let d = g.new_dataset_builder().with_data(&st).create("stable")?;
+    str_attr(&d, "legend", "1 stable, 0 unstable, -1 not computed")?;
     let kd: Vec<u8> = branch.points.iter().map(|p| kind_code(p.kind)).collect();
-    let d = root
-        .new_dataset_builder()
-        .with_data(&kd)
-        .create("kind")
-        .map_err(err)?;
-    str_attr(&d, "legend", "0 regular, 1 fold, 2 end, 3 jump").map_err(err)?;
+    let d = g.new_dataset_builder().with_data(&kd).create("kind")?;
+    str_attr(&d, "legend", "0 regular, 1 fold, 2 end, 3 jump")?;
     let ratio: Vec<f64> = (0..=sys.set.h)
         .map(|k| k as f64 / sys.set.nu as f64)
         .collect();
-    real(&root, "harmonic_ratio", &ratio, "1")?;
-    let g = file.create_group("sensors").map_err(err)?;
+    real(g, "harmonic_ratio", &ratio, "1")?;
+    let gsen = g.create_group("sensors")?;
     let nk = sys.set.h + 1;
     for (s, sen) in sys.sensors.iter().enumerate() {
-        let gs = g.create_group(&sen.name).map_err(err)?;
-        str_attr(&gs, "quantity", sen.quantity.as_str()).map_err(err)?;
+        let gs = gsen.create_group(&sen.name)?;
+        str_attr(&gs, "quantity", sen.quantity.as_str())?;
         let data: Vec<c64> = (0..n)
             .flat_map(|i| (0..nk).map(move |k| (i, k)))
             .map(|(i, k)| y[i][(s, k)])
             .collect();
-        let d = gs
-            .new_dataset::<c64>()
-            .shape((n, nk))
-            .create("response")
-            .map_err(err)?;
-        d.write_raw(&data).map_err(err)?;
-        str_attr(&d, "unit", unit(sen.quantity)).map_err(err)?;
-        str_attr(&d, "dims", "point x harmonic").map_err(err)?;
+        let d = gs.new_dataset::<c64>().shape((n, nk)).create("response")?;
+        d.write_raw(&data)?;
+        str_attr(&d, "unit", unit(sen.quantity))?;
+        str_attr(&d, "dims", "point x harmonic")?;
         // FRFs per input: Y_k / F_k where harmonic k is forced.
         for (i, (name, _)) in sys.inputs.iter().enumerate() {
             let frf: Vec<c64> = (0..n)
@@ -244,14 +244,13 @@ fn write_hdf5(
             let d = gs
                 .new_dataset::<c64>()
                 .shape((n, nk))
-                .create(format!("frf_{name}").as_str())
-                .map_err(err)?;
-            d.write_raw(&frf).map_err(err)?;
-            str_attr(&d, "unit", &format!("{}/N", unit(sen.quantity))).map_err(err)?;
-            str_attr(&d, "note", "NaN where the harmonic carries no force").map_err(err)?;
+                .create(format!("frf_{name}").as_str())?;
+            d.write_raw(&frf)?;
+            str_attr(&d, "unit", &format!("{}/N", unit(sen.quantity)))?;
+            str_attr(&d, "note", "NaN where the harmonic carries no force")?;
         }
     }
-    let g = file.create_group("elements").map_err(err)?;
+    let gel = g.create_group("elements")?;
     let nh = sys.set.len();
     for (e, el) in sys.elements.iter().enumerate() {
         let data: Vec<f64> = branch
@@ -259,21 +258,15 @@ fn write_hdf5(
             .iter()
             .flat_map(|p| p.x[e * nh..(e + 1) * nh].iter().copied())
             .collect();
-        let d = g
-            .new_dataset::<f64>()
-            .shape((n, nh))
-            .create(el.name())
-            .map_err(err)?;
-        d.write_raw(&data).map_err(err)?;
-        str_attr(&d, "unit", "m").map_err(err)?;
+        let d = gel.new_dataset::<f64>().shape((n, nh)).create(el.name())?;
+        d.write_raw(&data)?;
+        str_attr(&d, "unit", "m")?;
         str_attr(
             &d,
             "layout",
             "per point: c0, c1, s1, ..., cH, sH with u(t) = c0 + sum c_k cos(k w0 t) + s_k sin(k w0 t)",
-        )
-        .map_err(err)?;
+        )?;
     }
-    file.flush().map_err(err)?;
     Ok(())
 }
 

@@ -12,11 +12,13 @@
 //! println!("{}", nlsim::summary::model_summary(&loaded.model, &loaded.source, Some(&report)));
 //! ```
 
+pub mod batch;
 pub mod error;
 pub mod frf;
 pub mod modes;
 pub mod mtx;
 pub mod output;
+pub mod run;
 pub mod simulate;
 pub mod spec;
 pub mod summary;

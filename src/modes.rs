@@ -113,10 +113,11 @@ pub fn format_table(r: &ModeReport) -> String {
 /// Writes the modes to `path`: HDF5 for `.h5`/`.hdf5`, CSV (the table) for `.csv`. The file is
 /// written next to its destination and renamed into place, so a failed run leaves no partial
 /// file and an existing one untouched.
-pub fn write_modes(path: &Path, model: &Model, r: &ModeReport) -> Result<()> {
+/// `model_spec` is the model argument as given (stored with the data).
+pub fn write_modes(path: &Path, model_spec: &str, model: &Model, r: &ModeReport) -> Result<()> {
     crate::output::write_atomically(path, HINT, |tmp, format| match format {
         Format::Csv => write_csv(tmp, r),
-        Format::Hdf5 => write_hdf5(tmp, model, r),
+        Format::Hdf5 => write_hdf5(tmp, model_spec, model, r),
     })
 }
 
@@ -150,29 +151,37 @@ fn write_csv(path: &Path, r: &ModeReport) -> Result<()> {
     })
 }
 
-fn h5err(path: &Path) -> impl Fn(hdf5::Error) -> Error + '_ {
-    move |e| Error::Hdf5 {
-        path: path.to_path_buf(),
-        message: e.to_string(),
-    }
-}
-
-fn write_hdf5(path: &Path, model: &Model, r: &ModeReport) -> Result<()> {
-    let err = h5err(path);
+fn write_hdf5(path: &Path, model_spec: &str, model: &Model, r: &ModeReport) -> Result<()> {
+    let err = crate::output::h5err(path);
     let file = hdf5::File::create(path).map_err(&err)?;
+    crate::output::provenance(
+        &file.as_group().map_err(&err)?,
+        "modes",
+        model_spec,
+        model.name(),
+        None,
+    )
+    .map_err(&err)?;
     let g = file.create_group("modes").map_err(&err)?;
-    let put = |name: &str, data: &[f64]| -> Result<hdf5::Dataset> {
-        g.new_dataset_builder()
+    let put = |name: &str, data: &[f64], unit: &str| -> Result<hdf5::Dataset> {
+        let d = g
+            .new_dataset_builder()
             .with_data(data)
             .create(name)
-            .map_err(&err)
+            .map_err(&err)?;
+        crate::output::str_attr(&d, "unit", unit).map_err(&err)?;
+        Ok(d)
     };
-    put("frequency_hz", &r.modes.frequencies_hz())?;
-    put("eigenvalue_rad2_s2", &r.modes.eigenvalues)?;
-    put("damping_ratio", &r.damping)?;
-    put("residual", &r.modes.residuals)?;
+    put("frequency_hz", &r.modes.frequencies_hz(), "Hz")?;
+    put("eigenvalue_rad2_s2", &r.modes.eigenvalues, "rad^2/s^2")?;
+    put("damping_ratio", &r.damping, "1")?;
+    put("residual", &r.modes.residuals, "1")?;
     for e in &r.effective {
-        let d = put(&format!("effective_mass_{}_kg", e.component), &e.per_mode)?;
+        let d = put(
+            &format!("effective_mass_{}_kg", e.component),
+            &e.per_mode,
+            "kg",
+        )?;
         d.new_attr::<f64>()
             .create("total_kg")
             .and_then(|a| a.write_scalar(&e.total))
@@ -193,6 +202,7 @@ fn write_hdf5(path: &Path, model: &Model, r: &ModeReport) -> Result<()> {
         .create("shapes")
         .map_err(&err)?;
     shapes.write_raw(&raw).map_err(&err)?;
+    crate::output::str_attr(&shapes, "unit", "1/sqrt(kg) (mass-normalised)").map_err(&err)?;
     let st = &r.modes.stats;
     let attr_str = |name: &str, v: &str| -> Result<()> {
         let s: hdf5::types::VarLenUnicode = v.parse().map_err(|e| Error::Hdf5 {

@@ -83,3 +83,38 @@ pub(crate) fn str_attr(loc: &hdf5::Location, name: &str, v: &str) -> hdf5::Resul
 pub(crate) fn f64_attr(loc: &hdf5::Location, name: &str, v: f64) -> hdf5::Result<()> {
     loc.new_attr::<f64>().create(name)?.write_scalar(&v)
 }
+
+/// Maps an HDF5 error to [`Error::Hdf5`] naming `path`.
+pub(crate) fn h5err(path: &Path) -> impl Fn(hdf5::Error) -> Error + '_ {
+    move |e| Error::Hdf5 {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    }
+}
+
+/// Writes what every nlsim HDF5 file carries at its root (`docs/file-formats.md`): the nlsim
+/// version, the command, the model spec as given, the model's name, the seed of any random
+/// draws, and — when the spec is a model file — that file's text, so the data can be traced
+/// back without the file.
+pub(crate) fn provenance(
+    root: &hdf5::Group,
+    command: &str,
+    model_spec: &str,
+    model_name: &str,
+    seed: Option<u64>,
+) -> hdf5::Result<()> {
+    str_attr(root, "nlsim_version", env!("CARGO_PKG_VERSION"))?;
+    str_attr(root, "command", command)?;
+    str_attr(root, "model", model_spec)?;
+    str_attr(root, "model_name", model_name)?;
+    if let Some(s) = seed {
+        root.new_attr::<u64>().create("seed")?.write_scalar(&s)?;
+    }
+    let p = Path::new(model_spec);
+    if p.is_file()
+        && let Ok(text) = std::fs::read_to_string(p)
+    {
+        str_attr(root, "model_file_text", &text)?;
+    }
+    Ok(())
+}

@@ -250,72 +250,64 @@ fn write_csv(path: &Path, h: &TimeHistory, info: &RunInfo) -> Result<()> {
 }
 
 fn write_hdf5(path: &Path, model: &Model, h: &TimeHistory, info: &RunInfo) -> Result<()> {
-    let err = |e: hdf5::Error| Error::Hdf5 {
-        path: path.to_path_buf(),
-        message: e.to_string(),
-    };
-    let file = hdf5::File::create(path).map_err(err)?;
+    let err = crate::output::h5err(path);
+    let file = hdf5::File::create(path).map_err(&err)?;
+    let root = file.as_group().map_err(&err)?;
+    crate::output::provenance(&root, "simulate", &info.model_spec, model.name(), None)
+        .map_err(&err)?;
+    f64_attr(&root, "wall_seconds", h.stats.seconds).map_err(&err)?;
+    write_group(&root, h, info).map_err(&err)?;
+    file.flush().map_err(&err)?;
+    Ok(())
+}
+
+/// Writes the datasets of a time history into `g` (the layout of `docs/file-formats.md`; used
+/// for `nlsim simulate` files and for each job of an `nlsim batch` shard). Series are chunked
+/// and compressed (shuffle, then deflate).
+pub(crate) fn write_group(g: &hdf5::Group, h: &TimeHistory, info: &RunInfo) -> hdf5::Result<()> {
     let n = h.n_samples();
     let chunk = n.clamp(1, 1 << 14);
-    let series = |g: &hdf5::Group, name: &str, data: &[f64], unit: &str| -> Result<()> {
+    let series = |g: &hdf5::Group, name: &str, data: &[f64], unit: &str| -> hdf5::Result<()> {
         let d = g
             .new_dataset::<f64>()
             .shape(data.len())
             .chunk(chunk.min(data.len().max(1)))
             .shuffle()
             .deflate(4)
-            .create(name)
-            .map_err(err)?;
-        d.write_raw(data).map_err(err)?;
-        str_attr(&d, "unit", unit).map_err(err)
+            .create(name)?;
+        d.write_raw(data)?;
+        str_attr(&d, "unit", unit)
     };
-    let root = file.as_group().map_err(err)?;
-    str_attr(&root, "nlsim_version", env!("CARGO_PKG_VERSION")).map_err(err)?;
-    str_attr(&root, "model", &info.model_spec).map_err(err)?;
-    str_attr(&root, "model_name", model.name()).map_err(err)?;
-    str_attr(&root, "method", &info.method).map_err(err)?;
-    str_attr(&root, "case", &h.case).map_err(err)?;
-    f64_attr(&root, "dt_s", h.dt).map_err(err)?;
-    f64_attr(&root, "modes", info.modes as f64).map_err(err)?;
-    f64_attr(&root, "wall_seconds", h.stats.seconds).map_err(err)?;
+    str_attr(g, "method", &info.method)?;
+    str_attr(g, "case", &h.case)?;
+    f64_attr(g, "dt_s", h.dt)?;
+    f64_attr(g, "modes", info.modes as f64)?;
     let times: Vec<f64> = h.times();
-    series(&root, "time", &times, "s")?;
-    let g = file.create_group("outputs").map_err(err)?;
+    series(g, "time", &times, "s")?;
+    let go = g.create_group("outputs")?;
     for o in &h.outputs {
-        series(&g, &o.name, &o.values, unit(o.quantity))?;
-        let d = g.dataset(&o.name).map_err(err)?;
-        str_attr(&d, "quantity", o.quantity.as_str()).map_err(err)?;
+        series(&go, &o.name, &o.values, unit(o.quantity))?;
+        str_attr(&*go.dataset(&o.name)?, "quantity", o.quantity.as_str())?;
     }
-    let g = file.create_group("inputs").map_err(err)?;
+    let gi = g.create_group("inputs")?;
     for ((name, v), spec) in h.inputs.iter().zip(&info.excitation) {
-        series(&g, name, v, "N")?;
-        let d = g.dataset(name).map_err(err)?;
-        str_attr(&d, "excitation", spec).map_err(err)?;
+        series(&gi, name, v, "N")?;
+        str_attr(&*gi.dataset(name)?, "excitation", spec)?;
     }
-    let g = file.create_group("elements").map_err(err)?;
+    let gel = g.create_group("elements")?;
     for (e, name) in h.element_names.iter().enumerate() {
-        let ge = g.create_group(name).map_err(err)?;
+        let ge = gel.create_group(name)?;
         series(&ge, "displacement", &h.element_displacements[e], "m")?;
         series(&ge, "velocity", &h.element_velocities[e], "m/s")?;
         series(&ge, "force", &h.element_forces[e], "N")?;
     }
-    let g = file.create_group("events").map_err(err)?;
+    let gev = g.create_group("events")?;
     let t: Vec<f64> = h.stats.events.iter().map(|e| e.time).collect();
     let el: Vec<u32> = h.stats.events.iter().map(|e| e.element as u32).collect();
     let cl: Vec<u8> = h.stats.events.iter().map(|e| u8::from(e.closing)).collect();
-    g.new_dataset_builder()
-        .with_data(&t)
-        .create("time")
-        .map_err(err)?;
-    g.new_dataset_builder()
-        .with_data(&el)
-        .create("element")
-        .map_err(err)?;
-    g.new_dataset_builder()
-        .with_data(&cl)
-        .create("closing")
-        .map_err(err)?;
-    file.flush().map_err(err)?;
+    gev.new_dataset_builder().with_data(&t).create("time")?;
+    gev.new_dataset_builder().with_data(&el).create("element")?;
+    gev.new_dataset_builder().with_data(&cl).create("closing")?;
     Ok(())
 }
 

@@ -323,7 +323,50 @@ mod cli {
         )
         .unwrap();
         let missing = dir.join("missing.toml");
+        let bad_jobs = dir.join("bad_jobs.toml");
+        std::fs::write(&bad_jobs, "name = \"b\"\ncommand = \"frf\"\nmodel = 3\n").unwrap();
+        let jobs_param = dir.join("jobs_param.toml");
+        std::fs::write(
+            &jobs_param,
+            "name = \"p\"\ncommand = \"frf\"\nmodel = \"duffing_fig3\"\n[frf]\nfrom = 20.0\n\
+             to = 40.0\n[[sweep]]\nset = \"spring.k5\"\nvalues = [1.0]\n",
+        )
+        .unwrap();
+        let jp = jobs_param.display().to_string();
         let cases: Vec<(Vec<String>, i32, String)> = vec![
+            (
+                vec!["batch".into(), bad_jobs.display().to_string()],
+                1,
+                "bad_jobs.toml:3:".into(),
+            ),
+            (
+                vec!["batch".into(), jp.clone()],
+                1,
+                "jobs_param.toml:8: set: unknown parameter 'spring.k5'".into(),
+            ),
+            (
+                vec!["batch".into(), "merge".into(), jp.clone()],
+                2,
+                "no complete shard".into(),
+            ),
+            (
+                vec![
+                    "batch".into(),
+                    jp.clone(),
+                    "--task-index".into(),
+                    "2".into(),
+                    "--task-count".into(),
+                    "2".into(),
+                ],
+                2,
+                "--task-index 2 is not below --task-count 2".into(),
+            ),
+            (vec!["batch".into()], 2, "needs a jobs file".into()),
+            (
+                vec!["--threads".into(), "0".into(), "fixtures".into()],
+                2,
+                "--threads must be at least 1".into(),
+            ),
             (
                 vec!["check".into(), missing.display().to_string()],
                 1,
@@ -369,7 +412,8 @@ mod cli {
             let (rc, _out, err) = nlsim(&a);
             assert_eq!(rc, code, "{args:?}: stderr {err}");
             assert!(err.contains(&word), "{args:?}: expected '{word}' in {err}");
-            if code == 1 {
+            // Every error of nlsim's own is one line; clap's usage errors carry their usage.
+            if err.starts_with("error: ") && !err.contains("Usage:") {
                 assert_eq!(
                     err.trim_end().lines().count(),
                     1,
@@ -908,6 +952,302 @@ mod frf_cli {
             assert_eq!(code, *want, "{args:?}: {err}");
             assert_eq!(err.lines().count(), 1, "{args:?}: {err}");
             assert!(err.contains(text), "{args:?}: {err}");
+        }
+    }
+}
+
+/// `nlsim batch`: shards, merge, skip-complete, killed runs, and every file read by h5py.
+mod batch {
+    use super::*;
+
+    /// A Python interpreter with h5py (scripts/find-h5py.sh), for the reader checks.
+    fn python() -> String {
+        let out = Command::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/find-h5py.sh"))
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).trim().to_string()
+    }
+
+    /// Runs scripts/h5check.py with `args`; panics with its report when a check fails.
+    fn h5check(args: &[&str]) {
+        let out = Command::new(python())
+            .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/h5check.py"))
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "h5check {args:?}: {}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+
+    fn ok(args: &[&str]) -> String {
+        let (rc, out, err) = nlsim(args);
+        assert_eq!(rc, 0, "{args:?}: {err}");
+        out
+    }
+
+    const FRF_JOBS: &str = r#"
+name = "frfs"
+command = "frf"
+model = "duffing_fig3"
+seed = 21
+output = "frf-out"
+
+[frf]
+from = 22.0
+to = 40.0
+harmonics = 3
+mode = "continuation"
+
+[[sweep]]
+option = "force"
+values = [1.0, 2.0]
+
+[lhs]
+samples = 5
+params = [{ set = "spring.k3", min = 5e14, max = 5e15, log = true }]
+"#;
+
+    /// Three shards merged equal one process bit for bit (datasets and attributes), a second
+    /// run skips complete shards, and h5py reads every kind of file nlsim writes, complex data
+    /// included.
+    #[test]
+    fn shards_merge_to_the_single_run_and_h5py_reads_every_file() {
+        let dir = scratch("batch-merge");
+        let jobs = dir.join("frf.toml");
+        std::fs::write(&jobs, FRF_JOBS).unwrap();
+        let j = jobs.to_str().unwrap();
+        let out = ok(&["batch", j, "--task-count", "3", "--threads", "2"]);
+        assert!(
+            out.contains("10 frf jobs") && out.contains("shard 2 of 3"),
+            "{out}"
+        );
+        let again = ok(&["batch", j, "--task-count", "3", "--task-index", "1"]);
+        assert!(
+            again.contains("complete in") && again.contains("skipped"),
+            "{again}"
+        );
+        ok(&["batch", "merge", j]);
+        let single = dir.join("single");
+        let s = single.to_str().unwrap();
+        ok(&["--threads", "1", "batch", j, "--output", s]);
+        ok(&["batch", "merge", j, "--output", s]);
+        let merged = dir.join("frf-out/merged.h5");
+        let m = merged.to_str().unwrap();
+        h5check(&["same", m, single.join("merged.h5").to_str().unwrap()]);
+
+        // One file of each command.
+        let sim_jobs = dir.join("sim.toml");
+        std::fs::write(
+            &sim_jobs,
+            "name = \"sims\"\ncommand = \"simulate\"\nmodel = \"bumpstop_cantilever\"\n\
+             [simulate]\nduration = 0.2\nrate = 4000.0\n[[sweep]]\noption = \"excitation\"\n\
+             values = [\"sine:freq=10\", \"sweep:f0=5,f1=20\"]\n",
+        )
+        .unwrap();
+        ok(&["batch", sim_jobs.to_str().unwrap()]);
+        ok(&["batch", "merge", sim_jobs.to_str().unwrap()]);
+        let files: Vec<PathBuf> = vec![
+            dir.join("modes.h5"),
+            dir.join("sim.h5"),
+            dir.join("frf.h5"),
+            merged.clone(),
+            dir.join("frf-out/shard-00000-of-00003.h5"),
+            dir.join("sims-results/merged.h5"),
+        ];
+        let p = |i: usize| files[i].to_str().unwrap().to_string();
+        ok(&["modes", "ecl_beam", "--out", &p(0)]);
+        ok(&[
+            "simulate",
+            "bumpstop_cantilever",
+            "--duration",
+            "0.1",
+            "--rate",
+            "4000",
+            "--out",
+            &p(1),
+        ]);
+        ok(&[
+            "frf",
+            "duffing_fig3",
+            "--from",
+            "22",
+            "--to",
+            "40",
+            "--out",
+            &p(2),
+        ]);
+        let mut args = vec!["read".to_string()];
+        args.extend((0..files.len()).map(p));
+        let a: Vec<&str> = args.iter().map(String::as_str).collect();
+        h5check(&a);
+        // Complex data reads as complex without knowing nlsim's layout.
+        let out = Command::new(python())
+            .args([
+                "-c",
+                "import h5py,sys; f=h5py.File(sys.argv[1]); \
+                 d=f['jobs/job-00000003/sensors/mass/response']; \
+                 print(d.dtype.kind, d.shape[1], f['parameters'].shape)",
+                m,
+            ])
+            .output()
+            .unwrap();
+        assert_eq!(
+            String::from_utf8_lossy(&out.stdout).trim(),
+            "c 4 (10, 1)",
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+
+    /// A shard killed while it writes leaves only a temporary file (never a complete-looking
+    /// shard), merge refuses to run naming the missing shard, and the rerun redoes only that
+    /// shard; the result equals an uninterrupted run.
+    #[test]
+    fn a_killed_shard_is_redone_and_nothing_else_is_lost() {
+        let dir = scratch("batch-kill");
+        let jobs = dir.join("jobs.toml");
+        std::fs::write(
+            &jobs,
+            "name = \"kill\"\ncommand = \"simulate\"\nmodel = \"ecl_beam\"\nseed = 4\n\
+             [simulate]\nduration = 20.0\nrate = 5000.0\nmodes = 12\n\
+             [lhs]\nsamples = 40\nparams = [{ set = \"tip_spring.k3\", min = 1e9, max = 1e10 }]\n",
+        )
+        .unwrap();
+        let j = jobs.to_str().unwrap();
+        let out_dir = dir.join("kill-results");
+        ok(&["batch", j, "--task-count", "2", "--task-index", "1"]);
+        let shard0 = out_dir.join("shard-00000-of-00002.h5");
+        let shard1 = out_dir.join("shard-00001-of-00002.h5");
+        let done1 = std::fs::metadata(&shard1).unwrap().modified().unwrap();
+        let mut child = Command::new(env!("CARGO_BIN_EXE_nlsim"))
+            .args(["--quiet", "--threads", "1", "batch", j])
+            .args(["--task-count", "2", "--task-index", "0"])
+            .spawn()
+            .unwrap();
+        // Kill it once the temporary file holds a few finished jobs.
+        let tmp = || {
+            std::fs::read_dir(&out_dir)
+                .unwrap()
+                .flatten()
+                .find(|e| e.file_name().to_string_lossy().contains(".h5.tmp-"))
+                .map(|e| e.path())
+        };
+        let t0 = std::time::Instant::now();
+        loop {
+            if tmp().is_some_and(|p| std::fs::metadata(p).unwrap().len() > 4 << 20) {
+                break;
+            }
+            assert!(
+                child.try_wait().unwrap().is_none(),
+                "the shard finished before it could be killed"
+            );
+            assert!(t0.elapsed().as_secs() < 120, "no temporary file appeared");
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        child.kill().unwrap();
+        child.wait().unwrap();
+        assert!(tmp().is_some(), "the killed run's temporary file is left");
+        assert!(!shard0.exists(), "a killed shard must not look complete");
+        let (rc, _, err) = nlsim(&["batch", "merge", j]);
+        assert_eq!(rc, 2);
+        assert!(err.contains("shards 0 of 2 are missing"), "{err}");
+        let out = ok(&["batch", j, "--task-count", "2"]);
+        assert!(out.contains("shard 1 of 2: complete"), "{out}");
+        assert!(out.contains("shard 0 of 2: 20 jobs"), "{out}");
+        assert!(tmp().is_none(), "the stale temporary file is removed");
+        assert_eq!(
+            std::fs::metadata(&shard1).unwrap().modified().unwrap(),
+            done1,
+            "the complete shard is not rewritten"
+        );
+        ok(&["batch", "merge", j]);
+        let single = dir.join("single");
+        ok(&["batch", j, "--output", single.to_str().unwrap()]);
+        ok(&["batch", "merge", j, "--output", single.to_str().unwrap()]);
+        h5check(&[
+            "same",
+            out_dir.join("merged.h5").to_str().unwrap(),
+            single.join("merged.h5").to_str().unwrap(),
+        ]);
+    }
+
+    /// The job-array script runs every shard of the batch through this executable.
+    #[test]
+    fn sbatch_script_names_the_array_and_the_shards() {
+        let dir = scratch("batch-sbatch");
+        let jobs = dir.join("frf.toml");
+        std::fs::write(&jobs, FRF_JOBS).unwrap();
+        let out = ok(&[
+            "batch",
+            "sbatch",
+            jobs.to_str().unwrap(),
+            "--tasks",
+            "4",
+            "--cpus-per-task",
+            "2",
+            "--time",
+            "00:10:00",
+        ]);
+        assert!(out.contains("4-task array"), "{out}");
+        let script = std::fs::read_to_string(dir.join("frf-out/nlsim-batch.sbatch")).unwrap();
+        for want in [
+            "#SBATCH --array=0-3",
+            "#SBATCH --cpus-per-task=2",
+            "#SBATCH --time=00:10:00",
+            "--task-index \"$SLURM_ARRAY_TASK_ID\" --task-count 4",
+            env!("CARGO_BIN_EXE_nlsim"),
+        ] {
+            assert!(script.contains(want), "'{want}' missing from\n{script}");
+        }
+    }
+}
+
+/// The README's two commands are what CI runs and what the Makefile defines.
+#[test]
+fn readme_commands_are_the_makefile_targets_ci_runs() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    let make = std::fs::read_to_string(root.join("Makefile")).unwrap();
+    let ci = std::fs::read_to_string(root.join(".ci/run")).unwrap();
+    for cmd in ["make demo", "make test"] {
+        assert!(
+            readme
+                .lines()
+                .any(|l| l.split('#').next().unwrap().trim() == cmd),
+            "README lacks a line '{cmd}'"
+        );
+        let target = cmd.trim_start_matches("make ");
+        assert!(
+            make.lines().any(|l| l.starts_with(&format!("{target}:"))),
+            "Makefile lacks target {target}"
+        );
+        assert!(
+            ci.lines().any(|l| l.trim() == cmd),
+            ".ci/run does not run '{cmd}'"
+        );
+        // The recipe parses and names only commands that exist in the repository.
+        let out = Command::new("make")
+            .args(["-n", target])
+            .current_dir(root)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "make -n {target}");
+        for word in String::from_utf8_lossy(&out.stdout).split_whitespace() {
+            if let Some(script) = word.strip_prefix("scripts/") {
+                assert!(
+                    root.join("scripts").join(script).is_file(),
+                    "make {target} runs missing scripts/{script}"
+                );
+            }
         }
     }
 }

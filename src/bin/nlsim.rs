@@ -15,8 +15,15 @@ static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 #[command(name = "nlsim", version, about, long_about = None)]
 struct Cli {
     /// Print only errors.
-    #[arg(long, short, global = true)]
+    #[arg(long, short, global = true, conflicts_with = "verbose")]
     quiet: bool,
+    /// Print more detail (solver statistics, each batch job).
+    #[arg(long, short, global = true)]
+    verbose: bool,
+    /// Worker threads for the parallel parts (default: every core). Results do not depend on
+    /// it.
+    #[arg(long, global = true, value_name = "N")]
+    threads: Option<usize>,
     #[command(subcommand)]
     command: Command,
 }
@@ -163,46 +170,97 @@ enum Command {
         #[arg(long)]
         set: Vec<String>,
     },
-    /// Run the pipeline on a built-in model and print a readable summary.
+    /// Run the pipeline on a built-in model, print a readable summary and write a report
+    /// folder with plots.
     Demo {
         /// Model to run on (default: the ECL benchmark beam).
         #[arg(long, default_value = "ecl_beam")]
         model: String,
+        /// Report folder (plots as SVG and PNG, the summary as text).
+        #[arg(long, default_value = "nlsim-report")]
+        report: std::path::PathBuf,
+    },
+    /// Many runs of `frf` or `simulate` from a jobs file (sweeps, load cases, Latin-hypercube
+    /// candidates), split into shards for cluster job arrays: `nlsim batch JOBS.toml` runs
+    /// shards, `nlsim batch merge JOBS.toml` joins them, `nlsim batch sbatch JOBS.toml` writes
+    /// the SLURM script. See docs/batch.md.
+    #[command(args_conflicts_with_subcommands = true)]
+    Batch {
+        #[command(subcommand)]
+        action: Option<BatchAction>,
+        /// The jobs file (TOML).
+        jobs: Option<std::path::PathBuf>,
+        /// Shard to run (default: $SLURM_ARRAY_TASK_ID; without either, every shard in turn).
+        #[arg(long)]
+        task_index: Option<usize>,
+        /// Number of shards (default: $SLURM_ARRAY_TASK_COUNT, else 1).
+        #[arg(long)]
+        task_count: Option<usize>,
+        /// Output directory (default: from the jobs file).
+        #[arg(long)]
+        output: Option<std::path::PathBuf>,
     },
 }
 
-/// How `nlsim frf` sweeps.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-enum FrfMode {
-    /// Pseudo-arclength continuation: every branch through the folds, stability per point.
-    Continuation,
-    /// Stepped sine upwards, each point from the last (jumps down past the upper fold).
-    StepUp,
-    /// Stepped sine downwards (jumps up past the lower fold).
-    StepDown,
+/// `nlsim batch merge` and `nlsim batch sbatch`.
+#[derive(Subcommand, Debug)]
+enum BatchAction {
+    /// Join the complete shard files into OUTPUT/merged.h5 (fails naming missing shards).
+    Merge {
+        /// The jobs file (TOML).
+        jobs: std::path::PathBuf,
+        /// Output directory (default: from the jobs file).
+        #[arg(long)]
+        output: Option<std::path::PathBuf>,
+    },
+    /// Write the SLURM job-array script OUTPUT/nlsim-batch.sbatch (and submit it with
+    /// --submit).
+    Sbatch {
+        /// The jobs file (TOML).
+        jobs: std::path::PathBuf,
+        /// Array size: the number of shards.
+        #[arg(long)]
+        tasks: usize,
+        /// CPUs per array task (jobs run at once in a shard).
+        #[arg(long, default_value_t = 1)]
+        cpus_per_task: usize,
+        /// SLURM partition.
+        #[arg(long)]
+        partition: Option<String>,
+        /// Time limit per task, e.g. 01:00:00.
+        #[arg(long)]
+        time: Option<String>,
+        /// Memory per task, e.g. 4G.
+        #[arg(long)]
+        mem: Option<String>,
+        /// Submit the script with sbatch and print the job id.
+        #[arg(long)]
+        submit: bool,
+        /// Output directory (default: from the jobs file).
+        #[arg(long)]
+        output: Option<std::path::PathBuf>,
+    },
 }
 
-/// Time integration methods of `nlsim simulate`.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-enum Method {
-    /// Exponential first-order hold with nonlinear feedback (the fast method).
-    Foh,
-    /// Zero-order hold (bias studies).
-    Zoh,
-    /// Lagrange second-order hold (bias studies).
-    Lsoh,
-    /// Dormand-Prince RK45 with ODE45's error control on the reduced model.
-    Rk45,
-    /// Classic RK4 on the reduced model.
-    Rk4,
-    /// Newmark average acceleration with Newton on the unreduced model.
-    Newmark,
-    /// HHT-alpha with Newton on the unreduced model.
-    Hht,
-}
+use nlsim::run::{Method, SweepMode as FrfMode};
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if let Some(n) = cli.threads {
+        if n == 0 {
+            eprintln!("error: --threads must be at least 1");
+            return ExitCode::from(2);
+        }
+        // The first and only global pool: cannot fail here.
+        let _ = rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global();
+        faer::set_global_parallelism(if n == 1 {
+            faer::Par::Seq
+        } else {
+            faer::Par::rayon(n)
+        });
+    }
     match run(&cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e @ nlsim::Error::Usage(_)) => {
@@ -285,7 +343,7 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 print!("{}", nlsim::modes::format_table(&report));
             }
             if let Some(path) = out {
-                nlsim::modes::write_modes(path, &loaded.model, &report)?;
+                nlsim::modes::write_modes(path, model, &loaded.model, &report)?;
                 if !cli.quiet {
                     println!("  written to {}", path.display());
                 }
@@ -335,11 +393,11 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             hht_alpha,
             set,
         } => {
-            let opts = SimulateOptions {
+            let req = nlsim::run::SimRequest {
                 duration: *duration,
                 rate: *rate,
                 method: *method,
-                excitation,
+                excitation: excitation.clone(),
                 modes: *modes,
                 residual: !no_residual,
                 events: !no_events,
@@ -347,9 +405,8 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 atol: *atol,
                 substeps: *substeps,
                 hht_alpha: *hht_alpha,
-                set,
             };
-            simulate(model, &opts, out.as_deref(), cli.quiet)
+            simulate(model, &req, set, out.as_deref(), cli)
         }
         Command::Frf {
             model,
@@ -367,7 +424,7 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             plot,
             set,
         } => {
-            let o = FrfOptions {
+            let req = nlsim::run::FrfRequest {
                 from_hz: *from,
                 to_hz: *to,
                 harmonics: *harmonics,
@@ -378,11 +435,47 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 modes: *modes,
                 residual: !no_residual,
                 stability: !no_stability,
-                set,
             };
-            frf(model, &o, out.as_deref(), plot.as_deref(), cli.quiet)
+            frf(model, &req, set, out.as_deref(), plot.as_deref(), cli)
         }
-        Command::Demo { model } => demo(model, cli.quiet),
+        Command::Demo { model, report } => demo(model, report, cli.quiet),
+        Command::Batch {
+            action,
+            jobs,
+            task_index,
+            task_count,
+            output,
+        } => match action {
+            Some(BatchAction::Merge { jobs, output }) => batch_merge(jobs, output.as_deref(), cli),
+            Some(BatchAction::Sbatch {
+                jobs,
+                tasks,
+                cpus_per_task,
+                partition,
+                time,
+                mem,
+                submit,
+                output,
+            }) => {
+                let o = nlsim::batch::SbatchOptions {
+                    tasks: *tasks,
+                    cpus_per_task: *cpus_per_task,
+                    partition: partition.clone(),
+                    time: time.clone(),
+                    mem: mem.clone(),
+                };
+                batch_sbatch(jobs, output.as_deref(), &o, *submit, cli)
+            }
+            None => {
+                let jobs = jobs.as_ref().ok_or_else(|| {
+                    nlsim::Error::Usage(
+                        "nlsim batch needs a jobs file: nlsim batch JOBS.toml (or merge, sbatch)"
+                            .into(),
+                    )
+                })?;
+                batch_run(jobs, *task_index, *task_count, output.as_deref(), cli)
+            }
+        },
     }
 }
 
@@ -508,6 +601,7 @@ fn demo_time_response(
 fn demo_frf(
     model: &nlsim::kernel::Model,
     reduced: &nlsim::reduction::ReducedModel,
+    report_dir: &std::path::Path,
     say: &dyn Fn(&str),
 ) -> nlsim::Result<()> {
     use nlsim::hb::{ContinuationConfig, HarmonicSet, HbConfig, HbSystem, PointKind};
@@ -569,7 +663,7 @@ fn demo_frf(
         list(PointKind::Jump, &up),
         list(PointKind::Jump, &down)
     ));
-    let dir = std::path::Path::new("nlsim-report");
+    let dir = report_dir;
     std::fs::create_dir_all(dir).map_err(|source| nlsim::Error::Io {
         path: dir.to_path_buf(),
         source,
@@ -588,7 +682,7 @@ fn demo_frf(
 }
 
 /// The thesis pipeline, stage by stage; stages not built yet say so.
-fn demo(model: &str, quiet: bool) -> nlsim::Result<()> {
+fn demo(model: &str, report_dir: &std::path::Path, quiet: bool) -> nlsim::Result<()> {
     let say = |s: &str| {
         if !quiet {
             println!("{s}");
@@ -661,7 +755,7 @@ fn demo(model: &str, quiet: bool) -> nlsim::Result<()> {
     say("");
     demo_time_response(&loaded.model, &reduced, &system, &say)?;
     say("");
-    demo_frf(&loaded.model, &reduced, &say)?;
+    demo_frf(&loaded.model, &reduced, report_dir, &say)?;
     say("");
     let stages = [
         (
@@ -683,21 +777,6 @@ fn demo(model: &str, quiet: bool) -> nlsim::Result<()> {
     Ok(())
 }
 
-struct SimulateOptions<'a> {
-    duration: f64,
-    rate: f64,
-    method: Method,
-    excitation: &'a [String],
-    modes: usize,
-    residual: bool,
-    events: bool,
-    rtol: f64,
-    atol: f64,
-    substeps: usize,
-    hht_alpha: f64,
-    set: &'a [String],
-}
-
 /// A progress line on stderr, only when it is a terminal.
 fn progress_line(quiet: bool, what: &'static str) -> impl FnMut(usize, usize) {
     use std::io::IsTerminal;
@@ -706,7 +785,7 @@ fn progress_line(quiet: bool, what: &'static str) -> impl FnMut(usize, usize) {
     move |done, total| {
         if show {
             eprint!(
-                "\r  {what}: {:3.0} % ({done}/{total} steps, {:.1} s) ",
+                "\r  {what}: {:3.0} % ({done}/{total}, {:.1} s) ",
                 100.0 * done as f64 / total.max(1) as f64,
                 t.elapsed().as_secs_f64()
             );
@@ -717,76 +796,19 @@ fn progress_line(quiet: bool, what: &'static str) -> impl FnMut(usize, usize) {
     }
 }
 
-/// Options of `nlsim frf`.
-struct FrfOptions<'a> {
-    from_hz: f64,
-    to_hz: f64,
-    harmonics: usize,
-    subharmonic: usize,
-    force: Option<f64>,
-    mode: FrfMode,
-    points: usize,
-    modes: usize,
-    residual: bool,
-    stability: bool,
-    set: &'a [String],
-}
-
-/// Loads and validates a model for a run (definiteness shows in the factorisations) and
-/// applies its `--set` overrides.
-fn load_for_run(spec: &str, sets: &[String]) -> nlsim::Result<nlsim::kernel::Model> {
-    let mut model = nlsim::load_model(spec)?.model;
-    model.validate(&ValidationConfig {
-        check_definiteness: false,
-        ..Default::default()
-    })?;
-    apply_sets(&mut model, sets)?;
-    Ok(model)
-}
-
-/// Applies `--set element.param=value` overrides.
-fn apply_sets(model: &mut nlsim::kernel::Model, sets: &[String]) -> nlsim::Result<()> {
-    for s in sets {
-        let (name, v) = s.split_once('=').ok_or_else(|| {
-            nlsim::Error::Usage(format!("--set '{s}': expected element.param=value"))
-        })?;
-        let v: f64 = v
-            .trim()
-            .parse()
-            .map_err(|_| nlsim::Error::Usage(format!("--set '{s}': '{v}' is not a number")))?;
-        model.set_param_by_name(name.trim(), v)?;
-    }
-    Ok(())
-}
-
 fn frf(
     spec: &str,
-    o: &FrfOptions<'_>,
+    req: &nlsim::run::FrfRequest,
+    sets: &[String],
     out: Option<&std::path::Path>,
     plot: Option<&std::path::Path>,
-    quiet: bool,
+    cli: &Cli,
 ) -> nlsim::Result<()> {
-    use nlsim::hb::{ContinuationConfig, HarmonicSet, HbConfig, HbSystem, PointKind};
+    use nlsim::hb::PointKind;
     use std::f64::consts::PI;
-    let usage = |m: String| nlsim::Error::Usage(m);
-    for (what, v) in [("--from", o.from_hz), ("--to", o.to_hz)] {
-        if !(v > 0.0 && v.is_finite()) {
-            return Err(usage(format!(
-                "{what} {v} must be a positive frequency in Hz"
-            )));
-        }
-    }
-    if o.from_hz == o.to_hz {
-        return Err(usage("--from and --to are equal".into()));
-    }
-    if o.points < 2 {
-        return Err(usage("--points must be at least 2".into()));
-    }
-    if let Some(f) = o.force
-        && !f.is_finite()
-    {
-        return Err(usage(format!("--force {f} is not a finite number")));
-    }
+    let quiet = cli.quiet;
+    // Refuse bad options and output names before the (possibly long) solve.
+    let set = req.check()?;
     if let Some(path) = out {
         nlsim::output::Format::of(path, nlsim::frf::HINT)?;
     }
@@ -796,84 +818,17 @@ fn frf(
     if let Some(p) = &plot_path
         && p.extension().and_then(|e| e.to_str()) != Some("svg")
     {
-        return Err(usage(format!(
+        return Err(nlsim::Error::Usage(format!(
             "--plot {}: name the plot FILE.svg",
             p.display()
         )));
     }
-    let set = HarmonicSet::new(o.harmonics, o.subharmonic)
-        .map_err(|e| usage(format!("--harmonics/--subharmonic: {e}")))?;
     let say = |s: String| {
         if !quiet {
             println!("{s}");
         }
     };
-    let model = load_for_run(spec, o.set)?;
-    if model.elements().is_empty() {
-        return Err(usage(format!(
-            "model '{spec}' has no nonlinear element: its FRF is linear (see `nlsim modes`)"
-        )));
-    }
-    if model.excitation().is_empty() {
-        return Err(usage(format!(
-            "model '{spec}' has no excitation point to force"
-        )));
-    }
-    if model.sensors().is_empty() {
-        return Err(usage(format!("model '{spec}' has no sensor to report")));
-    }
-    let n_modes = o.modes.min(model.n_dofs());
-    if n_modes == 0 {
-        return Err(usage("--modes must be at least 1".into()));
-    }
-    let t0 = Instant::now();
-    let reduced = nlsim::reduction::reduce(
-        &model,
-        &nlsim::reduction::ReductionConfig {
-            eigen: EigenConfig {
-                selection: ModeSelection::Lowest(n_modes),
-                ..EigenConfig::default()
-            },
-            residual_flexibility: o.residual,
-            ..Default::default()
-        },
-    )?;
-    let red_s = t0.elapsed().as_secs_f64();
-    let mut sys = HbSystem::from_model(&model, &reduced, set, HbConfig::default())?;
-    if let Some(f) = o.force {
-        for t in &mut sys.forcing.terms {
-            t.amplitude = nlsim::hb::harmonics::c64::new(f, 0.0);
-        }
-    }
-    let mode_name = match o.mode {
-        FrfMode::Continuation => "continuation",
-        FrfMode::StepUp => "step-up",
-        FrfMode::StepDown => "step-down",
-    };
-    say(format!(
-        "frf {}: {mode_name} {:.4}–{:.4} Hz, H = {} harmonics of Ω/{}, {} modes{} (reduced in          {red_s:.2} s), {} unknowns, AFT samples {:?}",
-        model.name(),
-        o.from_hz,
-        o.to_hz,
-        set.h,
-        set.nu,
-        n_modes,
-        if o.residual {
-            " + residual flexibility"
-        } else {
-            ""
-        },
-        sys.n_unknowns(),
-        sys.aft_samples()
-    ));
-    for x in &sys.forcing.terms {
-        say(format!(
-            "  force {:<10} {:.4e} N at harmonic {} (Ω)",
-            sys.inputs[x.input].0,
-            x.amplitude.norm(),
-            nlsim::frf::harmonic_label(x.harmonic, set.nu)
-        ));
-    }
+    let model = nlsim::run::load_for_run(spec, sets)?;
     let show = !quiet && std::io::IsTerminal::is_terminal(&std::io::stderr());
     let t1 = Instant::now();
     let mut count = 0usize;
@@ -887,28 +842,38 @@ fn frf(
             );
         }
     };
-    let branch = match o.mode {
-        FrfMode::Continuation => {
-            let mut cfg = ContinuationConfig::frequency(o.from_hz, o.to_hz);
-            cfg.stability = o.stability;
-            nlsim::hb::continuation(&sys, &cfg, None, &mut progress)?
-        }
-        FrfMode::StepUp | FrfMode::StepDown => {
-            let (a, b) = if o.mode == FrfMode::StepUp {
-                (o.from_hz.min(o.to_hz), o.from_hz.max(o.to_hz))
-            } else {
-                (o.from_hz.max(o.to_hz), o.from_hz.min(o.to_hz))
-            };
-            let omegas: Vec<f64> = (0..o.points)
-                .map(|i| 2.0 * PI * (a + (b - a) * i as f64 / (o.points - 1) as f64))
-                .collect();
-            nlsim::hb::stepped_sine(&sys, &omegas, 1.0, o.stability, &mut progress)?
-        }
-    };
+    let run = nlsim::run::run_frf(&model, req, &mut progress)?;
     if show {
         eprintln!();
     }
-    let secs = t1.elapsed().as_secs_f64();
+    let (sys, branch, y) = (&run.system, &run.branch, &run.responses);
+    say(format!(
+        "frf {}: {} {:.4}–{:.4} Hz, H = {} harmonics of Ω/{}, {} modes{} (reduced in {:.2} s), \
+         {} unknowns, AFT samples {:?}",
+        model.name(),
+        req.mode.as_str(),
+        req.from_hz,
+        req.to_hz,
+        set.h,
+        set.nu,
+        run.modes,
+        if req.residual {
+            " + residual flexibility"
+        } else {
+            ""
+        },
+        run.reduce_seconds,
+        sys.n_unknowns(),
+        sys.aft_samples()
+    ));
+    for x in &sys.forcing.terms {
+        say(format!(
+            "  force {:<10} {:.4e} N at harmonic {} (Ω)",
+            sys.inputs[x.input].0,
+            x.amplitude.norm(),
+            nlsim::frf::harmonic_label(x.harmonic, set.nu)
+        ));
+    }
     let n = branch.points.len();
     let unstable = branch
         .points
@@ -916,14 +881,22 @@ fn frf(
         .filter(|p| p.stable() == Some(false))
         .count();
     say(format!(
-        "  {n} points in {secs:.3} s ({:.3} ms per point){}; {unstable} unstable",
-        1e3 * secs / n as f64,
+        "  {n} points in {:.3} s ({:.3} ms per point){}; {unstable} unstable",
+        run.seconds,
+        1e3 * run.seconds / n as f64,
         if branch.complete {
             ""
         } else {
             " — stopped at the point limit before the end"
         }
     ));
+    if cli.verbose {
+        let its: usize = branch.points.iter().map(|p| p.iterations).sum();
+        say(format!(
+            "  Newton: {its} iterations in all, {:.2} per point",
+            its as f64 / n.max(1) as f64
+        ));
+    }
     for p in branch
         .points
         .iter()
@@ -945,7 +918,6 @@ fn frf(
             bp.omega / (2.0 * PI)
         ));
     }
-    let y = nlsim::frf::responses(&sys, &branch);
     for (s, sen) in sys.sensors.iter().enumerate() {
         let (i, a) = (0..n)
             .map(|i| (i, y[i][(s, set.nu)].norm()))
@@ -958,20 +930,21 @@ fn frf(
             branch.points[i].omega / (2.0 * PI)
         ));
     }
-    let info = nlsim::frf::FrfInfo {
-        model_spec: spec.to_string(),
-        mode: mode_name.to_string(),
-        modes: n_modes,
-        residual: o.residual,
-        seconds: secs,
-    };
     if let Some(path) = out {
-        nlsim::frf::write_frf(path, &sys, &branch, &y, &info)?;
+        let info = nlsim::frf::FrfInfo {
+            model_spec: spec.to_string(),
+            model_name: model.name().to_string(),
+            mode: req.mode.as_str().to_string(),
+            modes: run.modes,
+            residual: req.residual,
+            seconds: run.seconds,
+        };
+        nlsim::frf::write_frf(path, sys, branch, y, &info)?;
         say(format!("  written to {}", path.display()));
     }
     if let Some(p) = plot_path {
-        let title = format!("{} — {mode_name}, H = {}", model.name(), set.h);
-        nlsim::frf::plot_svg(&p, &sys, &branch, &y, 0, &title)?;
+        let title = format!("{} — {}, H = {}", model.name(), req.mode.as_str(), set.h);
+        nlsim::frf::plot_svg(&p, sys, branch, y, 0, &title)?;
         say(format!("  plot {}", p.display()));
     }
     Ok(())
@@ -979,191 +952,64 @@ fn frf(
 
 fn simulate(
     spec: &str,
-    o: &SimulateOptions<'_>,
+    req: &nlsim::run::SimRequest,
+    sets: &[String],
     out: Option<&std::path::Path>,
-    quiet: bool,
+    cli: &Cli,
 ) -> nlsim::Result<()> {
-    use nlsim::sim::{FohConfig, Hold, LoadCase, Newmark, NewmarkConfig, Plant, Simulator};
-    let usage = |m: String| nlsim::Error::Usage(m);
-    if !(o.duration > 0.0 && o.duration.is_finite()) {
-        return Err(usage(format!(
-            "--duration {} must be a positive number of seconds",
-            o.duration
-        )));
-    }
-    if !(o.rate > 0.0 && o.rate.is_finite()) {
-        return Err(usage(format!(
-            "--rate {} must be a positive frequency in Hz",
-            o.rate
-        )));
-    }
-    let n_steps = (o.duration * o.rate).round() as usize;
-    if n_steps == 0 || n_steps > 200_000_000 {
-        return Err(usage(format!(
-            "--duration x --rate gives {n_steps} steps; it must be between 1 and 2e8"
-        )));
-    }
+    let quiet = cli.quiet;
+    let n_steps = req.check()?;
     if let Some(path) = out {
         // Refuse an unknown format before the run.
         nlsim::output::Format::of(path, nlsim::simulate::HINT)?;
     }
-    let dt = 1.0 / o.rate;
     let say = |s: String| {
         if !quiet {
             println!("{s}");
         }
     };
-    let model = load_for_run(spec, o.set)?;
-    if model.excitation().is_empty() && !o.excitation.is_empty() {
-        return Err(usage(format!(
-            "model '{spec}' has no excitation points to drive"
-        )));
-    }
-    let t_red = Instant::now();
-    let unreduced = matches!(o.method, Method::Newmark | Method::Hht);
-    let n_modes = if unreduced {
-        1
-    } else {
-        o.modes.min(model.n_dofs())
-    };
-    if n_modes == 0 {
-        return Err(usage("--modes must be at least 1".into()));
-    }
-    let cfg = nlsim::reduction::ReductionConfig {
-        eigen: EigenConfig {
-            selection: ModeSelection::Lowest(n_modes),
-            ..EigenConfig::default()
-        },
-        residual_flexibility: o.residual,
-        ..Default::default()
-    };
-    let reduced = nlsim::reduction::reduce(&model, &cfg)?;
-    let f1 = reduced.modes.frequencies_hz()[0];
-    let red_s = t_red.elapsed().as_secs_f64();
-    // Excitation: one signal per excitation point.
-    let mut specs: Vec<String> = model
-        .excitation()
-        .iter()
-        .map(|_| format!("sine:freq={f1:.6}"))
-        .collect();
-    for e in o.excitation {
-        match e
-            .split_once('=')
-            .filter(|(n, _)| !n.contains(':') && !n.contains(','))
-        {
-            Some((name, sp)) => {
-                let i = model
-                    .excitation()
-                    .iter()
-                    .position(|x| x.name == name)
-                    .ok_or_else(|| {
-                        usage(format!(
-                            "--excitation '{e}': no excitation point '{name}' (the model has {})",
-                            model
-                                .excitation()
-                                .iter()
-                                .map(|x| x.name.as_str())
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        ))
-                    })?;
-                specs[i] = sp.to_string();
-            }
-            None => specs.iter_mut().for_each(|s| *s = e.clone()),
-        }
-    }
-    let forces = model
-        .excitation()
-        .iter()
-        .zip(&specs)
-        .map(|(x, sp)| nlsim::simulate::parse_excitation(sp, x.amplitude, o.duration, o.rate))
-        .collect::<nlsim::Result<Vec<_>>>()?;
-    let case = LoadCase::new("simulate", forces);
-    let method_name = format!("{:?}", o.method).to_lowercase();
+    let model = nlsim::run::load_for_run(spec, sets)?;
+    let run = nlsim::run::run_simulation(&model, req, &mut progress_line(quiet, "simulate"))?;
+    let history = &run.history;
+    let dt = 1.0 / req.rate;
     say(format!(
-        "simulate {}: {method_name}, {}, dt {dt:.4e} s, {} samples over {} s",
+        "simulate {}: {}, {}, dt {dt:.4e} s, {} samples over {} s",
         model.name(),
-        if unreduced {
-            format!("unreduced ({} DOFs)", model.n_dofs())
+        req.method.as_str(),
+        if req.method.unreduced() {
+            format!(
+                "unreduced ({} DOFs), effective stiffness factorised in {:.2} s",
+                model.n_dofs(),
+                run.setup_seconds
+            )
         } else {
             format!(
-                "{n_modes} modes{} (reduced in {red_s:.2} s)",
-                if o.residual {
+                "{} modes{} (reduced in {:.2} s)",
+                run.modes,
+                if req.residual {
                     " + residual flexibility"
                 } else {
                     ""
-                }
+                },
+                run.setup_seconds
             )
         },
         n_steps + 1,
-        o.duration
+        req.duration
     ));
-    for (x, sp) in model.excitation().iter().zip(&specs) {
+    for (x, sp) in model.excitation().iter().zip(&run.excitation) {
         say(format!("  excitation {:<10} {sp}", x.name));
     }
-    let history = if unreduced {
-        let mut cfg = NewmarkConfig::new(dt);
-        cfg.substeps = o.substeps;
-        cfg.alpha = if o.method == Method::Hht {
-            o.hht_alpha
-        } else {
-            0.0
-        };
-        let nm = Newmark::new(&model, &cfg)?;
-        say(format!(
-            "  effective stiffness factorised in {:.2} s",
-            nm.setup_seconds
-        ));
-        nm.run(&case, n_steps)?
-    } else {
-        let system = nlsim::reduction::ModalSystem::new(&reduced)?;
-        let plant = Plant::from_model(&model, &system)?;
-        match o.method {
-            Method::Foh | Method::Zoh | Method::Lsoh => {
-                let mut cfg = FohConfig::new(dt);
-                cfg.hold = match o.method {
-                    Method::Zoh => Hold::Zoh,
-                    Method::Lsoh => Hold::Lsoh,
-                    _ => Hold::Foh,
-                };
-                cfg.locate_events = o.events;
-                let sim = Simulator::new(&plant, &cfg)?;
-                let h =
-                    sim.run_with_progress(&case, n_steps, &mut progress_line(quiet, "simulate"))?;
-                let per = h.stats.seconds / (n_steps as f64 * system.n_states() as f64) * 1e9;
-                say(format!(
-                    "  run: {:.3} s wall, {:.2} ns per mode-step ({} states, {} flops each)",
-                    h.stats.seconds,
-                    per,
-                    system.n_states(),
-                    sim.flops_per_state_step()
-                ));
-                h
-            }
-            Method::Rk45 => nlsim::sim::rk45(
-                &plant,
-                &case,
-                dt,
-                n_steps,
-                &nlsim::sim::Rk45Config {
-                    rtol: o.rtol,
-                    atol: o.atol,
-                    ..Default::default()
-                },
-            )?,
-            _ => nlsim::sim::rk4(
-                &plant,
-                &case,
-                dt,
-                n_steps,
-                &nlsim::sim::Rk4Config {
-                    substeps: o.substeps,
-                    ..Default::default()
-                },
-            )?,
-        }
-    };
     let st = &history.stats;
+    if run.flops_per_state_step > 0 {
+        say(format!(
+            "  run: {:.3} s wall, {:.2} ns per mode-step ({} states, {} flops each)",
+            st.seconds,
+            st.seconds / (n_steps as f64 * run.states as f64) * 1e9,
+            run.states,
+            run.flops_per_state_step
+        ));
+    }
     say(format!(
         "  {} steps ({} rejected), {} evaluations, Newton {} iterations (max {} in a step), {} \
          contact events, {:.3} s wall",
@@ -1175,6 +1021,16 @@ fn simulate(
         st.events.len(),
         st.seconds
     ));
+    if cli.verbose {
+        for e in &st.events {
+            say(format!(
+                "    contact event: element {} {} at t = {:.9e} s",
+                history.element_names[e.element],
+                if e.closing { "closes" } else { "opens" },
+                e.time
+            ));
+        }
+    }
     say(format!(
         "  {:<14} {:<13} {:>13} {:>13}",
         "output", "quantity", "peak", "rms"
@@ -1202,12 +1058,224 @@ fn simulate(
     if let Some(path) = out {
         let info = nlsim::simulate::RunInfo {
             model_spec: spec.to_string(),
-            method: method_name,
-            excitation: specs,
-            modes: if unreduced { 0 } else { n_modes },
+            method: req.method.as_str().to_string(),
+            excitation: run.excitation.clone(),
+            modes: run.modes,
         };
-        nlsim::simulate::write_history(path, &model, &history, &info)?;
+        nlsim::simulate::write_history(path, &model, history, &info)?;
         say(format!("  written to {}", path.display()));
+    }
+    Ok(())
+}
+
+/// Loads a jobs file, with `--output` overriding its output directory.
+fn load_batch(
+    jobs: &std::path::Path,
+    output: Option<&std::path::Path>,
+) -> nlsim::Result<nlsim::batch::Batch> {
+    let mut b = nlsim::batch::Batch::load(jobs)?;
+    if let Some(o) = output {
+        b.output = o.to_path_buf();
+    }
+    Ok(b)
+}
+
+/// A task index or count from the command line, else from a SLURM variable.
+fn from_env(given: Option<usize>, var: &str) -> nlsim::Result<Option<usize>> {
+    if given.is_some() {
+        return Ok(given);
+    }
+    match std::env::var(var) {
+        Err(_) => Ok(None),
+        Ok(v) => v.trim().parse().map(Some).map_err(|_| {
+            nlsim::Error::Usage(format!("${var} = '{v}' is not a non-negative integer"))
+        }),
+    }
+}
+
+fn batch_run(
+    jobs: &std::path::Path,
+    task_index: Option<usize>,
+    task_count: Option<usize>,
+    output: Option<&std::path::Path>,
+    cli: &Cli,
+) -> nlsim::Result<()> {
+    use nlsim::batch::{ShardEvent, ShardOutcome};
+    let b = load_batch(jobs, output)?;
+    let index = from_env(task_index, "SLURM_ARRAY_TASK_ID")?;
+    let count = from_env(task_count, "SLURM_ARRAY_TASK_COUNT")?.unwrap_or(1);
+    if count == 0 {
+        return Err(nlsim::Error::Usage(
+            "--task-count must be at least 1".into(),
+        ));
+    }
+    if let Some(i) = index
+        && i >= count
+    {
+        return Err(nlsim::Error::Usage(format!(
+            "--task-index {i} is not below --task-count {count}"
+        )));
+    }
+    b.check_models()?;
+    let say = |s: String| {
+        if !cli.quiet {
+            println!("{s}");
+        }
+    };
+    say(format!(
+        "batch {}: {} {} jobs of {} in {count} shard(s), seed {}, output {}",
+        b.name,
+        b.jobs.len(),
+        b.command.name(),
+        b.model,
+        b.seed,
+        b.output.display()
+    ));
+    let tasks: Vec<usize> = match index {
+        Some(i) => vec![i],
+        None => (0..count).collect(),
+    };
+    let mut n_failed = 0;
+    for task in tasks {
+        let mut bar = progress_line(cli.quiet, "jobs");
+        let verbose = cli.verbose && !cli.quiet;
+        let outcome = nlsim::batch::run_shard(&b, task, count, &mut |ev| match ev {
+            ShardEvent::Note(m) => {
+                if !cli.quiet {
+                    eprintln!("  note: {m}");
+                }
+            }
+            ShardEvent::JobDone {
+                index,
+                done,
+                total,
+                error,
+            } => {
+                if verbose {
+                    println!(
+                        "  job {index}: {}",
+                        error.map_or("ok".to_string(), |e| format!("failed: {e}"))
+                    );
+                }
+                bar(done, total);
+            }
+        })?;
+        match outcome {
+            ShardOutcome::Skipped(p) => say(format!(
+                "  shard {task} of {count}: complete in {}, skipped",
+                p.display()
+            )),
+            ShardOutcome::Written {
+                path,
+                jobs,
+                failed,
+                seconds,
+            } => {
+                say(format!(
+                    "  shard {task} of {count}: {jobs} jobs in {seconds:.2} s, {} failed, written to {}",
+                    failed.len(),
+                    path.display()
+                ));
+                for (i, e) in &failed {
+                    eprintln!("  job {i} failed: {e}");
+                }
+                n_failed += failed.len();
+            }
+        }
+    }
+    if n_failed > 0 {
+        return Err(nlsim::Error::Failed(format!(
+            "{n_failed} job(s) failed (their errors are in the shard files); the others are written"
+        )));
+    }
+    Ok(())
+}
+
+fn batch_merge(
+    jobs: &std::path::Path,
+    output: Option<&std::path::Path>,
+    cli: &Cli,
+) -> nlsim::Result<()> {
+    let b = load_batch(jobs, output)?;
+    let m = nlsim::batch::merge(&b)?;
+    if !cli.quiet {
+        println!(
+            "batch {}: merged {} jobs from {} shard(s) into {}{}",
+            b.name,
+            m.jobs,
+            m.shards,
+            m.path.display(),
+            if m.failed > 0 {
+                format!(" ({} failed jobs, with their errors)", m.failed)
+            } else {
+                String::new()
+            }
+        );
+    }
+    Ok(())
+}
+
+fn batch_sbatch(
+    jobs: &std::path::Path,
+    output: Option<&std::path::Path>,
+    o: &nlsim::batch::SbatchOptions,
+    submit: bool,
+    cli: &Cli,
+) -> nlsim::Result<()> {
+    let b = load_batch(jobs, output)?;
+    b.check_models()?;
+    let exe = std::env::current_exe().map_err(|source| nlsim::Error::Io {
+        path: "nlsim".into(),
+        source,
+    })?;
+    let script = nlsim::batch::sbatch_script(&b, &exe, o)?;
+    let logs = b.output.join("logs");
+    std::fs::create_dir_all(&logs).map_err(|source| nlsim::Error::Io {
+        path: logs.clone(),
+        source,
+    })?;
+    let path = b.output.join("nlsim-batch.sbatch");
+    std::fs::write(&path, &script).map_err(|source| nlsim::Error::Io {
+        path: path.clone(),
+        source,
+    })?;
+    if !cli.quiet {
+        println!(
+            "batch {}: {} jobs in a {}-task array, script {}",
+            b.name,
+            b.jobs.len(),
+            o.tasks,
+            path.display()
+        );
+    }
+    if submit {
+        let out = std::process::Command::new("sbatch")
+            .arg("--parsable")
+            .arg(&path)
+            .output()
+            .map_err(|e| {
+                nlsim::Error::Usage(format!(
+                    "cannot run sbatch ({e}): submit from a SLURM login node, or run the script \
+                     with `sbatch {}`",
+                    path.display()
+                ))
+            })?;
+        if !out.status.success() {
+            return Err(nlsim::Error::Usage(format!(
+                "sbatch {} failed: {}",
+                path.display(),
+                String::from_utf8_lossy(&out.stderr).trim()
+            )));
+        }
+        let id = String::from_utf8_lossy(&out.stdout).trim().to_string();
+        // Scripts read the job id from stdout, even with --quiet.
+        println!("{id}");
+        if !cli.quiet {
+            eprintln!(
+                "  submitted; when it is done: nlsim batch merge {}",
+                jobs.display()
+            );
+        }
     }
     Ok(())
 }

@@ -1,0 +1,516 @@
+//! The runs behind `nlsim frf` and `nlsim simulate`, as library calls: the command line and
+//! `nlsim batch` both go through [`run_frf`] and [`run_simulation`], so a batch job computes
+//! exactly what the single command computes.
+
+use crate::error::{Error, Result};
+use nlsim_hb::{Branch, ContinuationConfig, HarmonicSet, HbConfig, HbSystem, SolutionPoint};
+use nlsim_kernel::{Model, ValidationConfig};
+use nlsim_reduction::{EigenConfig, ModalSystem, ModeSelection, ReducedModel, ReductionConfig};
+use nlsim_sim::{
+    FohConfig, Hold, LoadCase, Newmark, NewmarkConfig, Plant, Rk4Config, Rk45Config, Simulator,
+    TimeHistory,
+};
+use std::f64::consts::PI;
+use std::time::Instant;
+
+/// Loads and validates a model for a run (definiteness shows later, in the factorisations)
+/// and applies `element.param=value` overrides.
+pub fn load_for_run(spec: &str, sets: &[String]) -> Result<Model> {
+    let mut model = crate::load_model(spec)?.model;
+    model.validate(&ValidationConfig {
+        check_definiteness: false,
+        ..Default::default()
+    })?;
+    apply_sets(&mut model, sets)?;
+    Ok(model)
+}
+
+/// Applies `element.param=value` overrides (the `--set` option).
+pub fn apply_sets(model: &mut Model, sets: &[String]) -> Result<()> {
+    for s in sets {
+        let (name, v) = s
+            .split_once('=')
+            .ok_or_else(|| Error::Usage(format!("--set '{s}': expected element.param=value")))?;
+        let v: f64 = v
+            .trim()
+            .parse()
+            .map_err(|_| Error::Usage(format!("--set '{s}': '{v}' is not a number")))?;
+        model.set_param_by_name(name.trim(), v)?;
+    }
+    Ok(())
+}
+
+/// The reduction every run uses: the lowest `modes` modes, with or without residual
+/// flexibility.
+fn reduce(model: &Model, modes: usize, residual: bool) -> Result<ReducedModel> {
+    Ok(nlsim_reduction::reduce(
+        model,
+        &ReductionConfig {
+            eigen: EigenConfig {
+                selection: ModeSelection::Lowest(modes),
+                ..EigenConfig::default()
+            },
+            residual_flexibility: residual,
+            ..Default::default()
+        },
+    )?)
+}
+
+/// How an FRF is swept.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum SweepMode {
+    /// Pseudo-arclength continuation: every branch through the folds, stability per point.
+    Continuation,
+    /// Stepped sine upwards, each point from the last (jumps down past the upper fold).
+    StepUp,
+    /// Stepped sine downwards (jumps up past the lower fold).
+    StepDown,
+}
+
+impl SweepMode {
+    /// `continuation`, `step-up` or `step-down`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            SweepMode::Continuation => "continuation",
+            SweepMode::StepUp => "step-up",
+            SweepMode::StepDown => "step-down",
+        }
+    }
+
+    /// Parses [`SweepMode::as_str`].
+    pub fn parse(s: &str) -> Option<Self> {
+        [Self::Continuation, Self::StepUp, Self::StepDown]
+            .into_iter()
+            .find(|m| m.as_str() == s)
+    }
+}
+
+/// A multi-harmonic FRF to compute (the options of `nlsim frf`).
+#[derive(Debug, Clone)]
+pub struct FrfRequest {
+    /// Start frequency (Hz).
+    pub from_hz: f64,
+    /// End frequency (Hz).
+    pub to_hz: f64,
+    /// Harmonics `H` of the base frequency `Ω/ν`.
+    pub harmonics: usize,
+    /// Sub-harmonic order `ν`.
+    pub subharmonic: usize,
+    /// Force amplitude (N) at the fundamental on every excitation point; `None`: the model's
+    /// nominal amplitudes.
+    pub force: Option<f64>,
+    /// Continuation or stepped sine.
+    pub mode: SweepMode,
+    /// Frequencies of a stepped sine.
+    pub points: usize,
+    /// Retained modes.
+    pub modes: usize,
+    /// Residual flexibility of the truncated modes.
+    pub residual: bool,
+    /// Hill stability per point.
+    pub stability: bool,
+}
+
+impl Default for FrfRequest {
+    fn default() -> Self {
+        Self {
+            from_hz: 0.0,
+            to_hz: 0.0,
+            harmonics: 7,
+            subharmonic: 1,
+            force: None,
+            mode: SweepMode::Continuation,
+            points: 400,
+            modes: 20,
+            residual: true,
+            stability: true,
+        }
+    }
+}
+
+impl FrfRequest {
+    /// Checks the values that do not need the model; errors are usage errors naming the option.
+    pub fn check(&self) -> Result<HarmonicSet> {
+        let usage = |m: String| Error::Usage(m);
+        for (what, v) in [("--from", self.from_hz), ("--to", self.to_hz)] {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(usage(format!(
+                    "{what} {v} must be a positive frequency in Hz"
+                )));
+            }
+        }
+        if self.from_hz == self.to_hz {
+            return Err(usage("--from and --to are equal".into()));
+        }
+        if self.points < 2 {
+            return Err(usage("--points must be at least 2".into()));
+        }
+        if self.modes == 0 {
+            return Err(usage("--modes must be at least 1".into()));
+        }
+        if let Some(f) = self.force
+            && !f.is_finite()
+        {
+            return Err(usage(format!("--force {f} is not a finite number")));
+        }
+        HarmonicSet::new(self.harmonics, self.subharmonic)
+            .map_err(|e| usage(format!("--harmonics/--subharmonic: {e}")))
+    }
+}
+
+/// A computed FRF.
+pub struct FrfRun {
+    /// The condensed harmonic-balance system (with the forcing used).
+    pub system: HbSystem,
+    /// The solution points.
+    pub branch: Branch,
+    /// Sensor responses (sensors × harmonics) per point, from [`crate::frf::responses`].
+    pub responses: Vec<faer::Mat<faer::c64>>,
+    /// Retained modes.
+    pub modes: usize,
+    /// Wall time of the reduction (s).
+    pub reduce_seconds: f64,
+    /// Wall time of the sweep (s).
+    pub seconds: f64,
+}
+
+/// Computes the FRF `req` asks for on `model`, calling `progress` after every point.
+pub fn run_frf(
+    model: &Model,
+    req: &FrfRequest,
+    progress: &mut dyn FnMut(&SolutionPoint),
+) -> Result<FrfRun> {
+    let set = req.check()?;
+    let name = model.name();
+    if model.elements().is_empty() {
+        return Err(Error::Usage(format!(
+            "model '{name}' has no nonlinear element: its FRF is linear (see `nlsim modes`)"
+        )));
+    }
+    if model.excitation().is_empty() {
+        return Err(Error::Usage(format!(
+            "model '{name}' has no excitation point to force"
+        )));
+    }
+    if model.sensors().is_empty() {
+        return Err(Error::Usage(format!(
+            "model '{name}' has no sensor to report"
+        )));
+    }
+    let modes = req.modes.min(model.n_dofs());
+    let t0 = Instant::now();
+    let reduced = reduce(model, modes, req.residual)?;
+    let reduce_seconds = t0.elapsed().as_secs_f64();
+    let mut system = HbSystem::from_model(model, &reduced, set, HbConfig::default())?;
+    if let Some(f) = req.force {
+        for t in &mut system.forcing.terms {
+            t.amplitude = faer::c64::new(f, 0.0);
+        }
+    }
+    let t1 = Instant::now();
+    let branch = match req.mode {
+        SweepMode::Continuation => {
+            let mut cfg = ContinuationConfig::frequency(req.from_hz, req.to_hz);
+            cfg.stability = req.stability;
+            nlsim_hb::continuation(&system, &cfg, None, progress)?
+        }
+        SweepMode::StepUp | SweepMode::StepDown => {
+            let (lo, hi) = (req.from_hz.min(req.to_hz), req.from_hz.max(req.to_hz));
+            let (a, b) = if req.mode == SweepMode::StepUp {
+                (lo, hi)
+            } else {
+                (hi, lo)
+            };
+            let omegas: Vec<f64> = (0..req.points)
+                .map(|i| 2.0 * PI * (a + (b - a) * i as f64 / (req.points - 1) as f64))
+                .collect();
+            nlsim_hb::stepped_sine(&system, &omegas, 1.0, req.stability, progress)?
+        }
+    };
+    let seconds = t1.elapsed().as_secs_f64();
+    let responses = crate::frf::responses(&system, &branch);
+    Ok(FrfRun {
+        system,
+        branch,
+        responses,
+        modes,
+        reduce_seconds,
+        seconds,
+    })
+}
+
+/// Time integration methods.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum Method {
+    /// Exponential first-order hold with nonlinear feedback (the fast method).
+    Foh,
+    /// Zero-order hold (bias studies).
+    Zoh,
+    /// Lagrange second-order hold (bias studies).
+    Lsoh,
+    /// Dormand-Prince RK45 with ODE45's error control on the reduced model.
+    Rk45,
+    /// Classic RK4 on the reduced model.
+    Rk4,
+    /// Newmark average acceleration with Newton on the unreduced model.
+    Newmark,
+    /// HHT-alpha with Newton on the unreduced model.
+    Hht,
+}
+
+impl Method {
+    /// Lower-case name, as on the command line.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Method::Foh => "foh",
+            Method::Zoh => "zoh",
+            Method::Lsoh => "lsoh",
+            Method::Rk45 => "rk45",
+            Method::Rk4 => "rk4",
+            Method::Newmark => "newmark",
+            Method::Hht => "hht",
+        }
+    }
+
+    /// Parses [`Method::as_str`].
+    pub fn parse(s: &str) -> Option<Self> {
+        use Method::*;
+        [Foh, Zoh, Lsoh, Rk45, Rk4, Newmark, Hht]
+            .into_iter()
+            .find(|m| m.as_str() == s)
+    }
+
+    /// Whether the method integrates the unreduced sparse model.
+    pub fn unreduced(self) -> bool {
+        matches!(self, Method::Newmark | Method::Hht)
+    }
+}
+
+/// A time response to compute (the options of `nlsim simulate`).
+#[derive(Debug, Clone)]
+pub struct SimRequest {
+    /// Simulated time (s).
+    pub duration: f64,
+    /// Sample rate (Hz).
+    pub rate: f64,
+    /// Integration method.
+    pub method: Method,
+    /// Excitation specs: `SPEC` for every excitation point or `NAME=SPEC` for one (see
+    /// [`crate::simulate::parse_excitation`]); empty: a sine at the first natural frequency.
+    pub excitation: Vec<String>,
+    /// Retained modes (reduced methods).
+    pub modes: usize,
+    /// Residual flexibility of the truncated modes.
+    pub residual: bool,
+    /// Locate contact events inside steps (FOH).
+    pub events: bool,
+    /// RK45 relative tolerance.
+    pub rtol: f64,
+    /// RK45 absolute tolerance on the modal states.
+    pub atol: f64,
+    /// Integration steps per sample (RK4, Newmark, HHT).
+    pub substeps: usize,
+    /// HHT α in `[−1/3, 0]`.
+    pub hht_alpha: f64,
+}
+
+impl Default for SimRequest {
+    fn default() -> Self {
+        Self {
+            duration: 0.0,
+            rate: 0.0,
+            method: Method::Foh,
+            excitation: Vec::new(),
+            modes: 20,
+            residual: true,
+            events: true,
+            rtol: 1e-3,
+            atol: 1e-6,
+            substeps: 1,
+            hht_alpha: -0.05,
+        }
+    }
+}
+
+impl SimRequest {
+    /// Checks the values that do not need the model and returns the number of steps.
+    pub fn check(&self) -> Result<usize> {
+        let usage = |m: String| Error::Usage(m);
+        if !(self.duration > 0.0 && self.duration.is_finite()) {
+            return Err(usage(format!(
+                "--duration {} must be a positive number of seconds",
+                self.duration
+            )));
+        }
+        if !(self.rate > 0.0 && self.rate.is_finite()) {
+            return Err(usage(format!(
+                "--rate {} must be a positive frequency in Hz",
+                self.rate
+            )));
+        }
+        if self.modes == 0 {
+            return Err(usage("--modes must be at least 1".into()));
+        }
+        let n_steps = (self.duration * self.rate).round() as usize;
+        if n_steps == 0 || n_steps > 200_000_000 {
+            return Err(usage(format!(
+                "--duration x --rate gives {n_steps} steps; it must be between 1 and 2e8"
+            )));
+        }
+        Ok(n_steps)
+    }
+}
+
+/// A computed time response.
+pub struct SimRun {
+    /// The time history.
+    pub history: TimeHistory,
+    /// The excitation spec used at each excitation point.
+    pub excitation: Vec<String>,
+    /// Retained modes (0 for the unreduced methods).
+    pub modes: usize,
+    /// Wall time of the reduction or of the effective-stiffness factorisation (s).
+    pub setup_seconds: f64,
+    /// Stored states of the reduced model (0 for the unreduced methods).
+    pub states: usize,
+    /// Flops per state and step of the FOH loop (0 for the other methods).
+    pub flops_per_state_step: usize,
+}
+
+/// One excitation spec per excitation point: a sine at `f1` everywhere, then `specs` in order
+/// (`SPEC` for all points, `NAME=SPEC` for one).
+fn excitation_specs(model: &Model, specs: &[String], f1: f64) -> Result<Vec<String>> {
+    let mut out: Vec<String> = model
+        .excitation()
+        .iter()
+        .map(|_| format!("sine:freq={f1:.6}"))
+        .collect();
+    for e in specs {
+        match e
+            .split_once('=')
+            .filter(|(n, _)| !n.contains(':') && !n.contains(','))
+        {
+            Some((name, sp)) => {
+                let i = model
+                    .excitation()
+                    .iter()
+                    .position(|x| x.name == name)
+                    .ok_or_else(|| {
+                        Error::Usage(format!(
+                            "--excitation '{e}': no excitation point '{name}' (the model has {})",
+                            model
+                                .excitation()
+                                .iter()
+                                .map(|x| x.name.as_str())
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ))
+                    })?;
+                out[i] = sp.to_string();
+            }
+            None => out.iter_mut().for_each(|s| *s = e.clone()),
+        }
+    }
+    Ok(out)
+}
+
+/// Integrates `model` as `req` asks, calling `progress(done, total)` on long FOH runs.
+pub fn run_simulation(
+    model: &Model,
+    req: &SimRequest,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<SimRun> {
+    let n_steps = req.check()?;
+    let dt = 1.0 / req.rate;
+    if model.excitation().is_empty() && !req.excitation.is_empty() {
+        return Err(Error::Usage(format!(
+            "model '{}' has no excitation points to drive",
+            model.name()
+        )));
+    }
+    let unreduced = req.method.unreduced();
+    let modes = if unreduced {
+        1
+    } else {
+        req.modes.min(model.n_dofs())
+    };
+    let t0 = Instant::now();
+    let reduced = reduce(model, modes, req.residual)?;
+    let f1 = reduced.modes.frequencies_hz()[0];
+    let reduce_seconds = t0.elapsed().as_secs_f64();
+    let excitation = excitation_specs(model, &req.excitation, f1)?;
+    let forces = model
+        .excitation()
+        .iter()
+        .zip(&excitation)
+        .map(|(x, sp)| crate::simulate::parse_excitation(sp, x.amplitude, req.duration, req.rate))
+        .collect::<Result<Vec<_>>>()?;
+    let case = LoadCase::new("simulate", forces);
+    if unreduced {
+        let mut cfg = NewmarkConfig::new(dt);
+        cfg.substeps = req.substeps;
+        cfg.alpha = if req.method == Method::Hht {
+            req.hht_alpha
+        } else {
+            0.0
+        };
+        let nm = Newmark::new(model, &cfg)?;
+        let history = nm.run(&case, n_steps)?;
+        return Ok(SimRun {
+            history,
+            excitation,
+            modes: 0,
+            setup_seconds: nm.setup_seconds,
+            states: 0,
+            flops_per_state_step: 0,
+        });
+    }
+    let system = ModalSystem::new(&reduced)?;
+    let plant = Plant::from_model(model, &system)?;
+    let mut flops = 0;
+    let history = match req.method {
+        Method::Foh | Method::Zoh | Method::Lsoh => {
+            let mut cfg = FohConfig::new(dt);
+            cfg.hold = match req.method {
+                Method::Zoh => Hold::Zoh,
+                Method::Lsoh => Hold::Lsoh,
+                _ => Hold::Foh,
+            };
+            cfg.locate_events = req.events;
+            let sim = Simulator::new(&plant, &cfg)?;
+            flops = sim.flops_per_state_step();
+            sim.run_with_progress(&case, n_steps, progress)?
+        }
+        Method::Rk45 => nlsim_sim::rk45(
+            &plant,
+            &case,
+            dt,
+            n_steps,
+            &Rk45Config {
+                rtol: req.rtol,
+                atol: req.atol,
+                ..Default::default()
+            },
+        )?,
+        _ => nlsim_sim::rk4(
+            &plant,
+            &case,
+            dt,
+            n_steps,
+            &Rk4Config {
+                substeps: req.substeps,
+                ..Default::default()
+            },
+        )?,
+    };
+    Ok(SimRun {
+        history,
+        excitation,
+        modes,
+        setup_seconds: reduce_seconds,
+        states: system.n_states(),
+        flops_per_state_step: flops,
+    })
+}
