@@ -271,9 +271,10 @@ pub(crate) fn write_group(
 }
 
 /// Plots `|Y|` of sensor `sensor` (responses `y` from [`responses`]) at every harmonic
-/// carrying response (the fundamental thick) against frequency as SVG: stable parts solid,
-/// unstable parts red, folds and jumps marked. Written atomically.
-pub fn plot_svg(
+/// carrying response (the fundamental thick) against frequency, as SVG or PNG by the
+/// extension of `path`: stable parts solid, unstable parts red, folds and jumps marked.
+/// Written atomically.
+pub fn plot_frf(
     path: &Path,
     sys: &HbSystem,
     branch: &Branch,
@@ -281,30 +282,64 @@ pub fn plot_svg(
     sensor: usize,
     title: &str,
 ) -> Result<()> {
-    use plotters::prelude::*;
-    let hz: Vec<f64> = branch
-        .points
-        .iter()
-        .map(|p| p.omega / (2.0 * std::f64::consts::PI))
-        .collect();
-    let nk = sys.set.h + 1;
-    let amp = |i: usize, k: usize| y[i][(sensor, k)].norm();
-    let peak_k: Vec<f64> = (0..nk)
-        .map(|k| (0..y.len()).fold(0.0f64, |m, i| m.max(amp(i, k))))
-        .collect();
-    let top = peak_k.iter().fold(0.0f64, |m, v| m.max(*v));
-    // Harmonics above 1 % of the largest are drawn.
-    let shown: Vec<usize> = (0..nk).filter(|&k| peak_k[k] > 0.01 * top).collect();
-    let (x0, x1) = hz
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-            (a.min(*v), b.max(*v))
-        });
-    let sen = &sys.sensors[sensor];
-    let draw = |out: &Path| -> std::result::Result<(), Box<dyn std::error::Error>> {
-        let root = SVGBackend::new(out, (960, 600)).into_drawing_area();
+    crate::plot::write(
+        path,
+        &FrfFigure {
+            sys,
+            branch,
+            y,
+            sensor,
+            title,
+        },
+    )
+}
+
+/// The FRF plot of [`plot_frf`].
+struct FrfFigure<'a> {
+    sys: &'a HbSystem,
+    branch: &'a Branch,
+    y: &'a [Mat<c64>],
+    sensor: usize,
+    title: &'a str,
+}
+
+impl crate::plot::Figure for FrfFigure<'_> {
+    fn draw<DB: plotters::prelude::DrawingBackend>(
+        &self,
+        root: &plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
+    ) -> crate::plot::DrawResult
+    where
+        DB::ErrorType: 'static,
+    {
+        let FrfFigure {
+            sys,
+            branch,
+            y,
+            sensor,
+            title,
+        } = *self;
+        use plotters::prelude::*;
+        let hz: Vec<f64> = branch
+            .points
+            .iter()
+            .map(|p| p.omega / (2.0 * std::f64::consts::PI))
+            .collect();
+        let nk = sys.set.h + 1;
+        let amp = |i: usize, k: usize| y[i][(sensor, k)].norm();
+        let peak_k: Vec<f64> = (0..nk)
+            .map(|k| (0..y.len()).fold(0.0f64, |m, i| m.max(amp(i, k))))
+            .collect();
+        let top = peak_k.iter().fold(0.0f64, |m, v| m.max(*v));
+        // Harmonics above 1 % of the largest are drawn.
+        let shown: Vec<usize> = (0..nk).filter(|&k| peak_k[k] > 0.01 * top).collect();
+        let (x0, x1) = hz
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(*v), b.max(*v))
+            });
+        let sen = &sys.sensors[sensor];
         root.fill(&WHITE)?;
-        let mut chart = ChartBuilder::on(&root)
+        let mut chart = ChartBuilder::on(root)
             .caption(title, ("sans-serif", 20))
             .margin(12)
             .x_label_area_size(44)
@@ -386,22 +421,6 @@ pub fn plot_svg(
             .border_style(BLACK)
             .position(SeriesLabelPosition::UpperRight)
             .draw()?;
-        root.present()?;
         Ok(())
-    };
-    let mut name = path
-        .file_name()
-        .map(|n| n.to_os_string())
-        .unwrap_or_default();
-    name.push(format!(".tmp-{}", std::process::id()));
-    let tmp = path.with_file_name(name);
-    let io = |e: String| Error::Io {
-        path: path.to_path_buf(),
-        source: std::io::Error::other(e),
-    };
-    if let Err(e) = draw(&tmp) {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(io(e.to_string()));
     }
-    std::fs::rename(&tmp, path).map_err(|e| io(e.to_string()))
 }

@@ -13,11 +13,13 @@
 //! ```
 
 pub mod batch;
+pub mod cache;
 pub mod error;
 pub mod frf;
 pub mod modes;
 pub mod mtx;
 pub mod output;
+pub mod plot;
 pub mod run;
 pub mod simulate;
 pub mod spec;

@@ -162,3 +162,79 @@ pub fn parse_dof_labels(text: &str, file: &Path) -> Result<Vec<DofLabel>> {
     }
     Ok(out)
 }
+
+/// Reads a square matrix from an HDF5 file: `object` is either a group holding compressed
+/// sparse rows in scipy's convention (`data`, `indices`, `indptr`, 0-based, and a `shape`
+/// attribute or dataset; repeated entries are summed) or a 2-D dense dataset.
+pub fn read_hdf5_matrix(file: &Path, object: &str, name: &str) -> Result<SparseSym> {
+    use hdf5_metno as hdf5;
+    let err = |message: String| Error::Hdf5 {
+        path: file.to_path_buf(),
+        message: format!("{object}: {message}"),
+    };
+    let h5 = |e: hdf5::Error| err(e.to_string());
+    let f = hdf5::File::open(file).map_err(|e| Error::Hdf5 {
+        path: file.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    if let Ok(g) = f.group(object) {
+        let read_i = |k: &str| -> Result<Vec<i64>> {
+            g.dataset(k)
+                .and_then(|d| d.read_raw::<i64>())
+                .map_err(|e| err(format!("dataset '{k}' of a CSR group: {e}")))
+        };
+        let indptr = read_i("indptr")?;
+        let indices = read_i("indices")?;
+        let data = g
+            .dataset("data")
+            .and_then(|d| d.read_raw::<f64>())
+            .map_err(|e| err(format!("dataset 'data' of a CSR group: {e}")))?;
+        let shape: Vec<i64> = match g.attr("shape") {
+            Ok(a) => a.read_raw::<i64>().map_err(h5)?,
+            Err(_) => read_i("shape")?,
+        };
+        if shape.len() != 2 || shape[0] != shape[1] || shape[0] < 0 {
+            return Err(err(format!("shape {shape:?} is not square")));
+        }
+        let n = shape[0] as usize;
+        if indptr.len() != n + 1 || indices.len() != data.len() {
+            return Err(err(format!(
+                "indptr has {} entries (n + 1 = {}), indices {} and data {}",
+                indptr.len(),
+                n + 1,
+                indices.len(),
+                data.len()
+            )));
+        }
+        let mut t = Vec::with_capacity(data.len());
+        for i in 0..n {
+            let (a, b) = (indptr[i], indptr[i + 1]);
+            if a < 0 || b < a || b as usize > data.len() {
+                return Err(err(format!(
+                    "indptr[{i}..{}] = {a}..{b} is out of order",
+                    i + 1
+                )));
+            }
+            for k in a as usize..b as usize {
+                let j = indices[k];
+                if j < 0 || j as usize >= n {
+                    return Err(err(format!("row {i}: column index {j} outside 0..{n}")));
+                }
+                t.push((i, j as usize, data[k]));
+            }
+        }
+        return Ok(SparseSym::from_triplets(name, n, &t)?);
+    }
+    let d = f
+        .dataset(object)
+        .map_err(|_| err("no such group (CSR) or dataset (dense) in the file".into()))?;
+    let shape = d.shape();
+    if shape.len() != 2 || shape[0] != shape[1] {
+        return Err(err(format!(
+            "a dense matrix must be square and 2-D, this one is {shape:?}"
+        )));
+    }
+    let v = d.read_raw::<f64>().map_err(h5)?;
+    let rows: Vec<Vec<f64>> = v.chunks(shape[1].max(1)).map(<[f64]>::to_vec).collect();
+    Ok(SparseSym::from_dense_rows(name, &rows)?)
+}

@@ -11,7 +11,7 @@ use nlsim_kernel::{
     NonlinearElement, PolyTerm, Quantity, Sensor, SparseSym,
 };
 use std::ops::Range;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use toml::Spanned;
 use toml::de::{DeTable, DeValue};
 
@@ -442,12 +442,23 @@ fn read_matrix(
 ) -> Result<SparseSym> {
     match v.get_ref() {
         DeValue::String(p) => {
-            let path: PathBuf = base.join(p.as_ref());
-            let text = std::fs::read_to_string(&path).map_err(|source| Error::Io {
-                path: path.clone(),
-                source,
-            })?;
-            mtx::parse_matrix_market(&text, &path, name)
+            // `FILE.h5[:OBJECT]` (default object: the key) or a Matrix Market file, read
+            // through the binary cache.
+            let p: &str = p.as_ref();
+            let lower = p.to_ascii_lowercase();
+            let h5 = [".h5", ".hdf5"].iter().find_map(|ext| {
+                if lower.ends_with(ext) {
+                    Some((p, key))
+                } else {
+                    lower
+                        .find(&format!("{ext}:"))
+                        .map(|i| (&p[..i + ext.len()], &p[i + ext.len() + 1..]))
+                }
+            });
+            match h5 {
+                Some((file, object)) => mtx::read_hdf5_matrix(&base.join(file), object, name),
+                None => crate::cache::load_matrix_market(&base.join(p), name),
+            }
         }
         DeValue::Array(rows) => {
             let mut dense = Vec::with_capacity(rows.len());

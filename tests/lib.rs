@@ -307,6 +307,102 @@ mod matrix_market {
     }
 }
 
+/// Model matrices from HDF5 (written by h5py, scipy's CSR convention and dense) and from
+/// Matrix Market through the memory-mapped cache give the same model.
+mod matrix_inputs {
+    use super::*;
+
+    #[test]
+    fn hdf5_csr_dense_and_cached_matrix_market_agree() {
+        let dir = scratch("matrix-inputs");
+        let d = dir.to_str().unwrap();
+        let (rc, _, err) = nlsim(&["export", "ecl_beam", d]);
+        assert_eq!(rc, 0, "{err}");
+        // h5py writes K as CSR (both triangles, int32 indices) and M dense, from the .mtx text.
+        let py = String::from_utf8(
+            Command::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/find-h5py.sh"))
+                .output()
+                .unwrap()
+                .stdout,
+        )
+        .unwrap();
+        let script = r#"
+import sys, h5py, numpy as np
+def read(p):
+    lines = [l for l in open(p) if not l.startswith('%')]
+    n = int(lines[0].split()[0]); a = np.zeros((n, n))
+    for l in lines[1:]:
+        i, j, v = l.split(); i, j = int(i) - 1, int(j) - 1
+        a[i, j] = float(v); a[j, i] = float(v)
+    return a
+d = sys.argv[1]
+k, m = read(d + '/K.mtx'), read(d + '/M.mtx')
+with h5py.File(d + '/model.h5', 'w') as f:
+    g = f.create_group('K')
+    rows, cols = np.nonzero(k)
+    indptr = np.searchsorted(rows, np.arange(k.shape[0] + 1)).astype(np.int32)
+    g['indptr'] = indptr; g['indices'] = cols.astype(np.int32); g['data'] = k[rows, cols]
+    g.attrs['shape'] = np.array(k.shape, dtype=np.int64)
+    f['M'] = m
+"#;
+        let out = Command::new(py.trim())
+            .args(["-c", script, d])
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let labels = "dofs = \"dofs.txt\"\n";
+        let h5_model = dir.join("h5.toml");
+        std::fs::write(
+            &h5_model,
+            format!(
+                "name = \"beam_h5\"\n[matrices]\nstiffness = \"model.h5:/K\"\nmass = \"model.h5:M\"\n{labels}"
+            ),
+        )
+        .unwrap();
+        let mtx_model = dir.join("mtx.toml");
+        std::fs::write(
+            &mtx_model,
+            format!(
+                "name = \"beam_mtx\"\n[matrices]\nstiffness = \"K.mtx\"\nmass = \"M.mtx\"\n{labels}"
+            ),
+        )
+        .unwrap();
+        let freqs = |model: &Path| -> String {
+            let (rc, out, err) = nlsim(&["modes", model.to_str().unwrap(), "--count", "6"]);
+            assert_eq!(rc, 0, "{err}");
+            out.lines()
+                .filter(|l| l.trim_start().starts_with(char::is_numeric))
+                .map(|l| l.split_whitespace().nth(1).unwrap().to_string())
+                .collect::<Vec<_>>()
+                .join(" ")
+        };
+        let reference = freqs(&mtx_model);
+        assert!(reference.contains("23.661"), "{reference}");
+        // The first load wrote the caches; the second reads them.
+        for f in ["K.mtx.csc", "M.mtx.csc"] {
+            assert!(dir.join(".nlsim-cache").join(f).is_file(), "{f}");
+        }
+        assert_eq!(freqs(&mtx_model), reference);
+        assert_eq!(freqs(&h5_model), reference);
+        // Errors name the file and the object.
+        std::fs::write(
+            &h5_model,
+            format!("name = \"x\"\n[matrices]\nstiffness = \"model.h5:/nope\"\nmass = \"model.h5:M\"\n{labels}"),
+        )
+        .unwrap();
+        let (rc, _, err) = nlsim(&["check", h5_model.to_str().unwrap()]);
+        assert_eq!(rc, 1);
+        assert!(
+            err.contains("model.h5: HDF5: /nope: no such group"),
+            "{err}"
+        );
+    }
+}
+
 mod cli {
     use super::*;
 
@@ -446,8 +542,21 @@ mod cli {
     /// not built yet say so.
     #[test]
     fn demo_runs_and_names_unbuilt_stages() {
-        let (rc, out, err) = nlsim(&["demo"]);
+        let report = scratch("demo-report");
+        let (rc, out, err) = nlsim(&["demo", "--report", report.to_str().unwrap()]);
         assert_eq!(rc, 0, "{err}");
+        // The report folder: the summary as printed, and every plot as SVG and PNG.
+        let summary = std::fs::read_to_string(report.join("summary.txt")).unwrap();
+        assert!(summary.contains("[4/8] multi-harmonic FRFs") && out.starts_with(&summary[..200]));
+        for name in ["time_response", "frf_ecl_beam", "stepped_sines"] {
+            let svg = std::fs::read_to_string(report.join(format!("{name}.svg"))).unwrap();
+            assert!(svg.contains("<svg") && svg.contains("</svg>"), "{name}.svg");
+            let png = std::fs::read(report.join(format!("{name}.png"))).unwrap();
+            assert!(
+                png.starts_with(b"\x89PNG\r\n\x1a\n") && png.len() > 10_000,
+                "{name}.png"
+            );
+        }
         assert!(
             out.contains("ecl_beam") && out.contains("[1/8] model: loaded and validated"),
             "{out}"

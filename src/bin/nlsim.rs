@@ -163,7 +163,8 @@ enum Command {
         /// Output file: .h5 (HDF5) or .csv.
         #[arg(long)]
         out: Option<std::path::PathBuf>,
-        /// SVG plot of the amplitude against frequency (default: beside --out, .svg).
+        /// Plot of the amplitude against frequency, FILE.svg or FILE.png (default: beside
+        /// --out, .svg).
         #[arg(long)]
         plot: Option<std::path::PathBuf>,
         /// Element parameter overrides, e.g. `--set spring.k3=2e15` (repeatable).
@@ -514,6 +515,7 @@ fn demo_time_response(
     model: &nlsim::kernel::Model,
     reduced: &nlsim::reduction::ReducedModel,
     system: &nlsim::reduction::ModalSystem,
+    report_dir: &std::path::Path,
     say: &dyn Fn(&str),
 ) -> nlsim::Result<()> {
     use nlsim::sim::{FohConfig, Harmonic, LoadCase, Plant, Rk45Config, Signal, Simulator};
@@ -581,6 +583,37 @@ fn demo_time_response(
             a.quantity.as_str(),
             diff / peak.max(1e-300)
         ));
+    }
+    if let (Some(a), Some(b)) = (foh.outputs.first(), rk.outputs.first()) {
+        // At most ~4000 points per curve.
+        let every = (a.values.len() / 4000).max(1);
+        let curve = |v: &[f64]| -> Vec<(f64, f64)> {
+            v.iter()
+                .enumerate()
+                .step_by(every)
+                .map(|(k, &x)| (k as f64 / rate, x))
+                .collect()
+        };
+        let fig = nlsim::plot::Lines {
+            title: format!(
+                "{}: multi-sine response at {} (FOH vs RK45)",
+                model.name(),
+                a.name
+            ),
+            x_desc: "time (s)".into(),
+            y_desc: format!(
+                "{} {} ({})",
+                a.name,
+                a.quantity.as_str(),
+                nlsim::output::unit(a.quantity)
+            ),
+            series: vec![
+                (format!("FOH, {rate:.0} Hz"), curve(&a.values)),
+                ("RK45, rtol 1e-9".into(), curve(&b.values)),
+            ],
+        };
+        let paths = plot_both(report_dir, "time_response", &fig)?;
+        say(&format!("  plots: {paths}"));
     }
     for (e, name) in foh.element_names.iter().enumerate() {
         let pu = foh.element_displacements[e]
@@ -663,30 +696,72 @@ fn demo_frf(
         list(PointKind::Jump, &up),
         list(PointKind::Jump, &down)
     ));
-    let dir = report_dir;
-    std::fs::create_dir_all(dir).map_err(|source| nlsim::Error::Io {
-        path: dir.to_path_buf(),
-        source,
-    })?;
-    let plot = dir.join(format!("frf_{}.svg", model.name()));
-    nlsim::frf::plot_svg(
-        &plot,
-        &sys,
-        &cont,
-        &nlsim::frf::responses(&sys, &cont),
-        0,
-        &format!("{}: harmonic balance, H = 7", model.name()),
-    )?;
-    say(&format!("  plot: {}", plot.display()));
+    let y = nlsim::frf::responses(&sys, &cont);
+    let title = format!("{}: harmonic balance, H = 7", model.name());
+    let mut plots = Vec::new();
+    for ext in ["svg", "png"] {
+        let p = report_dir.join(format!("frf_{}.{ext}", model.name()));
+        nlsim::frf::plot_frf(&p, &sys, &cont, &y, 0, &title)?;
+        plots.push(p.display().to_string());
+    }
+    // The stepped sines as a test would run them, over the continuation.
+    let fund = |b: &nlsim::hb::Branch| -> Vec<(f64, f64)> {
+        nlsim::frf::responses(&sys, b)
+            .iter()
+            .zip(&b.points)
+            .map(|(r, p)| (hz(p), r[(0, 1)].norm()))
+            .collect()
+    };
+    let sen = &sys.sensors[0];
+    let fig = nlsim::plot::Lines {
+        title: format!("{}: stepped sines jump at the folds", model.name()),
+        x_desc: "frequency (Hz)".into(),
+        y_desc: format!(
+            "|{}| at the fundamental ({})",
+            sen.name,
+            nlsim::output::unit(sen.quantity)
+        ),
+        series: vec![
+            ("continuation (every branch)".into(), fund(&cont)),
+            ("stepped sine up".into(), fund(&up)),
+            ("stepped sine down".into(), fund(&down)),
+        ],
+    };
+    plots.push(plot_both(report_dir, "stepped_sines", &fig)?);
+    say(&format!("  plots: {}", plots.join(", ")));
     Ok(())
+}
+
+/// Writes `fig` as `DIR/NAME.svg` and `DIR/NAME.png`; returns the two paths for the summary.
+fn plot_both(
+    dir: &std::path::Path,
+    name: &str,
+    fig: &impl nlsim::plot::Figure,
+) -> nlsim::Result<String> {
+    let mut v = Vec::new();
+    for ext in ["svg", "png"] {
+        let p = dir.join(format!("{name}.{ext}"));
+        nlsim::plot::write(&p, fig)?;
+        v.push(p.display().to_string());
+    }
+    Ok(v.join(", "))
 }
 
 /// The thesis pipeline, stage by stage; stages not built yet say so.
 fn demo(model: &str, report_dir: &std::path::Path, quiet: bool) -> nlsim::Result<()> {
+    std::fs::create_dir_all(report_dir).map_err(|source| nlsim::Error::Io {
+        path: report_dir.to_path_buf(),
+        source,
+    })?;
+    // Everything said also goes to REPORT/summary.txt.
+    let text = std::cell::RefCell::new(String::new());
     let say = |s: &str| {
         if !quiet {
             println!("{s}");
         }
+        let mut t = text.borrow_mut();
+        t.push_str(s);
+        t.push('\n');
     };
     say("nlsim demo: the model-calibration pipeline of Chen (2016) on a built-in model");
     say("");
@@ -753,27 +828,45 @@ fn demo(model: &str, report_dir: &std::path::Path, quiet: bool) -> nlsim::Result
         ));
     }
     say("");
-    demo_time_response(&loaded.model, &reduced, &system, &say)?;
+    demo_time_response(&loaded.model, &reduced, &system, report_dir, &say)?;
     say("");
     demo_frf(&loaded.model, &reduced, report_dir, &say)?;
     say("");
     let stages = [
         (
             "[5/8] pre-test planning (Fisher information)",
-            "calibration",
+            "the calibration crate; no planning-ranking plot",
         ),
-        ("[6/8] virtual force-controlled test", "calibration"),
+        (
+            "[6/8] virtual force-controlled test with noise",
+            "the calibration crate; no measured-vs-model FRF plots",
+        ),
         (
             "[7/8] linear then nonlinear calibration from LHS seeds",
-            "calibration",
+            "the calibration crate; no true-vs-estimated table",
         ),
-        ("[8/8] k-fold statistics and validation", "calibration"),
+        (
+            "[8/8] k-fold statistics and validation",
+            "the calibration crate; no fold-bar plot",
+        ),
     ];
     for (stage, needs) in stages {
         say(&format!("{stage}: not built yet (needs {needs})"));
     }
     say("");
-    say(&format!("done in {:.2} s", t0.elapsed().as_secs_f64()));
+    let summary = report_dir.join("summary.txt");
+    say(&format!(
+        "done in {:.2} s; report in {} (summary.txt, plots as SVG and PNG)",
+        t0.elapsed().as_secs_f64(),
+        report_dir.display()
+    ));
+    let tmp = report_dir.join(".summary.txt.tmp");
+    std::fs::write(&tmp, text.borrow().as_bytes())
+        .and_then(|()| std::fs::rename(&tmp, &summary))
+        .map_err(|source| nlsim::Error::Io {
+            path: summary,
+            source,
+        })?;
     Ok(())
 }
 
@@ -815,13 +908,8 @@ fn frf(
     let plot_path = plot
         .map(|p| p.to_path_buf())
         .or_else(|| out.map(|p| p.with_extension("svg")));
-    if let Some(p) = &plot_path
-        && p.extension().and_then(|e| e.to_str()) != Some("svg")
-    {
-        return Err(nlsim::Error::Usage(format!(
-            "--plot {}: name the plot FILE.svg",
-            p.display()
-        )));
+    if let Some(p) = &plot_path {
+        nlsim::plot::check_path(p)?;
     }
     let say = |s: String| {
         if !quiet {
@@ -944,7 +1032,7 @@ fn frf(
     }
     if let Some(p) = plot_path {
         let title = format!("{} — {}, H = {}", model.name(), req.mode.as_str(), set.h);
-        nlsim::frf::plot_svg(&p, sys, branch, y, 0, &title)?;
+        nlsim::frf::plot_frf(&p, sys, branch, y, 0, &title)?;
         say(format!("  plot {}", p.display()));
     }
     Ok(())

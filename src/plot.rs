@@ -1,0 +1,216 @@
+//! Plots as SVG or PNG (by the file extension), written atomically.
+//!
+//! Text is laid out with a TrueType font read once from the system: `$NLSIM_FONT` if set,
+//! else DejaVu Sans or Liberation Sans where Debian and most distributions put them, else the
+//! first `.ttf` under `/usr/share/fonts`. Without any, plotting fails with the command that
+//! installs one (`scripts/ensure-deps.sh` does).
+
+use crate::error::{Error, Result};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+/// What plots are drawn on: implemented once, rendered to any backend.
+pub trait Figure {
+    /// Width and height in pixels.
+    fn size(&self) -> (u32, u32) {
+        (960, 600)
+    }
+
+    /// Draws the figure on `root`.
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult
+    where
+        DB::ErrorType: 'static;
+}
+
+/// The error type of [`Figure::draw`].
+pub type DrawResult = std::result::Result<(), Box<dyn std::error::Error>>;
+
+/// What plot files can be: `.svg` or `.png`.
+pub const HINT: &str = "FILE.svg or FILE.png";
+
+fn font_candidates() -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::env::var_os("NLSIM_FONT")
+        .map(PathBuf::from)
+        .into_iter()
+        .collect();
+    v.extend(
+        [
+            "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
+            "/usr/share/fonts/dejavu/DejaVuSans.ttf",
+            "/usr/share/fonts/TTF/DejaVuSans.ttf",
+            "/usr/share/fonts/truetype/liberation/LiberationSans-Regular.ttf",
+            "/Library/Fonts/Arial.ttf",
+            "/System/Library/Fonts/Supplemental/Arial.ttf",
+        ]
+        .map(PathBuf::from),
+    );
+    // Any TrueType font, two levels under /usr/share/fonts.
+    if let Ok(rd) = std::fs::read_dir("/usr/share/fonts") {
+        let mut more: Vec<PathBuf> = rd
+            .flatten()
+            .flat_map(|d| std::fs::read_dir(d.path()).into_iter().flatten().flatten())
+            .flat_map(|d| {
+                let p = d.path();
+                if p.is_dir() {
+                    std::fs::read_dir(&p)
+                        .into_iter()
+                        .flatten()
+                        .flatten()
+                        .map(|e| e.path())
+                        .collect()
+                } else {
+                    vec![p]
+                }
+            })
+            .filter(|p| p.extension().is_some_and(|e| e == "ttf"))
+            .collect();
+        more.sort();
+        v.extend(more);
+    }
+    v
+}
+
+/// Registers the plot font once (`sans-serif` for every style).
+fn ensure_font() -> Result<()> {
+    static FONT: OnceLock<std::result::Result<PathBuf, String>> = OnceLock::new();
+    let r = FONT.get_or_init(|| {
+        for p in font_candidates() {
+            let Ok(bytes) = std::fs::read(&p) else {
+                continue;
+            };
+            // The font lives as long as the process: plotters keeps a reference to it.
+            let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
+            let ok = [FontStyle::Normal, FontStyle::Bold, FontStyle::Italic]
+                .into_iter()
+                .all(|s| plotters::style::register_font("sans-serif", s, bytes).is_ok());
+            if ok {
+                return Ok(p);
+            }
+        }
+        Err(
+            "no TrueType font found for the plot text: install one with \
+             `sudo apt-get install fonts-dejavu-core`, or point NLSIM_FONT at a .ttf file"
+                .to_string(),
+        )
+    });
+    r.as_ref().map(|_| ()).map_err(|m| Error::Usage(m.clone()))
+}
+
+/// Checks that `path` names a plot format, before a long run.
+pub fn check_path(path: &Path) -> Result<()> {
+    match path.extension().and_then(|e| e.to_str()) {
+        Some("svg" | "png") => Ok(()),
+        _ => Err(Error::Usage(format!(
+            "{}: name the plot {HINT}",
+            path.display()
+        ))),
+    }
+}
+
+/// Renders `fig` to `path` (SVG or PNG by extension) through a temporary file.
+pub fn write(path: &Path, fig: &impl Figure) -> Result<()> {
+    check_path(path)?;
+    ensure_font()?;
+    let mut name = path
+        .file_name()
+        .map(|n| n.to_os_string())
+        .unwrap_or_default();
+    name.push(format!(".tmp-{}", std::process::id()));
+    let tmp = path.with_file_name(name);
+    let (w, h) = fig.size();
+    let render = || -> DrawResult {
+        if path.extension().is_some_and(|e| e == "svg") {
+            let root = SVGBackend::new(&tmp, (w, h)).into_drawing_area();
+            fig.draw(&root)?;
+            root.present()?;
+        } else {
+            let mut rgb = vec![255u8; (w * h * 3) as usize];
+            {
+                let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
+                fig.draw(&root)?;
+                root.present()?;
+            }
+            let file = std::io::BufWriter::new(std::fs::File::create(&tmp)?);
+            let mut enc = png::Encoder::new(file, w, h);
+            enc.set_color(png::ColorType::Rgb);
+            enc.set_depth(png::BitDepth::Eight);
+            let mut writer = enc.write_header()?;
+            writer.write_image_data(&rgb)?;
+            writer.finish()?;
+        }
+        Ok(())
+    };
+    let io = |e: String| Error::Io {
+        path: path.to_path_buf(),
+        source: std::io::Error::other(e),
+    };
+    if let Err(e) = render() {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(io(e.to_string()));
+    }
+    std::fs::rename(&tmp, path).map_err(|e| io(e.to_string()))
+}
+
+/// Line plots sharing axes: `(label, points, dashed)` each.
+pub struct Lines {
+    /// Title above the plot.
+    pub title: String,
+    /// x-axis label with unit.
+    pub x_desc: String,
+    /// y-axis label with unit.
+    pub y_desc: String,
+    /// The curves.
+    pub series: Vec<(String, Vec<(f64, f64)>)>,
+}
+
+impl Figure for Lines {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult
+    where
+        DB::ErrorType: 'static,
+    {
+        root.fill(&WHITE)?;
+        let pts = self.series.iter().flat_map(|(_, p)| p.iter());
+        let (x0, x1, y0, y1) = pts.fold(
+            (
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+            ),
+            |(a, b, c, d), &(x, y)| (a.min(x), b.max(x), c.min(y), d.max(y)),
+        );
+        let pad = 0.05 * (y1 - y0).abs().max(1e-300);
+        let mut chart = ChartBuilder::on(root)
+            .caption(&self.title, ("sans-serif", 20))
+            .margin(12)
+            .x_label_area_size(44)
+            .y_label_area_size(80)
+            .build_cartesian_2d(x0..x1.max(x0 + 1e-12), (y0 - pad)..(y1 + pad))?;
+        chart
+            .configure_mesh()
+            .x_desc(&self.x_desc)
+            .y_desc(&self.y_desc)
+            .y_label_formatter(&|v| format!("{v:.2e}"))
+            .draw()?;
+        let palette = [BLUE, RED, GREEN, MAGENTA, BLACK];
+        for (i, (label, p)) in self.series.iter().enumerate() {
+            let c = palette[i % palette.len()];
+            let w = if i == 0 { 2 } else { 1 };
+            chart
+                .draw_series(LineSeries::new(p.iter().copied(), c.stroke_width(w)))?
+                .label(label)
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(w))
+                });
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()?;
+        Ok(())
+    }
+}
