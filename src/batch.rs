@@ -230,7 +230,11 @@ impl Batch {
         // Line of the first occurrence of `key` (for errors found after parsing).
         let at = |key: &str| {
             text.lines()
-                .position(|l| l.trim_start().starts_with(key))
+                .position(|l| {
+                    l.trim_start().strip_prefix(key).is_some_and(|rest| {
+                        key.starts_with('[') || rest.trim_start().starts_with('=')
+                    })
+                })
                 .map_or(1, |i| i + 1)
         };
         if f.name.is_empty()

@@ -284,7 +284,7 @@ pub fn plot_frf(
 ) -> Result<()> {
     crate::plot::write(
         path,
-        &FrfFigure {
+        &FrfPlot {
             sys,
             branch,
             y,
@@ -294,16 +294,21 @@ pub fn plot_frf(
     )
 }
 
-/// The FRF plot of [`plot_frf`].
-struct FrfFigure<'a> {
-    sys: &'a HbSystem,
-    branch: &'a Branch,
-    y: &'a [Mat<c64>],
-    sensor: usize,
-    title: &'a str,
+/// The FRF plot of [`plot_frf`], as a [`crate::plot::Figure`].
+pub struct FrfPlot<'a> {
+    /// The system the branch belongs to.
+    pub sys: &'a HbSystem,
+    /// The solution points.
+    pub branch: &'a Branch,
+    /// Sensor responses per point, from [`responses`].
+    pub y: &'a [Mat<c64>],
+    /// Sensor plotted.
+    pub sensor: usize,
+    /// Title above the plot.
+    pub title: &'a str,
 }
 
-impl crate::plot::Figure for FrfFigure<'_> {
+impl crate::plot::Figure for FrfPlot<'_> {
     fn draw<DB: plotters::prelude::DrawingBackend>(
         &self,
         root: &plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
@@ -311,7 +316,7 @@ impl crate::plot::Figure for FrfFigure<'_> {
     where
         DB::ErrorType: 'static,
     {
-        let FrfFigure {
+        let FrfPlot {
             sys,
             branch,
             y,

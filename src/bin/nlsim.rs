@@ -698,12 +698,18 @@ fn demo_frf(
     ));
     let y = nlsim::frf::responses(&sys, &cont);
     let title = format!("{}: harmonic balance, H = 7", model.name());
-    let mut plots = Vec::new();
-    for ext in ["svg", "png"] {
-        let p = report_dir.join(format!("frf_{}.{ext}", model.name()));
-        nlsim::frf::plot_frf(&p, &sys, &cont, &y, 0, &title)?;
-        plots.push(p.display().to_string());
-    }
+    let fig = nlsim::frf::FrfPlot {
+        sys: &sys,
+        branch: &cont,
+        y: &y,
+        sensor: 0,
+        title: &title,
+    };
+    let mut plots = vec![plot_both(
+        report_dir,
+        &format!("frf_{}", model.name()),
+        &fig,
+    )?];
     // The stepped sines as a test would run them, over the continuation.
     let fund = |b: &nlsim::hb::Branch| -> Vec<(f64, f64)> {
         nlsim::frf::responses(&sys, b)
