@@ -370,27 +370,21 @@ impl Batch {
                     .map(str::to_string)
                     .ok_or_else(|| err(line, &key, format!("{v} is not a string")))
             };
+            let each = |f: &dyn Fn(&toml::Value) -> Result<Assignment>| {
+                s.values
+                    .iter()
+                    .map(|v| Ok(vec![f(v)?]))
+                    .collect::<Result<Vec<_>>>()
+            };
             let axis = match (&s.set, s.option.as_deref()) {
-                (Some(name), None) => s
-                    .values
-                    .iter()
-                    .map(|v| Ok(vec![Assignment::Set(name.clone(), num(v)?)]))
-                    .collect::<Result<Vec<_>>>()?,
-                (None, Some("force")) if f.command == "frf" => s
-                    .values
-                    .iter()
-                    .map(|v| Ok(vec![Assignment::Force(num(v)?)]))
-                    .collect::<Result<Vec<_>>>()?,
-                (None, Some("excitation")) if f.command == "simulate" => s
-                    .values
-                    .iter()
-                    .map(|v| Ok(vec![Assignment::Excitation(txt(v)?)]))
-                    .collect::<Result<Vec<_>>>()?,
-                (None, Some("model")) => s
-                    .values
-                    .iter()
-                    .map(|v| Ok(vec![Assignment::Model(txt(v)?)]))
-                    .collect::<Result<Vec<_>>>()?,
+                (Some(name), None) => each(&|v| Ok(Assignment::Set(name.clone(), num(v)?)))?,
+                (None, Some("force")) if f.command == "frf" => {
+                    each(&|v| Ok(Assignment::Force(num(v)?)))?
+                }
+                (None, Some("excitation")) if f.command == "simulate" => {
+                    each(&|v| Ok(Assignment::Excitation(txt(v)?)))?
+                }
+                (None, Some("model")) => each(&|v| Ok(Assignment::Model(txt(v)?)))?,
                 (None, Some(o)) => {
                     return Err(err(
                         line,
@@ -655,15 +649,16 @@ fn remove_stale_temporaries(path: &Path) -> Vec<PathBuf> {
     removed
 }
 
+/// Writes a scalar `u64` attribute.
+fn u64_attr_write(loc: &hdf5::Location, name: &str, v: u64) -> hdf5::Result<()> {
+    loc.new_attr::<u64>().create(name)?.write_scalar(&v)
+}
+
 fn write_root_attrs(root: &hdf5::Group, b: &Batch) -> hdf5::Result<()> {
     provenance(root, b.command.name(), &b.model, &b.model, Some(b.seed))?;
     str_attr(root, "batch", &b.name)?;
-    root.new_attr::<u64>()
-        .create("jobs_hash")?
-        .write_scalar(&b.hash)?;
-    root.new_attr::<u64>()
-        .create("n_jobs")?
-        .write_scalar(&(b.jobs.len() as u64))
+    u64_attr_write(root, "jobs_hash", b.hash)?;
+    u64_attr_write(root, "n_jobs", b.jobs.len() as u64)
 }
 
 /// The result of one job, ready to be written.
@@ -723,9 +718,7 @@ fn write_job(
     result: &Result<JobResult>,
 ) -> hdf5::Result<()> {
     let g = jobs.create_group(&job_group_name(job.index))?;
-    g.new_attr::<u64>()
-        .create("index")?
-        .write_scalar(&(job.index as u64))?;
+    u64_attr_write(&g, "index", job.index as u64)?;
     let desc: Vec<String> = job.assignments.iter().map(|a| a.to_string()).collect();
     str_attr(&g, "assignments", &desc.join("; "))?;
     for a in &job.assignments {
@@ -810,10 +803,7 @@ pub fn run_shard(
         let root = file.as_group().map_err(&err)?;
         write_root_attrs(&root, b).map_err(&err)?;
         for (name, v) in [("task_index", task), ("task_count", count)] {
-            root.new_attr::<u64>()
-                .create(name)
-                .and_then(|a| a.write_scalar(&(v as u64)))
-                .map_err(&err)?;
+            u64_attr_write(&root, name, v as u64).map_err(&err)?;
         }
         let jobs = file.create_group("jobs").map_err(&err)?;
         let width = rayon::current_num_threads().max(1);
@@ -847,10 +837,7 @@ pub fn run_shard(
         }
         faer::set_global_parallelism(saved);
         outcome?;
-        root.new_attr::<u64>()
-            .create("complete")
-            .and_then(|a| a.write_scalar(&1u64))
-            .map_err(&err)?;
+        u64_attr_write(&root, "complete", 1).map_err(&err)?;
         file.flush().map_err(&err)?;
         Ok(())
     })?;
@@ -989,10 +976,7 @@ pub fn merge(b: &Batch) -> Result<MergeOutcome> {
         str_attr(&d, "columns", &names.join(",")).map_err(&err)?;
         str_attr(&d, "dims", "job x parameter (NaN: not set by the job)").map_err(&err)?;
         str_attr(&d, "unit", "SI, per parameter").map_err(&err)?;
-        root.new_attr::<u64>()
-            .create("complete")
-            .and_then(|a| a.write_scalar(&1u64))
-            .map_err(&err)?;
+        u64_attr_write(&root, "complete", 1).map_err(&err)?;
         out.flush().map_err(&err)?;
         Ok(())
     })?;

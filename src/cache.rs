@@ -120,9 +120,7 @@ fn write_cache(path: &Path, (len, mtime): (u64, u64), m: &SparseSym) -> std::io:
     let dir = path.parent().unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir)?;
     let a = m.as_faer();
-    let mut name = path.file_name().unwrap_or_default().to_os_string();
-    name.push(format!(".tmp-{}", std::process::id()));
-    let tmp = path.with_file_name(name);
+    let tmp = crate::output::temp_path(path);
     let write = || -> std::io::Result<()> {
         let mut w = std::io::BufWriter::new(std::fs::File::create(&tmp)?);
         w.write_all(MAGIC)?;

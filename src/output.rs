@@ -53,7 +53,8 @@ pub fn write_atomically(
     })
 }
 
-fn temp_path(path: &Path) -> PathBuf {
+/// The temporary name `path` is written under first: `NAME.tmp-PID`, beside it.
+pub(crate) fn temp_path(path: &Path) -> PathBuf {
     let mut name = path
         .file_name()
         .map(|n| n.to_os_string())

@@ -113,12 +113,7 @@ pub fn check_path(path: &Path) -> Result<()> {
 pub fn write(path: &Path, fig: &impl Figure) -> Result<()> {
     check_path(path)?;
     ensure_font()?;
-    let mut name = path
-        .file_name()
-        .map(|n| n.to_os_string())
-        .unwrap_or_default();
-    name.push(format!(".tmp-{}", std::process::id()));
-    let tmp = path.with_file_name(name);
+    let tmp = crate::output::temp_path(path);
     let (w, h) = fig.size();
     let render = || -> DrawResult {
         if path.extension().is_some_and(|e| e == "svg") {
