@@ -416,7 +416,8 @@ fn excitation_specs(model: &Model, specs: &[String], f1: f64) -> Result<Vec<Stri
     Ok(out)
 }
 
-/// Integrates `model` as `req` asks, calling `progress(done, total)` on long FOH runs.
+/// Integrates `model` as `req` asks, calling `progress(samples done, total)` about 200 times
+/// whatever the method.
 pub fn run_simulation(
     model: &Model,
     req: &SimRequest,
@@ -457,7 +458,7 @@ pub fn run_simulation(
             0.0
         };
         let nm = Newmark::new(model, &cfg)?;
-        let history = nm.run(&case, n_steps)?;
+        let history = nm.run_with_progress(&case, n_steps, progress)?;
         return Ok(SimRun {
             history,
             excitation,
@@ -483,7 +484,7 @@ pub fn run_simulation(
             flops = sim.flops_per_state_step();
             sim.run_with_progress(&case, n_steps, progress)?
         }
-        Method::Rk45 => nlsim_sim::rk45(
+        Method::Rk45 => nlsim_sim::rk45_with_progress(
             &plant,
             &case,
             dt,
@@ -493,8 +494,9 @@ pub fn run_simulation(
                 atol: req.atol,
                 ..Default::default()
             },
+            progress,
         )?,
-        _ => nlsim_sim::rk4(
+        _ => nlsim_sim::rk4_with_progress(
             &plant,
             &case,
             dt,
@@ -503,6 +505,7 @@ pub fn run_simulation(
                 substeps: req.substeps,
                 ..Default::default()
             },
+            progress,
         )?,
     };
     Ok(SimRun {

@@ -6,13 +6,16 @@
 //!    `peak_fma`: a register-resident FMA kernel compiled for the same instruction set, whose
 //!    throughput is the core's measured peak. Their ratio is the fraction of peak.
 //! 2. `methods_<n>dofs`: the hexahedral bracket with the cubic tip spring and Rayleigh damping
-//!    (0.5 % at modes 1 and 3), driven by a 10 N sine at 0.9 f1 for two periods from rest. Every
-//!    method is first tuned, outside the timing, to the coarsest setting that reaches 1e-3 of
-//!    the peak tip displacement against its own converged solution: FOH (20 modes + residual
-//!    flexibility) by samples per period against a tight RK45; RK45 (same reduced model) by
-//!    tolerance; Newmark (the unreduced sparse model) by sub-steps, its error estimated from
-//!    halving the step. Then each is timed. Sizes: 10³ and 10⁴ DOFs, and 10⁵ with
-//!    `NLSIM_BENCH_LARGE=1` (Newmark then takes minutes per run).
+//!    (0.5 % at modes 1 and 3), driven by a 10 N sine at 0.9 f1 for two periods from rest,
+//!    reduced to 20, 60 and 150 modes + residual flexibility. Every method is first tuned,
+//!    outside the timing, to the coarsest setting that reaches 1e-3 of the peak tip
+//!    displacement: the hold integrators (FOH and LSOH) by samples per period against a tight
+//!    RK45 of the same reduced model; RK45 by tolerance against the same reference; Newmark
+//!    (the unreduced sparse model) by sub-steps, its error estimated from halving the step.
+//!    Then each is timed; set-up (reduction, discretisation, factorisation) is not counted.
+//!    Sizes: 10³ and 10⁴ DOFs, and 10⁵ with `NLSIM_BENCH_LARGE=1`. Above 2·10⁴ DOFs Newmark
+//!    reuses the sub-steps tuned at 10⁴ and is timed over a few samples and scaled: its line
+//!    says "(estimate)".
 //!
 //! Run with `cargo bench -p nlsim-bench --bench sim -- --quick --noplot`.
 
@@ -22,7 +25,7 @@ use nlsim_kernel::{Coupling, Damping, Law, Model, NonlinearElement, Quantity};
 use nlsim_reduction::modal::{ReductionConfig, reduce};
 use nlsim_reduction::{EigenConfig, ModalSystem, ModeSelection, Port, PortKind};
 use nlsim_sim::{
-    ElementPort, FohConfig, LoadCase, Newmark, NewmarkConfig, OutputSpec, Plant, Rk45Config,
+    ElementPort, FohConfig, Hold, LoadCase, Newmark, NewmarkConfig, OutputSpec, Plant, Rk45Config,
     Signal, Simulator, TimeHistory, rk45,
 };
 use pulp::{Arch, Simd, WithSimd};
@@ -203,44 +206,75 @@ fn rel_err(a: &[f64], sa: usize, b: &[f64], sb: usize) -> f64 {
 const TARGET: f64 = 1e-3;
 
 /// Retained mode counts compared: RK45's step is bounded by the highest retained mode's
-/// stability limit, FOH's is not, so the RK45/FOH ratio grows with the mode count.
-const MODES: [usize; 2] = [20, 60];
+/// stability limit, the hold integrators' is not, so the RK45/FOH ratio grows with the mode
+/// count.
+const MODES: [usize; 3] = [20, 60, 150];
 
-/// A method tuned to [`TARGET`] on one reduced plant.
+/// Samples per period of the tight reference. Every entry of [`LADDER`] divides it, so each
+/// candidate is compared with the reference at every one of its own samples.
+const BASE: usize = 1152;
+
+/// Samples per period tried for the hold integrators, in steps of 1.5 and 4/3.
+const LADDER: [usize; 12] = [8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 288, 576];
+
+/// Above this size Newmark is not tuned (hours at 10⁵ DOFs): it reuses the sub-step count
+/// tuned on the largest smaller model and is timed over [`NEWMARK_PROBE`] output samples.
+const NEWMARK_TUNE_MAX_DOFS: usize = 20_000;
+
+/// Output samples of the Newmark timing probe on large models.
+const NEWMARK_PROBE: usize = 4;
+
+/// The hold integrators and RK45 tuned to [`TARGET`] on one reduced plant.
 struct Tuned {
     modes: usize,
-    spp: usize,
-    foh_err: f64,
+    /// Highest retained natural frequency (Hz).
+    f_max: f64,
+    /// `(hold, samples per period, error)` for FOH and LSOH.
+    holds: Vec<(Hold, usize, f64)>,
+    /// Samples per period of the RK45 output grid: the coarsest hold grid.
+    rk_spp: usize,
     rk_cfg: Rk45Config,
     rk_err: f64,
     rk_steps: usize,
 }
 
-/// Tunes FOH (samples per period) and RK45 (tolerance) on `plant` against a tight RK45 of the
-/// same plant sampled at `base` per period.
+fn hold_config(hold: Hold, dt: f64) -> FohConfig {
+    FohConfig {
+        hold,
+        ..FohConfig::new(dt)
+    }
+}
+
+/// Tunes FOH and LSOH (samples per period) and RK45 (tolerance) on `plant` against a tight
+/// RK45 of the same plant sampled [`BASE`] times per period.
 fn tune(s: &Setup, modes: usize, plant: &Plant) -> Tuned {
-    let base = 512;
     let grid = |spp: usize| (1.0 / (s.f * spp as f64), s.n_periods * spp);
-    let (dt_ref, n_ref) = grid(base);
+    let (dt_ref, n_ref) = grid(BASE);
     let tight = Rk45Config {
         rtol: 1e-11,
         atol: 1e-20,
         ..Rk45Config::default()
     };
     let reference = rk45(plant, &s.case, dt_ref, n_ref, &tight).unwrap();
-    let (spp, foh_err) = [8usize, 16, 32, 64, 128, 256, 512]
+    let holds: Vec<(Hold, usize, f64)> = [Hold::Foh, Hold::Lsoh]
         .into_iter()
-        .find_map(|spp| {
-            let (dt, steps) = grid(spp);
-            let h = Simulator::new(plant, &FohConfig::new(dt))
-                .unwrap()
-                .run(&s.case, steps)
-                .unwrap();
-            let e = rel_err(tip(&h), 1, tip(&reference), base / spp);
-            (e <= TARGET).then_some((spp, e))
+        .map(|hold| {
+            LADDER
+                .into_iter()
+                .find_map(|spp| {
+                    let (dt, steps) = grid(spp);
+                    let h = Simulator::new(plant, &hold_config(hold, dt))
+                        .unwrap()
+                        .run(&s.case, steps)
+                        .unwrap();
+                    let e = rel_err(tip(&h), 1, tip(&reference), BASE / spp);
+                    (e <= TARGET).then_some((hold, spp, e))
+                })
+                .expect("the hold integrator reaches the target")
         })
-        .expect("FOH reaches the target");
-    let (rk_cfg, rk_err, rk_steps) = (3..=10)
+        .collect();
+    let rk_spp = holds.iter().map(|h| h.1).min().unwrap();
+    let (rk_cfg, rk_err, rk_steps) = (2..=10)
         .find_map(|k| {
             let rtol = 10f64.powi(-k);
             let cfg = Rk45Config {
@@ -248,20 +282,50 @@ fn tune(s: &Setup, modes: usize, plant: &Plant) -> Tuned {
                 atol: rtol * 1e-9,
                 ..Rk45Config::default()
             };
-            let (dt, steps) = grid(spp);
+            let (dt, steps) = grid(rk_spp);
             let h = rk45(plant, &s.case, dt, steps, &cfg).unwrap();
-            let e = rel_err(tip(&h), 1, tip(&reference), base / spp);
+            let e = rel_err(tip(&h), 1, tip(&reference), BASE / rk_spp);
             (e <= TARGET).then_some((cfg, e, h.stats.steps))
         })
         .expect("RK45 reaches the target");
+    let f_max = plant
+        .system
+        .poles
+        .iter()
+        .fold(0.0f64, |m, p| m.max(p.norm()))
+        / (2.0 * PI);
     Tuned {
         modes,
-        spp,
-        foh_err,
+        f_max,
+        holds,
+        rk_spp,
         rk_cfg,
         rk_err,
         rk_steps,
     }
+}
+
+/// Wall time of one call (s).
+fn time(f: &dyn Fn()) -> f64 {
+    let t = Instant::now();
+    f();
+    t.elapsed().as_secs_f64()
+}
+
+/// Time per call (s): the best of five batches, each of as many calls as fill 20 ms, so that
+/// runs of tens of microseconds are not timer noise.
+fn best(f: &dyn Fn()) -> f64 {
+    let once = time(f).max(1e-7);
+    let reps = ((0.02 / once).ceil() as usize).max(1);
+    (0..5)
+        .map(|_| {
+            time(&|| {
+                for _ in 0..reps {
+                    f();
+                }
+            }) / reps as f64
+        })
+        .fold(f64::INFINITY, f64::min)
 }
 
 fn methods(c: &mut Criterion) {
@@ -269,7 +333,10 @@ fn methods(c: &mut Criterion) {
     if std::env::var("NLSIM_BENCH_LARGE").is_ok() {
         sizes.push(100_000);
     }
+    // Newmark sub-steps tuned on the largest model so far, reused above the tuning limit.
+    let mut tuned_sub = None;
     for target in sizes {
+        let t_setup = Instant::now();
         let s = bracket_setup(target);
         let n = s.model.n_dofs();
         let duration = s.n_periods as f64 / s.f;
@@ -279,95 +346,119 @@ fn methods(c: &mut Criterion) {
         // (4/3)|N(s) − N(2s)| meets the target.
         let out_spp = 64;
         let (dt_out, steps_out) = grid(out_spp);
-        let run_nm = |sub: usize| {
+        let newmark = |sub: usize| {
             let mut cfg = NewmarkConfig::new(dt_out);
             cfg.substeps = sub;
-            let nm = Newmark::new(&s.model, &cfg).unwrap();
-            let h = nm.run(&s.case, steps_out).unwrap();
-            (nm, h)
+            Newmark::new(&s.model, &cfg).unwrap()
         };
-        let mut sub = 1;
-        let (_, mut prev) = run_nm(sub);
-        let nm_err = loop {
-            let (_, next) = run_nm(2 * sub);
-            let e = 4.0 / 3.0 * rel_err(tip(&prev), 1, tip(&next), 1);
-            if e <= TARGET || sub >= 64 {
-                break e;
-            }
-            sub *= 2;
-            prev = next;
+        let tune_newmark = n <= NEWMARK_TUNE_MAX_DOFS;
+        let (sub, nm_err) = if tune_newmark {
+            let mut sub = 1;
+            let mut prev = newmark(sub).run(&s.case, steps_out).unwrap();
+            let err = loop {
+                let next = newmark(2 * sub).run(&s.case, steps_out).unwrap();
+                let e = 4.0 / 3.0 * rel_err(tip(&prev), 1, tip(&next), 1);
+                if e <= TARGET || sub >= 64 {
+                    break e;
+                }
+                sub *= 2;
+                prev = next;
+            };
+            tuned_sub = Some(sub);
+            (sub, Some(err))
+        } else {
+            (tuned_sub.unwrap_or(4), None)
         };
-        let (nm, _) = run_nm(sub);
-        let large = n > 50_000;
+        let nm = newmark(sub);
+        let nm_how = match nm_err {
+            Some(e) => format!("estimated error {e:.2e}"),
+            None => format!(
+                "sub-steps taken from the tuned smaller model (not tuned here); timed over {NEWMARK_PROBE} output samples and scaled"
+            ),
+        };
         eprintln!(
-            "\n  bracket {n} DOFs, {duration:.4} s simulated (2 periods at {:.1} Hz), target {TARGET:e} of peak tip displacement:\n    Newmark unreduced, {} steps/period ({} steps), estimated error {nm_err:.2e}, K_eff factorised in {:.2} s",
+            "\n  bracket {n} DOFs, {duration:.4} s simulated (2 periods at {:.1} Hz), target {TARGET:e} of peak tip displacement (set-up and tuning {:.0} s):\n    Newmark unreduced, {} steps/period ({} steps), {nm_how}; K_eff factorised in {:.2} s",
             s.f,
+            t_setup.elapsed().as_secs_f64(),
             out_spp * sub,
             s.n_periods * out_spp * sub,
             nm.setup_seconds
         );
         for t in &tuned {
+            let holds: Vec<String> = t
+                .holds
+                .iter()
+                .map(|(h, spp, e)| format!("{h} {spp} samples/period (error {e:.2e})"))
+                .collect();
             eprintln!(
-                "    {:>2} modes + residual: FOH {} samples/period, error {:.2e}; RK45 rtol {:.0e} atol {:.0e}, {} steps, error {:.2e}",
-                t.modes, t.spp, t.foh_err, t.rk_cfg.rtol, t.rk_cfg.atol, t.rk_steps, t.rk_err
+                "    {:>3} modes + residual (f_max {:.0} Hz): {}; RK45 rtol {:.0e} atol {:.0e}, {} steps, error {:.2e} on {} samples/period",
+                t.modes,
+                t.f_max,
+                holds.join(", "),
+                t.rk_cfg.rtol,
+                t.rk_cfg.atol,
+                t.rk_steps,
+                t.rk_err,
+                t.rk_spp
             );
         }
         let mut g = c.benchmark_group(format!("methods_{n}dofs"));
         g.sample_size(10);
         g.warm_up_time(Duration::from_millis(1));
         g.measurement_time(Duration::from_secs(2));
-        let sims: Vec<(Simulator, f64, usize)> = tuned
+        // (hold, simulator, steps) per tuned plant, in `tuned` order.
+        let sims: Vec<Vec<(Hold, Simulator, usize)>> = tuned
             .iter()
             .zip(&s.plants)
             .map(|(t, (_, plant))| {
-                let (dt, steps) = grid(t.spp);
-                (
-                    Simulator::new(plant, &FohConfig::new(dt)).unwrap(),
-                    dt,
-                    steps,
-                )
+                t.holds
+                    .iter()
+                    .map(|&(hold, spp, _)| {
+                        let (dt, steps) = grid(spp);
+                        let sim = Simulator::new(plant, &hold_config(hold, dt)).unwrap();
+                        (hold, sim, steps)
+                    })
+                    .collect()
             })
             .collect();
-        for ((t, (_, plant)), (sim, dt, steps)) in tuned.iter().zip(&s.plants).zip(&sims) {
-            g.bench_function(format!("foh_{}modes", t.modes), |b| {
-                b.iter(|| black_box(sim.run(&s.case, *steps).unwrap()))
-            });
+        for ((t, (_, plant)), hs) in tuned.iter().zip(&s.plants).zip(&sims) {
+            for (hold, sim, steps) in hs {
+                g.bench_function(format!("{hold}_{}modes", t.modes), |b| {
+                    b.iter(|| black_box(sim.run(&s.case, *steps).unwrap()))
+                });
+            }
+            let (dt, steps) = grid(t.rk_spp);
             g.bench_function(format!("rk45_{}modes", t.modes), |b| {
-                b.iter(|| black_box(rk45(plant, &s.case, *dt, *steps, &t.rk_cfg).unwrap()))
-            });
-        }
-        // At 10⁵ DOFs one Newmark run takes minutes: it is timed once below instead.
-        if !large {
-            g.bench_function("newmark", |b| {
-                b.iter(|| black_box(nm.run(&s.case, steps_out).unwrap()))
+                b.iter(|| black_box(rk45(plant, &s.case, dt, steps, &t.rk_cfg).unwrap()))
             });
         }
         g.finish();
-        // Timed runs for the ratio table (same process, back to back; best of five for the
-        // fast methods, one Newmark run).
-        let time = |f: &dyn Fn()| {
-            let t = Instant::now();
-            f();
-            t.elapsed().as_secs_f64()
+        // Timed runs for the ratio table, in the same process, back to back: `best` for the
+        // reduced methods, one Newmark run (seconds to minutes each).
+        let t_nm = if tune_newmark {
+            time(&|| drop(black_box(nm.run(&s.case, steps_out).unwrap()))) / duration
+        } else {
+            let probe = time(&|| drop(black_box(nm.run(&s.case, NEWMARK_PROBE).unwrap())));
+            probe * steps_out as f64 / NEWMARK_PROBE as f64 / duration
         };
-        let best = |f: &dyn Fn()| (0..5).map(|_| time(f)).fold(f64::INFINITY, f64::min);
-        let t_nm = time(&|| drop(black_box(nm.run(&s.case, steps_out).unwrap())));
-        for ((t, (_, plant)), (sim, dt, steps)) in tuned.iter().zip(&s.plants).zip(&sims) {
-            let t_foh = best(&|| drop(black_box(sim.run(&s.case, *steps).unwrap())));
+        let label = if tune_newmark { "" } else { " (estimate)" };
+        for ((t, (_, plant)), hs) in tuned.iter().zip(&s.plants).zip(&sims) {
+            let (dt, steps) = grid(t.rk_spp);
             let t_rk = best(&|| {
                 drop(black_box(
-                    rk45(plant, &s.case, *dt, *steps, &t.rk_cfg).unwrap(),
+                    rk45(plant, &s.case, dt, steps, &t.rk_cfg).unwrap(),
                 ))
-            });
-            eprintln!(
-                "  {:>2} modes, per simulated second: FOH {:.3e} s, RK45 {:.3e} s, Newmark {:.3e} s; RK45/FOH {:.0}x, Newmark/FOH {:.0}x",
-                t.modes,
-                t_foh / duration,
-                t_rk / duration,
-                t_nm / duration,
-                t_rk / t_foh,
-                t_nm / t_foh
-            );
+            }) / duration;
+            let mut line = format!("  {:>3} modes, per simulated second:", t.modes);
+            for (hold, sim, steps) in hs {
+                let t_h = best(&|| drop(black_box(sim.run(&s.case, *steps).unwrap()))) / duration;
+                line += &format!(
+                    " {hold} {t_h:.3e} s (RK45/{hold} {:.0}x, Newmark/{hold} {:.0}x{label});",
+                    t_rk / t_h,
+                    t_nm / t_h
+                );
+            }
+            eprintln!("{line} RK45 {t_rk:.3e} s; Newmark {t_nm:.3e} s{label}");
         }
         eprintln!();
     }

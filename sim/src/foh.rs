@@ -22,7 +22,9 @@
 //! split there, so that each piece sees a smooth force.
 
 use crate::feedback::{Feedback, LoopFailure, NewtonConfig};
-use crate::history::{ContactEvent, LoadCase, RunStats, Series, TimeHistory, add_residual_rates};
+use crate::history::{
+    ContactEvent, LoadCase, Progress, RunStats, Series, TimeHistory, add_residual_rates,
+};
 use crate::hold::{Hold, step_coefficients};
 use crate::plant::{ElementPort, Plant, Responses};
 use faer::c64;
@@ -75,6 +77,10 @@ pub struct Simulator {
     stride: usize,
     coeffs: Vec<Block>,
     cols: Vec<Column>,
+    /// Distinct response rows accumulated in the state pass.
+    n_kernel_rows: usize,
+    /// The state-pass accumulator of each response row.
+    row_slot: Vec<usize>,
     /// Port responses: rows, modal coefficients, feedthrough, `t = 0` loop sensitivities.
     resp: Responses,
     /// `Σ_s Re(row_c Γ1 b̃_NL)` (rows × elements).
@@ -121,8 +127,20 @@ impl Simulator {
             }
         }
         let nr = resp.rows.len();
+        // Rows with the same modal coefficients (a sensor on an element's port) share one
+        // accumulator in the state pass.
+        let mut kernel_rows: Vec<usize> = Vec::new();
+        let row_slot: Vec<usize> = (0..nr)
+            .map(|r| {
+                let same = |&q: &usize| resp.coefficients(q) == resp.coefficients(r);
+                kernel_rows.iter().position(same).unwrap_or_else(|| {
+                    kernel_rows.push(r);
+                    kernel_rows.len() - 1
+                })
+            })
+            .collect();
         let nb = ns.div_ceil(LANES);
-        let stride = 2 + 2 * cols.len() + 2 * nr;
+        let stride = 2 + 2 * cols.len() + 2 * kernel_rows.len();
         let mut coeffs = vec![[0.0; LANES]; nb * stride];
         let mut g1n = vec![c64::new(0.0, 0.0); ns * nn];
         let tap_index = |j: i32| taps.iter().position(|&t| t == j);
@@ -147,10 +165,10 @@ impl Simulator {
                 blk[2 + 2 * c][l] = v.re;
                 blk[3 + 2 * c][l] = v.im;
             }
-            for r in 0..nr {
+            for (k, &r) in kernel_rows.iter().enumerate() {
                 let c = resp.coefficients(r)[s];
-                blk[2 + 2 * cols.len() + 2 * r][l] = c.re;
-                blk[3 + 2 * cols.len() + 2 * r][l] = -c.im;
+                blk[2 + 2 * cols.len() + 2 * k][l] = c.re;
+                blk[3 + 2 * cols.len() + 2 * k][l] = -c.im;
             }
             for n in 0..nn {
                 g1n[s * nn + n] = g1 * sys.input[(s, ports[ne + n])];
@@ -180,6 +198,8 @@ impl Simulator {
             stride,
             coeffs,
             cols,
+            n_kernel_rows: kernel_rows.len(),
+            row_slot,
             resp,
             corr,
             g1n,
@@ -200,9 +220,10 @@ impl Simulator {
     }
 
     /// Floating-point operations of one state update per state (for rate reports): the
-    /// complex product `φ z` (6), 4 per input column and 4 per accumulated response.
+    /// complex product `φ z` (6), 4 per input column and 4 per accumulated response (rows
+    /// with equal modal coefficients, such as a sensor on an element's port, count once).
     pub fn flops_per_state_step(&self) -> usize {
-        6 + 4 * self.cols.len() + 4 * self.resp.rows.len()
+        6 + 4 * self.cols.len() + 4 * self.n_kernel_rows
     }
 
     /// Runs `case` for `n_steps` steps (`n_steps + 1` samples).
@@ -311,10 +332,10 @@ impl Simulator {
         }
         let mut zr2 = zr.clone();
         let mut zi2 = zi.clone();
-        let mut acc = vec![[0.0; LANES]; nr];
+        let mut acc = vec![[0.0; LANES]; self.n_kernel_rows];
         let mut vals = vec![0.0; self.cols.len()];
         let mut ev = EventScratch::new(ns, nn);
-        let report = (n_steps / 200).max(1);
+        let mut progress = Progress::new(progress, n_steps);
 
         for k in 0..n_steps {
             for (c, col) in self.cols.iter().enumerate() {
@@ -348,7 +369,7 @@ impl Simulator {
                 acc: &mut acc,
             });
             for r in 0..nr {
-                rp[r] = acc[r].iter().sum();
+                rp[r] = acc[self.row_slot[r]].iter().sum();
             }
             for q in 0..ne {
                 u_next[q] = e[q][k + 1];
@@ -433,9 +454,7 @@ impl Simulator {
             }
             std::mem::swap(&mut zr, &mut zr2);
             std::mem::swap(&mut zi, &mut zi2);
-            if (k + 1) % report == 0 {
-                progress(k + 1, n_steps);
-            }
+            progress.tick(k + 1);
         }
         stats.steps = n_steps;
         // The true state at the end: z = ẑ − Γ1 b̃ f.

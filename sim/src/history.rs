@@ -259,3 +259,35 @@ pub(crate) fn add_residual_rates(plant: &Plant, h: &mut TimeHistory) {
         }
     }
 }
+
+/// Calls a progress callback `progress(done, total)` about 200 times over a run of `total`
+/// samples, without a division per sample.
+pub(crate) struct Progress<'a> {
+    callback: &'a mut dyn FnMut(usize, usize),
+    total: usize,
+    every: usize,
+    left: usize,
+}
+
+impl<'a> Progress<'a> {
+    /// Reports for a run of `total` samples.
+    pub fn new(callback: &'a mut dyn FnMut(usize, usize), total: usize) -> Self {
+        let every = (total / 200).max(1);
+        Progress {
+            callback,
+            total,
+            every,
+            left: every,
+        }
+    }
+
+    /// Sample `done` is finished.
+    #[inline]
+    pub fn tick(&mut self, done: usize) {
+        self.left -= 1;
+        if self.left == 0 {
+            self.left = self.every;
+            (self.callback)(done, self.total);
+        }
+    }
+}

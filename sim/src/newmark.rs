@@ -14,7 +14,7 @@
 //! with `Y = K_eff⁻¹ W` computed once: `Δ = x − Y (I + κ WᵀY)⁻¹ κ Wᵀ x`, `x = K_eff⁻¹ r`.
 
 use crate::feedback::NewtonConfig;
-use crate::history::{InitialState, LoadCase, RunStats, Series, TimeHistory};
+use crate::history::{InitialState, LoadCase, Progress, RunStats, Series, TimeHistory};
 use faer::Mat;
 use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::Llt;
@@ -223,6 +223,16 @@ impl Newmark {
     /// Runs `case` (forces at the model's excitation points, from rest) for `n_steps` sample
     /// intervals.
     pub fn run(&self, case: &LoadCase, n_steps: usize) -> Result<TimeHistory> {
+        self.run_with_progress(case, n_steps, &mut |_, _| {})
+    }
+
+    /// As [`Newmark::run`], calling `progress(samples done, n_steps)` about 200 times.
+    pub fn run_with_progress(
+        &self,
+        case: &LoadCase,
+        n_steps: usize,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<TimeHistory> {
         let start = std::time::Instant::now();
         if case.initial != InitialState::Rest {
             return Err(Error::invalid(
@@ -345,6 +355,7 @@ impl Newmark {
                 }
             };
         let mut col = Mat::<f64>::zeros(n, 1);
+        let mut progress = Progress::new(progress, n_steps);
         for step in 0..n_steps {
             for sub in 0..self.cfg.substeps {
                 let t1 = step as f64 * self.cfg.dt + (sub + 1) as f64 * h;
@@ -447,6 +458,7 @@ impl Newmark {
                 stats.steps += 1;
             }
             record(step + 1, &d, &v, &a, &g);
+            progress.tick(step + 1);
         }
         stats.seconds = start.elapsed().as_secs_f64();
         Ok(TimeHistory {

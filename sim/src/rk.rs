@@ -14,7 +14,7 @@
 
 use crate::feedback::{Feedback, NewtonConfig};
 use crate::foh::loop_error;
-use crate::history::{LoadCase, RunStats, Series, TimeHistory, add_residual_rates};
+use crate::history::{LoadCase, Progress, RunStats, Series, TimeHistory, add_residual_rates};
 use crate::plant::{Plant, Responses};
 use faer::c64;
 use nlsim_kernel::{Error, Result};
@@ -70,6 +70,8 @@ struct Rhs<'a> {
     elements: Vec<crate::plant::ElementPort>,
     case: &'a LoadCase,
     resp: Responses,
+    /// `b̃` column of each loop port (excitation inputs, then elements), contiguous.
+    input_cols: Vec<Vec<c64>>,
     fb: Feedback,
     f: Vec<f64>,
     u: Vec<f64>,
@@ -91,7 +93,14 @@ impl<'a> Rhs<'a> {
     ) -> Self {
         let nn = plant.elements.len();
         let resp = Responses::new(plant);
+        let sys = &plant.system;
+        let input_cols = resp
+            .ports
+            .iter()
+            .map(|&p| (0..sys.n_states()).map(|s| sys.input[(s, p)]).collect())
+            .collect();
         Rhs {
+            input_cols,
             plant,
             elements,
             case,
@@ -149,13 +158,13 @@ impl<'a> Rhs<'a> {
     fn eval(&mut self, t: f64, z: &[c64], dz: &mut [c64]) -> Result<()> {
         self.evaluations += 1;
         self.forces(t, z)?;
-        let sys = &self.plant.system;
-        for (s, d) in dz.iter_mut().enumerate() {
-            let mut v = sys.poles[s] * z[s];
-            for (q, &p) in self.resp.ports.iter().enumerate() {
-                v += sys.input[(s, p)] * self.u[q];
+        for ((d, p), z) in dz.iter_mut().zip(&self.plant.system.poles).zip(z) {
+            *d = p * z;
+        }
+        for (col, &u) in self.input_cols.iter().zip(&self.u) {
+            for (d, b) in dz.iter_mut().zip(col) {
+                *d += b * u;
             }
-            *d = v;
         }
         Ok(())
     }
@@ -314,6 +323,15 @@ const D: [f64; 7] = [
     69997945.0 / 29380423.0,
 ];
 
+/// `y += c x`, skipped when `c = 0` (the tableau's zeros).
+fn axpy(y: &mut [c64], c: f64, x: &[c64]) {
+    if c != 0.0 {
+        for (y, x) in y.iter_mut().zip(x) {
+            *y += x * c;
+        }
+    }
+}
+
 /// Dormand–Prince RK45 on the plant's diagonal system, sampled every `dt` for `n_steps`
 /// intervals. `stats.steps`/`rejected_steps` count the adaptive steps.
 pub fn rk45(
@@ -322,6 +340,18 @@ pub fn rk45(
     dt: f64,
     n_steps: usize,
     cfg: &Rk45Config,
+) -> Result<TimeHistory> {
+    rk45_with_progress(plant, case, dt, n_steps, cfg, &mut |_, _| {})
+}
+
+/// As [`rk45`], calling `progress(samples done, n_steps)` about 200 times.
+pub fn rk45_with_progress(
+    plant: &Plant,
+    case: &LoadCase,
+    dt: f64,
+    n_steps: usize,
+    cfg: &Rk45Config,
+    progress: &mut dyn FnMut(usize, usize),
 ) -> Result<TimeHistory> {
     check_grid(dt)?;
     if !(cfg.rtol > 0.0 && cfg.atol > 0.0) {
@@ -344,6 +374,8 @@ pub fn rk45(
     let mut k = vec![vec![c64::new(0.0, 0.0); ns]; 7];
     let mut ytmp = vec![c64::new(0.0, 0.0); ns];
     let mut ynew = vec![c64::new(0.0, 0.0); ns];
+    // The error estimate, then the dense-output term `h Σ_j d_j k_j`.
+    let mut evec = vec![c64::new(0.0, 0.0); ns];
     let mut t = 0.0;
     rhs.eval(t, &z, &mut k[0])?;
     // ODE45's initial step.
@@ -360,6 +392,7 @@ pub fn rk45(
     if h * rh > 1.0 {
         h = 1.0 / rh;
     }
+    let mut progress = Progress::new(progress, n_steps);
     let mut next = 1;
     while next < n {
         if stats.steps + stats.rejected_steps >= cfg.max_steps {
@@ -376,14 +409,10 @@ pub fn rk45(
         h = h.min(hmax).min(t_end - t).max(hmin);
         let mut stage_failed = None;
         for st in 1..7 {
-            for s in 0..ns {
-                let mut acc = z[s];
-                for j in 0..st {
-                    if A[st][j] != 0.0 {
-                        acc += k[j][s] * (h * A[st][j]);
-                    }
-                }
-                ytmp[s] = acc;
+            // ytmp = z + h Σ_j a_j k_j, one contiguous pass per stage (vectorised).
+            ytmp.copy_from_slice(&z);
+            for (j, kj) in k.iter().enumerate().take(st) {
+                axpy(&mut ytmp, h * A[st][j], kj);
             }
             let tt = t + C[st] * h;
             let (_, tail) = k.split_at_mut(st);
@@ -406,14 +435,13 @@ pub fn rk45(
             continue;
         }
         // Error estimate, ODE45's mixed test in the max norm.
+        evec.iter_mut().for_each(|e| *e = c64::new(0.0, 0.0));
+        for (j, kj) in k.iter().enumerate() {
+            axpy(&mut evec, h * E[j], kj);
+        }
         let mut err = 0.0f64;
         for s in 0..ns {
-            let mut e = c64::new(0.0, 0.0);
-            for j in 0..7 {
-                if E[j] != 0.0 {
-                    e += k[j][s] * (h * E[j]);
-                }
-            }
+            let e = evec[s];
             let sc_re = (cfg.rtol * z[s].re.abs().max(ynew[s].re.abs())).max(cfg.atol);
             let sc_im = (cfg.rtol * z[s].im.abs().max(ynew[s].im.abs())).max(cfg.atol);
             err = err.max(e.re.abs() / sc_re).max(e.im.abs() / sc_im);
@@ -441,19 +469,19 @@ pub fn rk45(
         while next < n && (next as f64 * dt) <= t_new * (1.0 + 1e-14) {
             let ts = next as f64 * dt;
             let th = ((ts - t) / h).clamp(0.0, 1.0);
+            evec.iter_mut().for_each(|e| *e = c64::new(0.0, 0.0));
+            for (j, kj) in k.iter().enumerate() {
+                axpy(&mut evec, h * D[j], kj);
+            }
             for s in 0..ns {
                 let r2 = ynew[s] - z[s];
                 let r3 = k[0][s] * h - r2;
                 let r4 = r2 - k[6][s] * h - r3;
-                let mut r5 = c64::new(0.0, 0.0);
-                for j in 0..7 {
-                    if D[j] != 0.0 {
-                        r5 += k[j][s] * (h * D[j]);
-                    }
-                }
+                let r5 = evec[s];
                 ytmp[s] = z[s] + (r2 + (r3 + (r4 + r5 * (1.0 - th)) * th) * (1.0 - th)) * th;
             }
             rhs.sample(next, ts, &ytmp, &mut rec)?;
+            progress.tick(next);
             next += 1;
         }
         t = t_new;
@@ -483,6 +511,18 @@ pub fn rk4(
     n_steps: usize,
     cfg: &Rk4Config,
 ) -> Result<TimeHistory> {
+    rk4_with_progress(plant, case, dt, n_steps, cfg, &mut |_, _| {})
+}
+
+/// As [`rk4`], calling `progress(samples done, n_steps)` about 200 times.
+pub fn rk4_with_progress(
+    plant: &Plant,
+    case: &LoadCase,
+    dt: f64,
+    n_steps: usize,
+    cfg: &Rk4Config,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<TimeHistory> {
     check_grid(dt)?;
     if cfg.substeps == 0 {
         return Err(Error::invalid("RK4 substeps", "must be at least 1"));
@@ -511,6 +551,7 @@ pub fn rk4(
     rhs.sample(0, 0.0, &z, &mut rec)?;
     let mut k = vec![vec![c64::new(0.0, 0.0); ns]; 4];
     let mut y = vec![c64::new(0.0, 0.0); ns];
+    let mut progress = Progress::new(progress, n_steps);
     for step in 0..n_steps {
         for sub in 0..cfg.substeps {
             let t = step as f64 * dt + sub as f64 * h;
@@ -538,6 +579,7 @@ pub fn rk4(
             });
         }
         rhs.sample(step + 1, (step + 1) as f64 * dt, &z, &mut rec)?;
+        progress.tick(step + 1);
     }
     stats.evaluations = rhs.evaluations;
     stats.newton_iterations = rhs.iterations;

@@ -6,8 +6,8 @@ use nlsim_kernel::{Damping, Model, Quantity, Sensor};
 use nlsim_reduction::modal::{ReductionConfig, reduce};
 use nlsim_reduction::{EigenConfig, ModalSystem, ModeSelection};
 use nlsim_sim::{
-    FohConfig, Hold, LoadCase, Newmark, NewmarkConfig, NewtonConfig, Plant, Rk4Config, Signal,
-    Simulator, rk4,
+    FohConfig, Hold, LoadCase, Newmark, NewmarkConfig, NewtonConfig, Plant, Rk4Config, Rk45Config,
+    Signal, Simulator, TimeHistory, rk4, rk4_with_progress, rk45, rk45_with_progress,
 };
 
 fn beam_with_tip_displacement() -> Model {
@@ -179,4 +179,66 @@ fn bad_input_gets_clear_errors() {
     let mut cfg = FohConfig::new(1e-4);
     cfg.hold = Hold::Lsoh;
     assert!(Simulator::new(&plant, &cfg).is_ok());
+}
+
+/// A progress callback.
+type Progress<'a> = &'a mut dyn FnMut(usize, usize);
+
+/// Every integrator reports progress about 200 times, in order, ending at the last sample, and
+/// reporting does not change the result.
+#[test]
+fn every_method_reports_progress_without_changing_the_result() {
+    let model = beam_with_tip_displacement();
+    let plant = foh_plant(&model, 12);
+    let case = LoadCase::new("sine", vec![Signal::sine(2.0, 24.0)]);
+    let (dt, n) = (1.0 / 24_000.0, 1000);
+    let check = |name: &str, quiet: TimeHistory, run: &dyn Fn(Progress<'_>) -> TimeHistory| {
+        let mut calls = Vec::new();
+        let loud = run(&mut |done, total| calls.push((done, total)));
+        assert_eq!(calls.len(), 200, "{name}: {} progress calls", calls.len());
+        assert!(calls.iter().all(|&(_, total)| total == n), "{name}");
+        assert!(
+            calls.windows(2).all(|w| w[0].0 < w[1].0),
+            "{name}: not increasing"
+        );
+        assert_eq!(calls.last().unwrap().0, n, "{name}");
+        assert_eq!(
+            quiet.output("tip_d").unwrap().values,
+            loud.output("tip_d").unwrap().values,
+            "{name}: progress changed the result"
+        );
+    };
+    let sim = Simulator::new(&plant, &FohConfig::new(dt)).unwrap();
+    check("foh", sim.run(&case, n).unwrap(), &|p| {
+        sim.run_with_progress(&case, n, p).unwrap()
+    });
+    let rk = Rk45Config::default();
+    check("rk45", rk45(&plant, &case, dt, n, &rk).unwrap(), &|p| {
+        rk45_with_progress(&plant, &case, dt, n, &rk, p).unwrap()
+    });
+    let r4 = Rk4Config::default();
+    check("rk4", rk4(&plant, &case, dt, n, &r4).unwrap(), &|p| {
+        rk4_with_progress(&plant, &case, dt, n, &r4, p).unwrap()
+    });
+    let nm = Newmark::new(&model, &NewmarkConfig::new(dt)).unwrap();
+    check("newmark", nm.run(&case, n).unwrap(), &|p| {
+        nm.run_with_progress(&case, n, p).unwrap()
+    });
+}
+
+/// A displacement sensor on the element's port shares the element's accumulator in the state
+/// pass (one response row fewer), and still reads the element's displacement.
+#[test]
+fn a_sensor_on_an_element_port_shares_its_row() {
+    let model = beam_with_tip_displacement();
+    let plant = foh_plant(&model, 12);
+    let case = LoadCase::new("sine", vec![Signal::sine(2.0, 24.0)]);
+    let sim = Simulator::new(&plant, &FohConfig::new(1.0 / 2400.0)).unwrap();
+    // Columns: the force at k and k+1, the element at k. Rows: element displacement and
+    // velocity, tip and mid accelerations, tip_d (shared with the element displacement).
+    assert_eq!(sim.flops_per_state_step(), 6 + 4 * 3 + 4 * 4);
+    let h = sim.run(&case, 2400).unwrap();
+    let tip = &h.output("tip_d").unwrap().values;
+    let d = &h.element_displacements[0];
+    assert!(max_rel(tip, d) < 1e-12, "{}", max_rel(tip, d));
 }
