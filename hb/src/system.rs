@@ -286,23 +286,7 @@ impl HbSystem {
             Error::invalid(format!("parameter '{name}'"), "expected element.param")
         })?;
         let e = self.element_index(el)?;
-        let law = self.elements[e].law();
-        let i = (0..law.n_params())
-            .find(|&i| law.param_name(i) == p)
-            .ok_or_else(|| {
-                Error::invalid(
-                    format!("parameter '{name}'"),
-                    format!(
-                        "element '{el}' ({}) has parameters {}",
-                        law.kind(),
-                        (0..law.n_params())
-                            .map(|i| law.param_name(i))
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ),
-                )
-            })?;
-        self.elements[e].set_param(i, value)
+        self.elements[e].set_named_param(&format!("parameter '{name}'"), p, value)
     }
 
     /// The forcing in the real layout (inputs × (2H+1)).

@@ -660,4 +660,27 @@ impl NonlinearElement {
     pub fn set_param(&mut self, i: usize, value: f64) -> Result<()> {
         self.law.set_param(&self.name, i, value)
     }
+
+    /// Sets the parameter called `param` (e.g. `k3`) with range checking; an unknown name is
+    /// an error that lists the law's parameters. `what` names the setting in the error.
+    pub fn set_named_param(&mut self, what: &str, param: &str, value: f64) -> Result<()> {
+        let law = &self.law;
+        let i = (0..law.n_params())
+            .find(|&i| law.param_name(i) == param)
+            .ok_or_else(|| {
+                Error::invalid(
+                    what,
+                    format!(
+                        "element '{}' ({}) has parameters {}",
+                        self.name,
+                        law.kind(),
+                        (0..law.n_params())
+                            .map(|i| law.param_name(i))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                )
+            })?;
+        self.set_param(i, value)
+    }
 }

@@ -257,13 +257,7 @@ impl Newmark {
                 .iter_mut()
                 .find(|e| e.name() == el)
                 .ok_or_else(|| Error::invalid(format!("parameter '{name}'"), "no such element"))?;
-            let law = e.law().clone();
-            let i = (0..law.n_params())
-                .find(|&i| law.param_name(i) == par)
-                .ok_or_else(|| {
-                    Error::invalid(format!("parameter '{name}'"), "no such parameter")
-                })?;
-            e.set_param(i, *v)?;
+            e.set_named_param(&format!("parameter '{name}'"), par, *v)?;
         }
         let n = self.m.n();
         let nn = elements.len();

@@ -322,21 +322,6 @@ pub(crate) fn set_element_parameter(
                 format!("the plant has no element '{el}'"),
             )
         })?;
-    let law = e.element.law();
-    let i = (0..law.n_params())
-        .find(|&i| law.param_name(i) == par)
-        .ok_or_else(|| {
-            Error::invalid(
-                format!("parameter '{name}'"),
-                format!(
-                    "element '{el}' ({}) has parameters {}",
-                    law.kind(),
-                    (0..law.n_params())
-                        .map(|i| law.param_name(i))
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            )
-        })?;
-    e.element.set_param(i, value)
+    e.element
+        .set_named_param(&format!("parameter '{name}'"), par, value)
 }
