@@ -14,7 +14,7 @@ use crate::dense::{Lu, norm_inf};
 use crate::stability::Stability;
 use crate::system::HbSystem;
 use faer::Mat;
-use nlsim_kernel::{Error, Result};
+use nlsim_kernel::{Error, Result, Status};
 use std::f64::consts::PI;
 
 /// The continuation parameter.
@@ -84,8 +84,75 @@ pub struct Branch {
     pub points: Vec<SolutionPoint>,
     /// Simple branch points detected.
     pub branch_points: Vec<BranchPoint>,
-    /// False when the run stopped at the point limit before the end of the range.
-    pub complete: bool,
+}
+
+/// Counters of a continuation or stepped sine.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ContinuationStats {
+    /// Accepted points (folds and the end point included).
+    pub n_points: usize,
+    /// Steps rejected (corrector failed or turned too sharply) and retried shorter.
+    pub n_rejected: usize,
+    /// Newton iterations over all accepted points.
+    pub n_newton: usize,
+}
+
+/// The outcome of [`continuation`] or [`stepped_sine`]: the branch computed so far, how the
+/// run ended and its counters. A run that stops short keeps every point it found.
+#[derive(Debug, Clone)]
+pub struct ContinuationReport {
+    /// [`Status::Converged`]: the whole range was followed (or the branch turned back out
+    /// of it). [`Status::IterationLimit`]: `max_points` reached first.
+    /// [`Status::StepTooSmall`]: the corrector failed down to `ds_min` (or a stepped-sine
+    /// point converged from no start). Otherwise the start point's Newton status.
+    pub status: Status,
+    /// The points found, in order.
+    pub branch: Branch,
+    /// Counters.
+    pub stats: ContinuationStats,
+    /// Where and why the run stopped short; empty when converged.
+    pub detail: String,
+}
+
+impl ContinuationReport {
+    /// `true` when the whole range was followed.
+    pub fn is_complete(&self) -> bool {
+        self.status.is_converged()
+    }
+
+    /// The branch when the run followed the range or stopped at the point limit; an
+    /// [`Error::Numerical`] with the report's detail otherwise, for callers that need the
+    /// whole branch or nothing.
+    pub fn into_branch(self) -> Result<Branch> {
+        match self.status {
+            Status::Converged | Status::IterationLimit => Ok(self.branch),
+            _ => Err(Error::Numerical {
+                what: self.detail_what(),
+                detail: self.detail_why(),
+            }),
+        }
+    }
+
+    fn detail_what(&self) -> String {
+        self.detail
+            .split_once('\n')
+            .map_or_else(|| self.detail.clone(), |(w, _)| w.to_string())
+    }
+
+    fn detail_why(&self) -> String {
+        self.detail
+            .split_once('\n')
+            .map_or_else(|| self.status.to_string(), |(_, d)| d.to_string())
+    }
+
+    fn stopped(status: Status, branch: Branch, stats: ContinuationStats, what: String, why: String) -> Self {
+        Self {
+            status,
+            branch,
+            stats,
+            detail: format!("{what}\n{why}"),
+        }
+    }
 }
 
 impl Branch {
@@ -289,13 +356,25 @@ impl Tracker<'_> {
 }
 
 /// Follows the branch through `cfg.from` over `cfg.to`, from `start` (condensed unknowns at
-/// `from`; the linear response when `None`). `progress` sees every accepted point.
+/// `from`; the linear response when `None`).
+///
+/// Returns the branch with a status: a run that stops short (step below `ds_min`, point
+/// limit, no converged start) keeps every point found. `Err` only for invalid settings.
 pub fn continuation(
     sys: &HbSystem,
     cfg: &ContinuationConfig,
     start: Option<&[f64]>,
+) -> Result<ContinuationReport> {
+    continuation_with_progress(sys, cfg, start, &mut |_| {})
+}
+
+/// [`continuation`] with `progress` called on every accepted point.
+pub fn continuation_with_progress(
+    sys: &HbSystem,
+    cfg: &ContinuationConfig,
+    start: Option<&[f64]>,
     progress: &mut dyn FnMut(&SolutionPoint),
-) -> Result<Branch> {
+) -> Result<ContinuationReport> {
     for (what, v) in [("from", cfg.from), ("to", cfg.to), ("fixed", cfg.fixed)] {
         if !v.is_finite() {
             return Err(Error::NonFinite {
@@ -329,6 +408,20 @@ pub fn continuation(
         None => sys.linear_guess(om0, sc0),
     };
     let (x0, rep) = sys.solve(om0, sc0, &guess)?;
+    let mut stats = ContinuationStats::default();
+    let mut branch = Branch {
+        parameter: cfg.parameter,
+        points: Vec::new(),
+        branch_points: Vec::new(),
+    };
+    if !rep.converged() {
+        let e = sys.not_converged(om0, sc0, &rep);
+        let (what, why) = match e {
+            Error::Numerical { what, detail } => (what, detail),
+            e => (String::from("continuation start"), e.to_string()),
+        };
+        return Ok(ContinuationReport::stopped(rep.status, branch, stats, what, why));
+    }
     let mut tr = Tracker {
         sys,
         cfg,
@@ -341,25 +434,36 @@ pub fn continuation(
     let mut y0: Vec<f64> = x0.iter().map(|v| v / tr.xs).collect();
     y0.push(0.0);
     let (_, a0) = tr.eval(&y0);
-    let (t0, d0) = tr.tangent(&a0, None)?;
+    let Ok((t0, d0)) = tr.tangent(&a0, None) else {
+        let what = format!("continuation at {}", tr.where_(&y0));
+        let why = "the branch tangent is singular at the start".to_string();
+        return Ok(ContinuationReport::stopped(Status::Singular, branch, stats, what, why));
+    };
     let mut cur = State {
         y: y0,
         t: t0,
         det_sign: d0,
         iterations: rep.iterations,
     };
-    let mut points = vec![tr.point(&cur, PointKind::Regular)?];
-    progress(&points[0]);
-    let mut branch_points = Vec::new();
+    let mut push = |branch: &mut Branch, stats: &mut ContinuationStats, p: SolutionPoint| {
+        stats.n_points += 1;
+        stats.n_newton += p.iterations;
+        progress(&p);
+        branch.points.push(p);
+    };
+    push(&mut branch, &mut stats, tr.point(&cur, PointKind::Regular)?);
+    let done = |status, branch, stats| ContinuationReport {
+        status,
+        branch,
+        stats,
+        detail: String::new(),
+    };
     let mut ds = cfg.ds;
     loop {
-        if points.len() >= cfg.max_points {
-            return Ok(Branch {
-                parameter: cfg.parameter,
-                points,
-                branch_points,
-                complete: false,
-            });
+        if branch.points.len() >= cfg.max_points {
+            let what = format!("continuation at {}", tr.where_(&cur.y));
+            let why = format!("stopped at the point limit ({})", cfg.max_points);
+            return Ok(ContinuationReport::stopped(Status::IterationLimit, branch, stats, what, why));
         }
         let pred: Vec<f64> = cur.y.iter().zip(&cur.t).map(|(y, t)| y + ds * t).collect();
         let attempt = tr.correct(&pred, &cur.t).and_then(|(y, a, it)| {
@@ -373,16 +477,16 @@ pub fn continuation(
             })
         });
         let Some(next) = attempt else {
+            stats.n_rejected += 1;
             ds *= 0.5;
             if ds < cfg.ds_min {
-                return Err(Error::Numerical {
-                    what: format!("continuation at {}", tr.where_(&cur.y)),
-                    detail: format!(
-                        "the corrector failed down to the smallest step {:.1e}; the branch may \
-                         have a non-smooth point there (try more AFT samples or harmonics)",
-                        cfg.ds_min
-                    ),
-                });
+                let what = format!("continuation at {}", tr.where_(&cur.y));
+                let why = format!(
+                    "the corrector failed down to the smallest step {:.1e}; the branch may \
+                     have a non-smooth point there (try more AFT samples or harmonics)",
+                    cfg.ds_min
+                );
+                return Ok(ContinuationReport::stopped(Status::StepTooSmall, branch, stats, what, why));
             }
             continue;
         };
@@ -394,6 +498,11 @@ pub fn continuation(
                 .collect();
             let (om, sc) = tr.omega_scale(cfg.to);
             let (x, rep) = sys.solve(om, sc, &guess)?;
+            if !rep.converged() {
+                let e = sys.not_converged(om, sc, &rep).to_string();
+                let what = format!("continuation at {}", tr.where_(&cur.y));
+                return Ok(ContinuationReport::stopped(rep.status, branch, stats, what, e));
+            }
             let mut y: Vec<f64> = x.iter().map(|v| v / tr.xs).collect();
             y.push(1.0);
             let end = State {
@@ -402,34 +511,26 @@ pub fn continuation(
                 det_sign: next.det_sign,
                 iterations: rep.iterations,
             };
-            points.push(tr.point(&end, PointKind::End)?);
-            progress(points.last().expect("pushed"));
-            return Ok(Branch {
-                parameter: cfg.parameter,
-                points,
-                branch_points,
-                complete: true,
-            });
+            push(&mut branch, &mut stats, tr.point(&end, PointKind::End)?);
+            return Ok(done(Status::Converged, branch, stats));
         }
         if next.y[n] < -0.05 {
             // The branch turned back out of the range: it ends at its start side.
-            return Ok(Branch {
-                parameter: cfg.parameter,
-                points,
-                branch_points,
-                complete: true,
-            });
+            return Ok(done(Status::Converged, branch, stats));
         }
         if next.t[n].signum() != cur.t[n].signum() && cur.t[n] != 0.0 {
-            let fold = locate_fold(&tr, &cur, ds)?;
-            points.push(tr.point(&fold, PointKind::Fold)?);
-            progress(points.last().expect("pushed"));
+            let Some(fold) = locate_fold(&tr, &cur, ds) else {
+                let what = format!("fold location near {}", tr.where_(&cur.y));
+                let why = "the corrector failed".to_string();
+                return Ok(ContinuationReport::stopped(Status::StepTooSmall, branch, stats, what, why));
+            };
+            push(&mut branch, &mut stats, tr.point(&fold, PointKind::Fold)?);
         } else if next.det_sign != cur.det_sign {
-            let i = points.len() - 1;
+            let i = branch.points.len() - 1;
             let (_, p0) = tr.unscale(&cur.y);
             let (_, p1) = tr.unscale(&next.y);
             let (om, sc) = tr.omega_scale(0.5 * (p0 + p1));
-            branch_points.push(BranchPoint {
+            branch.branch_points.push(BranchPoint {
                 between: (i, i + 1),
                 omega: om,
                 scale: sc,
@@ -451,19 +552,22 @@ pub fn continuation(
             let (_, a) = tr.eval(&next.y);
             let mut guide: Vec<f64> = next.t.clone();
             guide[..n].iter_mut().for_each(|v| *v /= amp);
-            let (t, d) = tr.tangent(&a, Some(&guide))?;
+            let Ok((t, d)) = tr.tangent(&a, Some(&guide)) else {
+                let what = format!("continuation at {}", tr.where_(&next.y));
+                let why = "the branch tangent is singular".to_string();
+                return Ok(ContinuationReport::stopped(Status::Singular, branch, stats, what, why));
+            };
             next.t = t;
             next.det_sign = d;
         }
-        points.push(tr.point(&next, PointKind::Regular)?);
-        progress(points.last().expect("pushed"));
+        push(&mut branch, &mut stats, tr.point(&next, PointKind::Regular)?);
         cur = next;
     }
 }
 
 /// Finds the fold between `cur` and the point `ds` further along by the Illinois method on
 /// the tangent's parameter component.
-fn locate_fold(tr: &Tracker<'_>, cur: &State, ds: f64) -> Result<State> {
+fn locate_fold(tr: &Tracker<'_>, cur: &State, ds: f64) -> Option<State> {
     let n = cur.y.len() - 1;
     let at = |s: f64| -> Option<State> {
         let pred: Vec<f64> = cur.y.iter().zip(&cur.t).map(|(y, t)| y + s * t).collect();
@@ -478,10 +582,7 @@ fn locate_fold(tr: &Tracker<'_>, cur: &State, ds: f64) -> Result<State> {
     };
     let (mut a, mut fa) = (0.0, cur.t[n]);
     let mut b = ds;
-    let mut best = at(b).ok_or_else(|| Error::Numerical {
-        what: format!("fold location near {}", tr.where_(&cur.y)),
-        detail: "the corrector failed".into(),
-    })?;
+    let mut best = at(b)?;
     let mut fb = best.t[n];
     let mut side = 0;
     for _ in 0..60 {
@@ -508,7 +609,7 @@ fn locate_fold(tr: &Tracker<'_>, cur: &State, ds: f64) -> Result<State> {
         }
         best = sc;
     }
-    Ok(best)
+    Some(best)
 }
 
 /// A stepped sine over `omegas` (rad/s, in test order, up or down) at force level `scale`:
@@ -520,19 +621,33 @@ fn locate_fold(tr: &Tracker<'_>, cur: &State, ds: f64) -> Result<State> {
 /// flagged, when no start gives a stable one). A point is a
 /// [`PointKind::Jump`] when it is not on the continuation of the last one: farther from the
 /// tangent prediction `x + (dx/dΩ) ΔΩ` than half its distance from `x`.
+///
+/// A frequency where Newton converges from no start ends the sweep with
+/// [`Status::StepTooSmall`]; the points before it are kept in the report.
 pub fn stepped_sine(
     sys: &HbSystem,
     omegas: &[f64],
     scale: f64,
     stability: bool,
+) -> Result<ContinuationReport> {
+    stepped_sine_with_progress(sys, omegas, scale, stability, &mut |_| {})
+}
+
+/// [`stepped_sine`] with `progress` called on every point.
+pub fn stepped_sine_with_progress(
+    sys: &HbSystem,
+    omegas: &[f64],
+    scale: f64,
+    stability: bool,
     progress: &mut dyn FnMut(&SolutionPoint),
-) -> Result<Branch> {
+) -> Result<ContinuationReport> {
     let Some(&first) = omegas.first() else {
         return Err(Error::invalid("stepped sine", "no frequency"));
     };
     let mut x = sys.linear_guess(first, scale);
     let mut prev = first;
     let mut points: Vec<SolutionPoint> = Vec::with_capacity(omegas.len());
+    let mut stats = ContinuationStats::default();
     let accept = |x: &[f64], om: f64| -> Result<Option<Option<Stability>>> {
         if !stability {
             return Ok(Some(None));
@@ -552,11 +667,12 @@ pub fn stepped_sine(
             for i in 1..=sub {
                 let w = prev + (om - prev) * i as f64 / sub as f64;
                 match sys.solve(w, scale, &xt) {
-                    Ok((xs, r)) => {
+                    Ok((xs, r)) if r.converged() => {
                         xt = xs;
                         rep = Some(r);
                     }
-                    Err(_) => {
+                    _ => {
+                        stats.n_rejected += 1;
                         rep = None;
                         break;
                     }
@@ -580,7 +696,9 @@ pub fn stepped_sine(
                     .map(|f| x.iter().map(|v| v * f).collect()),
             );
             for start in starts {
-                if let Ok((xs, r)) = sys.solve(om, scale, &start) {
+                if let Ok((xs, r)) = sys.solve(om, scale, &start)
+                    && r.converged()
+                {
                     match accept(&xs, om)? {
                         Some(st) => {
                             found = Some((xs, r, st, PointKind::Jump));
@@ -602,16 +720,23 @@ pub fn stepped_sine(
             found = Some((xs, r, Some(st), kind));
         }
         let Some((xn, rep, st, kind)) = found else {
-            return Err(Error::Numerical {
-                what: format!("stepped sine at {:.6} Hz (level {scale})", om / (2.0 * PI)),
-                detail: "Newton converged from none of the last point, the linear response \
-                         or scaled starts; refine the frequency grid"
-                    .into(),
-            });
+            let what = format!("stepped sine at {:.6} Hz (level {scale})", om / (2.0 * PI));
+            let why = "Newton converged from none of the last point, the linear response \
+                       or scaled starts; refine the frequency grid"
+                .to_string();
+            let branch = Branch {
+                parameter: Parameter::Frequency,
+                points,
+                branch_points: Vec::new(),
+            };
+            return Ok(ContinuationReport::stopped(Status::StepTooSmall, branch, stats, what, why));
         };
-        let kind = match kind {
-            PointKind::Regular if !points.is_empty() => {
-                let t = sys.dx_domega(&x, prev, scale)?;
+        let tangent = match kind {
+            PointKind::Regular if !points.is_empty() => sys.dx_domega(&x, prev, scale).ok(),
+            _ => None,
+        };
+        let kind = match (kind, tangent) {
+            (PointKind::Regular, Some(t)) => {
                 let pred: Vec<f64> = x.iter().zip(&t).map(|(a, b)| a + b * (om - prev)).collect();
                 let off: f64 = xn.iter().zip(&pred).map(|(a, b)| (a - b).powi(2)).sum();
                 let step: f64 = xn.iter().zip(&x).map(|(a, b)| (a - b).powi(2)).sum();
@@ -621,7 +746,7 @@ pub fn stepped_sine(
                     PointKind::Regular
                 }
             }
-            k => k,
+            (k, _) => k,
         };
         x = xn;
         prev = om;
@@ -633,13 +758,19 @@ pub fn stepped_sine(
             kind,
             iterations: rep.iterations,
         };
+        stats.n_points += 1;
+        stats.n_newton += p.iterations;
         progress(&p);
         points.push(p);
     }
-    Ok(Branch {
-        parameter: Parameter::Frequency,
-        points,
-        branch_points: Vec::new(),
-        complete: true,
+    Ok(ContinuationReport {
+        status: Status::Converged,
+        branch: Branch {
+            parameter: Parameter::Frequency,
+            points,
+            branch_points: Vec::new(),
+        },
+        stats,
+        detail: String::new(),
     })
 }

@@ -31,10 +31,11 @@ pub mod stability;
 pub mod system;
 
 pub use continuation::{
-    Branch, BranchPoint, ContinuationConfig, Parameter, PointKind, SolutionPoint, continuation,
-    stepped_sine,
+    Branch, BranchPoint, ContinuationConfig, ContinuationReport, ContinuationStats, Parameter,
+    PointKind, SolutionPoint, continuation, continuation_with_progress, stepped_sine,
+    stepped_sine_with_progress,
 };
 pub use harmonics::{ForceTerm, Forcing, HarmonicSet};
-pub use linear::{LinearParam, LinearPart};
+pub use linear::LinearPart;
 pub use stability::Stability;
-pub use system::{HbConfig, HbSystem, NewtonReport, Sensitivity, SensorSpec};
+pub use system::{HbConfig, HbSystem, HbSystemBuilder, NewtonReport, Sensitivity, SensorSpec};

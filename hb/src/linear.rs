@@ -9,45 +9,30 @@
 
 use faer::linalg::solvers::Solve;
 use faer::{Mat, c64};
-use nlsim_kernel::{Error, Result};
+use nlsim_kernel::param::{check_finite, unknown_param};
+use nlsim_kernel::{Error, Param, Parameterized, Result};
 use nlsim_reduction::ReducedModel;
 use std::f64::consts::PI;
 
-/// A linear model parameter whose sensitivity can be computed.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum LinearParam {
-    /// Natural frequency `f_r` (Hz) of retained mode `r` (0-based), its damping ratio held.
-    ModalFrequency(usize),
-    /// Damping ratio `ζ_r` of retained mode `r`, `c̃_rr = 2 ζ_r ω_r`.
-    DampingRatio(usize),
-    /// Scaling `κ` of the stiffness (nominal 1): `Ω² → κ Ω²`, `D → D/κ`, damping held.
-    StiffnessScale,
-}
-
-impl LinearParam {
-    /// A display name: `mode3.f`, `mode3.zeta`, `stiffness_scale` (modes 1-based).
-    pub fn name(&self) -> String {
-        match self {
-            LinearParam::ModalFrequency(r) => format!("mode{}.f", r + 1),
-            LinearParam::DampingRatio(r) => format!("mode{}.zeta", r + 1),
-            LinearParam::StiffnessScale => "stiffness_scale".into(),
-        }
-    }
-}
-
 /// The linear part of the reduced model as seen from its ports.
 #[derive(Debug, Clone)]
+///
+/// Its linear parameters ([`Param::ModalFrequency`], [`Param::ModalDamping`],
+/// [`Param::StiffnessScale`]) are read and set through [`Parameterized`]; the fields stay
+/// consistent with them.
 pub struct LinearPart {
-    /// Retained eigenvalues `ω_r²` (rad²/s²).
-    pub w2: Vec<f64>,
+    /// Retained eigenvalues `ω_r²` (rad²/s²), the stiffness scale included.
+    pub(crate) w2: Vec<f64>,
     /// Modal damping matrix `C̃` (modes × modes; 1/s).
-    pub damping: Mat<f64>,
+    pub(crate) damping: Mat<f64>,
     /// True when `C̃` is diagonal (proportional damping): receptances are then a plain sum.
-    pub diagonal: bool,
+    pub(crate) diagonal: bool,
     /// Modal participation `Φ_P` (ports × modes; m/√kg).
-    pub phi: Mat<f64>,
-    /// Residual flexibility `D` (ports × ports; m/N).
-    pub residual: Mat<f64>,
+    pub(crate) phi: Mat<f64>,
+    /// Residual flexibility `D` (ports × ports; m/N), the stiffness scale included.
+    pub(crate) residual: Mat<f64>,
+    /// The stiffness scale `κ` (nominal 1): `Ω² = κ Ω₀²`, `D = D₀/κ`.
+    pub(crate) kappa: f64,
 }
 
 /// `Z(ω)⁻¹ Φ_Pᵀ` restricted to some ports, for a full (non-diagonal) `C̃`.
@@ -82,7 +67,44 @@ impl LinearPart {
             diagonal,
             phi: reduced.participation.clone(),
             residual: reduced.residual.clone(),
+            kappa: 1.0,
         })
+    }
+
+    /// Retained eigenvalues `ω_r²` (rad²/s²).
+    pub fn eigenvalues(&self) -> &[f64] {
+        &self.w2
+    }
+
+    /// Modal damping matrix `C̃` (modes × modes; 1/s).
+    pub fn damping(&self) -> &Mat<f64> {
+        &self.damping
+    }
+
+    /// Modal participation `Φ_P` (ports × modes; m/√kg).
+    pub fn participation(&self) -> &Mat<f64> {
+        &self.phi
+    }
+
+    /// Residual flexibility `D` (ports × ports; m/N).
+    pub fn residual(&self) -> &Mat<f64> {
+        &self.residual
+    }
+
+    /// Natural frequency of mode `r` (Hz).
+    pub fn frequency_hz(&self, r: usize) -> f64 {
+        self.w2[r].sqrt() / (2.0 * PI)
+    }
+
+    fn mode_of(&self, p: &Param) -> Result<usize> {
+        match p {
+            Param::ModalFrequency(r) | Param::ModalDamping(r) if *r < self.n_modes() => Ok(*r),
+            Param::ModalFrequency(_) | Param::ModalDamping(_) => Err(Error::invalid(
+                format!("parameter {p}"),
+                format!("the model keeps {} modes", self.n_modes()),
+            )),
+            _ => Err(unknown_param(p, &self.parameters())),
+        }
     }
 
     /// Number of retained modes.
@@ -165,10 +187,11 @@ impl LinearPart {
         self.sandwich(omega, rows, cols, &dz, 0.0)
     }
 
-    /// `∂H/∂θ` (m/N per unit of θ) for linear parameter `p` at `omega` (rad/s).
+    /// `∂H/∂θ` (m/N per unit of θ) for linear parameter `p` ([`Param::ModalFrequency`],
+    /// [`Param::ModalDamping`], [`Param::StiffnessScale`]) at `omega` (rad/s).
     pub fn receptance_dparam(
         &self,
-        p: LinearParam,
+        p: &Param,
         omega: f64,
         rows: &[usize],
         cols: &[usize],
@@ -177,26 +200,24 @@ impl LinearPart {
         let mut dz = Mat::<c64>::zeros(m, m);
         let mut dd = 0.0;
         match p {
-            LinearParam::ModalFrequency(r) | LinearParam::DampingRatio(r) if r >= m => {
-                return Err(Error::invalid(
-                    format!("parameter {}", p.name()),
-                    format!("the model keeps {m} modes"),
-                ));
-            }
-            LinearParam::ModalFrequency(r) => {
+            Param::ModalFrequency(_) => {
+                let r = self.mode_of(p)?;
                 // Z_rr = ω_r² − ω² + 2iζ_r ω_r ω with ζ_r held; ∂/∂f_r = 2π ∂/∂ω_r.
                 let wr = self.w2[r].sqrt();
                 dz[(r, r)] = c64::new(2.0 * wr, 2.0 * self.zeta(r) * omega) * (2.0 * PI);
             }
-            LinearParam::DampingRatio(r) => {
+            Param::ModalDamping(_) => {
+                let r = self.mode_of(p)?;
                 dz[(r, r)] = c64::new(0.0, 2.0 * self.w2[r].sqrt() * omega);
             }
-            LinearParam::StiffnessScale => {
+            Param::StiffnessScale => {
+                // Ω² = κ Ω₀², D = D₀/κ: ∂Z/∂κ = Ω²/κ, ∂D/∂κ = −D/κ.
                 for r in 0..m {
-                    dz[(r, r)] = c64::new(self.w2[r], 0.0);
+                    dz[(r, r)] = c64::new(self.w2[r] / self.kappa, 0.0);
                 }
-                dd = -1.0;
+                dd = -1.0 / self.kappa;
             }
+            _ => return Err(unknown_param(p, &self.parameters())),
         }
         Ok(self.sandwich(omega, rows, cols, &dz, dd))
     }
@@ -235,6 +256,73 @@ impl LinearPart {
     }
 }
 
+/// `modeN.f` (Hz) and `modeN.zeta` of every retained mode, then `stiffness_scale`.
+impl Parameterized for LinearPart {
+    fn parameters(&self) -> Vec<Param> {
+        let mut p = Vec::with_capacity(2 * self.n_modes() + 1);
+        for r in 0..self.n_modes() {
+            p.push(Param::ModalFrequency(r));
+            p.push(Param::ModalDamping(r));
+        }
+        p.push(Param::StiffnessScale);
+        p
+    }
+
+    fn param(&self, p: &Param) -> Result<f64> {
+        match p {
+            Param::ModalFrequency(_) => Ok(self.frequency_hz(self.mode_of(p)?)),
+            Param::ModalDamping(_) => Ok(self.zeta(self.mode_of(p)?)),
+            Param::StiffnessScale => Ok(self.kappa),
+            _ => Err(unknown_param(p, &self.parameters())),
+        }
+    }
+
+    fn set_param(&mut self, p: &Param, value: f64) -> Result<()> {
+        check_finite(p, value)?;
+        let positive = |what: &str| {
+            Err(Error::InvalidParameter {
+                name: p.to_string(),
+                value,
+                reason: format!("{what} must be positive"),
+            })
+        };
+        match p {
+            Param::ModalFrequency(_) => {
+                let r = self.mode_of(p)?;
+                if value <= 0.0 {
+                    return positive("a natural frequency");
+                }
+                let zeta = self.zeta(r);
+                let w = 2.0 * PI * value;
+                self.w2[r] = w * w;
+                self.damping[(r, r)] = 2.0 * zeta * w;
+            }
+            Param::ModalDamping(_) => {
+                let r = self.mode_of(p)?;
+                if value < 0.0 {
+                    return Err(Error::InvalidParameter {
+                        name: p.to_string(),
+                        value,
+                        reason: "a damping ratio must be non-negative".into(),
+                    });
+                }
+                self.damping[(r, r)] = 2.0 * value * self.w2[r].sqrt();
+            }
+            Param::StiffnessScale => {
+                if value <= 0.0 {
+                    return positive("a stiffness scale");
+                }
+                let ratio = value / self.kappa;
+                self.w2.iter_mut().for_each(|w| *w *= ratio);
+                self.residual = &self.residual * faer::Scale(1.0 / ratio);
+                self.kappa = value;
+            }
+            _ => return Err(unknown_param(p, &self.parameters())),
+        }
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -251,6 +339,7 @@ mod tests {
             damping,
             phi: Mat::from_fn(3, 2, |p, r| 0.3 + 0.2 * p as f64 - 0.5 * r as f64),
             residual: Mat::from_fn(3, 3, |a, b| 1e-4 / (1.0 + (a + b) as f64)),
+            kappa: 1.0,
         }
     }
 
@@ -265,42 +354,56 @@ mod tests {
                 * faer::Scale(c64::new(1.0 / (2.0 * h), 0.0));
             let an = lp.receptance_domega(w, &rows, &cols);
             assert!((&fd - &an).norm_max() < 1e-7 * an.norm_max(), "full {full}");
-            for p in [
-                LinearParam::ModalFrequency(1),
-                LinearParam::DampingRatio(0),
-                LinearParam::StiffnessScale,
-            ] {
-                let eps = 1e-6;
-                let perturbed = |sign: f64| {
-                    let mut q = lp.clone();
-                    match p {
-                        LinearParam::ModalFrequency(r) => {
-                            let zeta = q.zeta(r);
-                            let f = q.w2[r].sqrt() / (2.0 * PI) + sign * eps;
-                            q.w2[r] = (2.0 * PI * f).powi(2);
-                            q.damping[(r, r)] = 2.0 * zeta * 2.0 * PI * f;
+            for kappa in [1.0, 1.3] {
+                let mut lp = lp.clone();
+                lp.set_param(&Param::StiffnessScale, kappa).unwrap();
+                for p in [
+                    Param::ModalFrequency(1),
+                    Param::ModalDamping(0),
+                    Param::StiffnessScale,
+                ] {
+                    let eps = 1e-6;
+                    // By hand, independently of `set_param`.
+                    let by_hand = |sign: f64| {
+                        let mut q = lp.clone();
+                        match p {
+                            Param::ModalFrequency(r) => {
+                                let zeta = q.zeta(r);
+                                let f = q.w2[r].sqrt() / (2.0 * PI) + sign * eps;
+                                q.w2[r] = (2.0 * PI * f).powi(2);
+                                q.damping[(r, r)] = 2.0 * zeta * 2.0 * PI * f;
+                            }
+                            Param::ModalDamping(r) => {
+                                q.damping[(r, r)] += sign * eps * 2.0 * q.w2[r].sqrt();
+                            }
+                            _ => {
+                                let k = (kappa + sign * eps) / kappa;
+                                q.w2.iter_mut().for_each(|x| *x *= k);
+                                q.residual = &q.residual * faer::Scale(1.0 / k);
+                            }
                         }
-                        LinearParam::DampingRatio(r) => {
-                            q.damping[(r, r)] += sign * eps * 2.0 * q.w2[r].sqrt();
-                        }
-                        LinearParam::StiffnessScale => {
-                            let k = 1.0 + sign * eps;
-                            q.w2.iter_mut().for_each(|x| *x *= k);
-                            q.residual = &q.residual * faer::Scale(1.0 / k);
-                        }
+                        q
+                    };
+                    let through_trait = |sign: f64| {
+                        let mut q = lp.clone();
+                        let v = q.param(&p).unwrap();
+                        q.set_param(&p, v + sign * eps).unwrap();
+                        q
+                    };
+                    for sign in [-1.0, 1.0] {
+                        let (a, b) = (by_hand(sign), through_trait(sign));
+                        let d = a.receptance(w, &rows, &cols) - b.receptance(w, &rows, &cols);
+                        assert!(d.norm_max() <= 1e-13 * a.receptance(w, &rows, &cols).norm_max());
                     }
-                    q.receptance(w, &rows, &cols)
-                };
-                let fd = (perturbed(1.0) - perturbed(-1.0))
-                    * faer::Scale(c64::new(1.0 / (2.0 * eps), 0.0));
-                let an = lp.receptance_dparam(p, w, &rows, &cols).unwrap();
-                assert!(
-                    (&fd - &an).norm_max() < 1e-6 * an.norm_max(),
-                    "{} full {full}: {:?} vs {:?}",
-                    p.name(),
-                    fd,
-                    an
-                );
+                    let fd = (by_hand(1.0).receptance(w, &rows, &cols)
+                        - by_hand(-1.0).receptance(w, &rows, &cols))
+                        * faer::Scale(c64::new(1.0 / (2.0 * eps), 0.0));
+                    let an = lp.receptance_dparam(&p, w, &rows, &cols).unwrap();
+                    assert!(
+                        (&fd - &an).norm_max() < 1e-6 * an.norm_max(),
+                        "{p} full {full} kappa {kappa}: {fd:?} vs {an:?}"
+                    );
+                }
             }
         }
     }

@@ -11,9 +11,12 @@
 use crate::aft::{AftPlan, samples_for};
 use crate::dense::{Lu, norm_inf};
 use crate::harmonics::{Forcing, HarmonicSet};
-use crate::linear::{LinearParam, LinearPart};
+use crate::linear::LinearPart;
 use faer::{Mat, c64};
-use nlsim_kernel::{Error, Model, NonlinearElement, Quantity, Result};
+use nlsim_kernel::param::unknown_param;
+use nlsim_kernel::{
+    Error, Model, NonlinearElement, Param, Parameterized, Quantity, Result, Status,
+};
 use nlsim_reduction::ReducedModel;
 use std::f64::consts::PI;
 
@@ -54,35 +57,30 @@ impl Default for HbConfig {
     }
 }
 
-/// How a Newton solve went.
+/// How a Newton solve went: its status, the iterations taken and the final residual.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NewtonReport {
+    /// [`Status::Converged`], or why it stopped: [`Status::IterationLimit`],
+    /// [`Status::Singular`] (a singular Jacobian), [`Status::NonFinite`].
+    pub status: Status,
     /// Iterations taken.
     pub iterations: usize,
     /// Final `‖R‖∞` (m).
     pub residual: f64,
 }
 
-/// A model parameter for sensitivities.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum ModelParam {
-    /// Parameter `param` of element `element` (indices into [`HbSystem::elements`] and the
-    /// law's parameter list).
-    Element {
-        /// Element index.
-        element: usize,
-        /// Parameter index of its law.
-        param: usize,
-    },
-    /// A linear parameter of the reduced model.
-    Linear(LinearParam),
+impl NewtonReport {
+    /// `true` when the solve converged.
+    pub fn converged(&self) -> bool {
+        self.status.is_converged()
+    }
 }
 
 /// Sensitivity of a solution to one parameter.
 #[derive(Debug, Clone)]
 pub struct Sensitivity {
-    /// Parameter name (`element.param`, `mode2.f`, …).
-    pub name: String,
+    /// The parameter.
+    pub param: Param,
     /// `dx/dp` of the condensed unknowns.
     pub dx: Vec<f64>,
     /// `dY/dp` of every sensor (rows) and harmonic `k = 0..=H` (columns), in the sensor's unit
@@ -110,26 +108,99 @@ pub(crate) struct Evaluation {
 }
 
 /// The harmonic balance system of a reduced model with local nonlinearities.
+///
+/// Built by [`HbSystem::from_model`] or [`HbSystem::builder`]; its parts are read through
+/// accessors and changed only through methods that keep the derived AFT plans consistent
+/// ([`Parameterized::set_param`], [`HbSystem::set_forcing`]).
 #[derive(Debug, Clone)]
 pub struct HbSystem {
-    /// The harmonics kept.
-    pub set: HarmonicSet,
-    /// Receptances of the reduced model.
-    pub linear: LinearPart,
-    /// The nonlinear elements (couplings folded into their ports).
-    pub elements: Vec<NonlinearElement>,
-    /// Port index of each element.
-    pub element_ports: Vec<usize>,
-    /// Excitation inputs `(name, port)`.
-    pub inputs: Vec<(String, usize)>,
-    /// Sensors recovered at every solution.
-    pub sensors: Vec<SensorSpec>,
-    /// The forcing at level `λ = 1`.
-    pub forcing: Forcing,
-    /// Settings.
-    pub config: HbConfig,
+    pub(crate) set: HarmonicSet,
+    pub(crate) linear: LinearPart,
+    pub(crate) elements: Vec<NonlinearElement>,
+    pub(crate) element_ports: Vec<usize>,
+    pub(crate) inputs: Vec<(String, usize)>,
+    pub(crate) sensors: Vec<SensorSpec>,
+    pub(crate) forcing: Forcing,
+    pub(crate) config: HbConfig,
     plans: Vec<AftPlan>,
     hill_plan: AftPlan,
+}
+
+/// Assembles an [`HbSystem`] from a [`LinearPart`] part by part:
+/// `HbSystem::builder(linear, set).element(e, port).input("shaker", 0).build()?`.
+/// Validation (ports in range, laws, forcing) happens once, in [`HbSystemBuilder::build`].
+#[derive(Debug, Clone)]
+#[must_use = "a builder does nothing until build() is called"]
+pub struct HbSystemBuilder {
+    set: HarmonicSet,
+    linear: LinearPart,
+    elements: Vec<NonlinearElement>,
+    element_ports: Vec<usize>,
+    inputs: Vec<(String, usize)>,
+    sensors: Vec<SensorSpec>,
+    forcing: Option<Forcing>,
+    config: HbConfig,
+}
+
+impl HbSystemBuilder {
+    /// A nonlinear element acting on port `port` (its coupling already folded into the port).
+    pub fn element(mut self, element: NonlinearElement, port: usize) -> Self {
+        self.elements.push(element);
+        self.element_ports.push(port);
+        self
+    }
+
+    /// An excitation input called `name` at port `port`.
+    pub fn input(mut self, name: impl Into<String>, port: usize) -> Self {
+        self.inputs.push((name.into(), port));
+        self
+    }
+
+    /// A sensor recovered at every solution.
+    pub fn sensor(mut self, name: impl Into<String>, port: usize, quantity: Quantity) -> Self {
+        self.sensors.push(SensorSpec {
+            name: name.into(),
+            port,
+            quantity,
+        });
+        self
+    }
+
+    /// The forcing at level `λ = 1` (default: unit amplitude on every input at the
+    /// fundamental, harmonic `ν`).
+    pub fn forcing(mut self, forcing: Forcing) -> Self {
+        self.forcing = Some(forcing);
+        self
+    }
+
+    /// Solver settings (default [`HbConfig::default`]).
+    pub fn config(mut self, config: HbConfig) -> Self {
+        self.config = config;
+        self
+    }
+
+    /// The validated system.
+    pub fn build(self) -> Result<HbSystem> {
+        let forcing = self.forcing.unwrap_or_else(|| Forcing {
+            terms: (0..self.inputs.len())
+                .map(|i| crate::ForceTerm {
+                    input: i,
+                    harmonic: self.set.nu,
+                    amplitude: c64::new(1.0, 0.0),
+                })
+                .collect(),
+        });
+        HbSystem::new(
+            self.set,
+            self.linear,
+            self.elements,
+            self.element_ports,
+            self.inputs,
+            self.sensors,
+            forcing,
+            self.config,
+        )
+    }
 }
 
 /// Expands per-harmonic complex matrices into the real coefficient layout
@@ -198,9 +269,23 @@ impl HbSystem {
         )
     }
 
+    /// A builder on the linear part `linear` with harmonics `set`.
+    pub fn builder(linear: LinearPart, set: HarmonicSet) -> HbSystemBuilder {
+        HbSystemBuilder {
+            set,
+            linear,
+            elements: Vec::new(),
+            element_ports: Vec::new(),
+            inputs: Vec::new(),
+            sensors: Vec::new(),
+            forcing: None,
+            config: HbConfig::default(),
+        }
+    }
+
     /// A system from its parts; validates ports, laws and forcing.
     #[allow(clippy::too_many_arguments)]
-    pub fn new(
+    fn new(
         set: HarmonicSet,
         linear: LinearPart,
         elements: Vec<NonlinearElement>,
@@ -272,6 +357,53 @@ impl HbSystem {
         self.plans.iter().map(|p| p.n).collect()
     }
 
+    /// The harmonics kept.
+    pub fn harmonics(&self) -> &HarmonicSet {
+        &self.set
+    }
+
+    /// Receptances of the reduced model.
+    pub fn linear(&self) -> &LinearPart {
+        &self.linear
+    }
+
+    /// The nonlinear elements (couplings folded into their ports).
+    pub fn elements(&self) -> &[NonlinearElement] {
+        &self.elements
+    }
+
+    /// Port index of each element.
+    pub fn element_ports(&self) -> &[usize] {
+        &self.element_ports
+    }
+
+    /// Excitation inputs `(name, port)`.
+    pub fn inputs(&self) -> &[(String, usize)] {
+        &self.inputs
+    }
+
+    /// Sensors recovered at every solution.
+    pub fn sensors(&self) -> &[SensorSpec] {
+        &self.sensors
+    }
+
+    /// The forcing at level `λ = 1`.
+    pub fn forcing(&self) -> &Forcing {
+        &self.forcing
+    }
+
+    /// Solver settings.
+    pub fn config(&self) -> &HbConfig {
+        &self.config
+    }
+
+    /// Replaces the forcing (validated against the harmonics and inputs).
+    pub fn set_forcing(&mut self, forcing: Forcing) -> Result<()> {
+        forcing.validate(&self.set, self.inputs.len())?;
+        self.forcing = forcing;
+        Ok(())
+    }
+
     /// Index of element `name`.
     pub fn element_index(&self, name: &str) -> Result<usize> {
         self.elements
@@ -280,13 +412,14 @@ impl HbSystem {
             .ok_or_else(|| Error::invalid(format!("element '{name}'"), "no such element"))
     }
 
-    /// Sets element parameter `element.param` (e.g. `spring.k3`).
-    pub fn set_parameter(&mut self, name: &str, value: f64) -> Result<()> {
-        let (el, p) = name.split_once('.').ok_or_else(|| {
-            Error::invalid(format!("parameter '{name}'"), "expected element.param")
-        })?;
-        let e = self.element_index(el)?;
-        self.elements[e].set_named_param(&format!("parameter '{name}'"), p, value)
+    /// `(element index, law parameter index)` of an element parameter.
+    fn element_param(&self, p: &Param) -> Option<(usize, usize)> {
+        let Param::Element { element, param } = p else {
+            return None;
+        };
+        let e = self.elements.iter().position(|e| e.name() == element)?;
+        let law = self.elements[e].law();
+        Some((e, (0..law.n_params()).find(|&i| law.param_name(i) == *param)?))
     }
 
     /// The forcing in the real layout (inputs × (2H+1)).
@@ -434,6 +567,20 @@ impl HbSystem {
             .collect()
     }
 
+    /// The residual `R(x) = x + H_NL,NL G(x) − λ H_NL,ext F` (m, real layout) at fundamental
+    /// `omega` (rad/s) and force level `scale`.
+    pub fn residual(&self, x: &[f64], omega: f64, scale: f64) -> Result<Vec<f64>> {
+        if x.len() != self.n_unknowns() {
+            return Err(Error::DimensionMismatch {
+                what: "harmonic balance unknowns".into(),
+                expected: self.n_unknowns(),
+                found: x.len(),
+            });
+        }
+        let rec = self.receptances(omega, false);
+        Ok(self.evaluate(&rec, x, omega, scale, false).r)
+    }
+
     /// `dx/dΩ = −R_x⁻¹ R_Ω` along the branch through solution `x` (m s/rad).
     pub fn dx_domega(&self, x: &[f64], omega: f64, scale: f64) -> Result<Vec<f64>> {
         let rec = self.receptances(omega, false);
@@ -455,8 +602,12 @@ impl HbSystem {
     }
 
     /// Solves `R(x) = 0` at fundamental `omega` (rad/s) and force level `scale` by Newton
-    /// from `x0`, halving the step until `‖R‖` decreases. Errors name the frequency, the
-    /// iteration and the residual.
+    /// from `x0`, halving the step until `‖R‖` decreases.
+    ///
+    /// Returns the last iterate with a report: [`Status::Converged`], or
+    /// [`Status::IterationLimit`], [`Status::Singular`], [`Status::NonFinite`] when it
+    /// stopped short. `Err` only for invalid input (a non-positive frequency, a start vector
+    /// of the wrong length).
     pub fn solve(&self, omega: f64, scale: f64, x0: &[f64]) -> Result<(Vec<f64>, NewtonReport)> {
         if !(omega.is_finite() && omega > 0.0 && scale.is_finite()) {
             return Err(Error::invalid(
@@ -476,30 +627,27 @@ impl HbSystem {
         let rec = self.receptances(omega, false);
         let reference = norm_inf(&rec.b) * scale.abs();
         let mut x = x0.to_vec();
-        let hz = omega / (2.0 * PI);
-        let mut rn = f64::INFINITY;
+        let report = |status, iterations, residual| NewtonReport {
+            status,
+            iterations,
+            residual,
+        };
         for it in 0..=self.config.max_iterations {
             let ev = self.evaluate(&rec, &x, omega, scale, true);
-            rn = norm_inf(&ev.r);
+            let rn = norm_inf(&ev.r);
+            if !rn.is_finite() {
+                return Ok((x, report(Status::NonFinite, it, rn)));
+            }
             let tol = self.config.rtol * norm_inf(&x).max(reference).max(1e-300);
             if rn <= tol {
-                return Ok((
-                    x,
-                    NewtonReport {
-                        iterations: it,
-                        residual: rn,
-                    },
-                ));
+                return Ok((x, report(Status::Converged, it, rn)));
             }
             if it == self.config.max_iterations {
-                break;
+                return Ok((x, report(Status::IterationLimit, it, rn)));
             }
-            let lu = Lu::new(ev.jacobian.as_ref().expect("asked for"), &|| {
-                format!(
-                    "harmonic balance Newton at {hz:.6} Hz, iteration {}",
-                    it + 1
-                )
-            })?;
+            let Ok(lu) = Lu::new(ev.jacobian.as_ref().expect("asked for"), &String::new) else {
+                return Ok((x, report(Status::Singular, it, rn)));
+            };
             let neg: Vec<f64> = ev.r.iter().map(|v| -v).collect();
             let dx = lu.solve(&neg);
             let mut alpha = 1.0;
@@ -520,14 +668,43 @@ impl HbSystem {
                 x.iter_mut().zip(&dx).for_each(|(a, d)| *a += d);
             }
         }
-        Err(Error::Numerical {
+        unreachable!("the loop returns at the iteration limit")
+    }
+
+    /// [`HbSystem::solve`] that turns a solve that stopped short into an error naming the
+    /// frequency, the level, the status and the residual: for callers that need a converged
+    /// point or nothing.
+    pub fn solve_converged(
+        &self,
+        omega: f64,
+        scale: f64,
+        x0: &[f64],
+    ) -> Result<(Vec<f64>, NewtonReport)> {
+        let (x, rep) = self.solve(omega, scale, x0)?;
+        if rep.converged() {
+            return Ok((x, rep));
+        }
+        Err(self.not_converged(omega, scale, &rep))
+    }
+
+    /// The error text of a Newton solve that stopped short at (`omega`, `scale`).
+    pub fn not_converged(&self, omega: f64, scale: f64, rep: &NewtonReport) -> Error {
+        let hz = omega / (2.0 * PI);
+        Error::Numerical {
             what: format!("harmonic balance Newton at {hz:.6} Hz (level {scale})"),
-            detail: format!(
-                "no convergence in {} iterations: residual {rn:.3e} m against tolerance {:.1e} \
-                 relative; take smaller frequency steps or start closer",
-                self.config.max_iterations, self.config.rtol
-            ),
-        })
+            detail: match rep.status {
+                Status::IterationLimit => format!(
+                    "no convergence in {} iterations: residual {:.3e} m against tolerance {:.1e} \
+                     relative; take smaller frequency steps or start closer",
+                    self.config.max_iterations, rep.residual, self.config.rtol
+                ),
+                s => format!(
+                    "{s} at iteration {} (residual {:.3e} m)",
+                    rep.iterations + 1,
+                    rep.residual
+                ),
+            },
+        }
     }
 
     /// Complex amplitudes of every sensor (rows) at every harmonic `k = 0..=H` (columns) at
@@ -595,36 +772,6 @@ impl HbSystem {
         })
     }
 
-    /// Every parameter of the model: each element's law parameters, then the linear ones
-    /// (modal frequencies and damping ratios of every retained mode, the stiffness scale).
-    pub fn all_parameters(&self) -> Vec<ModelParam> {
-        let mut p: Vec<ModelParam> = self
-            .elements
-            .iter()
-            .enumerate()
-            .flat_map(|(e, el)| {
-                (0..el.law().n_params()).map(move |i| ModelParam::Element {
-                    element: e,
-                    param: i,
-                })
-            })
-            .collect();
-        for r in 0..self.linear.n_modes() {
-            p.push(ModelParam::Linear(LinearParam::ModalFrequency(r)));
-            p.push(ModelParam::Linear(LinearParam::DampingRatio(r)));
-        }
-        p.push(ModelParam::Linear(LinearParam::StiffnessScale));
-        p
-    }
-
-    /// Display name of parameter `p`.
-    pub fn parameter_name(&self, p: ModelParam) -> String {
-        match p {
-            ModelParam::Element { element, param } => self.elements[element].param_full_name(param),
-            ModelParam::Linear(l) => l.name(),
-        }
-    }
-
     /// Sensitivities of the solution `x` at (`omega`, `scale`) to `params`, by implicit
     /// differentiation of `R(x, p) = 0`: `dx/dp = −R_x⁻¹ R_p` with one factorisation of the
     /// Jacobian for all parameters; then `dY/dp` of every sensor.
@@ -633,7 +780,7 @@ impl HbSystem {
         x: &[f64],
         omega: f64,
         scale: f64,
-        params: &[ModelParam],
+        params: &[Param],
     ) -> Result<Vec<Sensitivity>> {
         let nh = self.set.len();
         let n = self.n_unknowns();
@@ -653,59 +800,47 @@ impl HbSystem {
         let ports_nl = &self.element_ports;
         let inputs = self.input_ports();
         let mut out = Vec::with_capacity(params.len());
-        for &p in params {
+        for p in params {
             // R_p and the explicit part of dY/dp (sensors, real layout).
-            let (rp, mut dy) = match p {
-                ModelParam::Element { element, param } => {
-                    let el = self.elements.get(element).ok_or_else(|| {
-                        Error::invalid("sensitivity parameter", format!("no element {element}"))
-                    })?;
-                    if param >= el.law().n_params() {
-                        return Err(Error::invalid(
-                            "sensitivity parameter",
-                            format!(
-                                "element '{}' has {} parameters",
-                                el.name(),
-                                el.law().n_params()
-                            ),
-                        ));
-                    }
-                    let d = self.plans[element].dparams(
-                        el.law(),
-                        &x[element * nh..(element + 1) * nh],
-                        w0,
-                    );
-                    let mut gp = vec![0.0; n];
-                    for l in 0..nh {
-                        gp[element * nh + l] = d[(l, param)];
-                    }
-                    let rp: Vec<f64> = (0..n)
-                        .map(|i| (0..n).map(|j| rec.a[(i, j)] * gp[j]).sum())
-                        .collect();
-                    let dy: Vec<f64> = (0..hs.nrows())
-                        .map(|i| -(0..n).map(|j| hs[(i, j)] * gp[j]).sum::<f64>())
-                        .collect();
-                    (rp, dy)
+            let (rp, mut dy) = if let Param::Element { .. } = p {
+                let (element, param) = self
+                    .element_param(p)
+                    .ok_or_else(|| unknown_param(p, &self.parameters()))?;
+                let el = &self.elements[element];
+                let d = self.plans[element].dparams(
+                    el.law(),
+                    &x[element * nh..(element + 1) * nh],
+                    w0,
+                );
+                let mut gp = vec![0.0; n];
+                for l in 0..nh {
+                    gp[element * nh + l] = d[(l, param)];
                 }
-                ModelParam::Linear(lp) => {
-                    let d = |rows: &[usize], cols: &[usize]| -> Result<Mat<f64>> {
-                        let h = (0..=self.set.h)
-                            .map(|k| self.linear.receptance_dparam(lp, k as f64 * w0, rows, cols))
-                            .collect::<Result<Vec<_>>>()?;
-                        Ok(expand(&self.set, &h))
-                    };
-                    let (da, db) = (d(ports_nl, ports_nl)?, d(ports_nl, &inputs)?);
-                    let (dsa, dsb) = (d(&sports, ports_nl)?, d(&sports, &inputs)?);
-                    let lin = |a: &Mat<f64>, b: &Mat<f64>, sign: f64| -> Vec<f64> {
-                        (0..a.nrows())
-                            .map(|i| {
-                                sign * ((0..n).map(|j| a[(i, j)] * ev.g[j]).sum::<f64>()
-                                    - scale * (0..f.len()).map(|j| b[(i, j)] * f[j]).sum::<f64>())
-                            })
-                            .collect()
-                    };
-                    (lin(&da, &db, 1.0), lin(&dsa, &dsb, -1.0))
-                }
+                let rp: Vec<f64> = (0..n)
+                    .map(|i| (0..n).map(|j| rec.a[(i, j)] * gp[j]).sum())
+                    .collect();
+                let dy: Vec<f64> = (0..hs.nrows())
+                    .map(|i| -(0..n).map(|j| hs[(i, j)] * gp[j]).sum::<f64>())
+                    .collect();
+                (rp, dy)
+            } else {
+                let d = |rows: &[usize], cols: &[usize]| -> Result<Mat<f64>> {
+                    let h = (0..=self.set.h)
+                        .map(|k| self.linear.receptance_dparam(p, k as f64 * w0, rows, cols))
+                        .collect::<Result<Vec<_>>>()?;
+                    Ok(expand(&self.set, &h))
+                };
+                let (da, db) = (d(ports_nl, ports_nl)?, d(ports_nl, &inputs)?);
+                let (dsa, dsb) = (d(&sports, ports_nl)?, d(&sports, &inputs)?);
+                let lin = |a: &Mat<f64>, b: &Mat<f64>, sign: f64| -> Vec<f64> {
+                    (0..a.nrows())
+                        .map(|i| {
+                            sign * ((0..n).map(|j| a[(i, j)] * ev.g[j]).sum::<f64>()
+                                - scale * (0..f.len()).map(|j| b[(i, j)] * f[j]).sum::<f64>())
+                        })
+                        .collect()
+                };
+                (lin(&da, &db, 1.0), lin(&dsa, &dsb, -1.0))
             };
             let neg: Vec<f64> = rp.iter().map(|v| -v).collect();
             let dx = lu.solve(&neg);
@@ -720,7 +855,7 @@ impl HbSystem {
                 *v -= (0..n).map(|j| hs[(i, j)] * gdx[j]).sum::<f64>();
             }
             out.push(Sensitivity {
-                name: self.parameter_name(p),
+                param: p.clone(),
                 dy: self.to_quantities(&dy, omega, nh),
                 dx,
             });
@@ -802,32 +937,103 @@ impl HbSystem {
         (res, jac)
     }
 
-    /// Solves the full modal formulation by Newton from `eta0` (modes × (2H+1), real layout).
-    pub fn solve_modal(&self, omega: f64, scale: f64, eta0: &[f64]) -> Result<Vec<f64>> {
+    /// Solves the full modal formulation by Newton from `eta0` (modes × (2H+1), real layout):
+    /// the last iterate and its report (status as in [`HbSystem::solve`]; the residual is the
+    /// last Newton step's `‖Δη‖∞`).
+    pub fn solve_modal(
+        &self,
+        omega: f64,
+        scale: f64,
+        eta0: &[f64],
+    ) -> Result<(Vec<f64>, NewtonReport)> {
+        let m = self.linear.n_modes() * self.set.len();
+        if eta0.len() != m {
+            return Err(Error::DimensionMismatch {
+                what: "modal harmonic balance start vector".into(),
+                expected: m,
+                found: eta0.len(),
+            });
+        }
         let mut eta = eta0.to_vec();
-        let hz = omega / (2.0 * PI);
+        let mut step = f64::INFINITY;
+        let report = |status, iterations, residual| NewtonReport {
+            status,
+            iterations,
+            residual,
+        };
         for it in 0..self.config.max_iterations {
             let (r, j) = self.modal_residual(&eta, omega, scale);
-            let lu = Lu::new(&j, &|| {
-                format!("modal harmonic balance at {hz:.6} Hz, iteration {it}")
-            })?;
+            let Ok(lu) = Lu::new(&j, &String::new) else {
+                return Ok((eta, report(Status::Singular, it, step)));
+            };
             let neg: Vec<f64> = r.iter().map(|v| -v).collect();
             let d = lu.solve(&neg);
             eta.iter_mut().zip(&d).for_each(|(a, b)| *a += b);
-            if norm_inf(&d) <= self.config.rtol * norm_inf(&eta).max(1e-300) {
-                return Ok(eta);
+            step = norm_inf(&d);
+            if !step.is_finite() {
+                return Ok((eta, report(Status::NonFinite, it + 1, step)));
+            }
+            if step <= self.config.rtol * norm_inf(&eta).max(1e-300) {
+                return Ok((eta, report(Status::Converged, it + 1, step)));
             }
         }
-        Err(Error::Numerical {
-            what: format!("modal harmonic balance Newton at {hz:.6} Hz"),
-            detail: format!(
-                "no convergence in {} iterations",
-                self.config.max_iterations
-            ),
-        })
+        let n = self.config.max_iterations;
+        Ok((eta, report(Status::IterationLimit, n, step)))
     }
 
     pub(crate) fn hill_plan(&self) -> &AftPlan {
         &self.hill_plan
+    }
+}
+
+/// Element law parameters (element order), then the linear ones of [`LinearPart`]
+/// (`modeN.f`, `modeN.zeta` of every retained mode, `stiffness_scale`).
+impl Parameterized for HbSystem {
+    fn parameters(&self) -> Vec<Param> {
+        let mut p: Vec<Param> = self
+            .elements
+            .iter()
+            .flat_map(|el| {
+                (0..el.law().n_params()).map(move |i| Param::element(el.name(), el.law().param_name(i)))
+            })
+            .collect();
+        p.extend(self.linear.parameters());
+        p
+    }
+
+    fn param(&self, p: &Param) -> Result<f64> {
+        match p {
+            Param::Element { .. } => self
+                .element_param(p)
+                .map(|(e, i)| self.elements[e].law().param(i))
+                .ok_or_else(|| unknown_param(p, &self.parameters())),
+            Param::ModalFrequency(_) | Param::ModalDamping(_) | Param::StiffnessScale => {
+                self.linear.param(p)
+            }
+            _ => Err(unknown_param(p, &self.parameters())),
+        }
+    }
+
+    fn set_param(&mut self, p: &Param, value: f64) -> Result<()> {
+        match p {
+            Param::Element { .. } => {
+                let (e, i) = self
+                    .element_param(p)
+                    .ok_or_else(|| unknown_param(p, &self.parameters()))?;
+                self.elements[e].set_param(i, value)?;
+                // Keep the AFT plans those of a system built with the new value.
+                let n = self.config.aft_samples.unwrap_or(samples_for(self.elements[e].law(), &self.set));
+                if n != self.plans[e].n {
+                    self.plans[e] = AftPlan::new(self.set, n)?;
+                    let hill_n = self.plans.iter().map(|p| p.n).max().unwrap_or(n);
+                    self.hill_plan = AftPlan::new(self.set, hill_n)?;
+                }
+                Ok(())
+            }
+            Param::ModalFrequency(_) | Param::ModalDamping(_) | Param::StiffnessScale => {
+                self.linear.set_param(p, value)
+            }
+            _ => Err(unknown_param(p, &self.parameters())),
+        }
     }
 }

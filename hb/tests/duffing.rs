@@ -7,6 +7,7 @@ use nlsim_hb::{
     Branch, ContinuationConfig, HarmonicSet, HbConfig, HbSystem, Parameter, PointKind,
     continuation, stepped_sine,
 };
+use nlsim_kernel::Status;
 use nlsim_reduction::modal::{ReductionConfig, reduce};
 use nlsim_reduction::{EigenConfig, ModeSelection};
 use std::f64::consts::PI;
@@ -31,7 +32,7 @@ fn system(h: usize, nu: usize) -> HbSystem {
 }
 
 fn amplitude(sys: &HbSystem, x: &[f64], k: usize) -> f64 {
-    sys.set.complex(x, k).norm()
+    sys.harmonics().complex(x, k).norm()
 }
 
 fn closed_form(omega: f64, force: f64) -> Vec<f64> {
@@ -66,20 +67,16 @@ fn closed_form_folds(lo: f64, hi: f64, force: f64) -> Vec<f64> {
 }
 
 fn sweep(sys: &HbSystem, from_hz: f64, to_hz: f64) -> Branch {
-    continuation(
-        sys,
-        &ContinuationConfig::frequency(from_hz, to_hz),
-        None,
-        &mut |_| {},
-    )
-    .unwrap()
+    let rep = continuation(sys, &ContinuationConfig::frequency(from_hz, to_hz), None).unwrap();
+    assert!(rep.is_complete(), "{}", rep.detail);
+    assert_eq!(rep.stats.n_points, rep.branch.points.len());
+    rep.branch
 }
 
 #[test]
 fn first_order_branch_matches_the_closed_form_with_stability_and_folds() {
     let sys = system(1, 1);
     let br = sweep(&sys, 26.0, 40.0);
-    assert!(br.complete);
     let mut seen_middle = 0;
     for p in &br.points {
         let a = amplitude(&sys, &p.x, 1);
@@ -163,22 +160,23 @@ fn first_order_branch_matches_the_closed_form_with_stability_and_folds() {
 fn condensed_and_modal_formulations_agree() {
     let sys = system(5, 1);
     let om = 2.0 * PI * 31.0;
-    let (x, _) = sys.solve(om, 1.0, &sys.linear_guess(om, 1.0)).unwrap();
+    let (x, _) = sys.solve_converged(om, 1.0, &sys.linear_guess(om, 1.0)).unwrap();
     // η = Z⁻¹ Φᵀ(F − G) from the condensed solution, then the modal Newton from a perturbed
     // copy must return to it.
     let eta = sys.modal_amplitudes(&x, om, 1.0);
-    let nh = sys.set.len();
+    let nh = sys.harmonics().len();
     let mut e0 = vec![0.0; nh];
-    for k in 0..=sys.set.h {
-        sys.set.set_complex(&mut e0, k, eta[(0, k)]);
+    for k in 0..=sys.harmonics().h {
+        sys.harmonics().set_complex(&mut e0, k, eta[(0, k)]);
     }
     let (r, _) = sys.modal_residual(&e0, om, 1.0);
-    let scale = e0.iter().fold(0.0f64, |m, v| m.max(v.abs())) * sys.linear.w2[0];
+    let scale = e0.iter().fold(0.0f64, |m, v| m.max(v.abs())) * sys.linear().eigenvalues()[0];
     assert!(r.iter().all(|v| v.abs() < 1e-9 * scale), "{r:?}");
     let pert: Vec<f64> = e0.iter().map(|v| v * 1.05).collect();
-    let back = sys.solve_modal(om, 1.0, &pert).unwrap();
+    let (back, rep) = sys.solve_modal(om, 1.0, &pert).unwrap();
+    assert!(rep.converged(), "{rep:?}");
     for (a, b) in back.iter().zip(&e0) {
-        assert!((a - b).abs() < 1e-9 * scale / sys.linear.w2[0]);
+        assert!((a - b).abs() < 1e-9 * scale / sys.linear().eigenvalues()[0]);
     }
 }
 
@@ -190,8 +188,8 @@ fn stepped_sines_jump_at_the_folds() {
         .map(|i| 2.0 * PI * (27.0 + 9.0 * i as f64 / (n - 1) as f64))
         .collect();
     let down: Vec<f64> = up.iter().rev().copied().collect();
-    let bu = stepped_sine(&sys, &up, 1.0, true, &mut |_| {}).unwrap();
-    let bd = stepped_sine(&sys, &down, 1.0, true, &mut |_| {}).unwrap();
+    let bu = stepped_sine(&sys, &up, 1.0, true).unwrap().into_branch().unwrap();
+    let bd = stepped_sine(&sys, &down, 1.0, true).unwrap().into_branch().unwrap();
     let folds = closed_form_folds(2.0 * PI * 27.0, 2.0 * PI * 36.0, 2.0);
     let biggest_drop = |b: &Branch| {
         b.points
@@ -255,8 +253,9 @@ fn force_level_sweep_follows_the_closed_form() {
         fixed: om,
         ..ContinuationConfig::frequency(1.0, 2.0)
     };
-    let br = continuation(&sys, &cfg, None, &mut |_| {}).unwrap();
-    assert!(br.complete);
+    let rep = continuation(&sys, &cfg, None).unwrap();
+    assert!(rep.is_complete(), "{}", rep.detail);
+    let br = rep.branch;
     // At 31 Hz the level sweep passes a fold pair (the jump onto the resonant branch).
     for p in &br.points {
         let a = amplitude(&sys, &p.x, 1);
@@ -267,4 +266,40 @@ fn force_level_sweep_follows_the_closed_form() {
             p.scale
         );
     }
+}
+
+/// A continuation whose step falls below `ds_min` returns the branch it computed with
+/// `Status::StepTooSmall`, every kept point a converged solution.
+#[test]
+fn continuation_below_ds_min_keeps_its_partial_branch() {
+    let sys = system(1, 1);
+    let cfg = ContinuationConfig {
+        ds: 0.02,
+        ds_min: 0.02,
+        ds_max: 0.02,
+        // Two corrector iterations at a fixed step: enough on the smooth part of the branch,
+        // too few around the fold region, where the run must stop and keep what it found.
+        max_corrector: 2,
+        stability: false,
+        ..ContinuationConfig::frequency(26.0, 40.0)
+    };
+    let rep = continuation(&sys, &cfg, None).unwrap();
+    assert_eq!(rep.status, Status::StepTooSmall, "{}", rep.detail);
+    assert!(!rep.is_complete());
+    assert!(rep.detail.contains("smallest step"), "{}", rep.detail);
+    let pts = &rep.branch.points;
+    assert!(pts.len() > 1, "{} points", pts.len());
+    assert!(rep.stats.n_rejected >= 1);
+    let last = pts.last().unwrap();
+    assert!(last.omega > pts[0].omega && last.omega < 2.0 * PI * 40.0);
+    for p in pts {
+        let r = sys.residual(&p.x, p.omega, 1.0).unwrap();
+        let rn = r.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let xn = p.x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        // The corrector's own test (`‖R‖ ≤ rtol · ‖x‖`, scaled variables, rtol 1e-10).
+        assert!(rn <= 1e-9 * xn, "{rn:e} at {} Hz", p.omega / (2.0 * PI));
+    }
+    // The all-or-nothing form turns it into an error naming where it stopped.
+    let e = rep.into_branch().unwrap_err().to_string();
+    assert!(e.contains("continuation at") && e.contains("Hz"), "{e}");
 }

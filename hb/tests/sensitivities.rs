@@ -1,42 +1,25 @@
 //! Sensitivities `dQ/dp = −R_Q⁻¹ R_p` against central finite differences of re-solved FRFs.
 
 use nlsim_fixtures::build;
-use nlsim_hb::system::ModelParam;
-use nlsim_hb::{HarmonicSet, HbConfig, HbSystem, LinearParam};
-use nlsim_kernel::Model;
+use nlsim_hb::{HarmonicSet, HbConfig, HbSystem};
+use nlsim_kernel::{Model, Param, Parameterized};
 use nlsim_reduction::modal::{ReductionConfig, reduce};
 use nlsim_reduction::{EigenConfig, ModeSelection};
 
 /// Re-solves with parameter `p` moved by `h` (on a copy) and returns the sensor response.
 fn perturbed(
     sys: &HbSystem,
-    p: ModelParam,
+    p: &Param,
     h: f64,
     omega: f64,
     x0: &[f64],
 ) -> Option<faer::Mat<faer::c64>> {
     let mut s = sys.clone();
-    match p {
-        ModelParam::Element { element, param } => {
-            let v = s.elements[element].law().param(param);
-            // A contact exponent at its bound 1 cannot move down: None.
-            s.elements[element].set_param(param, v + h).ok()?;
-        }
-        ModelParam::Linear(LinearParam::ModalFrequency(r)) => {
-            let zeta = s.linear.zeta(r);
-            let w = s.linear.w2[r].sqrt() + 2.0 * std::f64::consts::PI * h;
-            s.linear.w2[r] = w * w;
-            s.linear.damping[(r, r)] = 2.0 * zeta * w;
-        }
-        ModelParam::Linear(LinearParam::DampingRatio(r)) => {
-            s.linear.damping[(r, r)] += 2.0 * h * s.linear.w2[r].sqrt();
-        }
-        ModelParam::Linear(LinearParam::StiffnessScale) => {
-            s.linear.w2.iter_mut().for_each(|w| *w *= 1.0 + h);
-            s.linear.residual = &s.linear.residual * faer::Scale(1.0 / (1.0 + h));
-        }
-    }
-    let (x, _) = s.solve(omega, 1.0, x0).unwrap();
+    let v = s.param(p).unwrap();
+    // A contact exponent at its bound 1 cannot move down: None.
+    s.set_param(p, v + h).ok()?;
+    let (x, rep) = s.solve(omega, 1.0, x0).unwrap();
+    assert!(rep.converged());
     Some(s.sensor_response(&x, omega, 1.0))
 }
 
@@ -61,19 +44,13 @@ fn check(model: &Model, modes: usize, h: usize, at: f64) {
     .unwrap();
     let omega = at * red.modes.omega()[0];
     let (x, _) = sys
-        .solve(omega, 1.0, &sys.linear_guess(omega, 1.0))
+        .solve_converged(omega, 1.0, &sys.linear_guess(omega, 1.0))
         .unwrap();
-    let params = sys.all_parameters();
+    let params = sys.parameters();
     let sens = sys.sensitivities(&x, omega, 1.0, &params).unwrap();
     for (p, s) in params.iter().zip(&sens) {
-        let value = match *p {
-            ModelParam::Element { element, param } => sys.elements[element].law().param(param),
-            ModelParam::Linear(LinearParam::ModalFrequency(r)) => {
-                sys.linear.w2[r].sqrt() / (2.0 * std::f64::consts::PI)
-            }
-            ModelParam::Linear(LinearParam::DampingRatio(r)) => sys.linear.zeta(r),
-            ModelParam::Linear(LinearParam::StiffnessScale) => 1.0,
-        };
+        assert_eq!(&s.param, p);
+        let value = sys.param(p).unwrap();
         if value == 0.0 {
             // An absent side of the bump stop (k2 = 0, e2 = 0): no relative step exists.
             continue;
@@ -82,8 +59,8 @@ fn check(model: &Model, modes: usize, h: usize, at: f64) {
         // solver's round-off (Newton to 1e-10 relative) / 1e-5 ~ 1e-5 of the response; a
         // forward difference (truncation ~1e-5) at a parameter bound.
         let step = 1e-5 * value.abs();
-        let up = perturbed(&sys, *p, step, omega, &x).unwrap();
-        let fd = match perturbed(&sys, *p, -step, omega, &x) {
+        let up = perturbed(&sys, p, step, omega, &x).unwrap();
+        let fd = match perturbed(&sys, p, -step, omega, &x) {
             Some(down) => (up - down) * faer::Scale(faer::c64::new(1.0 / (2.0 * step), 0.0)),
             None => {
                 (up - sys.sensor_response(&x, omega, 1.0))
@@ -95,18 +72,18 @@ fn check(model: &Model, modes: usize, h: usize, at: f64) {
         let scale =
             y.norm_max() * 1e-4 + (&fd * faer::Scale(faer::c64::new(value, 0.0))).norm_max() * 1e-4;
         // The element's main stiffness acts at this point (the bump stop is in contact).
-        if matches!(p, ModelParam::Element { param: 0, .. }) {
+        if matches!(p, Param::Element { .. }) && p == &sys.parameters()[0] {
             assert!(
                 s.dy.norm_max() * value.abs() > 1e-3 * y.norm_max(),
                 "{} has no effect",
-                s.name
+                s.param
             );
         }
         let diff = (&fd - &s.dy).norm_max() * value.abs();
         assert!(
             diff <= scale,
             "{}: analytic {:?} vs finite difference {:?}",
-            s.name,
+            s.param,
             s.dy,
             fd
         );
@@ -133,4 +110,79 @@ fn bump_stop_beam_sensitivities_match_finite_differences() {
         .unwrap()
         .model;
     check(&model, 4, 5, 0.97);
+}
+
+/// Setting a parameter through [`Parameterized`] changes the residual exactly as building
+/// the system from a model with the new value does (element parameters), and as the modal
+/// formulas do (modal parameters, checked on the linear part's receptances in its unit test).
+#[test]
+fn setting_a_parameter_equals_rebuilding_the_system() {
+    let model = build("ecl_beam", &[("elements".into(), "10".into())])
+        .unwrap()
+        .model;
+    let red = reduce(
+        &model,
+        &ReductionConfig {
+            eigen: EigenConfig {
+                selection: ModeSelection::Lowest(4),
+                ..EigenConfig::default()
+            },
+            ..ReductionConfig::default()
+        },
+    )
+    .unwrap();
+    let set = HarmonicSet::new(5, 1).unwrap();
+    let mut sys = HbSystem::from_model(&model, &red, set, HbConfig::default()).unwrap();
+    let p = model.parameters()[0].clone();
+    let v = model.param(&p).unwrap() * 1.7;
+    sys.set_param(&p, v).unwrap();
+    let mut changed = model.clone();
+    changed.set_param(&p, v).unwrap();
+    let rebuilt = HbSystem::from_model(&changed, &red, set, HbConfig::default()).unwrap();
+    let omega = 1.01 * red.modes.omega()[0];
+    let x: Vec<f64> = rebuilt
+        .linear_guess(omega, 1.0)
+        .iter()
+        .enumerate()
+        .map(|(i, v)| v * (1.0 + 0.1 * i as f64))
+        .collect();
+    assert_eq!(
+        sys.residual(&x, omega, 1.0).unwrap(),
+        rebuilt.residual(&x, omega, 1.0).unwrap()
+    );
+    assert_eq!(sys.param(&p).unwrap(), v);
+    // Round trip of every parameter's value: get, set the same value, nothing changes.
+    let before = sys.residual(&x, omega, 1.0).unwrap();
+    for q in sys.parameters() {
+        let value = sys.param(&q).unwrap();
+        sys.set_param(&q, value).unwrap();
+    }
+    let after = sys.residual(&x, omega, 1.0).unwrap();
+    for (a, b) in after.iter().zip(&before) {
+        assert!((a - b).abs() <= 1e-13 * b.abs().max(1e-300) + 1e-300, "{a} vs {b}");
+    }
+    // Unknown and out-of-range parameters are errors naming them.
+    let e = sys
+        .set_param(&"mode9.f".parse().unwrap(), 10.0)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("mode9.f") && e.contains("4 modes"), "{e}");
+    let e = sys
+        .set_param(&Param::GroupMass("web".into()), 1.0)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("group:web.m_scale"), "{e}");
+}
+
+/// The types a parallel caller (LHS candidates, k-fold runs) shares across threads.
+#[test]
+fn shared_types_are_send_and_sync() {
+    fn send_sync<T: Send + Sync>() {}
+    send_sync::<HbSystem>();
+    send_sync::<nlsim_hb::ContinuationReport>();
+    send_sync::<Param>();
+    send_sync::<Model>();
+    send_sync::<nlsim_reduction::ReducedModel>();
+    send_sync::<nlsim_sim::Plant>();
+    send_sync::<nlsim_sim::Simulator>();
 }

@@ -24,12 +24,12 @@ fn reduced(model: &Model, modes: usize) -> ReducedModel {
 
 /// The force of `sys.forcing` at level `scale` as time signals, one per input.
 fn signals(sys: &HbSystem, omega: f64, scale: f64) -> Vec<Signal> {
-    (0..sys.inputs.len())
+    (0..sys.inputs().len())
         .map(|i| Signal::MultiSine {
-            fundamental_hz: sys.set.base(omega) / (2.0 * PI),
-            harmonics: (0..=sys.set.h)
+            fundamental_hz: sys.harmonics().base(omega) / (2.0 * PI),
+            harmonics: (0..=sys.harmonics().h)
                 .filter_map(|k| {
-                    let f = sys.forcing.amplitude(i, k) * scale;
+                    let f = sys.forcing().amplitude(i, k) * scale;
                     (f != c64::new(0.0, 0.0)).then_some(Harmonic {
                         ratio: k as f64,
                         amplitude: f,
@@ -54,15 +54,15 @@ fn time_harmonics(
     spp: usize,
 ) -> Vec<Vec<c64>> {
     let plant = Plant::from_model(model, &ModalSystem::new(red).unwrap()).unwrap();
-    let w0 = sys.set.base(omega);
+    let w0 = sys.harmonics().base(omega);
     let eta = sys.modal_amplitudes(x, omega, scale);
     let m = red.n_modes();
     let displacement: Vec<f64> = (0..m)
-        .map(|r| (0..=sys.set.h).map(|k| eta[(r, k)].re).sum())
+        .map(|r| (0..=sys.harmonics().h).map(|k| eta[(r, k)].re).sum())
         .collect();
     let velocity: Vec<f64> = (0..m)
         .map(|r| {
-            (0..=sys.set.h)
+            (0..=sys.harmonics().h)
                 .map(|k| (c64::new(0.0, k as f64 * w0) * eta[(r, k)]).re)
                 .sum()
         })
@@ -77,12 +77,12 @@ fn time_harmonics(
         .unwrap()
         .run(&case, periods * spp)
         .unwrap();
-    sys.sensors
+    sys.sensors()
         .iter()
         .map(|s| {
             let v = &h.output(&s.name).unwrap().values;
             let last = &v[v.len() - 1 - spp..v.len() - 1];
-            (0..=sys.set.h)
+            (0..=sys.harmonics().h)
                 .map(|k| {
                     let c: c64 = last
                         .iter()
@@ -104,8 +104,8 @@ fn compare(sys: &HbSystem, x: &[f64], omega: f64, scale: f64, t: &[Vec<c64>]) ->
     let y = sys.sensor_response(x, omega, scale);
     let mut worst = 0.0f64;
     for (s, ts) in t.iter().enumerate() {
-        let peak = (0..=sys.set.h).fold(0.0f64, |m, k| m.max(y[(s, k)].norm()));
-        for k in 0..=sys.set.h {
+        let peak = (0..=sys.harmonics().h).fold(0.0f64, |m, k| m.max(y[(s, k)].norm()));
+        for k in 0..=sys.harmonics().h {
             worst = worst.max((y[(s, k)] - ts[k]).norm() / peak);
         }
     }
@@ -130,13 +130,13 @@ fn duffing_seven_harmonics_match_time_integration_on_both_stable_branches() {
     let down: Vec<f64> = (0..=40)
         .map(|i| 2.0 * PI * 33.0 + (target - 2.0 * PI * 33.0) * i as f64 / 40.0)
         .collect();
-    let high = stepped_sine(&sys, &up, 1.0, true, &mut |_| {}).unwrap();
-    let low = stepped_sine(&sys, &down, 1.0, true, &mut |_| {}).unwrap();
+    let high = stepped_sine(&sys, &up, 1.0, true).unwrap().into_branch().unwrap();
+    let low = stepped_sine(&sys, &down, 1.0, true).unwrap().into_branch().unwrap();
     let (xh, xl) = (
         &high.points.last().unwrap().x,
         &low.points.last().unwrap().x,
     );
-    let (ah, al) = (sys.set.complex(xh, 1).norm(), sys.set.complex(xl, 1).norm());
+    let (ah, al) = (sys.harmonics().complex(xh, 1).norm(), sys.harmonics().complex(xl, 1).norm());
     assert!(ah > 3.0 * al, "two distinct branches: {ah:e} vs {al:e}");
     for x in [xh, xl] {
         // 20 periods at 1024 samples: the FOH error (second order in the feedback) is
@@ -159,7 +159,7 @@ fn multi_harmonic_forcing_gives_the_frfs_of_time_integration() {
     )
     .unwrap();
     // Thesis eq. 12: force on the fundamental and its 2nd and 3rd harmonics at once.
-    sys.forcing = Forcing {
+    sys.set_forcing(Forcing {
         terms: vec![
             ForceTerm {
                 input: 0,
@@ -177,15 +177,16 @@ fn multi_harmonic_forcing_gives_the_frfs_of_time_integration() {
                 amplitude: c64::new(-1.0, 0.5),
             },
         ],
-    };
+    })
+    .unwrap();
     let omega = 2.0 * PI * 12.0;
     let (x, _) = sys
-        .solve(omega, 1.0, &sys.linear_guess(omega, 1.0))
+        .solve_converged(omega, 1.0, &sys.linear_guess(omega, 1.0))
         .unwrap();
     let frf = sys.frf(&x, omega, 1.0, 0);
     let t = time_harmonics(&model, &red, &sys, &x, omega, 1.0, 20, 1024);
     for k in 1..=3 {
-        let ht = t[0][k] / sys.forcing.amplitude(0, k);
+        let ht = t[0][k] / sys.forcing().amplitude(0, k);
         let err = (frf[(0, k)] - ht).norm() / frf[(0, k)].norm();
         assert!(err < 1e-4, "H_{k}: HB {:?} vs time {ht:?}", frf[(0, k)]);
     }
@@ -210,16 +211,16 @@ fn bump_stop_beam_seven_harmonics_match_time_integration() {
             HbConfig::default(),
         )
         .unwrap();
-        let br = stepped_sine(&sys, &omegas, 1.0, h == 7, &mut |_| {}).unwrap();
+        let br = stepped_sine(&sys, &omegas, 1.0, h == 7).unwrap().into_branch().unwrap();
         let p = br.points.last().unwrap().clone();
         (sys, p)
     };
     let (sys7, p7) = solve(7);
     let (sys31, p31) = solve(31);
     let e = sys7.element_index("stop").unwrap();
-    let nh = sys7.set.len();
+    let nh = sys7.harmonics().len();
     let xe = &p7.x[e * nh..(e + 1) * nh];
-    let peak = xe[0] + (1..=7).map(|k| sys7.set.complex(xe, k).norm()).sum::<f64>();
+    let peak = xe[0] + (1..=7).map(|k| sys7.harmonics().complex(xe, k).norm()).sum::<f64>();
     assert!(
         peak > 1e-3,
         "the tip should reach the stop (peak bound {peak:e})"
@@ -269,9 +270,9 @@ fn duffing_one_third_subharmonic_at_200_n_is_found_and_confirmed_in_time() {
     let omega = 3.0 * w0;
     let mut guess = sys.linear_guess(omega, 1.0);
     guess[1] = a;
-    let (x, _) = sys.solve(omega, 1.0, &guess).unwrap();
-    let sub = sys.set.complex(&x, 1).norm();
-    let forced = sys.set.complex(&x, 3).norm();
+    let (x, _) = sys.solve_converged(omega, 1.0, &guess).unwrap();
+    let sub = sys.harmonics().complex(&x, 1).norm();
+    let forced = sys.harmonics().complex(&x, 3).norm();
     assert!(
         sub > 10.0 * forced,
         "a 1/3 sub-harmonic response: {sub:e} vs {forced:e}"

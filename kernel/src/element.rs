@@ -618,14 +618,16 @@ impl NonlinearElement {
     /// A validated element. Names are identifiers: letters, digits, `_`, `-`.
     pub fn new(name: impl Into<String>, law: Law, coupling: Coupling) -> Result<Self> {
         let name = name.into();
-        if name.is_empty()
-            || !name
-                .chars()
-                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
-        {
+        if !crate::param::is_valid_name(&name) {
             return Err(Error::invalid(
                 format!("element name '{name}'"),
                 "use letters, digits, '_' and '-' only (it prefixes parameter names, e.g. tip.k3)",
+            ));
+        }
+        if crate::param::mode_number(&name).is_some() || name == "stiffness_scale" {
+            return Err(Error::invalid(
+                format!("element name '{name}'"),
+                "is reserved for the modal parameters (modeN.f, modeN.zeta, stiffness_scale)",
             ));
         }
         law.validate(&name)?;

@@ -11,7 +11,9 @@
 //! - [`Law`] and [`NonlinearElement`]: the element library with force, state derivatives and
 //!   parameter derivatives;
 //! - [`Model`]: all of it together, with validation that names what is wrong and where;
-//! - [`Error`]: the one error type of the numeric crates.
+//! - [`Param`] and [`Parameterized`]: one identity for every calibratable quantity, and
+//!   [`Status`], the outcome of every iterative solver;
+//! - [`Error`]: the one error type of the numeric crates (invalid input only).
 //!
 //! Units are SI throughout: m, kg, s, N, rad; frequencies in Hz where named `*_hz`, rad/s
 //! otherwise.
@@ -22,6 +24,7 @@ pub mod element;
 pub mod error;
 pub mod linalg;
 pub mod model;
+pub mod param;
 pub mod sparse;
 #[cfg(any(test, feature = "test-util"))]
 pub mod testing;
@@ -31,8 +34,10 @@ pub use dof::{Component, DofLabel, DofMap};
 pub use element::{Coupling, Law, LawEval, NonlinearElement, PolyTerm};
 pub use error::{Error, Result};
 pub use model::{
-    Excitation, Model, ParamId, ParameterSet, Quantity, Sensor, ValidationConfig, ValidationReport,
+    ElementGroup, Excitation, Model, ModelBuilder, Quantity, Sensor, ValidationConfig,
+    ValidationReport,
 };
+pub use param::{Param, Parameterized, Status};
 pub use sparse::SparseSym;
 
 /// faer, re-exported so that users of nlsim build matrices with the same version.

@@ -5,6 +5,7 @@ use crate::damping::Damping;
 use crate::dof::DofMap;
 use crate::element::{Coupling, NonlinearElement};
 use crate::error::{Error, Result};
+use crate::param::{Param, Parameterized, check_finite, unknown_param};
 use crate::sparse::SparseSym;
 
 /// What a sensor measures at its DOF.
@@ -96,22 +97,30 @@ pub struct ValidationReport {
     pub definiteness_checked: bool,
 }
 
-/// Location of one parameter: element index and parameter index within its law.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct ParamId {
-    /// Index of the element in [`Model::elements`].
-    pub element: usize,
-    /// Index of the parameter within the element's law.
-    pub index: usize,
+/// A labelled group of finite elements whose stiffness and mass contributions can be scaled
+/// as calibration parameters ([`Param::GroupStiffness`], [`Param::GroupMass`]).
+#[derive(Debug, Clone)]
+pub struct ElementGroup {
+    name: String,
+    stiffness: Option<SparseSym>,
+    mass: Option<SparseSym>,
+    k_scale: f64,
+    m_scale: f64,
 }
 
-/// Named parameter values, e.g. `tip.k3 = 6e9`, in model order.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ParameterSet {
-    /// Full names `element.param`.
-    pub names: Vec<String>,
-    /// Values in SI units.
-    pub values: Vec<f64>,
+impl ElementGroup {
+    /// Group name (letters, digits, `_`, `-`).
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+    /// The group's own stiffness contribution `K_g` (N/m), included once in the model's K.
+    pub fn stiffness(&self) -> Option<&SparseSym> {
+        self.stiffness.as_ref()
+    }
+    /// The group's own mass contribution `M_g` (kg), included once in the model's M.
+    pub fn mass(&self) -> Option<&SparseSym> {
+        self.mass.as_ref()
+    }
 }
 
 /// A linear FE structure with local nonlinear elements, excitation and sensors.
@@ -125,6 +134,11 @@ pub struct Model {
     elements: Vec<NonlinearElement>,
     excitation: Vec<Excitation>,
     sensors: Vec<Sensor>,
+    /// `K₀`, `M₀` with every group at scale 1 and no boundary spring, kept once groups or
+    /// springs exist so that the effective matrices can be rebuilt.
+    base: Option<Box<(SparseSym, SparseSym)>>,
+    groups: Vec<ElementGroup>,
+    springs: Vec<(usize, f64)>,
 }
 
 impl Model {
@@ -161,7 +175,128 @@ impl Model {
             elements: Vec::new(),
             excitation: Vec::new(),
             sensors: Vec::new(),
+            base: None,
+            groups: Vec::new(),
+            springs: Vec::new(),
         })
+    }
+
+    /// A builder: `Model::builder(name, dofs, M, K).damping(d).element(e).build()?` adds the
+    /// parts in order and validates the whole model with `cfg` on [`ModelBuilder::build`].
+    pub fn builder(
+        name: impl Into<String>,
+        dofs: DofMap,
+        mass: SparseSym,
+        stiffness: SparseSym,
+    ) -> ModelBuilder {
+        ModelBuilder {
+            model: Model::new(name, dofs, mass, stiffness),
+            validation: Some(ValidationConfig::default()),
+        }
+    }
+
+    /// Declares a labelled group of finite elements: `stiffness` and `mass` are the group's
+    /// own contributions `K_g`, `M_g`, which the model's K and M already contain. Its scales
+    /// start at 1 and become the parameters `group:NAME.k_scale` and `group:NAME.m_scale`.
+    pub fn add_group(
+        &mut self,
+        name: impl Into<String>,
+        stiffness: Option<SparseSym>,
+        mass: Option<SparseSym>,
+    ) -> Result<()> {
+        let name = name.into();
+        if !crate::param::is_valid_name(&name) {
+            return Err(Error::invalid(
+                format!("group name '{name}'"),
+                "use letters, digits, '_' and '-' only (it names parameters, e.g. group:NAME.k_scale)",
+            ));
+        }
+        if self.groups.iter().any(|g| g.name == name) {
+            return Err(Error::DuplicateName {
+                what: "group".into(),
+                name,
+            });
+        }
+        for (what, m) in [("stiffness", &stiffness), ("mass", &mass)] {
+            if let Some(m) = m
+                && m.n() != self.n_dofs()
+            {
+                return Err(Error::DimensionMismatch {
+                    what: format!("group '{name}' {what} matrix order"),
+                    expected: self.n_dofs(),
+                    found: m.n(),
+                });
+            }
+        }
+        self.keep_base();
+        self.groups.push(ElementGroup {
+            name,
+            stiffness,
+            mass,
+            k_scale: 1.0,
+            m_scale: 1.0,
+        });
+        Ok(())
+    }
+
+    /// Adds a grounded spring `k` (N/m, or N m/rad on a rotation) at `dof`: the parameter
+    /// `spring:LABEL.k`. Its stiffness is added to K.
+    pub fn add_boundary_spring(&mut self, dof: usize, k: f64) -> Result<()> {
+        self.check_dof("boundary spring", dof)?;
+        let label = self.dofs.labels()[dof];
+        if self.springs.iter().any(|&(d, _)| d == dof) {
+            return Err(Error::DuplicateName {
+                what: "boundary spring".into(),
+                name: label.to_string(),
+            });
+        }
+        let p = Param::BoundarySpring(label);
+        check_spring(&p, k)?;
+        self.keep_base();
+        self.springs.push((dof, k));
+        self.rebuild()
+    }
+
+    /// Labelled element groups.
+    pub fn groups(&self) -> &[ElementGroup] {
+        &self.groups
+    }
+
+    fn keep_base(&mut self) {
+        if self.base.is_none() {
+            self.base = Some(Box::new((self.stiffness.clone(), self.mass.clone())));
+        }
+    }
+
+    /// `K = K₀ + Σ_g (s_g − 1) K_g + Σ_i k_i e_i e_iᵀ`, `M = M₀ + Σ_g (t_g − 1) M_g`.
+    fn rebuild(&mut self) -> Result<()> {
+        let Some(base) = &self.base else {
+            return Ok(());
+        };
+        let (mut k, mut m) = (base.0.clone(), base.1.clone());
+        for g in &self.groups {
+            if let Some(kg) = &g.stiffness
+                && g.k_scale != 1.0
+            {
+                k = SparseSym::linear_combination("stiffness matrix", 1.0, &k, g.k_scale - 1.0, kg)?;
+            }
+            if let Some(mg) = &g.mass
+                && g.m_scale != 1.0
+            {
+                m = SparseSym::linear_combination("mass matrix", 1.0, &m, g.m_scale - 1.0, mg)?;
+            }
+        }
+        if !self.springs.is_empty() {
+            let mut d = vec![0.0; self.n_dofs()];
+            for &(i, v) in &self.springs {
+                d[i] += v;
+            }
+            let s = SparseSym::diagonal("boundary springs", &d)?;
+            k = SparseSym::linear_combination("stiffness matrix", 1.0, &k, 1.0, &s)?;
+        }
+        self.stiffness = k;
+        self.mass = m;
+        Ok(())
     }
 
     /// Sets the damping model (a matrix must match the model size).
@@ -293,60 +428,6 @@ impl Model {
         d
     }
 
-    /// All element parameters with their full names, in model order.
-    pub fn parameters(&self) -> ParameterSet {
-        let mut names = Vec::new();
-        let mut values = Vec::new();
-        for e in &self.elements {
-            for i in 0..e.law().n_params() {
-                names.push(e.param_full_name(i));
-                values.push(e.law().param(i));
-            }
-        }
-        ParameterSet { names, values }
-    }
-
-    /// Finds a parameter by full name (`tip.k3`).
-    pub fn param_id(&self, name: &str) -> Result<ParamId> {
-        for (ei, e) in self.elements.iter().enumerate() {
-            for i in 0..e.law().n_params() {
-                if e.param_full_name(i) == name {
-                    return Ok(ParamId {
-                        element: ei,
-                        index: i,
-                    });
-                }
-            }
-        }
-        Err(Error::UnknownParameter {
-            name: name.into(),
-            known: self.parameters().names.join(", "),
-        })
-    }
-
-    /// Value of a parameter.
-    pub fn param(&self, id: ParamId) -> f64 {
-        self.elements[id.element].law().param(id.index)
-    }
-
-    /// Sets a parameter by id, with range checks.
-    pub fn set_param(&mut self, id: ParamId, value: f64) -> Result<()> {
-        let n = self.elements.len();
-        let e = self.elements.get_mut(id.element).ok_or_else(|| {
-            Error::invalid(
-                format!("parameter id (element {})", id.element),
-                format!("the model has {n} elements"),
-            )
-        })?;
-        e.set_param(id.index, value)
-    }
-
-    /// Sets a parameter by full name, with range checks.
-    pub fn set_param_by_name(&mut self, name: &str, value: f64) -> Result<()> {
-        let id = self.param_id(name)?;
-        self.set_param(id, value)
-    }
-
     /// Checks the model: finite entries, symmetric M, K (and V), M positive definite (naming
     /// massless DOFs), K positive semi-definite, element parameters in range.
     pub fn validate(&self, cfg: &ValidationConfig) -> Result<ValidationReport> {
@@ -462,5 +543,218 @@ impl Model {
             .map(|l| if l.component == component { 1.0 } else { 0.0 })
             .collect();
         self.mass.bilinear(&r, &r)
+    }
+}
+
+fn check_spring(p: &Param, k: f64) -> Result<()> {
+    check_finite(p, k)?;
+    if k < 0.0 {
+        return Err(Error::InvalidParameter {
+            name: p.to_string(),
+            value: k,
+            reason: "a boundary spring stiffness must be non-negative".into(),
+        });
+    }
+    Ok(())
+}
+
+fn check_scale(p: &Param, s: f64) -> Result<()> {
+    check_finite(p, s)?;
+    if s <= 0.0 {
+        return Err(Error::InvalidParameter {
+            name: p.to_string(),
+            value: s,
+            reason: "a scale factor must be positive".into(),
+        });
+    }
+    Ok(())
+}
+
+impl Model {
+    fn element_param(&self, element: &str, param: &str) -> Option<(usize, usize)> {
+        let e = self.elements.iter().position(|e| e.name() == element)?;
+        let law = self.elements[e].law();
+        let i = (0..law.n_params()).find(|&i| law.param_name(i) == param)?;
+        Some((e, i))
+    }
+
+    fn group_index(&self, name: &str) -> Option<usize> {
+        self.groups.iter().position(|g| g.name == name)
+    }
+
+    fn spring_index(&self, dof: &crate::dof::DofLabel) -> Option<usize> {
+        let labels = self.dofs.labels();
+        self.springs.iter().position(|&(d, _)| labels[d] == *dof)
+    }
+}
+
+/// Element law parameters (model order), then the group scales of groups that have a
+/// stiffness (`k_scale`) or mass (`m_scale`) part, then the boundary springs.
+impl Parameterized for Model {
+    fn parameters(&self) -> Vec<Param> {
+        let mut out = Vec::new();
+        for e in &self.elements {
+            for i in 0..e.law().n_params() {
+                out.push(Param::element(e.name(), e.law().param_name(i)));
+            }
+        }
+        for g in &self.groups {
+            if g.stiffness.is_some() {
+                out.push(Param::GroupStiffness(g.name.clone()));
+            }
+            if g.mass.is_some() {
+                out.push(Param::GroupMass(g.name.clone()));
+            }
+        }
+        let labels = self.dofs.labels();
+        out.extend(
+            self.springs
+                .iter()
+                .map(|&(d, _)| Param::BoundarySpring(labels[d])),
+        );
+        out
+    }
+
+    fn param(&self, p: &Param) -> Result<f64> {
+        let found = match p {
+            Param::Element { element, param } => self
+                .element_param(element, param)
+                .map(|(e, i)| self.elements[e].law().param(i)),
+            Param::GroupStiffness(g) => self
+                .group_index(g)
+                .filter(|&i| self.groups[i].stiffness.is_some())
+                .map(|i| self.groups[i].k_scale),
+            Param::GroupMass(g) => self
+                .group_index(g)
+                .filter(|&i| self.groups[i].mass.is_some())
+                .map(|i| self.groups[i].m_scale),
+            Param::BoundarySpring(d) => self.spring_index(d).map(|i| self.springs[i].1),
+            _ => None,
+        };
+        found.ok_or_else(|| unknown_param(p, &self.parameters()))
+    }
+
+    fn set_param(&mut self, p: &Param, value: f64) -> Result<()> {
+        match p {
+            Param::Element { element, param } => {
+                let (e, i) = self
+                    .element_param(element, param)
+                    .ok_or_else(|| unknown_param(p, &self.parameters()))?;
+                self.elements[e].set_param(i, value)
+            }
+            Param::GroupStiffness(g) | Param::GroupMass(g) => {
+                let stiff = matches!(p, Param::GroupStiffness(_));
+                let i = self
+                    .group_index(g)
+                    .filter(|&i| {
+                        let gr = &self.groups[i];
+                        if stiff {
+                            gr.stiffness.is_some()
+                        } else {
+                            gr.mass.is_some()
+                        }
+                    })
+                    .ok_or_else(|| unknown_param(p, &self.parameters()))?;
+                check_scale(p, value)?;
+                if stiff {
+                    self.groups[i].k_scale = value;
+                } else {
+                    self.groups[i].m_scale = value;
+                }
+                self.rebuild()
+            }
+            Param::BoundarySpring(d) => {
+                let i = self
+                    .spring_index(d)
+                    .ok_or_else(|| unknown_param(p, &self.parameters()))?;
+                check_spring(p, value)?;
+                self.springs[i].1 = value;
+                self.rebuild()
+            }
+            _ => Err(unknown_param(p, &self.parameters())),
+        }
+    }
+}
+
+/// Builds a [`Model`] part by part and validates it once at the end
+/// ([`Model::builder`]). The first error met is returned by [`ModelBuilder::build`].
+#[derive(Debug)]
+#[must_use = "a builder does nothing until build() is called"]
+pub struct ModelBuilder {
+    model: Result<Model>,
+    validation: Option<ValidationConfig>,
+}
+
+impl ModelBuilder {
+    fn with(mut self, f: impl FnOnce(&mut Model) -> Result<()>) -> Self {
+        if let Ok(m) = &mut self.model
+            && let Err(e) = f(m)
+        {
+            self.model = Err(e);
+        }
+        self
+    }
+
+    /// Sets the damping model.
+    pub fn damping(self, damping: Damping) -> Self {
+        self.with(|m| m.set_damping(damping))
+    }
+
+    /// Adds a nonlinear element.
+    pub fn element(self, element: NonlinearElement) -> Self {
+        self.with(|m| m.add_element(element))
+    }
+
+    /// Adds an excitation point: `amplitude` (N) at the DOF labelled `dof` (e.g. `"2:ux"`).
+    pub fn excitation(self, name: &str, dof: &str, amplitude: f64) -> Self {
+        self.with(|m| {
+            let dof = m.dofs.find(dof)?;
+            m.add_excitation(Excitation {
+                name: name.into(),
+                dof,
+                amplitude,
+            })
+        })
+    }
+
+    /// Adds a sensor measuring `quantity` at the DOF labelled `dof`.
+    pub fn sensor(self, name: &str, dof: &str, quantity: Quantity) -> Self {
+        self.with(|m| {
+            let dof = m.dofs.find(dof)?;
+            m.add_sensor(Sensor {
+                name: name.into(),
+                dof,
+                quantity,
+            })
+        })
+    }
+
+    /// Declares a labelled element group (see [`Model::add_group`]).
+    pub fn group(self, name: &str, stiffness: Option<SparseSym>, mass: Option<SparseSym>) -> Self {
+        self.with(|m| m.add_group(name, stiffness, mass))
+    }
+
+    /// Adds a grounded spring (see [`Model::add_boundary_spring`]) at the DOF labelled `dof`.
+    pub fn boundary_spring(self, dof: &str, k: f64) -> Self {
+        self.with(|m| {
+            let d = m.dofs.find(dof)?;
+            m.add_boundary_spring(d, k)
+        })
+    }
+
+    /// The checks run by [`ModelBuilder::build`] (default: [`ValidationConfig::default`]);
+    /// `None` skips validation.
+    pub fn validation(mut self, cfg: Option<ValidationConfig>) -> Self {
+        self.validation = cfg;
+        self
+    }
+
+    /// The model, validated.
+    pub fn build(self) -> Result<Model> {
+        let model = self.model?;
+        if let Some(cfg) = &self.validation {
+            model.validate(cfg)?;
+        }
+        Ok(model)
     }
 }

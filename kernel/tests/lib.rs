@@ -524,16 +524,23 @@ mod model {
             "{e}"
         );
         let p = m.parameters();
-        assert_eq!(p.names[0], "a.k3");
-        assert_eq!(p.names.len(), 7);
-        m.set_param_by_name("b.e1", 2e-3).unwrap();
-        assert_eq!(m.param(m.param_id("b.e1").unwrap()), 2e-3);
-        let e = m.set_param_by_name("b.gap", 1.0).unwrap_err().to_string();
+        assert_eq!(p[0].to_string(), "a.k3");
+        assert_eq!(p.len(), 7);
+        let e1 = Param::element("b", "e1");
+        m.set_param(&e1, 2e-3).unwrap();
+        assert_eq!(m.param(&e1).unwrap(), 2e-3);
+        let e = m
+            .set_param(&"b.gap".parse().unwrap(), 1.0)
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("unknown parameter 'b.gap'") && e.contains("b.e1"),
             "{e}"
         );
-        let e = m.set_param_by_name("b.k1", -5.0).unwrap_err().to_string();
+        let e = m
+            .set_param(&Param::element("b", "k1"), -5.0)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("b.k1"), "{e}");
         assert_eq!(m.nonlinear_dofs(), vec![0, 1]);
         let e = m
@@ -612,5 +619,144 @@ mod dense {
             let mnorm = m * (v[0] * v[0] + v[1] * v[1]);
             nlsim_kernel::assert_close!(mnorm, 1.0, 1e-14, 0.0);
         }
+    }
+}
+
+mod params {
+    use super::*;
+
+    fn name() -> impl Strategy<Value = String> {
+        "[A-Za-z_-][A-Za-z0-9_-]{0,11}".prop_filter("not a reserved name", |s| {
+            !(s.starts_with("mode") && s[4..].bytes().all(|b| b.is_ascii_digit()))
+                && s != "stiffness_scale"
+        })
+    }
+
+    fn param() -> impl Strategy<Value = Param> {
+        let comp = prop_oneof![
+            Just(Component::Ux),
+            Just(Component::Uy),
+            Just(Component::Uz),
+            Just(Component::Rx),
+            Just(Component::Ry),
+            Just(Component::Rz),
+            Just(Component::U),
+        ];
+        prop_oneof![
+            (name(), "[a-z][a-z0-9_]{0,6}").prop_map(|(e, p)| Param::element(e, p)),
+            (0usize..100_000).prop_map(Param::ModalFrequency),
+            (0usize..100_000).prop_map(Param::ModalDamping),
+            Just(Param::StiffnessScale),
+            name().prop_map(Param::GroupStiffness),
+            name().prop_map(Param::GroupMass),
+            (0u64..u64::MAX, comp)
+                .prop_map(|(n, c)| Param::BoundarySpring(DofLabel::new(n, c))),
+        ]
+    }
+
+    proptest! {
+        /// `parse(display(p)) == p` for every kind of parameter.
+        #[test]
+        fn text_form_round_trips(p in param()) {
+            let text = p.to_string();
+            prop_assert_eq!(text.parse::<Param>().unwrap(), p);
+        }
+    }
+
+    /// Three DOFs in a chain, with the middle spring as a labelled group.
+    fn chain() -> Model {
+        let (k1, k2, m) = (1000.0, 400.0, 2.0);
+        let kg = SparseSym::from_triplets(
+            "K_g",
+            3,
+            &[(1, 1, k2), (2, 2, k2), (1, 2, -k2), (2, 1, -k2)],
+        )
+        .unwrap();
+        let k = SparseSym::from_triplets(
+            "K",
+            3,
+            &[
+                (0, 0, 2.0 * k1),
+                (0, 1, -k1),
+                (1, 0, -k1),
+                (1, 1, k1 + k2),
+                (1, 2, -k2),
+                (2, 1, -k2),
+                (2, 2, k2),
+            ],
+        )
+        .unwrap();
+        let mg = SparseSym::diagonal("M_g", &[0.0, 0.0, m]).unwrap();
+        let mass = SparseSym::diagonal("M", &[m, m, m]).unwrap();
+        Model::builder("chain", DofMap::scalar(3), mass, k)
+            .group("link", Some(kg), Some(mg))
+            .boundary_spring("3:u", 50.0)
+            .element(NonlinearElement::new("nl", Law::Cubic { k3: 1e6 }, Coupling::single(2)).unwrap())
+            .build()
+            .unwrap()
+    }
+
+    /// Group scales and boundary springs change K and M exactly as assembling them by hand.
+    #[test]
+    fn fe_level_parameters_rebuild_the_matrices() {
+        let mut m = chain();
+        let names: Vec<String> = m.parameters().iter().map(ToString::to_string).collect();
+        assert_eq!(
+            names,
+            ["nl.k3", "group:link.k_scale", "group:link.m_scale", "spring:3:u.k"]
+        );
+        assert_eq!(m.stiffness().get(2, 2), 450.0);
+        m.set_param(&"group:link.k_scale".parse().unwrap(), 1.5).unwrap();
+        m.set_param(&"group:link.m_scale".parse().unwrap(), 0.5).unwrap();
+        m.set_param(&"spring:3:u.k".parse().unwrap(), 10.0).unwrap();
+        let k = m.stiffness().to_dense();
+        let want = [
+            [2000.0, -1000.0, 0.0],
+            [-1000.0, 1600.0, -600.0],
+            [0.0, -600.0, 610.0],
+        ];
+        for i in 0..3 {
+            for j in 0..3 {
+                nlsim_kernel::assert_close!(k[(i, j)], want[i][j], 1e-15, 1e-12);
+            }
+        }
+        assert_eq!(m.mass().get(2, 2), 1.0);
+        assert_eq!(m.mass().get(0, 0), 2.0);
+        // Back to 1: the original matrices exactly.
+        m.set_param(&"group:link.k_scale".parse().unwrap(), 1.0).unwrap();
+        assert_eq!(m.stiffness().get(1, 1), 1400.0);
+        // Range checks name the parameter.
+        let e = m
+            .set_param(&Param::GroupStiffness("link".into()), -1.0)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("group:link.k_scale"), "{e}");
+        let e = m
+            .set_param(&"spring:3:u.k".parse().unwrap(), f64::NAN)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("spring:3:u.k"), "{e}");
+        let e = m
+            .param(&Param::GroupMass("web".into()))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("group:web.m_scale") && e.contains("group:link.m_scale"), "{e}");
+    }
+
+    #[test]
+    fn builder_reports_the_first_error_and_reserved_names() {
+        let mass = SparseSym::diagonal("M", &[1.0, 1.0]).unwrap();
+        let k = SparseSym::diagonal("K", &[1.0, 1.0]).unwrap();
+        let e = Model::builder("m", DofMap::scalar(2), mass, k)
+            .excitation("f", "9:u", 1.0)
+            .sensor("s", "1:u", Quantity::Displacement)
+            .build()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("9:u"), "{e}");
+        let e = NonlinearElement::new("mode2", Law::Cubic { k3: 1.0 }, Coupling::single(0))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("reserved"), "{e}");
     }
 }

@@ -1,0 +1,308 @@
+//! One identity for every calibratable quantity, and the outcome status of every iterative
+//! solver.
+//!
+//! A [`Param`] names a quantity wherever it lives: a nonlinear element's law parameter
+//! (`tip.k3`), a modal parameter of the reduced model (`mode1.f`, `mode1.zeta`), the global
+//! stiffness scale (`stiffness_scale`), or an FE-level parameter of the full model: the
+//! stiffness or mass scale of a labelled group of elements (`group:flange.k_scale`,
+//! `group:flange.m_scale`) or a grounded spring at a DOF (`spring:12:uz.k`). The text form
+//! parses and prints round trip (`p.to_string().parse() == Ok(p)`), and it is the name used
+//! in model files, jobs files, calibration settings and result files.
+//!
+//! Every object that holds parameters — the [`Model`](crate::Model), the reduced system, the
+//! time-domain plant, the harmonic balance system — implements [`Parameterized`]: list, get,
+//! set, with the same names and the same range checks. Bounds belong to the caller
+//! (calibration, planning), not to the trait.
+//!
+//! [`Status`] is the outcome of an iterative solver that ran on valid input: converged or why
+//! it stopped. A solver that stops short returns what it computed with its status; `Err` is
+//! reserved for invalid input.
+
+use crate::dof::DofLabel;
+use crate::error::{Error, Result};
+use std::fmt;
+use std::str::FromStr;
+
+/// A calibratable quantity, by identity.
+///
+/// Text forms (modes are 1-based in text, 0-based in the enum):
+///
+/// | variant | text | unit |
+/// |---|---|---|
+/// | [`Param::Element`] | `ELEMENT.PARAM` (`tip.k3`) | the law's (N/m³ for `k3`) |
+/// | [`Param::ModalFrequency`] | `modeN.f` | Hz |
+/// | [`Param::ModalDamping`] | `modeN.zeta` | 1 (fraction of critical) |
+/// | [`Param::StiffnessScale`] | `stiffness_scale` | 1 (factor on every stiffness) |
+/// | [`Param::GroupStiffness`] | `group:NAME.k_scale` | 1 (factor on the group's K) |
+/// | [`Param::GroupMass`] | `group:NAME.m_scale` | 1 (factor on the group's M) |
+/// | [`Param::BoundarySpring`] | `spring:NODE:COMP.k` | N/m (N m/rad on a rotation) |
+///
+/// Element names may not take the form `modeN` (see
+/// [`NonlinearElement::new`](crate::NonlinearElement::new)), so every text has one meaning.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Param {
+    /// Parameter `param` (e.g. `k3`) of the nonlinear element named `element`.
+    Element {
+        /// Element name.
+        element: String,
+        /// Parameter name within the element's law.
+        param: String,
+    },
+    /// Natural frequency `f_r` (Hz) of retained mode `mode` (0-based); its damping ratio is
+    /// held when it changes.
+    ModalFrequency(usize),
+    /// Damping ratio `ζ_r` of retained mode `mode` (0-based): `c̃_rr = 2 ζ_r ω_r`.
+    ModalDamping(usize),
+    /// A factor on the whole linear stiffness: `K → s K` (every `ω_r² → s ω_r²`, residual
+    /// flexibility `D → D / s`).
+    StiffnessScale,
+    /// Stiffness scale of a labelled group of finite elements:
+    /// `K = K₀ + Σ_g (s_g − 1) K_g`.
+    GroupStiffness(String),
+    /// Mass scale of a labelled group of finite elements: `M = M₀ + Σ_g (s_g − 1) M_g`.
+    GroupMass(String),
+    /// A grounded linear spring at one DOF (boundary stiffness): `K_dd += k`.
+    BoundarySpring(DofLabel),
+}
+
+impl Param {
+    /// An element law parameter, `element.param`.
+    pub fn element(element: impl Into<String>, param: impl Into<String>) -> Self {
+        Param::Element {
+            element: element.into(),
+            param: param.into(),
+        }
+    }
+
+    /// The unit of the value, as text (`Hz`, `1`, `N/m`; an element parameter's unit comes
+    /// from its law and is `law` here).
+    pub fn unit(&self) -> &'static str {
+        match self {
+            Param::Element { .. } => "law",
+            Param::ModalFrequency(_) => "Hz",
+            Param::ModalDamping(_)
+            | Param::StiffnessScale
+            | Param::GroupStiffness(_)
+            | Param::GroupMass(_) => "1",
+            Param::BoundarySpring(_) => "N/m",
+        }
+    }
+}
+
+impl fmt::Display for Param {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Param::Element { element, param } => write!(f, "{element}.{param}"),
+            Param::ModalFrequency(r) => write!(f, "mode{}.f", r + 1),
+            Param::ModalDamping(r) => write!(f, "mode{}.zeta", r + 1),
+            Param::StiffnessScale => f.write_str("stiffness_scale"),
+            Param::GroupStiffness(g) => write!(f, "group:{g}.k_scale"),
+            Param::GroupMass(g) => write!(f, "group:{g}.m_scale"),
+            Param::BoundarySpring(d) => write!(f, "spring:{d}.k"),
+        }
+    }
+}
+
+/// Whether `s` is a valid element or group name: ASCII letters, digits, `_` and `-`.
+pub fn is_valid_name(s: &str) -> bool {
+    !s.is_empty()
+        && s
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+}
+
+/// `Some(r)` (0-based) when `s` is `modeN` with `N ≥ 1`.
+pub(crate) fn mode_number(s: &str) -> Option<usize> {
+    let digits = s.strip_prefix("mode")?;
+    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) || digits.len() > 9 {
+        return None;
+    }
+    digits.parse::<usize>().ok()?.checked_sub(1)
+}
+
+impl FromStr for Param {
+    type Err = Error;
+
+    fn from_str(text: &str) -> Result<Self> {
+        let s = text.trim();
+        let bad = |why: &str| {
+            Error::invalid(
+                format!("parameter '{s}'"),
+                format!(
+                    "{why}; expected ELEMENT.PARAM (tip.k3), modeN.f, modeN.zeta, \
+                     stiffness_scale, group:NAME.k_scale, group:NAME.m_scale or spring:NODE:COMP.k"
+                ),
+            )
+        };
+        if s == "stiffness_scale" {
+            return Ok(Param::StiffnessScale);
+        }
+        let (head, tail) = s.rsplit_once('.').ok_or_else(|| bad("no '.'"))?;
+        if let Some(group) = head.strip_prefix("group:") {
+            if !is_valid_name(group) {
+                return Err(bad("a group name has letters, digits, '_' and '-' only"));
+            }
+            return match tail {
+                "k_scale" => Ok(Param::GroupStiffness(group.into())),
+                "m_scale" => Ok(Param::GroupMass(group.into())),
+                _ => Err(bad("a group has k_scale and m_scale")),
+            };
+        }
+        if let Some(dof) = head.strip_prefix("spring:") {
+            if tail != "k" {
+                return Err(bad("a boundary spring has one parameter, k"));
+            }
+            return Ok(Param::BoundarySpring(dof.parse()?));
+        }
+        if let Some(r) = mode_number(head) {
+            return match tail {
+                "f" => Ok(Param::ModalFrequency(r)),
+                "zeta" => Ok(Param::ModalDamping(r)),
+                _ => Err(bad("a mode has f and zeta")),
+            };
+        }
+        if head.starts_with("mode") && head[4..].bytes().all(|b| b.is_ascii_digit()) {
+            return Err(bad("modes are numbered from 1"));
+        }
+        if !is_valid_name(head) {
+            return Err(bad(
+                "an element name has letters, digits, '_' and '-' only",
+            ));
+        }
+        if tail.is_empty() || !tail.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+            return Err(bad("a parameter name has letters, digits and '_' only"));
+        }
+        Ok(Param::element(head, tail))
+    }
+}
+
+/// An object whose parameters can be listed, read and set by [`Param`].
+///
+/// Setting checks the value against the parameter's admissible range (a stiffness must be
+/// non-negative, a frequency positive, …) and keeps every derived quantity of the object
+/// consistent, so that the object afterwards equals one built with the new value.
+pub trait Parameterized {
+    /// Every parameter the object holds, in a fixed order.
+    fn parameters(&self) -> Vec<Param>;
+
+    /// The current value of `p` in its unit ([`Param::unit`]); an unknown parameter is an
+    /// error that lists the known ones.
+    fn param(&self, p: &Param) -> Result<f64>;
+
+    /// Sets `p` to `value` (its unit), with range checks.
+    fn set_param(&mut self, p: &Param, value: f64) -> Result<()>;
+
+    /// The values of `params`, in order.
+    fn param_values(&self, params: &[Param]) -> Result<Vec<f64>> {
+        params.iter().map(|p| self.param(p)).collect()
+    }
+
+    /// Sets every `params[i]` to `values[i]`.
+    fn set_params(&mut self, params: &[Param], values: &[f64]) -> Result<()> {
+        if params.len() != values.len() {
+            return Err(Error::DimensionMismatch {
+                what: "parameter values".into(),
+                expected: params.len(),
+                found: values.len(),
+            });
+        }
+        params
+            .iter()
+            .zip(values)
+            .try_for_each(|(p, &v)| self.set_param(p, v))
+    }
+}
+
+/// The error for a parameter the object does not hold, listing those it does.
+pub fn unknown_param(p: &Param, known: &[Param]) -> Error {
+    Error::UnknownParameter {
+        name: p.to_string(),
+        known: known
+            .iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join(", "),
+    }
+}
+
+/// Checks that `value` is finite for parameter `p`.
+pub fn check_finite(p: &Param, value: f64) -> Result<()> {
+    if value.is_finite() {
+        Ok(())
+    } else {
+        Err(Error::NonFinite {
+            what: "parameter value".into(),
+            location: p.to_string(),
+            value,
+        })
+    }
+}
+
+/// How an iterative solver ended on valid input.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Status {
+    /// The convergence test was met.
+    Converged,
+    /// The iteration (or point) limit was reached first.
+    IterationLimit,
+    /// The step was cut below its smallest allowed size.
+    StepTooSmall,
+    /// The iterates grew without bound or the residual rose beyond recovery.
+    Diverged,
+    /// A NaN or infinity appeared in the iterates.
+    NonFinite,
+    /// A linear system on the way was singular (a Jacobian, a pencil).
+    Singular,
+}
+
+impl Status {
+    /// `true` for [`Status::Converged`].
+    pub fn is_converged(self) -> bool {
+        self == Status::Converged
+    }
+
+    /// A short lower-case description, as reports print it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Status::Converged => "converged",
+            Status::IterationLimit => "iteration limit reached",
+            Status::StepTooSmall => "step too small",
+            Status::Diverged => "diverged",
+            Status::NonFinite => "non-finite values",
+            Status::Singular => "singular linear system",
+        }
+    }
+}
+
+impl fmt::Display for Status {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn text_forms_are_unique_and_checked() {
+        for (s, p) in [
+            ("tip.k3", Param::element("tip", "k3")),
+            ("mode1.f", Param::ModalFrequency(0)),
+            ("mode12.zeta", Param::ModalDamping(11)),
+            ("stiffness_scale", Param::StiffnessScale),
+            ("group:flange.k_scale", Param::GroupStiffness("flange".into())),
+            ("group:flange.m_scale", Param::GroupMass("flange".into())),
+            ("spring:12:uz.k", Param::BoundarySpring("12:uz".parse().unwrap())),
+        ] {
+            assert_eq!(s.parse::<Param>().unwrap(), p, "{s}");
+            assert_eq!(p.to_string(), s);
+        }
+        for bad in [
+            "", "k3", "mode0.f", "mode1.k", "group:.k_scale", "group:a.x", "spring:12:uz.c",
+            "spring:x.k", "a b.k3", "tip.", ".k3",
+        ] {
+            assert!(bad.parse::<Param>().is_err(), "{bad:?} parsed");
+        }
+    }
+}
