@@ -686,3 +686,15 @@ impl NonlinearElement {
         self.set_param(i, value)
     }
 }
+
+impl AsRef<NonlinearElement> for NonlinearElement {
+    fn as_ref(&self) -> &NonlinearElement {
+        self
+    }
+}
+
+impl AsMut<NonlinearElement> for NonlinearElement {
+    fn as_mut(&mut self) -> &mut NonlinearElement {
+        self
+    }
+}

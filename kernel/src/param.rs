@@ -19,6 +19,7 @@
 //! reserved for invalid input.
 
 use crate::dof::DofLabel;
+use crate::element::NonlinearElement;
 use crate::error::{Error, Result};
 use std::fmt;
 use std::str::FromStr;
@@ -235,6 +236,54 @@ pub fn check_finite(p: &Param, value: f64) -> Result<()> {
             location: p.to_string(),
             value,
         })
+    }
+}
+
+/// The law parameters of `elements`, in order (`element.param`).
+pub fn element_parameters<E: AsRef<NonlinearElement>>(elements: &[E]) -> Vec<Param> {
+    elements
+        .iter()
+        .map(AsRef::as_ref)
+        .flat_map(|e| (0..e.law().n_params()).map(move |i| Param::element(e.name(), e.law().param_name(i))))
+        .collect()
+}
+
+/// `(element index, parameter index)` of element parameter `p` among `elements`; `None` for
+/// another kind of parameter or a name no element has.
+pub fn find_element_param<E: AsRef<NonlinearElement>>(
+    elements: &[E],
+    p: &Param,
+) -> Option<(usize, usize)> {
+    let Param::Element { element, param } = p else {
+        return None;
+    };
+    let e = elements.iter().position(|e| e.as_ref().name() == element)?;
+    let law = elements[e].as_ref().law();
+    Some((e, (0..law.n_params()).find(|&i| law.param_name(i) == *param)?))
+}
+
+/// The value of element parameter `p` among `elements`.
+pub fn element_param<E: AsRef<NonlinearElement>>(elements: &[E], p: &Param) -> Result<f64> {
+    find_element_param(elements, p)
+        .map(|(e, i)| elements[e].as_ref().law().param(i))
+        .ok_or_else(|| unknown_param(p, &element_parameters(elements)))
+}
+
+/// Sets element parameter `p` among `elements`, with the law's range checks. An element
+/// that exists without that parameter is an error listing the law's parameters.
+pub fn set_element_param<E: AsRef<NonlinearElement> + AsMut<NonlinearElement>>(
+    elements: &mut [E],
+    p: &Param,
+    value: f64,
+) -> Result<()> {
+    let Param::Element { element, param } = p else {
+        return Err(unknown_param(p, &element_parameters(elements)));
+    };
+    match elements.iter_mut().find(|e| e.as_ref().name() == element) {
+        Some(e) => e
+            .as_mut()
+            .set_named_param(&format!("parameter '{p}'"), param, value),
+        None => Err(unknown_param(p, &element_parameters(elements))),
     }
 }
 

@@ -28,7 +28,7 @@ use crate::history::{
 use crate::hold::{Hold, step_coefficients};
 use crate::plant::{ElementPort, Plant, Responses};
 use faer::c64;
-use nlsim_kernel::{Error, Law, Result};
+use nlsim_kernel::{Error, Law, Result, Status};
 use pulp::{Arch, Simd, WithSimd};
 
 /// Settings of the hold integrator.
@@ -277,6 +277,9 @@ impl Simulator {
         let mut d_new = vec![0.0; nn];
         let mut v_new = vec![0.0; nn];
         let mut d_old = vec![0.0; nn];
+        // Why and at which sample the run stopped short, if it did (samples 0..=last valid).
+        let mut stop: Option<(Status, Error)> = None;
+        let mut last = n_steps;
 
         // t = 0: the loop with the feedthrough only.
         let resp = &self.resp;
@@ -301,7 +304,10 @@ impl Simulator {
                 &mut f,
                 &self.cfg.newton,
             )
-            .map_err(|e| loop_error(e, elements, 0, 0.0))?;
+            .unwrap_or_else(|e| {
+                stop = Some((Status::IterationLimit, loop_error(e, elements, 0, 0.0)));
+                0
+            });
         stats.newton_iterations += it;
         stats.max_newton_iterations = stats.max_newton_iterations.max(it);
         for i in 0..nn {
@@ -337,7 +343,13 @@ impl Simulator {
         let mut ev = EventScratch::new(ns, nn);
         let mut progress = Progress::new(progress, n_steps);
 
+        if stop.is_some() {
+            last = 0;
+        }
         for k in 0..n_steps {
+            if stop.is_some() {
+                break;
+            }
             for (c, col) in self.cols.iter().enumerate() {
                 vals[c] = match *col {
                     Column::Input(i, j) => {
@@ -403,7 +415,14 @@ impl Simulator {
                     break;
                 }
             }
-            let it = solved.map_err(|e| loop_error(e, elements, k + 1, t1))?;
+            let it = match solved {
+                Ok(it) => it,
+                Err(e) => {
+                    stop = Some((Status::IterationLimit, loop_error(e, elements, k + 1, t1)));
+                    last = k;
+                    break;
+                }
+            };
             stats.newton_iterations += it;
             stats.max_newton_iterations = stats.max_newton_iterations.max(it);
             d_new.copy_from_slice(&fb.last_d);
@@ -412,10 +431,14 @@ impl Simulator {
                 d_old[i] = d_hist[i][k];
             }
             if events_on && crossing(elements, &d_old, &d_new).is_some() {
-                self.event_step(
+                if let Err(err) = self.event_step(
                     k, &e, &f_hist, &d_hist, &zr, &zi, &mut zr2, &mut zi2, &mut f, &mut d_new,
                     &mut v_new, &states, &mut ev, &mut fb, &mut stats, elements,
-                )?;
+                ) {
+                    stop = Some((Status::IterationLimit, err));
+                    last = k;
+                    break;
+                }
                 // event_step leaves ẑ[k+1] in ev.za.
                 for r in 0..nr {
                     rp[r] = resp.modal(r, &ev.za);
@@ -440,7 +463,7 @@ impl Simulator {
                 out[o][k + 1] = y;
             }
             if let Some(bad) = (0..nn).find(|&i| !d_new[i].is_finite()) {
-                return Err(Error::Numerical {
+                let err = Error::Numerical {
                     what: format!(
                         "{} integration at step {} (t = {t1:.6e} s)",
                         self.cfg.hold,
@@ -450,23 +473,42 @@ impl Simulator {
                         "the response of element '{}' is not finite: the run diverged",
                         elements[bad].element.name()
                     ),
-                });
+                };
+                stop = Some((Status::NonFinite, err));
+                last = k;
+                break;
             }
             std::mem::swap(&mut zr, &mut zr2);
             std::mem::swap(&mut zi, &mut zi2);
             progress.tick(k + 1);
         }
-        stats.steps = n_steps;
-        // The true state at the end: z = ẑ − Γ1 b̃ f.
+        stats.steps = last;
+        // The true state at the last valid sample: z = ẑ − Γ1 b̃ f.
         let final_state: Vec<c64> = (0..ns)
             .map(|s| {
                 let mut z = c64::new(zr[s / LANES][s % LANES], zi[s / LANES][s % LANES]);
                 for i in 0..nn {
-                    z -= self.g1n[s * nn + i] * f_hist[i][n - 1];
+                    z -= self.g1n[s * nn + i] * f_hist[i][last];
                 }
                 z
             })
             .collect();
+        let mut e = e;
+        if last < n_steps {
+            for v in out
+                .iter_mut()
+                .chain(e.iter_mut())
+                .chain(&mut f_hist)
+                .chain(&mut d_hist)
+                .chain(&mut v_hist)
+            {
+                v.truncate(last + 1);
+            }
+        }
+        let (status, stopped) = match stop {
+            Some((st, err)) => (st, Some(err)),
+            None => (Status::Converged, None),
+        };
         stats.seconds = start.elapsed().as_secs_f64();
         let mut h = TimeHistory {
             method: self.cfg.hold.as_str().into(),
@@ -492,6 +534,8 @@ impl Simulator {
             element_forces: f_hist,
             final_state,
             stats,
+            status,
+            stopped,
         };
         add_residual_rates(plant, &mut h);
         Ok(h)

@@ -3,7 +3,7 @@
 use crate::plant::{Plant, order};
 use crate::signal::Signal;
 use faer::c64;
-use nlsim_kernel::{Error, Quantity, Result};
+use nlsim_kernel::{Error, Param, Quantity, Result, Status};
 
 /// The state the structure starts from.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -33,7 +33,7 @@ pub struct LoadCase {
     /// Initial state.
     pub initial: InitialState,
     /// Element parameters set for this run only: `(element.param, value)`.
-    pub parameters: Vec<(String, f64)>,
+    pub parameters: Vec<(Param, f64)>,
 }
 
 impl LoadCase {
@@ -101,8 +101,8 @@ impl LoadCase {
             } => plant.system.initial_states(displacement, velocity)?,
         };
         let mut elements = plant.elements.clone();
-        for (name, v) in &self.parameters {
-            crate::plant::set_element_parameter(&mut elements, name, *v)?;
+        for (p, v) in &self.parameters {
+            nlsim_kernel::param::set_element_param(&mut elements, p, *v)?;
         }
         Ok((z0, elements))
     }
@@ -175,9 +175,26 @@ pub struct TimeHistory {
     pub final_state: Vec<c64>,
     /// Counters and timings.
     pub stats: RunStats,
+    /// [`Status::Converged`] when every requested step was taken; otherwise why the run
+    /// stopped ([`Status::IterationLimit`]: the nonlinear loop's Newton failed;
+    /// [`Status::NonFinite`]: the response diverged; [`Status::StepTooSmall`]: an adaptive
+    /// step fell below its minimum). The series then hold the samples computed before.
+    pub status: Status,
+    /// Where and why the run stopped short (step, time, element), as an error a caller that
+    /// needs the whole run can return; `None` when complete.
+    pub stopped: Option<Error>,
 }
 
 impl TimeHistory {
+    /// The history when the run is complete; the reason it stopped short otherwise, for
+    /// callers that need every requested sample.
+    pub fn into_complete(self) -> Result<TimeHistory> {
+        match self.stopped {
+            Some(e) => Err(e),
+            None => Ok(self),
+        }
+    }
+
     /// Number of samples.
     pub fn n_samples(&self) -> usize {
         self.inputs

@@ -30,6 +30,6 @@ pub use foh::{FohConfig, Simulator};
 pub use history::{ContactEvent, InitialState, LoadCase, RunStats, Series, TimeHistory};
 pub use hold::{Hold, bias_error, reconstruction_gain, step_coefficients};
 pub use newmark::{Newmark, NewmarkConfig};
-pub use plant::{ElementPort, OutputSpec, Plant};
+pub use plant::{ElementPort, OutputSpec, Plant, PlantBuilder};
 pub use rk::{Rk4Config, Rk45Config, rk4, rk4_with_progress, rk45, rk45_with_progress};
 pub use signal::{Harmonic, Signal};

@@ -19,7 +19,7 @@ use faer::Mat;
 use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::Llt;
 use nlsim_kernel::{
-    Coupling, Damping, Error, Model, NonlinearElement, Quantity, Result, SparseSym,
+    Coupling, Damping, Error, Model, NonlinearElement, Quantity, Result, Status, SparseSym,
 };
 
 /// Settings of the Newmark/HHT reference.
@@ -251,13 +251,8 @@ impl Newmark {
             s.validate(&format!("load case '{}', input '{name}'", case.name))?;
         }
         let mut elements = self.elements.clone();
-        for (name, v) in &case.parameters {
-            let (el, par) = name.split_once('.').unwrap_or((name, ""));
-            let e = elements
-                .iter_mut()
-                .find(|e| e.name() == el)
-                .ok_or_else(|| Error::invalid(format!("parameter '{name}'"), "no such element"))?;
-            e.set_named_param(&format!("parameter '{name}'"), par, *v)?;
+        for (p, v) in &case.parameters {
+            nlsim_kernel::param::set_element_param(&mut elements, p, *v)?;
         }
         let n = self.m.n();
         let nn = elements.len();
@@ -350,7 +345,8 @@ impl Newmark {
             };
         let mut col = Mat::<f64>::zeros(n, 1);
         let mut progress = Progress::new(progress, n_steps);
-        for step in 0..n_steps {
+        let mut stop: Option<(Status, Error, usize)> = None;
+        'steps: for step in 0..n_steps {
             for sub in 0..self.cfg.substeps {
                 let t1 = step as f64 * self.cfg.dt + (sub + 1) as f64 * h;
                 force_at(t1 - h, &mut f_now);
@@ -428,7 +424,7 @@ impl Newmark {
                     }
                 }
                 if !converged {
-                    return Err(Error::Numerical {
+                    let err = Error::Numerical {
                         what: format!(
                             "Newmark Newton at step {} (t = {t1:.6e} s)",
                             step * self.cfg.substeps + sub + 1
@@ -437,7 +433,9 @@ impl Newmark {
                             "no convergence in {} iterations; try a smaller step",
                             self.cfg.newton.max_iterations
                         ),
-                    });
+                    };
+                    stop = Some((Status::IterationLimit, err, step + 1));
+                    break 'steps;
                 }
                 // Final kinematics and internal force at the converged d.
                 kinematics(&d, &dn, &vn, &an, &mut a, &mut v);
@@ -455,6 +453,21 @@ impl Newmark {
             progress.tick(step + 1);
         }
         stats.seconds = start.elapsed().as_secs_f64();
+        let (status, stopped) = match stop {
+            Some((st, err, samples)) => {
+                for v in rec_out
+                    .iter_mut()
+                    .chain(&mut rec_in)
+                    .chain(&mut rec_d)
+                    .chain(&mut rec_v)
+                    .chain(&mut rec_f)
+                {
+                    v.truncate(samples);
+                }
+                (st, Some(err))
+            }
+            None => (Status::Converged, None),
+        };
         Ok(TimeHistory {
             method: if alpha == 0.0 { "newmark" } else { "hht" }.into(),
             case: case.name.clone(),
@@ -481,6 +494,8 @@ impl Newmark {
             element_forces: rec_f,
             final_state: Vec::new(),
             stats,
+            status,
+            stopped,
         })
     }
 }

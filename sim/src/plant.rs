@@ -2,7 +2,10 @@
 //! elements fed back at their ports, the excitation inputs and the requested outputs.
 
 use faer::c64;
-use nlsim_kernel::{Error, Law, Model, NonlinearElement, Quantity, Result};
+use nlsim_kernel::param::{element_param, element_parameters, set_element_param};
+use nlsim_kernel::{
+    Error, Law, Model, NonlinearElement, Param, Parameterized, Quantity, Result,
+};
 use nlsim_reduction::ModalSystem;
 
 /// A nonlinear element fed back at a port of the modal system.
@@ -115,9 +118,14 @@ impl Plant {
         })
     }
 
-    /// Sets element parameter `name` (`element.param`, e.g. `tip_spring.k3`) to `value`.
-    pub fn set_parameter(&mut self, name: &str, value: f64) -> Result<()> {
-        set_element_parameter(&mut self.elements, name, value)
+    /// A builder on `system`: `Plant::builder(sys).element(e, port).input("f", 0).build()?`.
+    pub fn builder(system: ModalSystem) -> PlantBuilder {
+        PlantBuilder {
+            system,
+            elements: Vec::new(),
+            inputs: Vec::new(),
+            outputs: Vec::new(),
+        }
     }
 
     /// Number of diagonal states.
@@ -302,26 +310,71 @@ pub(crate) fn order(q: Quantity) -> u32 {
 }
 
 /// Sets parameter `name` (`element.param`) of the element it names in `elements`.
-pub(crate) fn set_element_parameter(
-    elements: &mut [ElementPort],
-    name: &str,
-    value: f64,
-) -> Result<()> {
-    let (el, par) = name.split_once('.').ok_or_else(|| {
-        Error::invalid(
-            format!("parameter '{name}'"),
-            "expected element.parameter, e.g. tip_spring.k3",
-        )
-    })?;
-    let e = elements
-        .iter_mut()
-        .find(|e| e.element.name() == el)
-        .ok_or_else(|| {
-            Error::invalid(
-                format!("parameter '{name}'"),
-                format!("the plant has no element '{el}'"),
-            )
-        })?;
-    e.element
-        .set_named_param(&format!("parameter '{name}'"), par, value)
+
+impl AsRef<NonlinearElement> for ElementPort {
+    fn as_ref(&self) -> &NonlinearElement {
+        &self.element
+    }
+}
+
+impl AsMut<NonlinearElement> for ElementPort {
+    fn as_mut(&mut self) -> &mut NonlinearElement {
+        &mut self.element
+    }
+}
+
+/// The element law parameters of the plant (`element.param`). Its modal system is fixed:
+/// modal parameters are set on the reduced model before the plant is built.
+impl Parameterized for Plant {
+    fn parameters(&self) -> Vec<Param> {
+        element_parameters(&self.elements)
+    }
+
+    fn param(&self, p: &Param) -> Result<f64> {
+        element_param(&self.elements, p)
+    }
+
+    fn set_param(&mut self, p: &Param, value: f64) -> Result<()> {
+        set_element_param(&mut self.elements, p, value)
+    }
+}
+
+/// Assembles a [`Plant`] part by part ([`Plant::builder`]); validated by
+/// [`PlantBuilder::build`].
+#[derive(Debug, Clone)]
+#[must_use = "a builder does nothing until build() is called"]
+pub struct PlantBuilder {
+    system: ModalSystem,
+    elements: Vec<ElementPort>,
+    inputs: Vec<(String, usize)>,
+    outputs: Vec<OutputSpec>,
+}
+
+impl PlantBuilder {
+    /// A nonlinear element fed back at port `port`.
+    pub fn element(mut self, element: NonlinearElement, port: usize) -> Self {
+        self.elements.push(ElementPort { element, port });
+        self
+    }
+
+    /// An excitation input `name` at port `port`.
+    pub fn input(mut self, name: impl Into<String>, port: usize) -> Self {
+        self.inputs.push((name.into(), port));
+        self
+    }
+
+    /// An output: `quantity` at port `port`.
+    pub fn output(mut self, name: impl Into<String>, port: usize, quantity: Quantity) -> Self {
+        self.outputs.push(OutputSpec {
+            name: name.into(),
+            port,
+            quantity,
+        });
+        self
+    }
+
+    /// The validated plant.
+    pub fn build(self) -> Result<Plant> {
+        Plant::new(self.system, self.elements, self.inputs, self.outputs)
+    }
 }

@@ -17,7 +17,7 @@ use crate::foh::loop_error;
 use crate::history::{LoadCase, Progress, RunStats, Series, TimeHistory, add_residual_rates};
 use crate::plant::{Plant, Responses};
 use faer::c64;
-use nlsim_kernel::{Error, Result};
+use nlsim_kernel::{Error, Result, Status};
 
 /// Settings of [`rk45`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -223,7 +223,26 @@ impl Record {
         dt: f64,
         final_state: Vec<c64>,
         stats: RunStats,
+        stop: Option<(Status, Error, usize)>,
     ) -> TimeHistory {
+        let mut rec = self;
+        let (status, stopped) = match stop {
+            Some((st, err, samples)) => {
+                for v in rec
+                    .out
+                    .iter_mut()
+                    .chain(&mut rec.inputs)
+                    .chain(&mut rec.d)
+                    .chain(&mut rec.v)
+                    .chain(&mut rec.f)
+                {
+                    v.truncate(samples);
+                }
+                (st, Some(err))
+            }
+            None => (Status::Converged, None),
+        };
+        let rec = rec;
         let mut h = TimeHistory {
             method: method.into(),
             case: case.name.clone(),
@@ -231,7 +250,7 @@ impl Record {
             outputs: plant
                 .outputs
                 .iter()
-                .zip(self.out)
+                .zip(rec.out)
                 .map(|(o, v)| Series {
                     name: o.name.clone(),
                     quantity: o.quantity,
@@ -242,18 +261,20 @@ impl Record {
                 .inputs
                 .iter()
                 .map(|(n, _)| n.clone())
-                .zip(self.inputs)
+                .zip(rec.inputs)
                 .collect(),
             element_names: plant
                 .elements
                 .iter()
                 .map(|e| e.element.name().to_string())
                 .collect(),
-            element_displacements: self.d,
-            element_velocities: self.v,
-            element_forces: self.f,
+            element_displacements: rec.d,
+            element_velocities: rec.v,
+            element_forces: rec.f,
             final_state,
             stats,
+            status,
+            stopped,
         };
         add_residual_rates(plant, &mut h);
         h
@@ -394,16 +415,19 @@ pub fn rk45_with_progress(
     }
     let mut progress = Progress::new(progress, n_steps);
     let mut next = 1;
+    let mut stop: Option<(Status, Error, usize)> = None;
     while next < n {
         if stats.steps + stats.rejected_steps >= cfg.max_steps {
-            return Err(Error::Numerical {
+            let err = Error::Numerical {
                 what: format!("RK45 at t = {t:.6e} s"),
                 detail: format!(
                     "step limit {} reached (step {h:.3e} s); the problem is stiff for an explicit \
                      method or the tolerances are too tight",
                     cfg.max_steps
                 ),
-            });
+            };
+            stop = Some((Status::IterationLimit, err, next));
+            break;
         }
         let hmin = 16.0 * f64::EPSILON * t.abs().max(1e-300);
         h = h.min(hmax).min(t_end - t).max(hmin);
@@ -429,7 +453,8 @@ pub fn rk45_with_progress(
         if let Some(e) = stage_failed {
             stats.rejected_steps += 1;
             if h <= hmin {
-                return Err(e);
+                stop = Some((Status::StepTooSmall, e, next));
+                break;
             }
             h *= 0.25;
             continue;
@@ -447,18 +472,22 @@ pub fn rk45_with_progress(
             err = err.max(e.re.abs() / sc_re).max(e.im.abs() / sc_im);
         }
         if !err.is_finite() {
-            return Err(Error::Numerical {
+            let err = Error::Numerical {
                 what: format!("RK45 at t = {t:.6e} s"),
                 detail: "the error estimate is not finite: the run diverged".into(),
-            });
+            };
+            stop = Some((Status::NonFinite, err, next));
+            break;
         }
         if err > 1.0 {
             stats.rejected_steps += 1;
             if h <= hmin {
-                return Err(Error::Numerical {
+                let err = Error::Numerical {
                     what: format!("RK45 at t = {t:.6e} s"),
                     detail: "the step fell below the round-off limit".into(),
-                });
+                };
+                stop = Some((Status::StepTooSmall, err, next));
+                break;
             }
             h *= (0.8 * err.powf(-0.2)).max(0.1);
             continue;
@@ -480,9 +509,15 @@ pub fn rk45_with_progress(
                 let r5 = evec[s];
                 ytmp[s] = z[s] + (r2 + (r3 + (r4 + r5 * (1.0 - th)) * th) * (1.0 - th)) * th;
             }
-            rhs.sample(next, ts, &ytmp, &mut rec)?;
+            if let Err(e) = rhs.sample(next, ts, &ytmp, &mut rec) {
+                stop = Some((Status::IterationLimit, e, next));
+                break;
+            }
             progress.tick(next);
             next += 1;
+        }
+        if stop.is_some() {
+            break;
         }
         t = t_new;
         z.copy_from_slice(&ynew);
@@ -500,7 +535,7 @@ pub fn rk45_with_progress(
     stats.newton_iterations = rhs.iterations;
     stats.max_newton_iterations = rhs.max_iterations;
     stats.seconds = start.elapsed().as_secs_f64();
-    Ok(rec.finish(plant, "rk45", case, dt, z, stats))
+    Ok(rec.finish(plant, "rk45", case, dt, z, stats, stop))
 }
 
 /// Classic fourth-order Runge–Kutta with `cfg.substeps` steps per sample interval `dt`.
@@ -552,16 +587,27 @@ pub fn rk4_with_progress(
     let mut k = vec![vec![c64::new(0.0, 0.0); ns]; 4];
     let mut y = vec![c64::new(0.0, 0.0); ns];
     let mut progress = Progress::new(progress, n_steps);
-    for step in 0..n_steps {
+    let mut stop: Option<(Status, Error, usize)> = None;
+    'steps: for step in 0..n_steps {
+        let z_step = z.clone();
         for sub in 0..cfg.substeps {
             let t = step as f64 * dt + sub as f64 * h;
-            rhs.eval(t, &z, &mut k[0])?;
-            for (st, (cf, tf)) in [(0.5, 0.5), (0.5, 0.5), (1.0, 1.0)].into_iter().enumerate() {
-                for s in 0..ns {
-                    y[s] = z[s] + k[st][s] * (h * cf);
+            let mut stages = || -> Result<()> {
+                rhs.eval(t, &z, &mut k[0])?;
+                for (st, (cf, tf)) in [(0.5, 0.5), (0.5, 0.5), (1.0, 1.0)].into_iter().enumerate()
+                {
+                    for s in 0..ns {
+                        y[s] = z[s] + k[st][s] * (h * cf);
+                    }
+                    let (_, tail) = k.split_at_mut(st + 1);
+                    rhs.eval(t + tf * h, &y, &mut tail[0])?;
                 }
-                let (_, tail) = k.split_at_mut(st + 1);
-                rhs.eval(t + tf * h, &y, &mut tail[0])?;
+                Ok(())
+            };
+            if let Err(e) = stages() {
+                z = z_step;
+                stop = Some((Status::IterationLimit, e, step + 1));
+                break 'steps;
             }
             for s in 0..ns {
                 z[s] += (k[0][s] + (k[1][s] + k[2][s]) * 2.0 + k[3][s]) * (h / 6.0);
@@ -569,21 +615,28 @@ pub fn rk4_with_progress(
             stats.steps += 1;
         }
         if z.iter().any(|v| !(v.re.is_finite() && v.im.is_finite())) {
-            return Err(Error::Numerical {
+            let err = Error::Numerical {
                 what: format!(
                     "RK4 at step {} (t = {:.6e} s)",
                     step + 1,
                     (step + 1) as f64 * dt
                 ),
                 detail: "the state is not finite: the run diverged".into(),
-            });
+            };
+            z = z_step;
+            stop = Some((Status::NonFinite, err, step + 1));
+            break;
         }
-        rhs.sample(step + 1, (step + 1) as f64 * dt, &z, &mut rec)?;
+        if let Err(e) = rhs.sample(step + 1, (step + 1) as f64 * dt, &z, &mut rec) {
+            z = z_step;
+            stop = Some((Status::IterationLimit, e, step + 1));
+            break;
+        }
         progress.tick(step + 1);
     }
     stats.evaluations = rhs.evaluations;
     stats.newton_iterations = rhs.iterations;
     stats.max_newton_iterations = rhs.max_iterations;
     stats.seconds = start.elapsed().as_secs_f64();
-    Ok(rec.finish(plant, "rk4", case, dt, z, stats))
+    Ok(rec.finish(plant, "rk4", case, dt, z, stats, stop))
 }

@@ -380,7 +380,7 @@ fn batch_is_bit_identical_for_any_thread_count() {
                 vec![Signal::sine(1.0 + 0.2 * i as f64, 24.0)],
             );
             c.parameters
-                .push(("tip_spring.k3".into(), 6e9 * (1.0 + i as f64)));
+                .push(("tip_spring.k3".parse().unwrap(), 6e9 * (1.0 + i as f64)));
             c
         })
         .collect();

@@ -149,7 +149,7 @@ fn bad_input_gets_clear_errors() {
     assert!(e.contains("sample 2"), "{e}");
     // Unknown parameter.
     let mut c = LoadCase::new("p", vec![Signal::Zero]);
-    c.parameters.push(("tip_spring.k9".into(), 1.0));
+    c.parameters.push(("tip_spring.k9".parse().unwrap(), 1.0));
     let e = msg(sim.run(&c, 10).unwrap_err());
     assert!(e.contains("has parameters k3"), "{e}");
     // A Newton that cannot converge names the step and time.
@@ -159,9 +159,18 @@ fn bad_input_gets_clear_errors() {
         rtol: 1e-15,
     };
     let sim = Simulator::new(&plant, &cfg).unwrap();
-    let e = msg(sim
+    // It is an outcome, not an error: the samples before the failing step come back with
+    // the status and the reason.
+    let h = sim
         .run(&LoadCase::new("hard", vec![Signal::sine(50.0, 24.0)]), 2000)
-        .unwrap_err());
+        .unwrap();
+    assert_eq!(h.status, nlsim_kernel::Status::IterationLimit);
+    assert!(h.n_samples() < 2001 && h.n_samples() == h.stats.steps + 1);
+    for s in h.outputs.iter().map(|o| &o.values).chain(&h.element_forces) {
+        assert_eq!(s.len(), h.n_samples());
+        assert!(s.iter().all(|v| v.is_finite()));
+    }
+    let e = msg(h.into_complete().unwrap_err());
     assert!(
         e.contains("step") && e.contains("t = ") && e.contains("tip_spring"),
         "{e}"
