@@ -11,6 +11,10 @@ test:
 	@scripts/ensure-deps.sh --test
 	cargo fmt --all -- --check
 	cargo clippy --workspace --all-targets -- -D warnings
+	RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --quiet
+	@# The computation alone (no `io`): builds, and pulls in no HDF5 or plotting crate.
+	cargo build -p nlsim --no-default-features --quiet
+	@! cargo tree -p nlsim --no-default-features -e normal | grep -E 'hdf5|plotters|png '
 	cargo test --workspace
 	scripts/slurm-e2e.sh $${CARGO_TARGET_DIR:-target}/debug/nlsim
 

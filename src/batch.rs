@@ -36,6 +36,8 @@ use crate::error::{Error, Result};
 use crate::output::{h5err, provenance, str_attr};
 use crate::run::{FrfRequest, Method, SimRequest, SweepMode, run_frf, run_simulation};
 use hdf5_metno as hdf5;
+use nlsim_kernel::Parameterized;
+use nlsim_kernel::param::parse_known;
 use rand::{RngExt, SeedableRng};
 use rayon::prelude::*;
 use serde::Deserialize;
@@ -290,6 +292,9 @@ impl Batch {
                     modes: t.modes.unwrap_or(d.modes),
                     residual: t.residual.unwrap_or(d.residual),
                     stability: t.stability.unwrap_or(d.stability),
+                    // Jobs run in parallel, each sequential inside: results independent of
+                    // the thread and shard count.
+                    par: faer::Par::Seq,
                 };
                 req.check()
                     .map_err(|e| err(at("[frf]"), "frf", e.to_string()))?;
@@ -335,6 +340,7 @@ impl Batch {
                     atol: t.atol.unwrap_or(d.atol),
                     substeps: t.substeps.unwrap_or(d.substeps),
                     hht_alpha: t.hht_alpha.unwrap_or(d.hht_alpha),
+                    par: faer::Par::Seq,
                 };
                 req.check()
                     .map_err(|e| err(at("[simulate]"), "simulate", e.to_string()))?;
@@ -534,8 +540,8 @@ impl Batch {
         for m in &models {
             let model = crate::run::load_for_run(m, &self.sets).map_err(|e| err(m, "model", e))?;
             for n in &names {
-                model
-                    .param_id(n)
+                parse_known(n, &model.parameters())
+                    .and_then(|p| model.param(&p))
                     .map_err(|e| err(n, "set", Error::Model(e)))?;
             }
         }
@@ -807,8 +813,6 @@ pub fn run_shard(
         }
         let jobs = file.create_group("jobs").map_err(&err)?;
         let width = rayon::current_num_threads().max(1);
-        let saved = faer::get_global_parallelism();
-        faer::set_global_parallelism(faer::Par::Seq);
         let mut done = 0;
         let mut outcome = Ok(());
         for chunk in mine.chunks(width) {
@@ -835,7 +839,6 @@ pub fn run_shard(
             }
             file.flush().map_err(&err)?;
         }
-        faer::set_global_parallelism(saved);
         outcome?;
         u64_attr_write(&root, "complete", 1).map_err(&err)?;
         file.flush().map_err(&err)?;

@@ -93,8 +93,8 @@ fn write_csv(
         env!("CARGO_PKG_VERSION"),
         info.model_spec,
         info.mode,
-        sys.set.h,
-        sys.set.nu,
+        sys.harmonics().h,
+        sys.harmonics().nu,
         info.modes,
         if info.residual {
             " + residual flexibility"
@@ -108,9 +108,9 @@ fn write_csv(
          <sensor>_h<r>_re/_im: complex amplitude of harmonic r x Omega (q = Re(Q e^(i r Omega t)))"
     );
     s.push_str("frequency_hz,level,stable,kind,max_floquet_real_per_s");
-    for sen in &sys.sensors {
-        for k in 0..=sys.set.h {
-            let l = harmonic_label(k, sys.set.nu).replace('/', "_");
+    for sen in sys.sensors() {
+        for k in 0..=sys.harmonics().h {
+            let l = harmonic_label(k, sys.harmonics().nu).replace('/', "_");
             let u = unit(sen.quantity).replace('/', "_per_").replace("^2", "2");
             let _ = write!(s, ",{0}_h{l}_re_{u},{0}_h{l}_im_{u}", sen.name);
         }
@@ -184,8 +184,8 @@ pub(crate) fn write_group(
         "convention",
         "q(t) = Re(sum_k Q_k exp(i k Omega t / nu)); harmonic k is at k/nu times the fundamental",
     )?;
-    f64_attr(g, "harmonics", sys.set.h as f64)?;
-    f64_attr(g, "subharmonic_order", sys.set.nu as f64)?;
+    f64_attr(g, "harmonics", sys.harmonics().h as f64)?;
+    f64_attr(g, "subharmonic_order", sys.harmonics().nu as f64)?;
     let n = branch.points.len();
     let real = |g: &hdf5::Group, name: &str, data: &[f64], u: &str| -> hdf5::Result<()> {
         let d = g.new_dataset_builder().with_data(data).create(name)?;
@@ -211,13 +211,13 @@ pub(crate) fn write_group(
     let kd: Vec<u8> = branch.points.iter().map(|p| kind_code(p.kind)).collect();
     let d = g.new_dataset_builder().with_data(&kd).create("kind")?;
     str_attr(&d, "legend", "0 regular, 1 fold, 2 end, 3 jump")?;
-    let ratio: Vec<f64> = (0..=sys.set.h)
-        .map(|k| k as f64 / sys.set.nu as f64)
+    let ratio: Vec<f64> = (0..=sys.harmonics().h)
+        .map(|k| k as f64 / sys.harmonics().nu as f64)
         .collect();
     real(g, "harmonic_ratio", &ratio, "1")?;
     let gsen = g.create_group("sensors")?;
-    let nk = sys.set.h + 1;
-    for (s, sen) in sys.sensors.iter().enumerate() {
+    let nk = sys.harmonics().h + 1;
+    for (s, sen) in sys.sensors().iter().enumerate() {
         let gs = gsen.create_group(&sen.name)?;
         str_attr(&gs, "quantity", sen.quantity.as_str())?;
         let data: Vec<c64> = (0..n)
@@ -229,11 +229,11 @@ pub(crate) fn write_group(
         str_attr(&d, "unit", unit(sen.quantity))?;
         str_attr(&d, "dims", "point x harmonic")?;
         // FRFs per input: Y_k / F_k where harmonic k is forced.
-        for (i, (name, _)) in sys.inputs.iter().enumerate() {
+        for (i, (name, _)) in sys.inputs().iter().enumerate() {
             let frf: Vec<c64> = (0..n)
                 .flat_map(|p| (0..nk).map(move |k| (p, k)))
                 .map(|(p, k)| {
-                    let f = sys.forcing.amplitude(i, k) * branch.points[p].scale;
+                    let f = sys.forcing().amplitude(i, k) * branch.points[p].scale;
                     if f == c64::new(0.0, 0.0) {
                         c64::new(f64::NAN, f64::NAN)
                     } else {
@@ -251,8 +251,8 @@ pub(crate) fn write_group(
         }
     }
     let gel = g.create_group("elements")?;
-    let nh = sys.set.len();
-    for (e, el) in sys.elements.iter().enumerate() {
+    let nh = sys.harmonics().len();
+    for (e, el) in sys.elements().iter().enumerate() {
         let data: Vec<f64> = branch
             .points
             .iter()
@@ -329,7 +329,7 @@ impl crate::plot::Figure for FrfPlot<'_> {
             .iter()
             .map(|p| p.omega / (2.0 * std::f64::consts::PI))
             .collect();
-        let nk = sys.set.h + 1;
+        let nk = sys.harmonics().h + 1;
         let amp = |i: usize, k: usize| y[i][(sensor, k)].norm();
         let peak_k: Vec<f64> = (0..nk)
             .map(|k| (0..y.len()).fold(0.0f64, |m, i| m.max(amp(i, k))))
@@ -342,7 +342,7 @@ impl crate::plot::Figure for FrfPlot<'_> {
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
                 (a.min(*v), b.max(*v))
             });
-        let sen = &sys.sensors[sensor];
+        let sen = &sys.sensors()[sensor];
         root.fill(&WHITE)?;
         let mut chart = ChartBuilder::on(root)
             .caption(title, ("sans-serif", 20))
@@ -362,7 +362,7 @@ impl crate::plot::Figure for FrfPlot<'_> {
         let palette = [BLUE, GREEN, MAGENTA, CYAN, BLACK, RGBColor(150, 100, 0)];
         for (c, &k) in shown.iter().enumerate() {
             let colour = palette[c % palette.len()];
-            let width = if k == sys.set.nu { 3 } else { 1 };
+            let width = if k == sys.harmonics().nu { 3 } else { 1 };
             // Consecutive points of equal stability form one segment.
             let mut start = 0;
             let mut labelled = false;
@@ -386,8 +386,8 @@ impl crate::plot::Figure for FrfPlot<'_> {
                     labelled = true;
                     s.label(format!(
                         "harmonic {} ({})",
-                        harmonic_label(k, sys.set.nu),
-                        if k == sys.set.nu {
+                        harmonic_label(k, sys.harmonics().nu),
+                        if k == sys.harmonics().nu {
                             "fundamental"
                         } else {
                             "stable"
@@ -406,7 +406,7 @@ impl crate::plot::Figure for FrfPlot<'_> {
                 .label("unstable")
                 .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
         }
-        let k = sys.set.nu;
+        let k = sys.harmonics().nu;
         let marks: Vec<(f64, f64)> = branch
             .points
             .iter()

@@ -4,7 +4,8 @@
 
 use crate::error::{Error, Result};
 use nlsim_hb::{Branch, ContinuationConfig, HarmonicSet, HbConfig, HbSystem, SolutionPoint};
-use nlsim_kernel::{Model, ValidationConfig};
+use nlsim_kernel::param::parse_known;
+use nlsim_kernel::{Model, Parameterized, Status, ValidationConfig};
 use nlsim_reduction::{EigenConfig, ModalSystem, ModeSelection, ReducedModel, ReductionConfig};
 use nlsim_sim::{
     FohConfig, Hold, LoadCase, Newmark, NewmarkConfig, Plant, Rk4Config, Rk45Config, Simulator,
@@ -35,19 +36,21 @@ pub fn apply_sets(model: &mut Model, sets: &[String]) -> Result<()> {
             .trim()
             .parse()
             .map_err(|_| Error::Usage(format!("--set '{s}': '{v}' is not a number")))?;
-        model.set_param_by_name(name.trim(), v)?;
+        let p = parse_known(name, &model.parameters())?;
+        model.set_param(&p, v)?;
     }
     Ok(())
 }
 
 /// The reduction every run uses: the lowest `modes` modes, with or without residual
 /// flexibility.
-fn reduce(model: &Model, modes: usize, residual: bool) -> Result<ReducedModel> {
+fn reduce(model: &Model, modes: usize, residual: bool, par: faer::Par) -> Result<ReducedModel> {
     Ok(nlsim_reduction::reduce(
         model,
         &ReductionConfig {
             eigen: EigenConfig {
                 selection: ModeSelection::Lowest(modes),
+                par,
                 ..EigenConfig::default()
             },
             residual_flexibility: residual,
@@ -110,6 +113,8 @@ pub struct FrfRequest {
     pub residual: bool,
     /// Hill stability per point.
     pub stability: bool,
+    /// Parallelism of the reduction (faer's `Par`; `Par::rayon(0)` uses the current pool).
+    pub par: faer::Par,
 }
 
 impl Default for FrfRequest {
@@ -125,6 +130,7 @@ impl Default for FrfRequest {
             modes: 20,
             residual: true,
             stability: true,
+            par: faer::Par::rayon(0),
         }
     }
 }
@@ -165,6 +171,9 @@ pub struct FrfRun {
     pub system: HbSystem,
     /// The solution points.
     pub branch: Branch,
+    /// [`Status::Converged`] when the whole range was followed,
+    /// [`Status::IterationLimit`] when the continuation stopped at its point limit.
+    pub status: Status,
     /// Sensor responses (sensors × harmonics) per point, from [`crate::frf::responses`].
     pub responses: Vec<faer::Mat<faer::c64>>,
     /// Retained modes.
@@ -200,20 +209,22 @@ pub fn run_frf(
     }
     let modes = req.modes.min(model.n_dofs());
     let t0 = Instant::now();
-    let reduced = reduce(model, modes, req.residual)?;
+    let reduced = reduce(model, modes, req.residual, req.par)?;
     let reduce_seconds = t0.elapsed().as_secs_f64();
     let mut system = HbSystem::from_model(model, &reduced, set, HbConfig::default())?;
     if let Some(f) = req.force {
-        for t in &mut system.forcing.terms {
+        let mut forcing = system.forcing().clone();
+        for t in &mut forcing.terms {
             t.amplitude = faer::c64::new(f, 0.0);
         }
+        system.set_forcing(forcing)?;
     }
     let t1 = Instant::now();
-    let branch = match req.mode {
+    let report = match req.mode {
         SweepMode::Continuation => {
             let mut cfg = ContinuationConfig::frequency(req.from_hz, req.to_hz);
             cfg.stability = req.stability;
-            nlsim_hb::continuation(&system, &cfg, None, progress)?
+            nlsim_hb::continuation_with_progress(&system, &cfg, None, progress)?
         }
         SweepMode::StepUp | SweepMode::StepDown => {
             let (lo, hi) = (req.from_hz.min(req.to_hz), req.from_hz.max(req.to_hz));
@@ -225,14 +236,17 @@ pub fn run_frf(
             let omegas: Vec<f64> = (0..req.points)
                 .map(|i| 2.0 * PI * (a + (b - a) * i as f64 / (req.points - 1) as f64))
                 .collect();
-            nlsim_hb::stepped_sine(&system, &omegas, 1.0, req.stability, progress)?
+            nlsim_hb::stepped_sine_with_progress(&system, &omegas, 1.0, req.stability, progress)?
         }
     };
     let seconds = t1.elapsed().as_secs_f64();
+    let status = report.status;
+    let branch = report.into_branch()?;
     let responses = crate::frf::responses(&system, &branch);
     Ok(FrfRun {
         system,
         branch,
+        status,
         responses,
         modes,
         reduce_seconds,
@@ -314,6 +328,8 @@ pub struct SimRequest {
     pub substeps: usize,
     /// HHT α in `[−1/3, 0]`.
     pub hht_alpha: f64,
+    /// Parallelism of the reduction (faer's `Par`; `Par::rayon(0)` uses the current pool).
+    pub par: faer::Par,
 }
 
 impl Default for SimRequest {
@@ -330,6 +346,7 @@ impl Default for SimRequest {
             atol: 1e-6,
             substeps: 1,
             hht_alpha: -0.05,
+            par: faer::Par::rayon(0),
         }
     }
 }
@@ -438,7 +455,7 @@ pub fn run_simulation(
         req.modes.min(model.n_dofs())
     };
     let t0 = Instant::now();
-    let reduced = reduce(model, modes, req.residual)?;
+    let reduced = reduce(model, modes, req.residual, req.par)?;
     let f1 = reduced.modes.frequencies_hz()[0];
     let reduce_seconds = t0.elapsed().as_secs_f64();
     let excitation = excitation_specs(model, &req.excitation, f1)?;

@@ -1,6 +1,6 @@
 //! A readable summary of a model, for `nlsim check` and the demo.
 
-use nlsim_kernel::{Component, Damping, Model, ValidationReport};
+use nlsim_kernel::{Component, Damping, Model, Parameterized, ValidationReport};
 use std::fmt::Write;
 
 /// Formats the summary of `model` (and of its validation, when given) as aligned text.
@@ -139,10 +139,13 @@ pub fn model_summary(model: &Model, source: &str, validation: Option<&Validation
     let _ = writeln!(
         s,
         "  parameters   {}",
-        if p.names.is_empty() {
+        if p.is_empty() {
             "none".into()
         } else {
-            p.names.join(", ")
+            p.iter()
+                .map(ToString::to_string)
+                .collect::<Vec<_>>()
+                .join(", ")
         }
     );
     if let Some(v) = validation {

@@ -62,7 +62,10 @@ fn bench_model(c: &mut Criterion, name: &str, model: &Model) {
     g.warm_up_time(Duration::from_millis(200));
     g.measurement_time(Duration::from_secs(3));
     // One point: Newton from the previous grid point's solution, as in a sweep.
-    let sweep = stepped_sine(&sys, &omegas, 1.0, false, &mut |_| {}).unwrap();
+    let sweep = stepped_sine(&sys, &omegas, 1.0, false)
+        .unwrap()
+        .into_branch()
+        .unwrap();
     let x_prev = sweep.points[199].x.clone();
     g.bench_function("point", |b| {
         b.iter(|| black_box(sys.solve(omegas[200], 1.0, &x_prev).unwrap()))
@@ -72,15 +75,32 @@ fn bench_model(c: &mut Criterion, name: &str, model: &Model) {
         b.iter(|| black_box(sys.stability(&x200, omegas[200]).unwrap()))
     });
     g.bench_function("frf_400_points", |b| {
-        b.iter(|| black_box(stepped_sine(&sys, &omegas, 1.0, false, &mut |_| {}).unwrap()))
+        b.iter(|| {
+            black_box(
+                stepped_sine(&sys, &omegas, 1.0, false)
+                    .unwrap()
+                    .into_branch()
+                    .unwrap(),
+            )
+        })
     });
     g.bench_function("frf_400_points_with_stability", |b| {
-        b.iter(|| black_box(stepped_sine(&sys, &omegas, 1.0, true, &mut |_| {}).unwrap()))
+        b.iter(|| {
+            black_box(
+                stepped_sine(&sys, &omegas, 1.0, true)
+                    .unwrap()
+                    .into_branch()
+                    .unwrap(),
+            )
+        })
     });
     g.finish();
     // Ratio table, same process.
     let t = Instant::now();
-    let br = stepped_sine(&sys, &omegas, 1.0, false, &mut |_| {}).unwrap();
+    let br = stepped_sine(&sys, &omegas, 1.0, false)
+        .unwrap()
+        .into_branch()
+        .unwrap();
     let t_frf = t.elapsed().as_secs_f64();
     let iters: usize = br.points.iter().map(|p| p.iterations).sum();
     let pencil = ShiftedPencil::new(model.stiffness(), model.mass()).unwrap();

@@ -145,7 +145,13 @@ impl ContinuationReport {
             .map_or_else(|| self.status.to_string(), |(_, d)| d.to_string())
     }
 
-    fn stopped(status: Status, branch: Branch, stats: ContinuationStats, what: String, why: String) -> Self {
+    fn stopped(
+        status: Status,
+        branch: Branch,
+        stats: ContinuationStats,
+        what: String,
+        why: String,
+    ) -> Self {
         Self {
             status,
             branch,
@@ -420,7 +426,9 @@ pub fn continuation_with_progress(
             Error::Numerical { what, detail } => (what, detail),
             e => (String::from("continuation start"), e.to_string()),
         };
-        return Ok(ContinuationReport::stopped(rep.status, branch, stats, what, why));
+        return Ok(ContinuationReport::stopped(
+            rep.status, branch, stats, what, why,
+        ));
     }
     let mut tr = Tracker {
         sys,
@@ -437,7 +445,13 @@ pub fn continuation_with_progress(
     let Ok((t0, d0)) = tr.tangent(&a0, None) else {
         let what = format!("continuation at {}", tr.where_(&y0));
         let why = "the branch tangent is singular at the start".to_string();
-        return Ok(ContinuationReport::stopped(Status::Singular, branch, stats, what, why));
+        return Ok(ContinuationReport::stopped(
+            Status::Singular,
+            branch,
+            stats,
+            what,
+            why,
+        ));
     };
     let mut cur = State {
         y: y0,
@@ -463,7 +477,13 @@ pub fn continuation_with_progress(
         if branch.points.len() >= cfg.max_points {
             let what = format!("continuation at {}", tr.where_(&cur.y));
             let why = format!("stopped at the point limit ({})", cfg.max_points);
-            return Ok(ContinuationReport::stopped(Status::IterationLimit, branch, stats, what, why));
+            return Ok(ContinuationReport::stopped(
+                Status::IterationLimit,
+                branch,
+                stats,
+                what,
+                why,
+            ));
         }
         let pred: Vec<f64> = cur.y.iter().zip(&cur.t).map(|(y, t)| y + ds * t).collect();
         let attempt = tr.correct(&pred, &cur.t).and_then(|(y, a, it)| {
@@ -486,7 +506,13 @@ pub fn continuation_with_progress(
                      have a non-smooth point there (try more AFT samples or harmonics)",
                     cfg.ds_min
                 );
-                return Ok(ContinuationReport::stopped(Status::StepTooSmall, branch, stats, what, why));
+                return Ok(ContinuationReport::stopped(
+                    Status::StepTooSmall,
+                    branch,
+                    stats,
+                    what,
+                    why,
+                ));
             }
             continue;
         };
@@ -501,7 +527,9 @@ pub fn continuation_with_progress(
             if !rep.converged() {
                 let e = sys.not_converged(om, sc, &rep).to_string();
                 let what = format!("continuation at {}", tr.where_(&cur.y));
-                return Ok(ContinuationReport::stopped(rep.status, branch, stats, what, e));
+                return Ok(ContinuationReport::stopped(
+                    rep.status, branch, stats, what, e,
+                ));
             }
             let mut y: Vec<f64> = x.iter().map(|v| v / tr.xs).collect();
             y.push(1.0);
@@ -522,7 +550,13 @@ pub fn continuation_with_progress(
             let Some(fold) = locate_fold(&tr, &cur, ds) else {
                 let what = format!("fold location near {}", tr.where_(&cur.y));
                 let why = "the corrector failed".to_string();
-                return Ok(ContinuationReport::stopped(Status::StepTooSmall, branch, stats, what, why));
+                return Ok(ContinuationReport::stopped(
+                    Status::StepTooSmall,
+                    branch,
+                    stats,
+                    what,
+                    why,
+                ));
             };
             push(&mut branch, &mut stats, tr.point(&fold, PointKind::Fold)?);
         } else if next.det_sign != cur.det_sign {
@@ -555,12 +589,22 @@ pub fn continuation_with_progress(
             let Ok((t, d)) = tr.tangent(&a, Some(&guide)) else {
                 let what = format!("continuation at {}", tr.where_(&next.y));
                 let why = "the branch tangent is singular".to_string();
-                return Ok(ContinuationReport::stopped(Status::Singular, branch, stats, what, why));
+                return Ok(ContinuationReport::stopped(
+                    Status::Singular,
+                    branch,
+                    stats,
+                    what,
+                    why,
+                ));
             };
             next.t = t;
             next.det_sign = d;
         }
-        push(&mut branch, &mut stats, tr.point(&next, PointKind::Regular)?);
+        push(
+            &mut branch,
+            &mut stats,
+            tr.point(&next, PointKind::Regular)?,
+        );
         cur = next;
     }
 }
@@ -729,7 +773,13 @@ pub fn stepped_sine_with_progress(
                 points,
                 branch_points: Vec::new(),
             };
-            return Ok(ContinuationReport::stopped(Status::StepTooSmall, branch, stats, what, why));
+            return Ok(ContinuationReport::stopped(
+                Status::StepTooSmall,
+                branch,
+                stats,
+                what,
+                why,
+            ));
         };
         let tangent = match kind {
             PointKind::Regular if !points.is_empty() => sys.dx_domega(&x, prev, scale).ok(),

@@ -16,7 +16,7 @@
 //!   `dx/dp = −R_x⁻¹ R_p`.
 //! - [`stability`]: Hill's method with the Floquet exponents sorted by the weight of their
 //!   eigenvectors in the central harmonic.
-//! - [`continuation`]: pseudo-arclength continuation through folds with fold and
+//! - [`mod@continuation`]: pseudo-arclength continuation through folds with fold and
 //!   branch-point detection, stepped-sine sweeps up or down, force-level sweeps.
 //!
 //! Units: SI (s, rad/s, N, m); frequencies given to users in Hz are named `_hz`.

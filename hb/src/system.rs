@@ -419,7 +419,10 @@ impl HbSystem {
         };
         let e = self.elements.iter().position(|e| e.name() == element)?;
         let law = self.elements[e].law();
-        Some((e, (0..law.n_params()).find(|&i| law.param_name(i) == *param)?))
+        Some((
+            e,
+            (0..law.n_params()).find(|&i| law.param_name(i) == *param)?,
+        ))
     }
 
     /// The forcing in the real layout (inputs × (2H+1)).
@@ -807,11 +810,8 @@ impl HbSystem {
                     .element_param(p)
                     .ok_or_else(|| unknown_param(p, &self.parameters()))?;
                 let el = &self.elements[element];
-                let d = self.plans[element].dparams(
-                    el.law(),
-                    &x[element * nh..(element + 1) * nh],
-                    w0,
-                );
+                let d =
+                    self.plans[element].dparams(el.law(), &x[element * nh..(element + 1) * nh], w0);
                 let mut gp = vec![0.0; n];
                 for l in 0..nh {
                     gp[element * nh + l] = d[(l, param)];
@@ -994,7 +994,8 @@ impl Parameterized for HbSystem {
             .elements
             .iter()
             .flat_map(|el| {
-                (0..el.law().n_params()).map(move |i| Param::element(el.name(), el.law().param_name(i)))
+                (0..el.law().n_params())
+                    .map(move |i| Param::element(el.name(), el.law().param_name(i)))
             })
             .collect();
         p.extend(self.linear.parameters());
@@ -1022,7 +1023,10 @@ impl Parameterized for HbSystem {
                     .ok_or_else(|| unknown_param(p, &self.parameters()))?;
                 self.elements[e].set_param(i, value)?;
                 // Keep the AFT plans those of a system built with the new value.
-                let n = self.config.aft_samples.unwrap_or(samples_for(self.elements[e].law(), &self.set));
+                let n = self
+                    .config
+                    .aft_samples
+                    .unwrap_or(samples_for(self.elements[e].law(), &self.set));
                 if n != self.plans[e].n {
                     self.plans[e] = AftPlan::new(self.set, n)?;
                     let hill_n = self.plans.iter().map(|p| p.n).max().unwrap_or(n);

@@ -160,7 +160,9 @@ fn first_order_branch_matches_the_closed_form_with_stability_and_folds() {
 fn condensed_and_modal_formulations_agree() {
     let sys = system(5, 1);
     let om = 2.0 * PI * 31.0;
-    let (x, _) = sys.solve_converged(om, 1.0, &sys.linear_guess(om, 1.0)).unwrap();
+    let (x, _) = sys
+        .solve_converged(om, 1.0, &sys.linear_guess(om, 1.0))
+        .unwrap();
     // η = Z⁻¹ Φᵀ(F − G) from the condensed solution, then the modal Newton from a perturbed
     // copy must return to it.
     let eta = sys.modal_amplitudes(&x, om, 1.0);
@@ -188,8 +190,14 @@ fn stepped_sines_jump_at_the_folds() {
         .map(|i| 2.0 * PI * (27.0 + 9.0 * i as f64 / (n - 1) as f64))
         .collect();
     let down: Vec<f64> = up.iter().rev().copied().collect();
-    let bu = stepped_sine(&sys, &up, 1.0, true).unwrap().into_branch().unwrap();
-    let bd = stepped_sine(&sys, &down, 1.0, true).unwrap().into_branch().unwrap();
+    let bu = stepped_sine(&sys, &up, 1.0, true)
+        .unwrap()
+        .into_branch()
+        .unwrap();
+    let bd = stepped_sine(&sys, &down, 1.0, true)
+        .unwrap()
+        .into_branch()
+        .unwrap();
     let folds = closed_form_folds(2.0 * PI * 27.0, 2.0 * PI * 36.0, 2.0);
     let biggest_drop = |b: &Branch| {
         b.points

@@ -159,7 +159,10 @@ fn setting_a_parameter_equals_rebuilding_the_system() {
     }
     let after = sys.residual(&x, omega, 1.0).unwrap();
     for (a, b) in after.iter().zip(&before) {
-        assert!((a - b).abs() <= 1e-13 * b.abs().max(1e-300) + 1e-300, "{a} vs {b}");
+        assert!(
+            (a - b).abs() <= 1e-13 * b.abs().max(1e-300) + 1e-300,
+            "{a} vs {b}"
+        );
     }
     // Unknown and out-of-range parameters are errors naming them.
     let e = sys

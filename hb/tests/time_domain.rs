@@ -130,13 +130,22 @@ fn duffing_seven_harmonics_match_time_integration_on_both_stable_branches() {
     let down: Vec<f64> = (0..=40)
         .map(|i| 2.0 * PI * 33.0 + (target - 2.0 * PI * 33.0) * i as f64 / 40.0)
         .collect();
-    let high = stepped_sine(&sys, &up, 1.0, true).unwrap().into_branch().unwrap();
-    let low = stepped_sine(&sys, &down, 1.0, true).unwrap().into_branch().unwrap();
+    let high = stepped_sine(&sys, &up, 1.0, true)
+        .unwrap()
+        .into_branch()
+        .unwrap();
+    let low = stepped_sine(&sys, &down, 1.0, true)
+        .unwrap()
+        .into_branch()
+        .unwrap();
     let (xh, xl) = (
         &high.points.last().unwrap().x,
         &low.points.last().unwrap().x,
     );
-    let (ah, al) = (sys.harmonics().complex(xh, 1).norm(), sys.harmonics().complex(xl, 1).norm());
+    let (ah, al) = (
+        sys.harmonics().complex(xh, 1).norm(),
+        sys.harmonics().complex(xl, 1).norm(),
+    );
     assert!(ah > 3.0 * al, "two distinct branches: {ah:e} vs {al:e}");
     for x in [xh, xl] {
         // 20 periods at 1024 samples: the FOH error (second order in the feedback) is
@@ -211,7 +220,10 @@ fn bump_stop_beam_seven_harmonics_match_time_integration() {
             HbConfig::default(),
         )
         .unwrap();
-        let br = stepped_sine(&sys, &omegas, 1.0, h == 7).unwrap().into_branch().unwrap();
+        let br = stepped_sine(&sys, &omegas, 1.0, h == 7)
+            .unwrap()
+            .into_branch()
+            .unwrap();
         let p = br.points.last().unwrap().clone();
         (sys, p)
     };
@@ -220,7 +232,10 @@ fn bump_stop_beam_seven_harmonics_match_time_integration() {
     let e = sys7.element_index("stop").unwrap();
     let nh = sys7.harmonics().len();
     let xe = &p7.x[e * nh..(e + 1) * nh];
-    let peak = xe[0] + (1..=7).map(|k| sys7.harmonics().complex(xe, k).norm()).sum::<f64>();
+    let peak = xe[0]
+        + (1..=7)
+            .map(|k| sys7.harmonics().complex(xe, k).norm())
+            .sum::<f64>();
     assert!(
         peak > 1e-3,
         "the tip should reach the stop (peak bound {peak:e})"

@@ -278,7 +278,13 @@ impl Model {
             if let Some(kg) = &g.stiffness
                 && g.k_scale != 1.0
             {
-                k = SparseSym::linear_combination("stiffness matrix", 1.0, &k, g.k_scale - 1.0, kg)?;
+                k = SparseSym::linear_combination(
+                    "stiffness matrix",
+                    1.0,
+                    &k,
+                    g.k_scale - 1.0,
+                    kg,
+                )?;
             }
             if let Some(mg) = &g.mass
                 && g.m_scale != 1.0

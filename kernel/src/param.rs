@@ -107,8 +107,7 @@ impl fmt::Display for Param {
 /// Whether `s` is a valid element or group name: ASCII letters, digits, `_` and `-`.
 pub fn is_valid_name(s: &str) -> bool {
     !s.is_empty()
-        && s
-            .chars()
+        && s.chars()
             .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
 }
 
@@ -166,9 +165,7 @@ impl FromStr for Param {
             return Err(bad("modes are numbered from 1"));
         }
         if !is_valid_name(head) {
-            return Err(bad(
-                "an element name has letters, digits, '_' and '-' only",
-            ));
+            return Err(bad("an element name has letters, digits, '_' and '-' only"));
         }
         if tail.is_empty() || !tail.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
             return Err(bad("a parameter name has letters, digits and '_' only"));
@@ -226,6 +223,19 @@ pub fn unknown_param(p: &Param, known: &[Param]) -> Error {
     }
 }
 
+/// Parses `name` as a parameter of an object whose parameters are `known`: a text that
+/// does not parse is reported like an unknown parameter, with the known ones listed.
+pub fn parse_known(name: &str, known: &[Param]) -> Result<Param> {
+    name.parse().map_err(|_| Error::UnknownParameter {
+        name: name.trim().to_string(),
+        known: known
+            .iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join(", "),
+    })
+}
+
 /// Checks that `value` is finite for parameter `p`.
 pub fn check_finite(p: &Param, value: f64) -> Result<()> {
     if value.is_finite() {
@@ -244,7 +254,9 @@ pub fn element_parameters<E: AsRef<NonlinearElement>>(elements: &[E]) -> Vec<Par
     elements
         .iter()
         .map(AsRef::as_ref)
-        .flat_map(|e| (0..e.law().n_params()).map(move |i| Param::element(e.name(), e.law().param_name(i))))
+        .flat_map(|e| {
+            (0..e.law().n_params()).map(move |i| Param::element(e.name(), e.law().param_name(i)))
+        })
         .collect()
 }
 
@@ -259,7 +271,10 @@ pub fn find_element_param<E: AsRef<NonlinearElement>>(
     };
     let e = elements.iter().position(|e| e.as_ref().name() == element)?;
     let law = elements[e].as_ref().law();
-    Some((e, (0..law.n_params()).find(|&i| law.param_name(i) == *param)?))
+    Some((
+        e,
+        (0..law.n_params()).find(|&i| law.param_name(i) == *param)?,
+    ))
 }
 
 /// The value of element parameter `p` among `elements`.
@@ -340,16 +355,31 @@ mod tests {
             ("mode1.f", Param::ModalFrequency(0)),
             ("mode12.zeta", Param::ModalDamping(11)),
             ("stiffness_scale", Param::StiffnessScale),
-            ("group:flange.k_scale", Param::GroupStiffness("flange".into())),
+            (
+                "group:flange.k_scale",
+                Param::GroupStiffness("flange".into()),
+            ),
             ("group:flange.m_scale", Param::GroupMass("flange".into())),
-            ("spring:12:uz.k", Param::BoundarySpring("12:uz".parse().unwrap())),
+            (
+                "spring:12:uz.k",
+                Param::BoundarySpring("12:uz".parse().unwrap()),
+            ),
         ] {
             assert_eq!(s.parse::<Param>().unwrap(), p, "{s}");
             assert_eq!(p.to_string(), s);
         }
         for bad in [
-            "", "k3", "mode0.f", "mode1.k", "group:.k_scale", "group:a.x", "spring:12:uz.c",
-            "spring:x.k", "a b.k3", "tip.", ".k3",
+            "",
+            "k3",
+            "mode0.f",
+            "mode1.k",
+            "group:.k_scale",
+            "group:a.x",
+            "spring:12:uz.c",
+            "spring:x.k",
+            "a b.k3",
+            "tip.",
+            ".k3",
         ] {
             assert!(bad.parse::<Param>().is_err(), "{bad:?} parsed");
         }

@@ -649,8 +649,7 @@ mod params {
             Just(Param::StiffnessScale),
             name().prop_map(Param::GroupStiffness),
             name().prop_map(Param::GroupMass),
-            (0u64..u64::MAX, comp)
-                .prop_map(|(n, c)| Param::BoundarySpring(DofLabel::new(n, c))),
+            (0u64..u64::MAX, comp).prop_map(|(n, c)| Param::BoundarySpring(DofLabel::new(n, c))),
         ]
     }
 
@@ -691,7 +690,9 @@ mod params {
         Model::builder("chain", DofMap::scalar(3), mass, k)
             .group("link", Some(kg), Some(mg))
             .boundary_spring("3:u", 50.0)
-            .element(NonlinearElement::new("nl", Law::Cubic { k3: 1e6 }, Coupling::single(2)).unwrap())
+            .element(
+                NonlinearElement::new("nl", Law::Cubic { k3: 1e6 }, Coupling::single(2)).unwrap(),
+            )
             .build()
             .unwrap()
     }
@@ -703,11 +704,18 @@ mod params {
         let names: Vec<String> = m.parameters().iter().map(ToString::to_string).collect();
         assert_eq!(
             names,
-            ["nl.k3", "group:link.k_scale", "group:link.m_scale", "spring:3:u.k"]
+            [
+                "nl.k3",
+                "group:link.k_scale",
+                "group:link.m_scale",
+                "spring:3:u.k"
+            ]
         );
         assert_eq!(m.stiffness().get(2, 2), 450.0);
-        m.set_param(&"group:link.k_scale".parse().unwrap(), 1.5).unwrap();
-        m.set_param(&"group:link.m_scale".parse().unwrap(), 0.5).unwrap();
+        m.set_param(&"group:link.k_scale".parse().unwrap(), 1.5)
+            .unwrap();
+        m.set_param(&"group:link.m_scale".parse().unwrap(), 0.5)
+            .unwrap();
         m.set_param(&"spring:3:u.k".parse().unwrap(), 10.0).unwrap();
         let k = m.stiffness().to_dense();
         let want = [
@@ -723,7 +731,8 @@ mod params {
         assert_eq!(m.mass().get(2, 2), 1.0);
         assert_eq!(m.mass().get(0, 0), 2.0);
         // Back to 1: the original matrices exactly.
-        m.set_param(&"group:link.k_scale".parse().unwrap(), 1.0).unwrap();
+        m.set_param(&"group:link.k_scale".parse().unwrap(), 1.0)
+            .unwrap();
         assert_eq!(m.stiffness().get(1, 1), 1400.0);
         // Range checks name the parameter.
         let e = m
@@ -740,7 +749,10 @@ mod params {
             .param(&Param::GroupMass("web".into()))
             .unwrap_err()
             .to_string();
-        assert!(e.contains("group:web.m_scale") && e.contains("group:link.m_scale"), "{e}");
+        assert!(
+            e.contains("group:web.m_scale") && e.contains("group:link.m_scale"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -73,6 +73,10 @@ pub struct EigenConfig {
     pub sturm_check: bool,
     /// Models with at most this many DOFs are solved densely (exact, O(n³)).
     pub dense_below: usize,
+    /// Parallelism of the factorisations, solves and block products (faer's `Par`; the
+    /// default `Par::rayon(0)` uses the current rayon pool). Results are bit-identical for
+    /// a given `par`; `Par::Seq` makes them independent of the machine's thread count.
+    pub par: faer::Par,
 }
 
 impl Default for EigenConfig {
@@ -87,6 +91,7 @@ impl Default for EigenConfig {
             seed: 0x5eed_0001,
             sturm_check: true,
             dense_below: 200,
+            par: faer::Par::rayon(0),
         }
     }
 }
@@ -283,8 +288,8 @@ fn finish_vectors(
     m: &SparseSym,
     values: &[f64],
     vectors: &mut Mat<f64>,
+    par: faer::Par,
 ) -> Vec<f64> {
-    let par = faer::get_global_parallelism();
     for c in 0..vectors.ncols() {
         let col = vectors.col(c);
         let mut best = 0.0f64;
@@ -362,6 +367,9 @@ impl EigenSolver {
             }
         };
         self.factor = None;
+        if let Some(p) = self.pencil.as_mut() {
+            p.set_par(cfg.par);
+        }
         let pencil = self.pencil.as_ref().expect("set above");
         let analysis_seconds = if reused {
             0.0
@@ -486,7 +494,7 @@ impl EigenSolver {
                     ),
                 });
             }
-            let residuals = finish_vectors(k, m, &values, &mut vectors);
+            let residuals = finish_vectors(k, m, &values, &mut vectors, cfg.par);
             check_seconds += t3.elapsed().as_secs_f64();
             let max_residual = residuals.iter().fold(0.0f64, |a, &r| a.max(r));
             let modes = Modes {
@@ -631,7 +639,7 @@ fn solve_dense(k: &SparseSym, m: &SparseSym, cfg: &EigenConfig) -> Result<Modes>
     let mut vectors = d.vectors.subcols(0, count).to_owned();
     let iteration_seconds = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let residuals = finish_vectors(k, m, &values, &mut vectors);
+    let residuals = finish_vectors(k, m, &values, &mut vectors, cfg.par);
     let max_residual = residuals.iter().fold(0.0f64, |a, &r| a.max(r));
     Ok(Modes {
         eigenvalues: values,
@@ -858,7 +866,7 @@ impl KrylovSchur<'_> {
     }
 
     fn run(&self, progress: &mut dyn FnMut(&EigenProgress)) -> Result<Ritz> {
-        let par = faer::get_global_parallelism();
+        let par = self.pencil.par();
         let (n, b, nv, nev) = (self.pencil.n(), self.block, self.basis, self.nev);
         let mut rng = SplitMix::new(self.seed);
         // The basis V, M V, the projection H = Vᵀ M Op V and the coupling B of V to the next

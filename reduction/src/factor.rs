@@ -14,7 +14,7 @@ use faer::sparse::linalg::cholesky::{
     factorize_symbolic_cholesky,
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
-use faer::{Conj, MatMut, Side};
+use faer::{Conj, MatMut, Par, Side};
 use nlsim_kernel::{Error, Result, SparseSym};
 
 /// `K − σM` on the union of the patterns of `K` and `M` (lower triangle), with its symbolic
@@ -28,6 +28,7 @@ pub struct ShiftedPencil {
     m_vals: Vec<f64>,
     symbolic: SymbolicCholesky<usize>,
     analyses: usize,
+    par: Par,
 }
 
 /// A numeric Cholesky factor `L Lᵀ = K − σM` of a [`ShiftedPencil`].
@@ -107,6 +108,17 @@ fn faer_error(what: &str, e: impl core::fmt::Debug) -> Error {
 }
 
 impl ShiftedPencil {
+    /// The parallelism of its factorisations and solves (default `Par::rayon(0)`: the
+    /// current rayon pool).
+    pub fn set_par(&mut self, par: Par) {
+        self.par = par;
+    }
+
+    /// The parallelism in force.
+    pub fn par(&self) -> Par {
+        self.par
+    }
+
     /// Builds the union pattern of `K` and `M` and runs the symbolic analysis (approximate
     /// minimum degree ordering, supernodal structure).
     pub fn new(k: &SparseSym, m: &SparseSym) -> Result<Self> {
@@ -134,6 +146,7 @@ impl ShiftedPencil {
             factorize_symbolic_cholesky(pattern, Side::Lower, SymmetricOrdering::Amd, params)
                 .map_err(|e| faer_error("symbolic Cholesky analysis of K − σM", e))?;
         Ok(ShiftedPencil {
+            par: Par::rayon(0),
             n,
             col_ptr,
             row_idx,
@@ -207,7 +220,7 @@ impl ShiftedPencil {
     pub fn cholesky(&self, sigma: f64) -> Result<core::result::Result<ShiftFactor, usize>> {
         let a_vals = self.shifted(sigma);
         let a = self.matrix(&a_vals);
-        let par = faer::get_global_parallelism();
+        let par = self.par;
         let mut values = Vec::new();
         values
             .try_reserve_exact(self.symbolic.len_val())
@@ -246,7 +259,7 @@ impl ShiftedPencil {
 
     /// Solves `(K − σM) X = B` in place for all columns of `rhs`.
     pub fn solve_in_place(&self, factor: &ShiftFactor, rhs: MatMut<'_, f64>) {
-        let par = faer::get_global_parallelism();
+        let par = self.par;
         let llt = LltRef::<'_, usize, f64>::new(&self.symbolic, &factor.values);
         let mut mem = MemBuffer::new(
             self.symbolic
@@ -261,7 +274,7 @@ impl ShiftedPencil {
     pub fn count_below(&self, sigma: f64) -> Result<usize> {
         let a_vals = self.shifted(sigma);
         let a = self.matrix(&a_vals);
-        let par = faer::get_global_parallelism();
+        let par = self.par;
         let mut values = vec![0.0f64; self.symbolic.len_val()];
         let mut mem = MemBuffer::new(
             self.symbolic

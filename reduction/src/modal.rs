@@ -14,7 +14,7 @@
 //! solver already holds (`σ = 0` unless `K` is singular, then a small negative shift). It is the
 //! displacement feedthrough `D_L`, `D_NL` of thesis eq. (10).
 
-use crate::eigen::{EigenConfig, EigenProgress, EigenSolver, Modes};
+use crate::eigen::{EigenConfig, EigenProgress, EigenSolver, ModeSelection, Modes};
 use crate::factor::ShiftedPencil;
 use faer::Mat;
 use nlsim_kernel::{Component, Coupling, Damping, Error, Model, Result};
@@ -188,6 +188,19 @@ pub struct ReductionConfig {
     pub extra_dofs: Vec<usize>,
 }
 
+impl ReductionConfig {
+    /// The lowest `modes` modes with residual flexibility, other settings default.
+    pub fn lowest(modes: usize) -> Self {
+        ReductionConfig {
+            eigen: EigenConfig {
+                selection: ModeSelection::Lowest(modes),
+                ..EigenConfig::default()
+            },
+            ..ReductionConfig::default()
+        }
+    }
+}
+
 impl Default for ReductionConfig {
     fn default() -> Self {
         ReductionConfig {
@@ -261,7 +274,7 @@ impl ReducedModel {
                     v.as_faer(),
                     phi.as_ref(),
                     1.0,
-                    faer::get_global_parallelism(),
+                    faer::Par::Seq,
                 );
                 let vt = phi.transpose() * &vphi;
                 Mat::from_fn(m, m, |r, s| 0.5 * (vt[(r, s)] + vt[(s, r)]))
@@ -317,7 +330,7 @@ pub fn reduce_with(
     });
     let t = std::time::Instant::now();
     let (residual, residual_shift) = if cfg.residual_flexibility && n_ports > 0 {
-        residual_flexibility(model, solver, &modes, &ports, &participation)?
+        residual_flexibility(model, solver, &modes, &ports, &participation, cfg.eigen.par)?
     } else {
         (Mat::zeros(n_ports, n_ports), 0.0)
     };
@@ -357,6 +370,7 @@ fn residual_flexibility(
     modes: &Modes,
     ports: &[Port],
     participation: &Mat<f64>,
+    par: faer::Par,
 ) -> Result<(Mat<f64>, f64)> {
     let n = model.n_dofs();
     let mut w = Mat::<f64>::zeros(n, ports.len());
@@ -370,7 +384,8 @@ fn residual_flexibility(
     let (pencil, factor) = match solver.pencil_and_factor() {
         Some(pf) => pf,
         None => {
-            let p = ShiftedPencil::new(model.stiffness(), model.mass())?;
+            let mut p = ShiftedPencil::new(model.stiffness(), model.mass())?;
+            p.set_par(par);
             let f = crate::eigen::factor_below_spectrum(&p, model.stiffness(), model.mass(), None)?;
             own = (p, f);
             (&own.0, &own.1)

@@ -19,7 +19,7 @@ use faer::Mat;
 use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::Llt;
 use nlsim_kernel::{
-    Coupling, Damping, Error, Model, NonlinearElement, Quantity, Result, Status, SparseSym,
+    Coupling, Damping, Error, Model, NonlinearElement, Quantity, Result, SparseSym, Status,
 };
 
 /// Settings of the Newmark/HHT reference.

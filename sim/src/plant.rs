@@ -3,9 +3,7 @@
 
 use faer::c64;
 use nlsim_kernel::param::{element_param, element_parameters, set_element_param};
-use nlsim_kernel::{
-    Error, Law, Model, NonlinearElement, Param, Parameterized, Quantity, Result,
-};
+use nlsim_kernel::{Error, Law, Model, NonlinearElement, Param, Parameterized, Quantity, Result};
 use nlsim_reduction::ModalSystem;
 
 /// A nonlinear element fed back at a port of the modal system.
@@ -308,8 +306,6 @@ pub(crate) fn order(q: Quantity) -> u32 {
         Quantity::Acceleration => 2,
     }
 }
-
-/// Sets parameter `name` (`element.param`) of the element it names in `elements`.
 
 impl AsRef<NonlinearElement> for ElementPort {
     fn as_ref(&self) -> &NonlinearElement {

@@ -215,6 +215,7 @@ impl Record {
         }
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn finish(
         self,
         plant: &Plant,
@@ -594,8 +595,7 @@ pub fn rk4_with_progress(
             let t = step as f64 * dt + sub as f64 * h;
             let mut stages = || -> Result<()> {
                 rhs.eval(t, &z, &mut k[0])?;
-                for (st, (cf, tf)) in [(0.5, 0.5), (0.5, 0.5), (1.0, 1.0)].into_iter().enumerate()
-                {
+                for (st, (cf, tf)) in [(0.5, 0.5), (0.5, 0.5), (1.0, 1.0)].into_iter().enumerate() {
                     for s in 0..ns {
                         y[s] = z[s] + k[st][s] * (h * cf);
                     }

@@ -245,6 +245,14 @@ enum BatchAction {
 
 use nlsim::run::{Method, SweepMode as FrfMode};
 
+/// The parallelism `--threads` asks for: sequential for 1, the rayon pool otherwise.
+fn par(cli: &Cli) -> faer::Par {
+    match cli.threads {
+        Some(1) => faer::Par::Seq,
+        _ => faer::Par::rayon(0),
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     if let Some(n) = cli.threads {
@@ -323,6 +331,7 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 tol: *tol,
                 block_size: *block,
                 sturm_check: !no_sturm_check,
+                par: par(cli),
                 ..EigenConfig::default()
             };
             if let Some(path) = out {
@@ -406,6 +415,7 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 atol: *atol,
                 substeps: *substeps,
                 hht_alpha: *hht_alpha,
+                par: par(cli),
             };
             simulate(model, &req, set, out.as_deref(), cli)
         }
@@ -436,6 +446,7 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 modes: *modes,
                 residual: !no_residual,
                 stability: !no_stability,
+                par: par(cli),
             };
             frf(model, &req, set, out.as_deref(), plot.as_deref(), cli)
         }
@@ -649,12 +660,8 @@ fn demo_frf(
     let f1 = reduced.modes.frequencies_hz()[0];
     let (lo, hi) = (0.85 * f1, 1.5 * f1);
     let t = Instant::now();
-    let cont = nlsim::hb::continuation(
-        &sys,
-        &ContinuationConfig::frequency(lo, hi),
-        None,
-        &mut |_| {},
-    )?;
+    let cont = nlsim::hb::continuation(&sys, &ContinuationConfig::frequency(lo, hi), None)?
+        .into_branch()?;
     let t_cont = t.elapsed().as_secs_f64();
     let n = 200;
     let grid = |a: f64, b: f64| -> Vec<f64> {
@@ -663,8 +670,8 @@ fn demo_frf(
             .collect()
     };
     let t = Instant::now();
-    let up = nlsim::hb::stepped_sine(&sys, &grid(lo, hi), 1.0, false, &mut |_| {})?;
-    let down = nlsim::hb::stepped_sine(&sys, &grid(hi, lo), 1.0, false, &mut |_| {})?;
+    let up = nlsim::hb::stepped_sine(&sys, &grid(lo, hi), 1.0, false)?.into_branch()?;
+    let down = nlsim::hb::stepped_sine(&sys, &grid(hi, lo), 1.0, false)?.into_branch()?;
     let t_step = t.elapsed().as_secs_f64();
     let hz = |p: &nlsim::hb::SolutionPoint| p.omega / (2.0 * PI);
     let list = |kind: PointKind, b: &nlsim::hb::Branch| -> String {
@@ -718,7 +725,7 @@ fn demo_frf(
             .map(|(r, p)| (hz(p), r[(0, 1)].norm()))
             .collect()
     };
-    let sen = &sys.sensors[0];
+    let sen = &sys.sensors()[0];
     let fig = nlsim::plot::Lines {
         title: format!("{}: stepped sines jump at the folds", model.name()),
         x_desc: "frequency (Hz)".into(),
@@ -960,10 +967,10 @@ fn frf(
         sys.n_unknowns(),
         sys.aft_samples()
     ));
-    for x in &sys.forcing.terms {
+    for x in &sys.forcing().terms {
         say(format!(
             "  force {:<10} {:.4e} N at harmonic {} (Ω)",
-            sys.inputs[x.input].0,
+            sys.inputs()[x.input].0,
             x.amplitude.norm(),
             nlsim::frf::harmonic_label(x.harmonic, set.nu)
         ));
@@ -978,7 +985,7 @@ fn frf(
         "  {n} points in {:.3} s ({:.3} ms per point){}; {unstable} unstable",
         run.seconds,
         1e3 * run.seconds / n as f64,
-        if branch.complete {
+        if run.status.is_converged() {
             ""
         } else {
             " — stopped at the point limit before the end"
@@ -1012,7 +1019,7 @@ fn frf(
             bp.omega / (2.0 * PI)
         ));
     }
-    for (s, sen) in sys.sensors.iter().enumerate() {
+    for (s, sen) in sys.sensors().iter().enumerate() {
         let (i, a) = (0..n)
             .map(|i| (i, y[i][(s, set.nu)].norm()))
             .fold((0, 0.0f64), |m, v| if v.1 > m.1 { v } else { m });
