@@ -573,15 +573,21 @@ impl HbSystem {
     /// The residual `R(x) = x + H_NL,NL G(x) − λ H_NL,ext F` (m, real layout) at fundamental
     /// `omega` (rad/s) and force level `scale`.
     pub fn residual(&self, x: &[f64], omega: f64, scale: f64) -> Result<Vec<f64>> {
+        self.check_unknowns("harmonic balance unknowns", x)?;
+        let rec = self.receptances(omega, false);
+        Ok(self.evaluate(&rec, x, omega, scale, false).r)
+    }
+
+    /// `Err` unless `x` has one value per condensed unknown.
+    fn check_unknowns(&self, what: &str, x: &[f64]) -> Result<()> {
         if x.len() != self.n_unknowns() {
             return Err(Error::DimensionMismatch {
-                what: "harmonic balance unknowns".into(),
+                what: what.into(),
                 expected: self.n_unknowns(),
                 found: x.len(),
             });
         }
-        let rec = self.receptances(omega, false);
-        Ok(self.evaluate(&rec, x, omega, scale, false).r)
+        Ok(())
     }
 
     /// `dx/dΩ = −R_x⁻¹ R_Ω` along the branch through solution `x` (m s/rad).
@@ -620,13 +626,7 @@ impl HbSystem {
                 ),
             ));
         }
-        if x0.len() != self.n_unknowns() {
-            return Err(Error::DimensionMismatch {
-                what: "harmonic balance start vector".into(),
-                expected: self.n_unknowns(),
-                found: x0.len(),
-            });
-        }
+        self.check_unknowns("harmonic balance start vector", x0)?;
         let rec = self.receptances(omega, false);
         let reference = norm_inf(&rec.b) * scale.abs();
         let mut x = x0.to_vec();
