@@ -13,7 +13,7 @@ use crate::dense::{Lu, norm_inf};
 use crate::harmonics::{Forcing, HarmonicSet};
 use crate::linear::LinearPart;
 use faer::{Mat, c64};
-use nlsim_kernel::param::unknown_param;
+use nlsim_kernel::param::{element_parameters, find_element_param, unknown_param};
 use nlsim_kernel::{
     Error, Model, NonlinearElement, Param, Parameterized, Quantity, Result, Status,
 };
@@ -180,8 +180,8 @@ impl HbSystemBuilder {
     }
 
     /// The validated system.
-    pub fn build(self) -> Result<HbSystem> {
-        let forcing = self.forcing.unwrap_or_else(|| Forcing {
+    pub fn build(mut self) -> Result<HbSystem> {
+        let forcing = self.forcing.take().unwrap_or_else(|| Forcing {
             terms: (0..self.inputs.len())
                 .map(|i| crate::ForceTerm {
                     input: i,
@@ -190,16 +190,7 @@ impl HbSystemBuilder {
                 })
                 .collect(),
         });
-        HbSystem::new(
-            self.set,
-            self.linear,
-            self.elements,
-            self.element_ports,
-            self.inputs,
-            self.sensors,
-            forcing,
-            self.config,
-        )
+        HbSystem::new(self, forcing)
     }
 }
 
@@ -257,16 +248,17 @@ impl HbSystem {
                 })
                 .collect(),
         };
-        Self::new(
+        HbSystemBuilder {
             set,
-            LinearPart::from_reduced(reduced)?,
-            model.elements().to_vec(),
-            map.elements,
-            map.inputs,
+            linear: LinearPart::from_reduced(reduced)?,
+            elements: model.elements().to_vec(),
+            element_ports: map.elements,
+            inputs: map.inputs,
             sensors,
-            forcing,
+            forcing: Some(forcing),
             config,
-        )
+        }
+        .build()
     }
 
     /// A builder on the linear part `linear` with harmonics `set`.
@@ -283,18 +275,18 @@ impl HbSystem {
         }
     }
 
-    /// A system from its parts; validates ports, laws and forcing.
-    #[allow(clippy::too_many_arguments)]
-    fn new(
-        set: HarmonicSet,
-        linear: LinearPart,
-        elements: Vec<NonlinearElement>,
-        element_ports: Vec<usize>,
-        inputs: Vec<(String, usize)>,
-        sensors: Vec<SensorSpec>,
-        forcing: Forcing,
-        config: HbConfig,
-    ) -> Result<Self> {
+    /// The system of a builder's parts with `forcing`; validates ports, laws and forcing.
+    fn new(parts: HbSystemBuilder, forcing: Forcing) -> Result<Self> {
+        let HbSystemBuilder {
+            set,
+            linear,
+            elements,
+            element_ports,
+            inputs,
+            sensors,
+            config,
+            ..
+        } = parts;
         let np = linear.phi.nrows();
         if elements.is_empty() {
             return Err(Error::invalid(
@@ -414,15 +406,7 @@ impl HbSystem {
 
     /// `(element index, law parameter index)` of an element parameter.
     fn element_param(&self, p: &Param) -> Option<(usize, usize)> {
-        let Param::Element { element, param } = p else {
-            return None;
-        };
-        let e = self.elements.iter().position(|e| e.name() == element)?;
-        let law = self.elements[e].law();
-        Some((
-            e,
-            (0..law.n_params()).find(|&i| law.param_name(i) == *param)?,
-        ))
+        find_element_param(&self.elements, p)
     }
 
     /// The forcing in the real layout (inputs × (2H+1)).
@@ -990,14 +974,7 @@ impl HbSystem {
 /// (`modeN.f`, `modeN.zeta` of every retained mode, `stiffness_scale`).
 impl Parameterized for HbSystem {
     fn parameters(&self) -> Vec<Param> {
-        let mut p: Vec<Param> = self
-            .elements
-            .iter()
-            .flat_map(|el| {
-                (0..el.law().n_params())
-                    .map(move |i| Param::element(el.name(), el.law().param_name(i)))
-            })
-            .collect();
+        let mut p = element_parameters(&self.elements);
         p.extend(self.linear.parameters());
         p
     }

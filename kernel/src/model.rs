@@ -5,7 +5,9 @@ use crate::damping::Damping;
 use crate::dof::DofMap;
 use crate::element::{Coupling, NonlinearElement};
 use crate::error::{Error, Result};
-use crate::param::{Param, Parameterized, check_finite, unknown_param};
+use crate::param::{
+    Param, Parameterized, check_finite, element_parameters, find_element_param, unknown_param,
+};
 use crate::sparse::SparseSym;
 
 /// What a sensor measures at its DOF.
@@ -577,13 +579,6 @@ fn check_scale(p: &Param, s: f64) -> Result<()> {
 }
 
 impl Model {
-    fn element_param(&self, element: &str, param: &str) -> Option<(usize, usize)> {
-        let e = self.elements.iter().position(|e| e.name() == element)?;
-        let law = self.elements[e].law();
-        let i = (0..law.n_params()).find(|&i| law.param_name(i) == param)?;
-        Some((e, i))
-    }
-
     fn group_index(&self, name: &str) -> Option<usize> {
         self.groups.iter().position(|g| g.name == name)
     }
@@ -598,12 +593,7 @@ impl Model {
 /// stiffness (`k_scale`) or mass (`m_scale`) part, then the boundary springs.
 impl Parameterized for Model {
     fn parameters(&self) -> Vec<Param> {
-        let mut out = Vec::new();
-        for e in &self.elements {
-            for i in 0..e.law().n_params() {
-                out.push(Param::element(e.name(), e.law().param_name(i)));
-            }
-        }
+        let mut out = element_parameters(&self.elements);
         for g in &self.groups {
             if g.stiffness.is_some() {
                 out.push(Param::GroupStiffness(g.name.clone()));
@@ -623,9 +613,9 @@ impl Parameterized for Model {
 
     fn param(&self, p: &Param) -> Result<f64> {
         let found = match p {
-            Param::Element { element, param } => self
-                .element_param(element, param)
-                .map(|(e, i)| self.elements[e].law().param(i)),
+            Param::Element { .. } => {
+                find_element_param(&self.elements, p).map(|(e, i)| self.elements[e].law().param(i))
+            }
             Param::GroupStiffness(g) => self
                 .group_index(g)
                 .filter(|&i| self.groups[i].stiffness.is_some())
@@ -642,9 +632,8 @@ impl Parameterized for Model {
 
     fn set_param(&mut self, p: &Param, value: f64) -> Result<()> {
         match p {
-            Param::Element { element, param } => {
-                let (e, i) = self
-                    .element_param(element, param)
+            Param::Element { .. } => {
+                let (e, i) = find_element_param(&self.elements, p)
                     .ok_or_else(|| unknown_param(p, &self.parameters()))?;
                 self.elements[e].set_param(i, value)
             }
