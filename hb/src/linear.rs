@@ -18,8 +18,8 @@ use std::f64::consts::PI;
 #[derive(Debug, Clone)]
 ///
 /// Its linear parameters ([`Param::ModalFrequency`], [`Param::ModalDamping`],
-/// [`Param::StiffnessScale`]) are read and set through [`Parameterized`]; the fields stay
-/// consistent with them.
+/// [`Param::ModalMass`], [`Param::StiffnessScale`]) are read and set through
+/// [`Parameterized`]; the fields stay consistent with them.
 pub struct LinearPart {
     /// Retained eigenvalues `ω_r²` (rad²/s²), the stiffness scale included.
     pub(crate) w2: Vec<f64>,
@@ -33,6 +33,8 @@ pub struct LinearPart {
     pub(crate) residual: Mat<f64>,
     /// The stiffness scale `κ` (nominal 1): `Ω² = κ Ω₀²`, `D = D₀/κ`.
     pub(crate) kappa: f64,
+    /// Modal masses `m_r` (kg, nominal 1): column `r` of `Φ_P` is `Φ_P0,r / √m_r`.
+    pub(crate) modal_mass: Vec<f64>,
 }
 
 /// `Z(ω)⁻¹ Φ_Pᵀ` restricted to some ports, for a full (non-diagonal) `C̃`.
@@ -68,6 +70,7 @@ impl LinearPart {
             phi: reduced.participation.clone(),
             residual: reduced.residual.clone(),
             kappa: 1.0,
+            modal_mass: vec![1.0; m],
         })
     }
 
@@ -98,11 +101,17 @@ impl LinearPart {
 
     fn mode_of(&self, p: &Param) -> Result<usize> {
         match p {
-            Param::ModalFrequency(r) | Param::ModalDamping(r) if *r < self.n_modes() => Ok(*r),
-            Param::ModalFrequency(_) | Param::ModalDamping(_) => Err(Error::invalid(
-                format!("parameter {p}"),
-                format!("the model keeps {} modes", self.n_modes()),
-            )),
+            Param::ModalFrequency(r) | Param::ModalDamping(r) | Param::ModalMass(r)
+                if *r < self.n_modes() =>
+            {
+                Ok(*r)
+            }
+            Param::ModalFrequency(_) | Param::ModalDamping(_) | Param::ModalMass(_) => {
+                Err(Error::invalid(
+                    format!("parameter {p}"),
+                    format!("the model keeps {} modes", self.n_modes()),
+                ))
+            }
             _ => Err(unknown_param(p, &self.parameters())),
         }
     }
@@ -188,7 +197,8 @@ impl LinearPart {
     }
 
     /// `∂H/∂θ` (m/N per unit of θ) for linear parameter `p` ([`Param::ModalFrequency`],
-    /// [`Param::ModalDamping`], [`Param::StiffnessScale`]) at `omega` (rad/s).
+    /// [`Param::ModalDamping`], [`Param::ModalMass`], [`Param::StiffnessScale`]) at `omega`
+    /// (rad/s).
     pub fn receptance_dparam(
         &self,
         p: &Param,
@@ -209,6 +219,17 @@ impl LinearPart {
             Param::ModalDamping(_) => {
                 let r = self.mode_of(p)?;
                 dz[(r, r)] = c64::new(0.0, 2.0 * self.w2[r].sqrt() * omega);
+            }
+            Param::ModalMass(_) => {
+                // Φ_r = Φ_r0/√m_r: ∂H/∂m_r = −(Φ_rows E_r Z⁻¹ Φ_colsᵀ + Φ_rows Z⁻¹ E_r Φ_colsᵀ)/(2 m_r).
+                let r = self.mode_of(p)?;
+                let z = self.solve(omega);
+                let x = self.zinv_phi(&z, cols);
+                let y = self.zinv_phi(&z, rows);
+                let c = -0.5 / self.modal_mass[r];
+                return Ok(Mat::from_fn(rows.len(), cols.len(), |i, j| {
+                    (x[(r, j)] * self.phi[(rows[i], r)] + y[(r, i)] * self.phi[(cols[j], r)]) * c
+                }));
             }
             Param::StiffnessScale => {
                 // Ω² = κ Ω₀², D = D₀/κ: ∂Z/∂κ = Ω²/κ, ∂D/∂κ = −D/κ.
@@ -256,13 +277,15 @@ impl LinearPart {
     }
 }
 
-/// `modeN.f` (Hz) and `modeN.zeta` of every retained mode, then `stiffness_scale`.
+/// `modeN.f` (Hz), `modeN.zeta` and `modeN.m` (kg) of every retained mode, then
+/// `stiffness_scale`.
 impl Parameterized for LinearPart {
     fn parameters(&self) -> Vec<Param> {
         let mut p = Vec::with_capacity(2 * self.n_modes() + 1);
         for r in 0..self.n_modes() {
             p.push(Param::ModalFrequency(r));
             p.push(Param::ModalDamping(r));
+            p.push(Param::ModalMass(r));
         }
         p.push(Param::StiffnessScale);
         p
@@ -272,6 +295,7 @@ impl Parameterized for LinearPart {
         match p {
             Param::ModalFrequency(_) => Ok(self.frequency_hz(self.mode_of(p)?)),
             Param::ModalDamping(_) => Ok(self.zeta(self.mode_of(p)?)),
+            Param::ModalMass(_) => Ok(self.modal_mass[self.mode_of(p)?]),
             Param::StiffnessScale => Ok(self.kappa),
             _ => Err(unknown_param(p, &self.parameters())),
         }
@@ -308,6 +332,17 @@ impl Parameterized for LinearPart {
                 }
                 self.damping[(r, r)] = 2.0 * value * self.w2[r].sqrt();
             }
+            Param::ModalMass(_) => {
+                let r = self.mode_of(p)?;
+                if value <= 0.0 {
+                    return positive("a modal mass");
+                }
+                let f = (self.modal_mass[r] / value).sqrt();
+                for i in 0..self.phi.nrows() {
+                    self.phi[(i, r)] *= f;
+                }
+                self.modal_mass[r] = value;
+            }
             Param::StiffnessScale => {
                 if value <= 0.0 {
                     return positive("a stiffness scale");
@@ -340,6 +375,7 @@ mod tests {
             phi: Mat::from_fn(3, 2, |p, r| 0.3 + 0.2 * p as f64 - 0.5 * r as f64),
             residual: Mat::from_fn(3, 3, |a, b| 1e-4 / (1.0 + (a + b) as f64)),
             kappa: 1.0,
+            modal_mass: vec![1.0; 2],
         }
     }
 
@@ -360,6 +396,7 @@ mod tests {
                 for p in [
                     Param::ModalFrequency(1),
                     Param::ModalDamping(0),
+                    Param::ModalMass(1),
                     Param::StiffnessScale,
                 ] {
                     let eps = 1e-6;
@@ -375,6 +412,14 @@ mod tests {
                             }
                             Param::ModalDamping(r) => {
                                 q.damping[(r, r)] += sign * eps * 2.0 * q.w2[r].sqrt();
+                            }
+                            Param::ModalMass(r) => {
+                                let m = q.modal_mass[r];
+                                let f = (m / (m + sign * eps)).sqrt();
+                                for i in 0..q.phi.nrows() {
+                                    q.phi[(i, r)] *= f;
+                                }
+                                q.modal_mass[r] = m + sign * eps;
                             }
                             _ => {
                                 let k = (kappa + sign * eps) / kappa;

@@ -985,9 +985,10 @@ impl Parameterized for HbSystem {
                 .element_param(p)
                 .map(|(e, i)| self.elements[e].law().param(i))
                 .ok_or_else(|| unknown_param(p, &self.parameters())),
-            Param::ModalFrequency(_) | Param::ModalDamping(_) | Param::StiffnessScale => {
-                self.linear.param(p)
-            }
+            Param::ModalFrequency(_)
+            | Param::ModalDamping(_)
+            | Param::ModalMass(_)
+            | Param::StiffnessScale => self.linear.param(p),
             _ => Err(unknown_param(p, &self.parameters())),
         }
     }
@@ -1011,9 +1012,10 @@ impl Parameterized for HbSystem {
                 }
                 Ok(())
             }
-            Param::ModalFrequency(_) | Param::ModalDamping(_) | Param::StiffnessScale => {
-                self.linear.set_param(p, value)
-            }
+            Param::ModalFrequency(_)
+            | Param::ModalDamping(_)
+            | Param::ModalMass(_)
+            | Param::StiffnessScale => self.linear.set_param(p, value),
             _ => Err(unknown_param(p, &self.parameters())),
         }
     }

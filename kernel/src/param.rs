@@ -33,6 +33,7 @@ use std::str::FromStr;
 /// | [`Param::Element`] | `ELEMENT.PARAM` (`tip.k3`) | the law's (N/m³ for `k3`) |
 /// | [`Param::ModalFrequency`] | `modeN.f` | Hz |
 /// | [`Param::ModalDamping`] | `modeN.zeta` | 1 (fraction of critical) |
+/// | [`Param::ModalMass`] | `modeN.m` | kg (1 for mass-normalised shapes) |
 /// | [`Param::StiffnessScale`] | `stiffness_scale` | 1 (factor on every stiffness) |
 /// | [`Param::GroupStiffness`] | `group:NAME.k_scale` | 1 (factor on the group's K) |
 /// | [`Param::GroupMass`] | `group:NAME.m_scale` | 1 (factor on the group's M) |
@@ -54,6 +55,12 @@ pub enum Param {
     ModalFrequency(usize),
     /// Damping ratio `ζ_r` of retained mode `mode` (0-based): `c̃_rr = 2 ζ_r ω_r`.
     ModalDamping(usize),
+    /// Modal mass `m_r` (kg) of retained mode `mode` (0-based) as seen at the ports: its
+    /// participation becomes `Φ_P,r / √m_r`, so its receptance term is
+    /// `Φ_P,r Φ_P,rᵀ / (m_r Z_rr)`. Nominal 1 for mass-normalised shapes; calibrated when the
+    /// model is a modal model whose shapes are not known in absolute scale (experimental
+    /// modal analysis: the modal constant `1/m_r` at a drive point).
+    ModalMass(usize),
     /// A factor on the whole linear stiffness: `K → s K` (every `ω_r² → s ω_r²`, residual
     /// flexibility `D → D / s`).
     StiffnessScale,
@@ -85,6 +92,7 @@ impl Param {
             | Param::StiffnessScale
             | Param::GroupStiffness(_)
             | Param::GroupMass(_) => "1",
+            Param::ModalMass(_) => "kg",
             Param::BoundarySpring(_) => "N/m",
         }
     }
@@ -96,6 +104,7 @@ impl fmt::Display for Param {
             Param::Element { element, param } => write!(f, "{element}.{param}"),
             Param::ModalFrequency(r) => write!(f, "mode{}.f", r + 1),
             Param::ModalDamping(r) => write!(f, "mode{}.zeta", r + 1),
+            Param::ModalMass(r) => write!(f, "mode{}.m", r + 1),
             Param::StiffnessScale => f.write_str("stiffness_scale"),
             Param::GroupStiffness(g) => write!(f, "group:{g}.k_scale"),
             Param::GroupMass(g) => write!(f, "group:{g}.m_scale"),
@@ -130,7 +139,7 @@ impl FromStr for Param {
                 format!("parameter '{s}'"),
                 format!(
                     "{why}; expected ELEMENT.PARAM (tip.k3), modeN.f, modeN.zeta, \
-                     stiffness_scale, group:NAME.k_scale, group:NAME.m_scale or spring:NODE:COMP.k"
+                     modeN.m, stiffness_scale, group:NAME.k_scale, group:NAME.m_scale or spring:NODE:COMP.k"
                 ),
             )
         };
@@ -158,7 +167,8 @@ impl FromStr for Param {
             return match tail {
                 "f" => Ok(Param::ModalFrequency(r)),
                 "zeta" => Ok(Param::ModalDamping(r)),
-                _ => Err(bad("a mode has f and zeta")),
+                "m" => Ok(Param::ModalMass(r)),
+                _ => Err(bad("a mode has f, zeta and m")),
             };
         }
         if head.starts_with("mode") && head[4..].bytes().all(|b| b.is_ascii_digit()) {
@@ -354,6 +364,7 @@ mod tests {
             ("tip.k3", Param::element("tip", "k3")),
             ("mode1.f", Param::ModalFrequency(0)),
             ("mode12.zeta", Param::ModalDamping(11)),
+            ("mode3.m", Param::ModalMass(2)),
             ("stiffness_scale", Param::StiffnessScale),
             (
                 "group:flange.k_scale",

@@ -646,6 +646,7 @@ mod params {
             (name(), "[a-z][a-z0-9_]{0,6}").prop_map(|(e, p)| Param::element(e, p)),
             (0usize..100_000).prop_map(Param::ModalFrequency),
             (0usize..100_000).prop_map(Param::ModalDamping),
+            (0usize..100_000).prop_map(Param::ModalMass),
             Just(Param::StiffnessScale),
             name().prop_map(Param::GroupStiffness),
             name().prop_map(Param::GroupMass),

@@ -1,0 +1,414 @@
+//! The calibration workflow (thesis §4.5–4.6): Latin-hypercube candidates evaluated in
+//! parallel, Levenberg–Marquardt from the best few, the Cramér–Rao bound at the optimum, and
+//! k-fold cross validation started from the optimum.
+//!
+//! Every random draw comes from the recorded seed, and every parallel task is independent and
+//! sequential inside, so the estimates are bit-identical for any number of threads.
+
+use crate::lhs::maximin_latin_hypercube;
+use crate::lm::{LmConfig, LmReport, levenberg_marquardt};
+use crate::objective::{FrfObjective, SweepEvaluation};
+use crate::stats::{CramerRao, mean_and_covariance};
+use faer::Mat;
+use nlsim_kernel::{Error, Param, Parameterized, Result, Status};
+use rand::{RngExt, SeedableRng};
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// Settings of [`calibrate`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct CalibrationConfig {
+    /// Latin-hypercube candidates over the bounds (the model's current values are a further
+    /// candidate).
+    pub lhs_samples: usize,
+    /// Seed of the Latin hypercube and of the fold assignment.
+    pub seed: u64,
+    /// Maximin improvement swaps of the Latin hypercube.
+    pub maximin_swaps: usize,
+    /// Levenberg–Marquardt runs, from the best candidates.
+    pub starts: usize,
+    /// Levenberg–Marquardt settings.
+    pub lm: LmConfig,
+    /// Folds of the cross validation (0: none; at least 2 otherwise).
+    pub folds: usize,
+}
+
+impl Default for CalibrationConfig {
+    fn default() -> Self {
+        Self {
+            lhs_samples: 64,
+            seed: 1,
+            maximin_swaps: 2000,
+            starts: 3,
+            lm: LmConfig::default(),
+            folds: 10,
+        }
+    }
+}
+
+impl CalibrationConfig {
+    /// Checks the settings against `n_points` data points.
+    pub fn validate(&self, n_points: usize) -> Result<()> {
+        self.lm.validate()?;
+        if self.starts == 0 {
+            return Err(Error::invalid(
+                "calibration settings",
+                "starts must be at least 1",
+            ));
+        }
+        if self.lhs_samples > 1_000_000 {
+            return Err(Error::invalid(
+                "calibration settings",
+                format!(
+                    "{} Latin-hypercube samples is beyond any budget (at most 10⁶)",
+                    self.lhs_samples
+                ),
+            ));
+        }
+        if self.folds == 1 || self.folds > n_points {
+            return Err(Error::invalid(
+                "calibration settings",
+                format!(
+                    "folds must be 0 (none) or 2..={n_points} (the data points), not {}",
+                    self.folds
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// A Latin-hypercube candidate and its cost.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Candidate {
+    /// Parameter values.
+    pub values: Vec<f64>,
+    /// Cost `½‖r‖²` (infinite where a point failed).
+    pub cost: f64,
+}
+
+/// One Levenberg–Marquardt run.
+#[derive(Debug, Clone)]
+pub struct StartRun {
+    /// Start values.
+    pub start: Vec<f64>,
+    /// Final values.
+    pub values: Vec<f64>,
+    /// Its report.
+    pub report: LmReport,
+}
+
+/// The k-fold cross validation.
+#[derive(Debug, Clone)]
+pub struct KFold {
+    /// Number of folds.
+    pub k: usize,
+    /// Fold of every data point (in [`TestData::points`](crate::data::TestData::points) order).
+    pub fold_of: Vec<usize>,
+    /// The estimate of each fold (trained on the other folds).
+    pub estimates: Vec<Vec<f64>>,
+    /// Status of each fold's optimisation.
+    pub status: Vec<Status>,
+    /// Root-mean-square weighted residual on each fold's held-out points.
+    pub held_out_rms: Vec<f64>,
+    /// Root-mean-square weighted residual on each fold's training points.
+    pub training_rms: Vec<f64>,
+    /// Mean of the estimates.
+    pub mean: Vec<f64>,
+    /// Covariance of the estimates.
+    pub covariance: Mat<f64>,
+    /// Standard deviation of the fold estimates.
+    pub std: Vec<f64>,
+    /// Delete-a-group jackknife standard deviation `(k−1)/√k · std`: the spread expected of
+    /// an estimate from all the data, comparable with the Cramér–Rao bound.
+    pub jackknife_std: Vec<f64>,
+}
+
+/// The outcome of [`calibrate`].
+#[derive(Debug, Clone)]
+pub struct Calibration {
+    /// The calibrated parameters.
+    pub params: Vec<Param>,
+    /// The estimate.
+    pub estimate: Vec<f64>,
+    /// The status of the best optimisation.
+    pub status: Status,
+    /// Every candidate: the model's values first, then the Latin hypercube in sample order.
+    pub candidates: Vec<Candidate>,
+    /// The optimisations, best first.
+    pub runs: Vec<StartRun>,
+    /// Cramér–Rao bound at the estimate.
+    pub cramer_rao: CramerRao,
+    /// Parameters whose estimate sits on a bound.
+    pub at_bound: Vec<bool>,
+    /// Parameters that are poorly identifiable (relative Cramér–Rao std above 0.5 or part of
+    /// a collinear set).
+    pub poorly_identified: Vec<bool>,
+    /// The model at the estimate, at every data point.
+    pub fit: SweepEvaluation,
+    /// Cost at the estimate.
+    pub cost: f64,
+    /// The cross validation, when asked for.
+    pub kfold: Option<KFold>,
+}
+
+/// Progress of a calibration.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Progress {
+    /// Candidates evaluated so far.
+    Candidates {
+        /// Done.
+        done: usize,
+        /// Total.
+        total: usize,
+    },
+    /// An optimisation finished.
+    Start {
+        /// Done.
+        done: usize,
+        /// Total.
+        total: usize,
+    },
+    /// A fold finished.
+    Fold {
+        /// Done.
+        done: usize,
+        /// Total.
+        total: usize,
+    },
+}
+
+/// Calibrates `objective`'s parameters ([`calibrate_with_progress`] without a callback).
+pub fn calibrate(objective: &FrfObjective, config: &CalibrationConfig) -> Result<Calibration> {
+    calibrate_with_progress(objective, config, &|_| {})
+}
+
+/// Calibrates: candidates from a maximin Latin hypercube over the bounds (and the model's
+/// current values) in parallel, Levenberg–Marquardt from the best `starts`, statistics at the
+/// best optimum, then k-fold cross validation from it. Runs in the caller's rayon pool.
+pub fn calibrate_with_progress(
+    objective: &FrfObjective,
+    config: &CalibrationConfig,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<Calibration> {
+    let n_points = objective.data().n_points();
+    config.validate(n_points)?;
+    let specs = objective.specs().to_vec();
+    let n = specs.len();
+    let params: Vec<Param> = specs.iter().map(|s| s.param.clone()).collect();
+    let current = objective.system().param_values(&params)?;
+    let mut starts: Vec<Vec<f64>> = Vec::with_capacity(config.lhs_samples + 1);
+    let clamp = |v: Vec<f64>| -> Vec<f64> {
+        v.iter()
+            .zip(&specs)
+            .map(|(x, s)| x.clamp(s.lower, s.upper))
+            .collect()
+    };
+    starts.push(clamp(current));
+    for t in maximin_latin_hypercube(config.lhs_samples, n, config.seed, config.maximin_swaps) {
+        let v = t
+            .iter()
+            .zip(&specs)
+            .map(|(&t, s)| crate::lhs::to_range(t, s.lower, s.upper, s.spacing))
+            .collect::<Result<Vec<_>>>()?;
+        starts.push(v);
+    }
+    let total = starts.len();
+    let done = AtomicUsize::new(0);
+    let costs: Vec<Result<f64>> = starts
+        .par_iter()
+        .map_init(
+            || objective.clone(),
+            |obj, v| {
+                let c = obj.cost_values(v);
+                let d = done.fetch_add(1, Ordering::Relaxed) + 1;
+                progress(Progress::Candidates { done: d, total });
+                c
+            },
+        )
+        .collect();
+    let mut candidates = Vec::with_capacity(total);
+    for (v, c) in starts.into_iter().zip(costs) {
+        candidates.push(Candidate {
+            values: v,
+            cost: c?,
+        });
+    }
+    let mut order: Vec<usize> = (0..total)
+        .filter(|&i| candidates[i].cost.is_finite())
+        .collect();
+    if order.is_empty() {
+        return Err(Error::Numerical {
+            what: "calibration".into(),
+            detail: format!(
+                "the harmonic balance failed at some data point for every one of the {total} \
+                 candidates: check the bounds, the harmonics and the data's frequency range"
+            ),
+        });
+    }
+    order.sort_by(|&a, &b| {
+        candidates[a]
+            .cost
+            .total_cmp(&candidates[b].cost)
+            .then(a.cmp(&b))
+    });
+    order.truncate(config.starts);
+    let (lo, hi) = objective.internal_bounds();
+    let done = AtomicUsize::new(0);
+    let n_starts = order.len();
+    let runs: Vec<Result<StartRun>> = order
+        .par_iter()
+        .map(|&i| {
+            let mut obj = objective.clone();
+            let start = candidates[i].values.clone();
+            let u0 = obj.to_internal(&start);
+            let report = levenberg_marquardt(&mut obj, &u0, &lo, &hi, &config.lm)?;
+            let values = obj.to_values(&report.u);
+            let d = done.fetch_add(1, Ordering::Relaxed) + 1;
+            progress(Progress::Start {
+                done: d,
+                total: n_starts,
+            });
+            Ok(StartRun {
+                start,
+                values,
+                report,
+            })
+        })
+        .collect();
+    let mut runs = runs.into_iter().collect::<Result<Vec<_>>>()?;
+    runs.sort_by(|a, b| a.report.cost.total_cmp(&b.report.cost));
+    let best = &runs[0];
+    let estimate = best.values.clone();
+    let mut obj = objective.clone();
+    let fit = obj.evaluate_values(&estimate, None, true)?;
+    let cost = 0.5 * fit.residuals.iter().map(|r| r * r).sum::<f64>();
+    let cramer_rao = match (&fit.jacobian, fit.failed.is_empty()) {
+        (Some(j), true) => {
+            // The objective's Jacobian is per internal variable: back to parameter units.
+            let du: Vec<f64> = specs
+                .iter()
+                .zip(&estimate)
+                .map(|(s, &v)| s.dvalue(s.to_internal(v)))
+                .collect();
+            let jp = Mat::from_fn(j.nrows(), n, |i, c| j[(i, c)] / du[c]);
+            CramerRao::new(&jp, &fit.residuals, &estimate)
+        }
+        _ => CramerRao::new(&Mat::zeros(0, n), &[], &estimate),
+    };
+    let at_bound: Vec<bool> = best.report.active_bounds.clone();
+    let poorly_identified = (0..n)
+        .map(|j| {
+            cramer_rao.relative_std[j].is_nan()
+                || cramer_rao.relative_std[j] > 0.5
+                || (cramer_rao.collinearity > 15.0
+                    && cramer_rao
+                        .most_correlated
+                        .is_some_and(|(a, b, _)| a == j || b == j))
+        })
+        .collect();
+    let status = best.report.status;
+    let kfold = if config.folds >= 2 {
+        Some(kfold(objective, &estimate, config, progress)?)
+    } else {
+        None
+    };
+    Ok(Calibration {
+        params,
+        estimate,
+        status,
+        candidates,
+        runs,
+        cramer_rao,
+        at_bound,
+        poorly_identified,
+        fit,
+        cost,
+        kfold,
+    })
+}
+
+/// Fold of every data point: a seeded shuffle of the points dealt round-robin into `k` folds.
+pub fn fold_assignment(n_points: usize, k: usize, seed: u64) -> Vec<usize> {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x006b_666f_6c64);
+    let mut idx: Vec<usize> = (0..n_points).collect();
+    for i in (1..n_points).rev() {
+        let j = rng.random_range(0..=i);
+        idx.swap(i, j);
+    }
+    let mut fold = vec![0; n_points];
+    for (pos, &p) in idx.iter().enumerate() {
+        fold[p] = pos % k.max(1);
+    }
+    fold
+}
+
+/// k-fold cross validation from `estimate`: each fold is held out in turn, the others are
+/// calibrated (Levenberg–Marquardt from `estimate`), and the held-out error is measured.
+pub fn kfold(
+    objective: &FrfObjective,
+    estimate: &[f64],
+    config: &CalibrationConfig,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<KFold> {
+    let n_points = objective.data().n_points();
+    let k = config.folds;
+    config.validate(n_points)?;
+    let fold_of = fold_assignment(n_points, k, config.seed);
+    let (lo, hi) = objective.internal_bounds();
+    let done = AtomicUsize::new(0);
+    let rms = |r: &[f64]| (r.iter().map(|v| v * v).sum::<f64>() / r.len().max(1) as f64).sqrt();
+    type FoldOutcome = (Vec<f64>, Status, f64, f64);
+    let results: Vec<Result<FoldOutcome>> = (0..k)
+        .into_par_iter()
+        .map(|f| {
+            let mut obj = objective.clone();
+            let train: Vec<bool> = fold_of.iter().map(|&g| g != f).collect();
+            let held: Vec<bool> = train.iter().map(|t| !t).collect();
+            obj.set_training(train)?;
+            let u0 = obj.to_internal(estimate);
+            let rep = levenberg_marquardt(&mut obj, &u0, &lo, &hi, &config.lm)?;
+            let values = obj.to_values(&rep.u);
+            let tr = rep
+                .evaluation
+                .as_ref()
+                .map_or(f64::NAN, |e| rms(&e.residuals));
+            let ho = obj.evaluate_values(&values, Some(&held), false)?;
+            let ho_rms = if ho.failed.is_empty() {
+                rms(&ho.residuals)
+            } else {
+                f64::INFINITY
+            };
+            let d = done.fetch_add(1, Ordering::Relaxed) + 1;
+            progress(Progress::Fold { done: d, total: k });
+            Ok((values, rep.status, ho_rms, tr))
+        })
+        .collect();
+    let mut estimates = Vec::with_capacity(k);
+    let mut status = Vec::with_capacity(k);
+    let mut held_out_rms = Vec::with_capacity(k);
+    let mut training_rms = Vec::with_capacity(k);
+    for r in results {
+        let (v, s, h, t) = r?;
+        estimates.push(v);
+        status.push(s);
+        held_out_rms.push(h);
+        training_rms.push(t);
+    }
+    let (mean, covariance) = mean_and_covariance(&estimates);
+    let std: Vec<f64> = (0..mean.len()).map(|j| covariance[(j, j)].sqrt()).collect();
+    let jk = (k as f64 - 1.0) / (k as f64).sqrt();
+    let jackknife_std = std.iter().map(|s| s * jk).collect();
+    Ok(KFold {
+        k,
+        fold_of,
+        estimates,
+        status,
+        held_out_rms,
+        training_rms,
+        mean,
+        covariance,
+        std,
+        jackknife_std,
+    })
+}

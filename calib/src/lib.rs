@@ -1,0 +1,40 @@
+//! # nlsim-calib
+//!
+//! Calibration of nonlinear structural models from stepped-sine test data (thesis §4.1,
+//! §4.5, §4.6; papers I, IV, V):
+//!
+//! - [`data`]: the test data: measured force and response harmonics per frequency step,
+//!   sweep directions, a noise model per channel;
+//! - [`objective`]: the weighted deviation of computed from measured multi-harmonic responses
+//!   along each sweep (fundamental only or with side harmonics; complex or log-magnitude and
+//!   phase), with its Jacobian from the harmonic balance sensitivities;
+//! - [`lm`]: bounded Levenberg–Marquardt with a scaled trust region;
+//! - [`lhs`]: seeded maximin Latin-hypercube start points;
+//! - [`calibrate`](mod@calibrate): the workflow (candidates in parallel → LM from the best few →
+//!   Cramér–Rao bound → k-fold cross validation);
+//! - [`stats`]: Cramér–Rao bounds, identifiability, estimate statistics.
+//!
+//! Solvers that stop short return what they computed with a [`Status`](nlsim_kernel::Status);
+//! `Err` means invalid input. Nothing here prints, reads files or exits.
+
+pub mod calibrate;
+pub mod data;
+pub mod lhs;
+mod linalg;
+pub mod lm;
+pub mod objective;
+pub mod stats;
+pub mod synthetic;
+
+pub use calibrate::{
+    Calibration, CalibrationConfig, Candidate, KFold, Progress, StartRun, calibrate,
+    calibrate_with_progress, fold_assignment, kfold,
+};
+pub use data::{Channel, Noise, PointId, Step, Sweep, SweepDirection, TestData};
+pub use lhs::{Spacing, latin_hypercube, maximin_latin_hypercube};
+pub use linalg::Svd;
+pub use lm::{Evaluation, LeastSquares, LmConfig, LmReport, StopReason, levenberg_marquardt};
+pub use nlsim_kernel::Status;
+pub use objective::{Form, FrfObjective, ObjectiveConfig, ParamSpec, PointResult, SweepEvaluation};
+pub use stats::CramerRao;
+pub use synthetic::{SweepPlan, synthesize};

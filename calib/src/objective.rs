@@ -1,0 +1,586 @@
+//! The nonlinear calibration objective (thesis §4.5, paper IV): the weighted deviation
+//! between measured and computed multi-harmonic responses along every stepped-sine sweep.
+//!
+//! At each step the model is forced with the *measured* force harmonics and solved by
+//! harmonic balance from the previous step's solution, in the sweep's measured direction, so
+//! that a jump lands where the test saw it. Residuals per measured harmonic `Y` of a channel
+//! with noise `σ` (see [`Noise`](crate::data::Noise)):
+//!
+//! - [`Form::Complex`]: `(Y_model − Y_test)/σ`, real and imaginary parts;
+//! - [`Form::LogMagnitudePhase`]: `(ln|Y_model| − ln|Y_test|)·|Y_test|/σ` and the wrapped
+//!   phase difference `·|Y_test|/σ` (the same noise to first order, without the weight of
+//!   the large amplitudes dominating).
+//!
+//! The Jacobian comes from the harmonic balance sensitivities `dY/dp` (implicit
+//! differentiation of `R(x, p) = 0`), never from finite differences.
+
+use crate::data::{PointId, TestData};
+use crate::lhs::Spacing;
+use crate::lm::{Evaluation, LeastSquares};
+use faer::{Mat, c64};
+use nlsim_hb::{ForceTerm, Forcing, HbSystem};
+use nlsim_kernel::{Error, Param, Parameterized, Quantity, Result, Status};
+use std::f64::consts::PI;
+use std::sync::Arc;
+
+/// A parameter to calibrate, with its box and how its range is sampled and scaled.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParamSpec {
+    /// The parameter.
+    pub param: Param,
+    /// Lower bound (the parameter's unit).
+    pub lower: f64,
+    /// Upper bound.
+    pub upper: f64,
+    /// [`Spacing::Log`] for a parameter spanning decades (the optimiser then works on its
+    /// logarithm); [`Spacing::Linear`] otherwise (it works on `p / max(|lower|, |upper|)`).
+    pub spacing: Spacing,
+}
+
+impl ParamSpec {
+    /// A parameter with bounds, log-spaced when both bounds are positive and more than a
+    /// decade apart.
+    pub fn new(param: Param, lower: f64, upper: f64) -> Self {
+        let spacing = if lower > 0.0 && upper > 10.0 * lower {
+            Spacing::Log
+        } else {
+            Spacing::Linear
+        };
+        Self {
+            param,
+            lower,
+            upper,
+            spacing,
+        }
+    }
+
+    fn check(&self) -> Result<()> {
+        if !(self.lower.is_finite() && self.upper.is_finite() && self.lower < self.upper) {
+            return Err(Error::invalid(
+                format!("bounds of {}", self.param),
+                format!(
+                    "[{}, {}] must be finite with lower < upper",
+                    self.lower, self.upper
+                ),
+            ));
+        }
+        if self.spacing == Spacing::Log && self.lower <= 0.0 {
+            return Err(Error::invalid(
+                format!("bounds of {}", self.param),
+                format!(
+                    "log scaling needs a positive lower bound, not {}",
+                    self.lower
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    fn scale(&self) -> f64 {
+        self.lower.abs().max(self.upper.abs())
+    }
+
+    /// Internal optimisation variable of value `p`.
+    pub fn to_internal(&self, p: f64) -> f64 {
+        match self.spacing {
+            Spacing::Linear => p / self.scale(),
+            Spacing::Log => p.ln(),
+        }
+    }
+
+    /// Value of internal variable `u`.
+    pub fn to_value(&self, u: f64) -> f64 {
+        match self.spacing {
+            Spacing::Linear => u * self.scale(),
+            Spacing::Log => u.exp(),
+        }
+    }
+
+    /// `dp/du` at internal `u`.
+    pub fn dvalue(&self, u: f64) -> f64 {
+        match self.spacing {
+            Spacing::Linear => self.scale(),
+            Spacing::Log => u.exp(),
+        }
+    }
+
+    /// Internal bounds.
+    pub fn internal_bounds(&self) -> (f64, f64) {
+        (self.to_internal(self.lower), self.to_internal(self.upper))
+    }
+}
+
+/// Residual form.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Form {
+    /// Complex difference, real and imaginary parts.
+    Complex,
+    /// Log-magnitude and phase differences.
+    LogMagnitudePhase,
+}
+
+/// Settings of the objective.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ObjectiveConfig {
+    /// Harmonics `k` (of the excitation frequency) compared: `[1]` is the fundamental-only
+    /// metric, `[1, 2, 3]` adds the side harmonics (thesis §4.5 compares both).
+    pub harmonics: Vec<usize>,
+    /// Residual form.
+    pub form: Form,
+}
+
+impl Default for ObjectiveConfig {
+    fn default() -> Self {
+        Self {
+            harmonics: vec![1],
+            form: Form::Complex,
+        }
+    }
+}
+
+/// The model at one point of the data.
+#[derive(Debug, Clone)]
+pub struct PointResult {
+    /// The point.
+    pub id: PointId,
+    /// How the harmonic balance solve went.
+    pub status: Status,
+    /// Computed harmonics `k = 1..=H_data` per channel (channels × harmonics) in each
+    /// channel's quantity; NaN where the solve failed or the model holds fewer harmonics.
+    pub response: Mat<c64>,
+}
+
+/// Everything computed at one parameter vector.
+#[derive(Debug, Clone)]
+pub struct SweepEvaluation {
+    /// Residuals of the training points (empty when a point failed).
+    pub residuals: Vec<f64>,
+    /// Their Jacobian with respect to the internal variables (when asked for).
+    pub jacobian: Option<Mat<f64>>,
+    /// Every point of the data, trained on or not.
+    pub points: Vec<PointResult>,
+    /// Points where the harmonic balance did not converge.
+    pub failed: Vec<PointId>,
+}
+
+/// The objective: a harmonic balance system, test data, parameters and which points are
+/// trained on. Cloning is cheap enough for one clone per parallel task.
+#[derive(Debug, Clone)]
+pub struct FrfObjective {
+    sys: HbSystem,
+    data: Arc<TestData>,
+    specs: Vec<ParamSpec>,
+    config: ObjectiveConfig,
+    /// Model sensor index of each data channel.
+    sensor_of: Vec<usize>,
+    /// Model input index of the drive point.
+    input: usize,
+    /// Training mask per point (in [`TestData::points`] order).
+    training: Vec<bool>,
+    /// σ of each channel × harmonic × point (fixed by the data).
+    points: Vec<PointId>,
+}
+
+fn exponent(q: Quantity) -> i32 {
+    match q {
+        Quantity::Displacement => 0,
+        Quantity::Velocity => 1,
+        Quantity::Acceleration => 2,
+    }
+}
+
+impl FrfObjective {
+    /// The objective of `data` on `sys` over `specs`. Errors when a data channel or the
+    /// drive point has no model counterpart, a parameter is unknown to the system or its
+    /// bounds are invalid, a compared harmonic is absent from the data, or the system uses
+    /// sub-harmonics.
+    pub fn new(
+        sys: &HbSystem,
+        data: Arc<TestData>,
+        specs: Vec<ParamSpec>,
+        config: ObjectiveConfig,
+    ) -> Result<Self> {
+        data.validate()?;
+        if specs.is_empty() {
+            return Err(Error::invalid("calibration", "no parameters to calibrate"));
+        }
+        let known = sys.parameters();
+        for s in &specs {
+            s.check()?;
+            sys.param(&s.param)?;
+            if !known.contains(&s.param) {
+                return Err(nlsim_kernel::param::unknown_param(&s.param, &known));
+            }
+        }
+        for (i, a) in specs.iter().enumerate() {
+            if specs[..i].iter().any(|b| b.param == a.param) {
+                return Err(Error::invalid(
+                    "calibration",
+                    format!("parameter {} is listed twice", a.param),
+                ));
+            }
+        }
+        if sys.harmonics().nu != 1 {
+            return Err(Error::invalid(
+                "calibration",
+                "stepped-sine data are harmonics of the excitation: use a harmonic set with ν = 1",
+            ));
+        }
+        if config.harmonics.is_empty() {
+            return Err(Error::invalid("calibration", "no harmonics to compare"));
+        }
+        for &k in &config.harmonics {
+            if k == 0 || k > data.harmonics {
+                return Err(Error::invalid(
+                    "calibration",
+                    format!(
+                        "harmonic {k} is not in the test data (it holds 1..={})",
+                        data.harmonics
+                    ),
+                ));
+            }
+            if k > sys.harmonics().h {
+                return Err(Error::invalid(
+                    "calibration",
+                    format!(
+                        "harmonic {k} is above the model's H = {}",
+                        sys.harmonics().h
+                    ),
+                ));
+            }
+        }
+        let names = |v: Vec<&str>| v.join(", ");
+        let sensor_of = data
+            .channels
+            .iter()
+            .map(|c| {
+                sys.sensors()
+                    .iter()
+                    .position(|s| s.name == c.name)
+                    .ok_or_else(|| {
+                        Error::invalid(
+                            format!("test data channel '{}'", c.name),
+                            format!(
+                                "the model has no sensor of that name (it has: {})",
+                                names(sys.sensors().iter().map(|s| s.name.as_str()).collect())
+                            ),
+                        )
+                    })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let input = sys
+            .inputs()
+            .iter()
+            .position(|(n, _)| n == &data.input)
+            .ok_or_else(|| {
+                Error::invalid(
+                    format!("test data drive point '{}'", data.input),
+                    format!(
+                        "the model has no input of that name (it has: {})",
+                        names(sys.inputs().iter().map(|(n, _)| n.as_str()).collect())
+                    ),
+                )
+            })?;
+        let points = data.points();
+        Ok(Self {
+            sys: sys.clone(),
+            training: vec![true; points.len()],
+            points,
+            data,
+            specs,
+            config,
+            sensor_of,
+            input,
+        })
+    }
+
+    /// The parameters.
+    pub fn specs(&self) -> &[ParamSpec] {
+        &self.specs
+    }
+
+    /// The test data.
+    pub fn data(&self) -> &TestData {
+        &self.data
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &ObjectiveConfig {
+        &self.config
+    }
+
+    /// The harmonic balance system (with the parameters last evaluated).
+    pub fn system(&self) -> &HbSystem {
+        &self.sys
+    }
+
+    /// Restricts the residuals to the points `training[i]` (in [`TestData::points`] order).
+    pub fn set_training(&mut self, training: Vec<bool>) -> Result<()> {
+        if training.len() != self.points.len() {
+            return Err(Error::DimensionMismatch {
+                what: "training mask".into(),
+                expected: self.points.len(),
+                found: training.len(),
+            });
+        }
+        self.training = training;
+        Ok(())
+    }
+
+    /// The training mask.
+    pub fn training(&self) -> &[bool] {
+        &self.training
+    }
+
+    /// Internal variables of parameter values `p`.
+    pub fn to_internal(&self, p: &[f64]) -> Vec<f64> {
+        self.specs
+            .iter()
+            .zip(p)
+            .map(|(s, &v)| s.to_internal(v))
+            .collect()
+    }
+
+    /// Parameter values of internal variables `u`.
+    pub fn to_values(&self, u: &[f64]) -> Vec<f64> {
+        self.specs
+            .iter()
+            .zip(u)
+            .map(|(s, &v)| s.to_value(v))
+            .collect()
+    }
+
+    /// Internal bounds `(lower, upper)`.
+    pub fn internal_bounds(&self) -> (Vec<f64>, Vec<f64>) {
+        self.specs.iter().map(ParamSpec::internal_bounds).unzip()
+    }
+
+    /// The residuals (and with `jacobian` their derivatives) of the points in `mask`, at
+    /// parameter values `values`.
+    ///
+    /// Every point is solved (the sweeps are followed through the held-out points too);
+    /// points that fail are listed in [`SweepEvaluation::failed`].
+    pub fn evaluate_values(
+        &mut self,
+        values: &[f64],
+        mask: Option<&[bool]>,
+        jacobian: bool,
+    ) -> Result<SweepEvaluation> {
+        let params: Vec<Param> = self.specs.iter().map(|s| s.param.clone()).collect();
+        self.sys.set_params(&params, values)?;
+        let dvalue: Vec<f64> = self
+            .specs
+            .iter()
+            .zip(values)
+            .map(|(s, &v)| s.dvalue(s.to_internal(v)))
+            .collect();
+        let mask = mask.unwrap_or(&self.training).to_vec();
+        let data = Arc::clone(&self.data);
+        let h_data = data.harmonics;
+        let h_model = self.sys.harmonics().h;
+        let mut residuals = Vec::new();
+        let mut rows: Vec<Vec<f64>> = Vec::new();
+        let mut points = Vec::with_capacity(self.points.len());
+        let mut failed = Vec::new();
+        let mut index = 0usize;
+        for (s, sw) in data.sweeps.iter().enumerate() {
+            let mut prev: Option<(Vec<f64>, f64)> = None;
+            for (i, st) in sw.steps.iter().enumerate() {
+                let id = PointId { sweep: s, step: i };
+                let train = mask[index];
+                index += 1;
+                let omega = 2.0 * PI * st.frequency_hz;
+                let terms = (1..=h_data.min(h_model))
+                    .filter(|&k| st.force[k - 1].norm() > 0.0)
+                    .map(|k| ForceTerm {
+                        input: self.input,
+                        harmonic: k,
+                        amplitude: st.force[k - 1],
+                    })
+                    .collect();
+                self.sys.set_forcing(Forcing { terms })?;
+                let (x, status) = self.solve_step(omega, prev.as_ref())?;
+                let mut response = Mat::from_fn(data.channels.len(), h_data, |_, _| {
+                    c64::new(f64::NAN, f64::NAN)
+                });
+                if !status.is_converged() {
+                    failed.push(id);
+                    points.push(PointResult {
+                        id,
+                        status,
+                        response,
+                    });
+                    prev = None;
+                    continue;
+                }
+                let y = self.sys.sensor_response(&x, omega, 1.0);
+                let conv = |c: usize, k: usize| -> c64 {
+                    let pm = exponent(self.sys.sensors()[self.sensor_of[c]].quantity);
+                    let pd = exponent(data.channels[c].quantity);
+                    let iw = c64::new(0.0, k as f64 * omega);
+                    let mut f = c64::new(1.0, 0.0);
+                    for _ in 0..(pd - pm).abs() {
+                        f *= iw;
+                    }
+                    if pd >= pm { f } else { f.inv() }
+                };
+                for c in 0..data.channels.len() {
+                    for k in 1..=h_data.min(h_model) {
+                        response[(c, k - 1)] = y[(self.sensor_of[c], k)] * conv(c, k);
+                    }
+                }
+                let sens = if jacobian && train {
+                    Some(self.sys.sensitivities(&x, omega, 1.0, &params)?)
+                } else {
+                    None
+                };
+                if train {
+                    for c in 0..data.channels.len() {
+                        for &k in &self.config.harmonics {
+                            let yd = st.response[(c, k - 1)];
+                            if yd.re.is_nan() {
+                                continue;
+                            }
+                            let sigma = data.channels[c].noise.sigma(yd);
+                            if sigma <= 0.0 {
+                                return Err(Error::invalid(
+                                    format!("test data channel '{}'", data.channels[c].name),
+                                    "noise is zero: give an absolute or relative noise estimate",
+                                ));
+                            }
+                            let ym = response[(c, k - 1)];
+                            let f = conv(c, k);
+                            let dy: Vec<c64> = sens
+                                .as_ref()
+                                .map(|ss| {
+                                    ss.iter()
+                                        .map(|d| d.dy[(self.sensor_of[c], k)] * f)
+                                        .collect()
+                                })
+                                .unwrap_or_default();
+                            match self.config.form {
+                                Form::Complex => {
+                                    residuals.push((ym.re - yd.re) / sigma);
+                                    residuals.push((ym.im - yd.im) / sigma);
+                                    if jacobian {
+                                        rows.push(
+                                            dy.iter()
+                                                .zip(&dvalue)
+                                                .map(|(d, dv)| d.re * dv / sigma)
+                                                .collect(),
+                                        );
+                                        rows.push(
+                                            dy.iter()
+                                                .zip(&dvalue)
+                                                .map(|(d, dv)| d.im * dv / sigma)
+                                                .collect(),
+                                        );
+                                    }
+                                }
+                                Form::LogMagnitudePhase => {
+                                    let w = yd.norm() / sigma;
+                                    let dphase = wrap(ym.arg() - yd.arg());
+                                    residuals.push((ym.norm().ln() - yd.norm().ln()) * w);
+                                    residuals.push(dphase * w);
+                                    if jacobian {
+                                        let rel: Vec<c64> = dy.iter().map(|d| *d / ym).collect();
+                                        rows.push(
+                                            rel.iter()
+                                                .zip(&dvalue)
+                                                .map(|(d, dv)| d.re * dv * w)
+                                                .collect(),
+                                        );
+                                        rows.push(
+                                            rel.iter()
+                                                .zip(&dvalue)
+                                                .map(|(d, dv)| d.im * dv * w)
+                                                .collect(),
+                                        );
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+                points.push(PointResult {
+                    id,
+                    status,
+                    response,
+                });
+                prev = Some((x, omega));
+            }
+        }
+        let jac = jacobian.then(|| Mat::from_fn(rows.len(), self.specs.len(), |i, j| rows[i][j]));
+        Ok(SweepEvaluation {
+            residuals,
+            jacobian: jac,
+            points,
+            failed,
+        })
+    }
+
+    /// One step of the stepped sine: Newton from the previous step's solution; else through
+    /// four intermediate frequencies from the previous step; else from the linear response.
+    fn solve_step(&self, omega: f64, prev: Option<&(Vec<f64>, f64)>) -> Result<(Vec<f64>, Status)> {
+        if let Some((x0, w0)) = prev {
+            let (x, rep) = self.sys.solve(omega, 1.0, x0)?;
+            if rep.converged() {
+                return Ok((x, rep.status));
+            }
+            let mut x = x0.clone();
+            let mut ok = true;
+            for j in 1..=4 {
+                let w = w0 + (omega - w0) * j as f64 / 4.0;
+                let (xs, rep) = self.sys.solve(w, 1.0, &x)?;
+                if !rep.converged() {
+                    ok = false;
+                    break;
+                }
+                x = xs;
+            }
+            if ok {
+                return Ok((x, Status::Converged));
+            }
+        }
+        let (x, rep) = self
+            .sys
+            .solve(omega, 1.0, &self.sys.linear_guess(omega, 1.0))?;
+        Ok((x, rep.status))
+    }
+
+    /// Cost `½‖r‖²` of the training points at values `values`; infinite when a point fails.
+    pub fn cost_values(&mut self, values: &[f64]) -> Result<f64> {
+        let ev = self.evaluate_values(values, None, false)?;
+        if !ev.failed.is_empty() {
+            return Ok(f64::INFINITY);
+        }
+        Ok(0.5 * ev.residuals.iter().map(|r| r * r).sum::<f64>())
+    }
+}
+
+/// Wraps an angle to `(−π, π]`.
+pub fn wrap(a: f64) -> f64 {
+    let mut w = a.rem_euclid(2.0 * PI);
+    if w > PI {
+        w -= 2.0 * PI;
+    }
+    w
+}
+
+impl LeastSquares for FrfObjective {
+    fn n_params(&self) -> usize {
+        self.specs.len()
+    }
+
+    fn evaluate(&mut self, u: &[f64]) -> Result<Option<Evaluation>> {
+        let values = self.to_values(u);
+        let ev = self.evaluate_values(&values, None, true)?;
+        if !ev.failed.is_empty() {
+            return Ok(None);
+        }
+        Ok(Some(Evaluation {
+            residuals: ev.residuals,
+            jacobian: ev.jacobian.expect("asked for"),
+        }))
+    }
+}
