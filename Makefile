@@ -24,3 +24,4 @@ bench:
 	cargo bench -p nlsim-bench --bench reduction -- --quick --noplot
 	cargo bench -p nlsim-bench --bench sim -- --quick --noplot
 	cargo bench -p nlsim-bench --bench hb -- --quick --noplot
+	cargo bench -p nlsim-bench --bench calib -- --quick --noplot

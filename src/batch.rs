@@ -38,7 +38,6 @@ use crate::run::{FrfRequest, Method, SimRequest, SweepMode, run_frf, run_simulat
 use hdf5_metno as hdf5;
 use nlsim_kernel::Parameterized;
 use nlsim_kernel::param::parse_known;
-use rand::{RngExt, SeedableRng};
 use rayon::prelude::*;
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -565,24 +564,7 @@ impl Batch {
     }
 }
 
-/// `n` points of a Latin hypercube in `[0, 1)^d` from `seed` (ChaCha8): each coordinate takes
-/// every one of the `n` strata once, at a uniform position inside it.
-pub fn latin_hypercube(n: usize, d: usize, seed: u64) -> Vec<Vec<f64>> {
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let mut out = vec![vec![0.0; d]; n];
-    for c in 0..d {
-        let mut strata: Vec<usize> = (0..n).collect();
-        // Fisher–Yates.
-        for i in (1..n).rev() {
-            let j = rng.random_range(0..=i);
-            strata.swap(i, j);
-        }
-        for (row, s) in out.iter_mut().zip(strata) {
-            row[c] = (s as f64 + rng.random::<f64>()) / n as f64;
-        }
-    }
-    out
-}
+pub use nlsim_calib::latin_hypercube;
 
 /// What happened to a shard.
 #[derive(Debug, Clone, PartialEq)]

@@ -60,6 +60,7 @@ pub mod spec;
 pub mod summary;
 
 pub use error::{Error, Result};
+pub use nlsim_calib as calib;
 pub use nlsim_fixtures as fixtures;
 pub use nlsim_hb as hb;
 pub use nlsim_kernel as kernel;

@@ -2,6 +2,10 @@
 //! it, simulate it with the FOH integrator, follow its multi-harmonic FRF, read and set its
 //! parameters. No file or plotting dependency is involved (see the `io` feature).
 
+pub use nlsim_calib::{
+    Calibration, CalibrationConfig, Channel, Form, FrfObjective, Noise, ObjectiveConfig, ParamSpec,
+    Step, Sweep, SweepDirection, TestData, calibrate,
+};
 pub use nlsim_hb::{
     Branch, ContinuationConfig, ContinuationReport, Forcing, HarmonicSet, HbConfig, HbSystem,
     PointKind, SolutionPoint, continuation, stepped_sine,

@@ -1,0 +1,100 @@
+//! Calibration benchmarks on the ECL beam (cubic tip spring and the driven mode's damping,
+//! two stepped sweeps of 17 and 21 steps, harmonics 1 and 3, 3 % noise):
+//!
+//! - `full`: the whole calibration of the goal — 200 maximin Latin-hypercube
+//!   candidates evaluated in parallel, Levenberg–Marquardt from the best 3, Cramér–Rao bound
+//!   and 10-fold cross validation (goal: under 10 s on 2 cores);
+//! - `jacobian/sensitivities` against `jacobian/central_differences`: one residual-and-Jacobian
+//!   evaluation from the HB sensitivities, beside the `2n + 1` sweep evaluations a
+//!   central-difference Jacobian needs (the ratio is what LM saves per iteration).
+//!
+//! Run with `cargo bench -p nlsim-bench --bench calib -- --quick --noplot`.
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use nlsim_calib::{
+    CalibrationConfig, Form, FrfObjective, LeastSquares, Noise, ObjectiveConfig, ParamSpec,
+    SweepPlan, calibrate, synthesize,
+};
+use nlsim_hb::{HarmonicSet, HbConfig, HbSystem};
+use nlsim_kernel::Param;
+use nlsim_reduction::{ReductionConfig, reduce};
+use std::hint::black_box;
+use std::sync::Arc;
+use std::time::Duration;
+
+fn objective() -> FrfObjective {
+    let fx = nlsim_fixtures::ecl_beam();
+    let red = reduce(&fx.model, &ReductionConfig::lowest(4)).unwrap();
+    let sys = HbSystem::from_model(
+        &fx.model,
+        &red,
+        HarmonicSet::new(3, 1).unwrap(),
+        HbConfig::default(),
+    )
+    .unwrap();
+    let port = sys.sensors()[0].port;
+    let phi = sys.linear().participation();
+    let driven = usize::from(phi[(port, 1)].abs() > phi[(port, 0)].abs());
+    let plans = vec![
+        SweepPlan::linear("0.05 N", 22.0, 26.0, 17, 0.05),
+        SweepPlan::linear("0.2 N", 22.0, 27.0, 21, 0.2),
+    ];
+    let data = synthesize(&sys, "shaker", &plans, 3, Noise::relative(0.03), 7).unwrap();
+    let specs = vec![
+        ParamSpec::new(Param::element("tip_spring", "k3"), 1e8, 1e11),
+        ParamSpec::new(Param::ModalDamping(driven), 0.002, 0.05),
+    ];
+    let cfg = ObjectiveConfig {
+        harmonics: vec![1, 3],
+        form: Form::Complex,
+    };
+    FrfObjective::new(&sys, Arc::new(data), specs, cfg).unwrap()
+}
+
+fn bench(c: &mut Criterion) {
+    let obj = objective();
+    let cfg = CalibrationConfig {
+        lhs_samples: 200,
+        seed: 1,
+        starts: 3,
+        folds: 10,
+        ..Default::default()
+    };
+    let mut g = c.benchmark_group("calib_ecl");
+    g.sample_size(10).measurement_time(Duration::from_secs(10));
+    g.bench_function("full", |b| {
+        b.iter(|| black_box(calibrate(&obj, &cfg).unwrap()))
+    });
+    let u = obj.to_internal(&[8e9, 0.012]);
+    g.bench_function("jacobian/sensitivities", |b| {
+        let mut o = obj.clone();
+        b.iter(|| black_box(o.evaluate(&u).unwrap().unwrap()))
+    });
+    g.bench_function("jacobian/central_differences", |b| {
+        let mut o = obj.clone();
+        b.iter(|| {
+            let p = o.to_values(&u);
+            let base = o.evaluate_values(&p, None, false).unwrap();
+            let mut cols = Vec::new();
+            for k in 0..u.len() {
+                let (mut a, mut m) = (u.clone(), u.clone());
+                a[k] += 1e-6;
+                m[k] -= 1e-6;
+                let ra = o.evaluate_values(&o.to_values(&a), None, false).unwrap();
+                let rm = o.evaluate_values(&o.to_values(&m), None, false).unwrap();
+                cols.push(
+                    ra.residuals
+                        .iter()
+                        .zip(&rm.residuals)
+                        .map(|(x, y)| (x - y) / 2e-6)
+                        .collect::<Vec<_>>(),
+                );
+            }
+            black_box((base, cols))
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
