@@ -14,7 +14,7 @@
 //!   Cramér–Rao bound → k-fold cross validation);
 //! - [`stats`]: Cramér–Rao bounds, identifiability, estimate statistics.
 //!
-//! Solvers that stop short return what they computed with a [`Status`](nlsim_kernel::Status);
+//! Solvers that stop short return what they computed with a [`Status`];
 //! `Err` means invalid input. Nothing here prints, reads files or exits.
 
 pub mod calibrate;
