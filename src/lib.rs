@@ -58,6 +58,8 @@ pub mod simulate;
 #[cfg(feature = "io")]
 pub mod spec;
 pub mod summary;
+#[cfg(feature = "io")]
+pub mod testdata;
 
 pub use error::{Error, Result};
 pub use nlsim_calib as calib;

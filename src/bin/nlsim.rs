@@ -171,6 +171,46 @@ enum Command {
         #[arg(long)]
         set: Vec<String>,
     },
+    /// Calibrate model parameters on stepped-sine test data (CSV, docs/file-formats.md):
+    /// Latin-hypercube candidates, bounded Levenberg–Marquardt on the multi-harmonic
+    /// responses with the measured force, Cramér–Rao bounds and k-fold cross validation.
+    Calibrate {
+        /// Model file (.toml) or built-in model, e.g. `ecl_beam`.
+        model: String,
+        /// Test data (CSV).
+        data: std::path::PathBuf,
+        /// A parameter and its bounds, `NAME=LOWER:UPPER` (repeatable), e.g.
+        /// `--param tip_spring.k3=1e8:1e11 --param mode2.zeta=0.002:0.05`.
+        #[arg(long = "param", required = true)]
+        params: Vec<String>,
+        /// Harmonics compared (1 = fundamental only), e.g. `1,3`.
+        #[arg(long, value_delimiter = ',', default_value = "1")]
+        compare: Vec<usize>,
+        /// Residual form: complex differences or log-magnitude and phase.
+        #[arg(long, value_enum, default_value = "complex")]
+        form: CalibForm,
+        /// Harmonics H kept by the harmonic balance.
+        #[arg(long, default_value_t = 3)]
+        harmonics: usize,
+        /// Retained modes of the reduced model.
+        #[arg(long, default_value_t = 20)]
+        modes: usize,
+        /// Latin-hypercube candidates.
+        #[arg(long, default_value_t = 64)]
+        lhs: usize,
+        /// Levenberg–Marquardt runs from the best candidates.
+        #[arg(long, default_value_t = 3)]
+        starts: usize,
+        /// Folds of the cross validation (0: none).
+        #[arg(long, default_value_t = 10)]
+        folds: usize,
+        /// Seed of the Latin hypercube and of the folds.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Estimates and statistics as CSV.
+        #[arg(long)]
+        out: Option<std::path::PathBuf>,
+    },
     /// Run the pipeline on a built-in model, print a readable summary and write a report
     /// folder with plots.
     Demo {
@@ -451,6 +491,44 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             frf(model, &req, set, out.as_deref(), plot.as_deref(), cli)
         }
         Command::Demo { model, report } => demo(model, report, cli.quiet),
+        Command::Calibrate {
+            model,
+            data,
+            params,
+            compare,
+            form,
+            harmonics,
+            modes,
+            lhs,
+            starts,
+            folds,
+            seed,
+            out,
+        } => {
+            let config = nlsim::calib::CalibrationConfig {
+                lhs_samples: *lhs,
+                seed: *seed,
+                starts: *starts,
+                folds: *folds,
+                ..Default::default()
+            };
+            let form = match form {
+                CalibForm::Complex => nlsim::calib::Form::Complex,
+                CalibForm::LogMagnitude => nlsim::calib::Form::LogMagnitudePhase,
+            };
+            calibrate_cmd(
+                model,
+                data,
+                params,
+                compare,
+                form,
+                *harmonics,
+                *modes,
+                &config,
+                out.as_deref(),
+                cli,
+            )
+        }
         Command::Batch {
             action,
             jobs,
@@ -828,6 +906,8 @@ fn demo_calibration(
         Noise::relative(noise),
         2016,
     )?);
+    let csv = report_dir.join("synthetic_test.csv");
+    nlsim::testdata::write_csv(&csv, &data)?;
     say(&format!(
         "[7/8] calibration: synthetic stepped-sine test of this model (stage 6 not built): {} \
          sweeps, {} steps, harmonics 1-3 at {} sensors, {:.0} % noise (seed 2016)",
@@ -948,6 +1028,15 @@ fn demo_calibration(
         "  plots: {}",
         plot_both(report_dir, "calibration_frf", &fig)?
     ));
+    say(&format!(
+        "  test data: {} (try `nlsim calibrate {} {} --param {}={:e}:{:e} --compare 1,3`)",
+        csv.display(),
+        model.name(),
+        csv.display(),
+        params[0],
+        truth[0] / 100.0,
+        truth[0] * 100.0
+    ));
     say("");
     let kf = cal.kfold.as_ref().expect("folds = 10");
     say(&format!(
@@ -984,6 +1073,172 @@ fn demo_calibration(
         "  plots: {}",
         plot_both(report_dir, "kfold", &fig)?
     ));
+    Ok(())
+}
+
+/// Residual form of `nlsim calibrate`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+enum CalibForm {
+    /// Real and imaginary parts of the complex difference.
+    Complex,
+    /// Log-magnitude and phase differences.
+    LogMagnitude,
+}
+
+/// `nlsim calibrate`.
+#[allow(clippy::too_many_arguments)]
+fn calibrate_cmd(
+    spec: &str,
+    data_path: &std::path::Path,
+    params: &[String],
+    compare: &[usize],
+    form: nlsim::calib::Form,
+    harmonics: usize,
+    modes: usize,
+    config: &nlsim::calib::CalibrationConfig,
+    out: Option<&std::path::Path>,
+    cli: &Cli,
+) -> nlsim::Result<()> {
+    use nlsim::calib::{FrfObjective, ObjectiveConfig, ParamSpec, Progress};
+    use nlsim::hb::{HarmonicSet, HbConfig, HbSystem};
+    use nlsim::kernel::Param;
+    let say = |s: String| {
+        if !cli.quiet {
+            println!("{s}");
+        }
+    };
+    let mut specs = Vec::new();
+    for p in params {
+        let bad = || {
+            nlsim::Error::Usage(format!(
+                "--param {p}: expected NAME=LOWER:UPPER, e.g. tip_spring.k3=1e8:1e11"
+            ))
+        };
+        let (name, range) = p.split_once('=').ok_or_else(bad)?;
+        let (lo, hi) = range.split_once(':').ok_or_else(bad)?;
+        let lo: f64 = lo.trim().parse().map_err(|_| bad())?;
+        let hi: f64 = hi.trim().parse().map_err(|_| bad())?;
+        let param: Param = name.trim().parse()?;
+        specs.push(ParamSpec::new(param, lo, hi));
+    }
+    if let Some(o) = out
+        && o.extension().is_none_or(|e| e != "csv")
+    {
+        return Err(nlsim::Error::Usage(format!(
+            "--out {}: name a .csv file",
+            o.display()
+        )));
+    }
+    let data = std::sync::Arc::new(nlsim::testdata::read_csv(data_path)?);
+    let model = nlsim::run::load_for_run(spec, &[])?;
+    let t = Instant::now();
+    let cfg = nlsim::reduction::ReductionConfig::lowest(modes.min(model.n_dofs()));
+    let reduced = nlsim::reduction::reduce(&model, &cfg)?;
+    let sys = HbSystem::from_model(
+        &model,
+        &reduced,
+        HarmonicSet::new(harmonics, 1)?,
+        HbConfig::default(),
+    )?;
+    let obj = FrfObjective::new(
+        &sys,
+        data.clone(),
+        specs.clone(),
+        ObjectiveConfig {
+            harmonics: compare.to_vec(),
+            form,
+        },
+    )?;
+    say(format!(
+        "calibrating {} parameters of '{}' on {} ({} sweeps, {} steps, {} channels); reduction {:.2} s",
+        specs.len(),
+        model.name(),
+        data_path.display(),
+        data.sweeps.len(),
+        data.n_points(),
+        data.channels.len(),
+        t.elapsed().as_secs_f64()
+    ));
+    let show = !cli.quiet && std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let progress = |p: Progress| {
+        if show {
+            let (what, d, n) = match p {
+                Progress::Candidates { done, total } => ("candidates", done, total),
+                Progress::Start { done, total } => ("optimisations", done, total),
+                Progress::Fold { done, total } => ("folds", done, total),
+            };
+            eprint!("\r  {what} {d}/{n}        ");
+            if d == n {
+                eprintln!();
+            }
+        }
+    };
+    let t = Instant::now();
+    let cal = nlsim::calib::calibrate_with_progress(&obj, config, &progress)?;
+    let best = &cal.runs[0].report;
+    say(format!(
+        "{} in {} LM iterations ({} evaluations, {} rejected, {} failed) from the best of {} candidates; {:.2} s",
+        cal.status,
+        best.iterations,
+        best.evaluations,
+        best.rejected,
+        best.failed_evaluations,
+        cal.candidates.len(),
+        t.elapsed().as_secs_f64()
+    ));
+    say(format!(
+        "cost {:.6e}, reduced chi2 {:.3} (1 when the noise model fits), collinearity index {:.2}",
+        cal.cost, cal.cramer_rao.reduced_chi2, cal.cramer_rao.collinearity
+    ));
+    if !cal.fit.failed.is_empty() {
+        say(format!(
+            "{} points did not converge at the estimate",
+            cal.fit.failed.len()
+        ));
+    }
+    say(format!(
+        "{:<22} {:>14} {:>14} {:>14}  flags",
+        "parameter", "estimate", "Cramér–Rao", "k-fold (jk)"
+    ));
+    let mut csv = String::from(
+        "param,estimate,cramer_rao_std,kfold_mean,kfold_std,jackknife_std,at_bound,poorly_identified\n",
+    );
+    for (j, p) in cal.params.iter().enumerate() {
+        let kf = cal.kfold.as_ref();
+        let flags = [
+            (cal.at_bound[j], "at bound"),
+            (cal.poorly_identified[j], "poorly identified"),
+        ]
+        .iter()
+        .filter(|f| f.0)
+        .map(|f| f.1)
+        .collect::<Vec<_>>()
+        .join(", ");
+        say(format!(
+            "{:<22} {:>14.6e} {:>14.3e} {:>14.3e}  {flags}",
+            p.to_string(),
+            cal.estimate[j],
+            cal.cramer_rao.std[j],
+            kf.map_or(f64::NAN, |k| k.jackknife_std[j])
+        ));
+        csv.push_str(&format!(
+            "{p},{:?},{:?},{:?},{:?},{:?},{},{}\n",
+            cal.estimate[j],
+            cal.cramer_rao.std[j],
+            kf.map_or(f64::NAN, |k| k.mean[j]),
+            kf.map_or(f64::NAN, |k| k.std[j]),
+            kf.map_or(f64::NAN, |k| k.jackknife_std[j]),
+            cal.at_bound[j],
+            cal.poorly_identified[j]
+        ));
+    }
+    if let Some(o) = out {
+        std::fs::write(o, csv).map_err(|source| nlsim::Error::Io {
+            path: o.to_path_buf(),
+            source,
+        })?;
+        say(format!("wrote {}", o.display()));
+    }
     Ok(())
 }
 
