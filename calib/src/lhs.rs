@@ -27,18 +27,18 @@ pub fn latin_hypercube(n: usize, d: usize, seed: u64) -> Vec<Vec<f64>> {
     out
 }
 
+/// Squared Euclidean distance.
+fn dist2(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum()
+}
+
 /// Morris–Mitchell criterion `φ_p = (Σ_{i<j} d_ij^{−p})^{1/p}` (smaller is more spread; it
 /// tends to the inverse of the smallest distance as `p` grows).
 pub fn phi_p(points: &[Vec<f64>], p: f64) -> f64 {
     let mut s = 0.0;
     for i in 0..points.len() {
         for j in i + 1..points.len() {
-            let d2: f64 = points[i]
-                .iter()
-                .zip(&points[j])
-                .map(|(a, b)| (a - b) * (a - b))
-                .sum();
-            s += d2.max(1e-300).powf(-p / 2.0);
+            s += dist2(&points[i], &points[j]).max(1e-300).powf(-p / 2.0);
         }
     }
     s.powf(1.0 / p)
@@ -49,12 +49,7 @@ pub fn min_distance(points: &[Vec<f64>]) -> f64 {
     let mut m = f64::INFINITY;
     for i in 0..points.len() {
         for j in i + 1..points.len() {
-            let d2: f64 = points[i]
-                .iter()
-                .zip(&points[j])
-                .map(|(a, b)| (a - b) * (a - b))
-                .sum();
-            m = m.min(d2);
+            m = m.min(dist2(&points[i], &points[j]));
         }
     }
     m.sqrt()
@@ -71,12 +66,7 @@ pub fn maximin_latin_hypercube(n: usize, d: usize, seed: u64, swaps: usize) -> V
     const P: f64 = 15.0;
     // The sum S = Σ d_ij^{−p}, updated for the two rows a swap touches.
     let pair = |pts: &[Vec<f64>], i: usize, j: usize| -> f64 {
-        let d2: f64 = pts[i]
-            .iter()
-            .zip(&pts[j])
-            .map(|(a, b)| (a - b) * (a - b))
-            .sum();
-        d2.max(1e-300).powf(-P / 2.0)
+        dist2(&pts[i], &pts[j]).max(1e-300).powf(-P / 2.0)
     };
     let row_sum = |pts: &[Vec<f64>], i: usize, skip: usize| -> f64 {
         (0..pts.len())
