@@ -54,6 +54,7 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
     let mut sweeps: Vec<Sweep> = Vec::new();
     // The step being read: (line, frequency, harmonics seen).
     let mut pending: Option<(usize, usize)> = None;
+    let n_lines = text.lines().count();
     for (i, raw) in text.lines().enumerate() {
         let ln = i + 1;
         let line = raw.trim();
@@ -251,6 +252,14 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
             ));
         }
         if k == 1 {
+            // Bounded by construction: a step's storage (channels × H) is allocated only when
+            // the file still holds the H rows that fill it.
+            if n_lines - i < h {
+                return Err(err(
+                    ln,
+                    format!("a step needs {h} harmonic rows; the file ends first"),
+                ));
+            }
             if let Some((l, seen)) = pending
                 && seen != h
             {

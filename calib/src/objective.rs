@@ -177,7 +177,7 @@ pub struct FrfObjective {
     input: usize,
     /// Training mask per point (in [`TestData::points`] order).
     training: Vec<bool>,
-    /// σ of each channel × harmonic × point (fixed by the data).
+    /// Every point of the data, in [`TestData::points`] order.
     points: Vec<PointId>,
 }
 
