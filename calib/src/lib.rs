@@ -8,6 +8,8 @@
 //! - [`objective`]: the weighted deviation of computed from measured multi-harmonic responses
 //!   along each sweep (fundamental only or with side harmonics; complex or log-magnitude and
 //!   phase), with its Jacobian from the harmonic balance sensitivities;
+//! - [`modal`]: the linear stage: FE-level parameters (group scales, boundary springs) from
+//!   measured frequencies and mode shapes, with analytic eigen-sensitivities;
 //! - [`lm`]: bounded Levenberg–Marquardt with a scaled trust region;
 //! - [`lhs`]: seeded maximin Latin-hypercube start points;
 //! - [`calibrate`](mod@calibrate): the workflow (candidates in parallel → LM from the best few →
@@ -22,6 +24,7 @@ pub mod data;
 pub mod lhs;
 mod linalg;
 pub mod lm;
+pub mod modal;
 pub mod objective;
 pub mod stats;
 pub mod synthetic;
@@ -34,7 +37,10 @@ pub use data::{Channel, Noise, PointId, Step, Sweep, SweepDirection, TestData};
 pub use lhs::{Spacing, latin_hypercube, maximin_latin_hypercube};
 pub use linalg::Svd;
 pub use lm::{Evaluation, LeastSquares, LmConfig, LmReport, StopReason, levenberg_marquardt};
+pub use modal::{
+    MeasuredMode, ModalCalibration, ModalData, ModalFit, ModalObjective, calibrate_modal, mac_of,
+};
 pub use nlsim_kernel::Status;
 pub use objective::{Form, FrfObjective, ObjectiveConfig, ParamSpec, PointResult, SweepEvaluation};
 pub use stats::CramerRao;
-pub use synthetic::{SweepPlan, synthesize};
+pub use synthetic::{Gaussian, SweepPlan, synthesize};

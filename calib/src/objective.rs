@@ -54,7 +54,7 @@ impl ParamSpec {
         }
     }
 
-    fn check(&self) -> Result<()> {
+    pub(crate) fn check(&self) -> Result<()> {
         if !(self.lower.is_finite() && self.upper.is_finite() && self.lower < self.upper) {
             return Err(Error::invalid(
                 format!("bounds of {}", self.param),

@@ -131,13 +131,8 @@ pub fn synthesize(
             ),
         });
     }
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut normal = move || {
-        // Box–Muller.
-        let u1: f64 = 1.0 - rng.random::<f64>();
-        let u2: f64 = rng.random::<f64>();
-        (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
-    };
+    let mut gauss = Gaussian::new(seed);
+    let mut normal = || gauss.sample();
     for pr in &ev.points {
         let st = &mut data.sweeps[pr.id.sweep].steps[pr.id.step];
         for c in 0..st.response.nrows() {
@@ -149,6 +144,25 @@ pub fn synthesize(
         }
     }
     Ok(data)
+}
+
+/// Seeded standard normal draws (ChaCha8 and the Box–Muller transform): the noise of every
+/// synthetic test, reproducible from its seed on any machine.
+#[derive(Debug, Clone)]
+pub struct Gaussian(ChaCha8Rng);
+
+impl Gaussian {
+    /// The stream of seed `seed`.
+    pub fn new(seed: u64) -> Self {
+        Self(ChaCha8Rng::seed_from_u64(seed))
+    }
+
+    /// The next draw of `N(0, 1)`.
+    pub fn sample(&mut self) -> f64 {
+        let u1: f64 = 1.0 - self.0.random::<f64>();
+        let u2: f64 = self.0.random::<f64>();
+        (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+    }
 }
 
 /// The quantity's unit, as text.

@@ -578,7 +578,103 @@ fn check_scale(p: &Param, s: f64) -> Result<()> {
     Ok(())
 }
 
+/// The derivative of the model's matrices with respect to one FE-level parameter
+/// ([`Model::matrix_derivative`]): `∂K/∂p` and `∂M/∂p`, constant because `K` and `M` are
+/// affine in every FE-level parameter.
+#[derive(Debug, Clone, Copy)]
+pub enum MatrixDerivative<'a> {
+    /// A group scale: `∂K/∂s_g = K_g` (stiffness scale) or `∂M/∂t_g = M_g` (mass scale).
+    Group {
+        /// `∂K/∂p` (N/m), when the parameter scales a stiffness.
+        stiffness: Option<&'a SparseSym>,
+        /// `∂M/∂p` (kg), when the parameter scales a mass.
+        mass: Option<&'a SparseSym>,
+    },
+    /// A boundary spring: `∂K/∂k = e_d e_dᵀ` at DOF index `d`, `∂M/∂k = 0`.
+    Spring {
+        /// DOF index of the spring.
+        dof: usize,
+    },
+}
+
+impl MatrixDerivative<'_> {
+    /// `y = (∂K/∂p − λ ∂M/∂p) x`, the right-hand side of the derivative of the eigenproblem
+    /// `(K − λM) φ = 0` at eigenvalue `λ` (rad²/s²) without its `∂λ/∂p` term.
+    ///
+    /// # Panics
+    /// When `x` or `y` does not have the model's order (a programming error of the caller).
+    pub fn apply(&self, lambda: f64, x: &[f64], y: &mut [f64]) {
+        y.fill(0.0);
+        match *self {
+            MatrixDerivative::Group { stiffness, mass } => {
+                let mut t = vec![0.0; y.len()];
+                if let Some(k) = stiffness {
+                    k.mul_vec(x, &mut t);
+                    y.iter_mut().zip(&t).for_each(|(a, b)| *a += b);
+                }
+                if let Some(m) = mass {
+                    m.mul_vec(x, &mut t);
+                    y.iter_mut().zip(&t).for_each(|(a, b)| *a -= lambda * b);
+                }
+            }
+            MatrixDerivative::Spring { dof } => y[dof] = x[dof],
+        }
+    }
+
+    /// The quadratic form `xᵀ (∂K/∂p − λ ∂M/∂p) x`: for a mass-normalised mode `x = φ_r` at
+    /// `λ = λ_r` it is the eigenvalue derivative `∂λ_r/∂p` (rad²/s² per unit of `p`).
+    pub fn quadratic(&self, lambda: f64, x: &[f64]) -> f64 {
+        match *self {
+            MatrixDerivative::Group { stiffness, mass } => {
+                stiffness.map_or(0.0, |k| k.bilinear(x, x))
+                    - lambda * mass.map_or(0.0, |m| m.bilinear(x, x))
+            }
+            MatrixDerivative::Spring { dof } => x[dof] * x[dof],
+        }
+    }
+
+    /// `xᵀ (∂M/∂p) x` (kg per unit of `p`).
+    pub fn mass_quadratic(&self, x: &[f64]) -> f64 {
+        match *self {
+            MatrixDerivative::Group { mass, .. } => mass.map_or(0.0, |m| m.bilinear(x, x)),
+            MatrixDerivative::Spring { .. } => 0.0,
+        }
+    }
+}
+
 impl Model {
+    /// `∂K/∂p` and `∂M/∂p` for an FE-level parameter (a group scale or a boundary spring);
+    /// an error naming the known FE-level parameters for any other.
+    pub fn matrix_derivative(&self, p: &Param) -> Result<MatrixDerivative<'_>> {
+        let fe_params = || {
+            self.parameters()
+                .into_iter()
+                .filter(|q| !matches!(q, Param::Element { .. }))
+                .collect::<Vec<_>>()
+        };
+        let found = match p {
+            Param::GroupStiffness(g) => self
+                .group_index(g)
+                .and_then(|i| self.groups[i].stiffness.as_ref())
+                .map(|k| MatrixDerivative::Group {
+                    stiffness: Some(k),
+                    mass: None,
+                }),
+            Param::GroupMass(g) => self
+                .group_index(g)
+                .and_then(|i| self.groups[i].mass.as_ref())
+                .map(|m| MatrixDerivative::Group {
+                    stiffness: None,
+                    mass: Some(m),
+                }),
+            Param::BoundarySpring(d) => self.spring_index(d).map(|i| MatrixDerivative::Spring {
+                dof: self.springs[i].0,
+            }),
+            _ => None,
+        };
+        found.ok_or_else(|| unknown_param(p, &fe_params()))
+    }
+
     fn group_index(&self, name: &str) -> Option<usize> {
         self.groups.iter().position(|g| g.name == name)
     }

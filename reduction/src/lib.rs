@@ -9,6 +9,8 @@
 //! - [`factor`]: the shifted pencil `K − σM` with its reusable symbolic analysis;
 //! - [`modal`]: ports (elements, excitation, sensors), modal participation and the residual
 //!   flexibility of the truncated modes at the ports (the feedthrough `D_L`, `D_NL` of eq. 10);
+//! - [`sensitivity`]: analytic eigenvalue and mode-shape derivatives with respect to FE-level
+//!   parameters, on the eigen solve's factor (no refactorisation per parameter);
 //! - [`state_space`]: the diagonal complex-modal state-space form ([`ModalSystem`]) and the
 //!   receptances evaluated from it.
 //!
@@ -17,6 +19,7 @@
 pub mod eigen;
 pub mod factor;
 pub mod modal;
+pub mod sensitivity;
 pub mod state_space;
 
 pub use eigen::{
@@ -27,4 +30,5 @@ pub use modal::{
     EffectiveMass, ModelPortMap, Port, PortKind, ReducedModel, ReductionConfig, damping_ratios,
     effective_masses, model_port_map, model_ports, reduce, reduce_with,
 };
+pub use sensitivity::{EigenSensitivities, SensitivityConfig, eigen_sensitivities};
 pub use state_space::{ModalSystem, Response};

@@ -1,0 +1,505 @@
+//! The linear stage of calibration (thesis §4.5): FE-level parameters — stiffness and mass
+//! scales of labelled element groups, boundary springs — from measured modal data (natural
+//! frequencies, and mode shapes at the sensors when measured).
+//!
+//! Each evaluation solves the eigenproblem once (the symbolic analysis is kept across
+//! evaluations) and takes the Jacobian from the analytic eigen-sensitivities on the same
+//! factor ([`nlsim_reduction::sensitivity`]), so a large model is factorised once per
+//! Levenberg–Marquardt trial, never once per parameter.
+//!
+//! Residuals, weighted by the noise model:
+//!
+//! - frequency of measured mode `i` paired with computed mode `r`:
+//!   `(f_r − f̃_i) / σ_f,i`;
+//! - mode shape (when measured): `(φ̂_r − ψ̂_i) / σ_φ` per sensor, both shapes normalised to
+//!   unit length over the sensors and the computed one signed to agree with the measured one.
+//!
+//! Pairing: a measured mode with a shape takes the free computed mode of largest MAC
+//! (`MAC = (φᵀψ)² / (φᵀφ ψᵀψ)`), in measured order; one without a shape takes the lowest
+//! computed mode not yet taken. It is redone at every evaluation (mode tracking), and
+//! reported.
+
+use crate::CalibrationConfig;
+use crate::calibrate::{Candidate, StartRun};
+use crate::lhs::{maximin_latin_hypercube, to_range};
+use crate::lm::{Evaluation, LeastSquares, levenberg_marquardt};
+use crate::objective::ParamSpec;
+use crate::stats::CramerRao;
+use faer::{Mat, Par};
+use nlsim_kernel::{Error, Model, Param, Parameterized, Result, Status};
+use nlsim_reduction::{
+    EigenConfig, EigenSolver, ModeSelection, SensitivityConfig, eigen_sensitivities,
+};
+use rayon::prelude::*;
+use std::sync::Arc;
+
+/// One measured mode.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeasuredMode {
+    /// Natural frequency (Hz).
+    pub frequency_hz: f64,
+    /// Standard deviation of the frequency (Hz), the weight of its residual.
+    pub frequency_std_hz: f64,
+    /// Mode shape at [`ModalData::dofs`] (any scale and sign), when measured.
+    pub shape: Option<Vec<f64>>,
+}
+
+/// Measured modal data: modes, the DOFs their shapes were measured at, and the shape noise.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModalData {
+    /// Model DOF indices of the sensors (the rows of every measured shape).
+    pub dofs: Vec<usize>,
+    /// Standard deviation of one component of a unit-normalised measured shape.
+    pub shape_std: f64,
+    /// The measured modes.
+    pub modes: Vec<MeasuredMode>,
+}
+
+impl ModalData {
+    /// Checks the data against a model of `n_dofs` DOFs; errors name the mode (1-based).
+    pub fn validate(&self, n_dofs: usize) -> Result<()> {
+        if self.modes.is_empty() {
+            return Err(Error::invalid("modal data", "has no modes"));
+        }
+        if let Some(&d) = self.dofs.iter().find(|&&d| d >= n_dofs) {
+            return Err(Error::invalid(
+                "modal data",
+                format!("sensor DOF index {d} is beyond the model's {n_dofs} DOFs"),
+            ));
+        }
+        let has_shape = self.modes.iter().any(|m| m.shape.is_some());
+        if has_shape && !(self.shape_std > 0.0 && self.shape_std.is_finite()) {
+            return Err(Error::invalid(
+                "modal data",
+                format!(
+                    "shapes are given, so the shape noise must be positive, not {}",
+                    self.shape_std
+                ),
+            ));
+        }
+        for (i, m) in self.modes.iter().enumerate() {
+            let what = || format!("measured mode {}", i + 1);
+            if !(m.frequency_hz > 0.0 && m.frequency_hz.is_finite()) {
+                return Err(Error::invalid(
+                    what(),
+                    format!("frequency must be positive, not {} Hz", m.frequency_hz),
+                ));
+            }
+            if !(m.frequency_std_hz > 0.0 && m.frequency_std_hz.is_finite()) {
+                return Err(Error::invalid(
+                    what(),
+                    format!(
+                        "frequency standard deviation must be positive, not {} Hz",
+                        m.frequency_std_hz
+                    ),
+                ));
+            }
+            if let Some(s) = &m.shape {
+                if s.len() != self.dofs.len() {
+                    return Err(Error::DimensionMismatch {
+                        what: format!("{}: shape components (one per sensor DOF)", what()),
+                        expected: self.dofs.len(),
+                        found: s.len(),
+                    });
+                }
+                if s.iter().any(|v| !v.is_finite()) || s.iter().all(|v| *v == 0.0) {
+                    return Err(Error::invalid(
+                        what(),
+                        "shape must be finite and not all zero",
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn n_residuals(&self) -> usize {
+        self.modes
+            .iter()
+            .map(|m| 1 + m.shape.as_ref().map_or(0, Vec::len))
+            .sum()
+    }
+}
+
+/// The model against the modal data at one set of parameter values.
+#[derive(Debug, Clone)]
+pub struct ModalFit {
+    /// Computed mode (0-based) paired with each measured mode.
+    pub pairing: Vec<usize>,
+    /// Computed frequency of each paired mode (Hz).
+    pub frequencies_hz: Vec<f64>,
+    /// MAC of each pair (NaN when the shape was not measured).
+    pub mac: Vec<f64>,
+    /// Weighted residuals.
+    pub residuals: Vec<f64>,
+    /// Jacobian with respect to the internal variables (residuals × parameters).
+    pub jacobian: Mat<f64>,
+    /// Status of the mode-shape derivative series ([`Status::Converged`] when exact).
+    pub sensitivity_status: Status,
+}
+
+/// The modal least-squares problem over FE-level parameters.
+#[derive(Debug)]
+pub struct ModalObjective {
+    model: Model,
+    data: Arc<ModalData>,
+    specs: Vec<ParamSpec>,
+    eigen: EigenConfig,
+    solver: EigenSolver,
+}
+
+impl Clone for ModalObjective {
+    /// A copy with a fresh eigen solver (the symbolic analysis is redone once).
+    fn clone(&self) -> Self {
+        Self {
+            model: self.model.clone(),
+            data: self.data.clone(),
+            specs: self.specs.clone(),
+            eigen: self.eigen.clone(),
+            solver: EigenSolver::new(),
+        }
+    }
+}
+
+impl ModalObjective {
+    /// The problem for `specs` (FE-level parameters of `model`) against `data`, retaining
+    /// `modes` computed modes (at least as many as measured; a few more let the pairing
+    /// follow modes that change order). `par` is the parallelism of the eigen solves.
+    pub fn new(
+        model: Model,
+        data: Arc<ModalData>,
+        specs: Vec<ParamSpec>,
+        modes: usize,
+        par: Par,
+    ) -> Result<Self> {
+        data.validate(model.n_dofs())?;
+        if specs.is_empty() {
+            return Err(Error::invalid(
+                "modal calibration",
+                "no parameters to calibrate",
+            ));
+        }
+        for s in &specs {
+            s.check()?;
+            model.matrix_derivative(&s.param)?;
+        }
+        if modes < data.modes.len() || modes > model.n_dofs() {
+            return Err(Error::invalid(
+                "modal calibration",
+                format!(
+                    "retain between {} (the measured modes) and {} (the DOFs) modes, not {modes}",
+                    data.modes.len(),
+                    model.n_dofs()
+                ),
+            ));
+        }
+        let eigen = EigenConfig {
+            selection: ModeSelection::Lowest(modes),
+            par,
+            ..EigenConfig::default()
+        };
+        Ok(Self {
+            model,
+            data,
+            specs,
+            eigen,
+            solver: EigenSolver::new(),
+        })
+    }
+
+    /// The parameters with their bounds.
+    pub fn specs(&self) -> &[ParamSpec] {
+        &self.specs
+    }
+
+    /// The model at the values last evaluated.
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
+    /// Internal variables of values `p`.
+    pub fn to_internal(&self, p: &[f64]) -> Vec<f64> {
+        self.specs
+            .iter()
+            .zip(p)
+            .map(|(s, &v)| s.to_internal(v))
+            .collect()
+    }
+
+    /// Values of internal variables `u`.
+    pub fn to_values(&self, u: &[f64]) -> Vec<f64> {
+        self.specs
+            .iter()
+            .zip(u)
+            .map(|(s, &v)| s.to_value(v))
+            .collect()
+    }
+
+    /// Internal bounds (lower, upper).
+    pub fn internal_bounds(&self) -> (Vec<f64>, Vec<f64>) {
+        self.specs.iter().map(ParamSpec::internal_bounds).unzip()
+    }
+
+    /// The model against the data at parameter `values`. `Ok(None)` when the eigen solve
+    /// fails numerically there; `Err` for invalid values.
+    pub fn fit_values(&mut self, values: &[f64]) -> Result<Option<ModalFit>> {
+        if values.len() != self.specs.len() {
+            return Err(Error::DimensionMismatch {
+                what: "modal calibration parameter values".into(),
+                expected: self.specs.len(),
+                found: values.len(),
+            });
+        }
+        for (s, &v) in self.specs.iter().zip(values) {
+            self.model.set_param(&s.param, v)?;
+        }
+        let modes = match self
+            .solver
+            .solve(self.model.stiffness(), self.model.mass(), &self.eigen)
+        {
+            Ok(m) => m,
+            Err(Error::Numerical { .. }) => return Ok(None),
+            Err(e) => return Err(e),
+        };
+        let data = self.data.clone();
+        let params: Vec<Param> = self.specs.iter().map(|s| s.param.clone()).collect();
+        let sens = eigen_sensitivities(
+            &self.model,
+            &modes,
+            &self.solver,
+            &params,
+            &SensitivityConfig {
+                shape_dofs: data.dofs.clone(),
+                par: self.eigen.par,
+                ..SensitivityConfig::default()
+            },
+        )?;
+        let freqs = modes.frequencies_hz();
+        let at =
+            |r: usize| -> Vec<f64> { data.dofs.iter().map(|&d| modes.vectors[(d, r)]).collect() };
+        // Pairing.
+        let mut taken = vec![false; modes.len()];
+        let mut pairing = Vec::with_capacity(data.modes.len());
+        let mut mac = Vec::with_capacity(data.modes.len());
+        for m in &data.modes {
+            let r = match &m.shape {
+                Some(psi) => {
+                    let mut best = (usize::MAX, -1.0);
+                    for r in (0..modes.len()).filter(|&r| !taken[r]) {
+                        let c = mac_of(&at(r), psi);
+                        if c > best.1 {
+                            best = (r, c);
+                        }
+                    }
+                    mac.push(best.1);
+                    best.0
+                }
+                None => {
+                    mac.push(f64::NAN);
+                    (0..modes.len()).find(|&r| !taken[r]).unwrap_or(0)
+                }
+            };
+            taken[r] = true;
+            pairing.push(r);
+        }
+        // Residuals and Jacobian (per internal variable: dp/du on every column).
+        let n = self.specs.len();
+        let du: Vec<f64> = self
+            .specs
+            .iter()
+            .zip(values)
+            .map(|(s, &v)| s.dvalue(s.to_internal(v)))
+            .collect();
+        let mut residuals = Vec::with_capacity(data.n_residuals());
+        let mut jacobian = Mat::zeros(data.n_residuals(), n);
+        let mut frequencies_hz = Vec::with_capacity(pairing.len());
+        for (m, &r) in data.modes.iter().zip(&pairing) {
+            let row = residuals.len();
+            residuals.push((freqs[r] - m.frequency_hz) / m.frequency_std_hz);
+            for j in 0..n {
+                jacobian[(row, j)] = sens.frequency_hz[(r, j)] * du[j] / m.frequency_std_hz;
+            }
+            frequencies_hz.push(freqs[r]);
+            if let Some(psi) = &m.shape {
+                let a = at(r);
+                let na = norm(&a);
+                let npsi = norm(psi);
+                let sign = if dot(&a, psi) < 0.0 { -1.0 } else { 1.0 };
+                let b: Vec<f64> = a.iter().map(|v| v / na).collect();
+                for (i, (&bi, &pi)) in b.iter().zip(psi).enumerate() {
+                    residuals.push((sign * bi - pi / npsi) / data.shape_std);
+                    for j in 0..n {
+                        // ∂b = (∂a − b (bᵀ∂a)) / ‖a‖.
+                        let da: Vec<f64> = (0..data.dofs.len())
+                            .map(|k| sens.shapes[j][(k, r)])
+                            .collect();
+                        let btda = dot(&b, &da);
+                        jacobian[(row + 1 + i, j)] =
+                            sign * (da[i] - bi * btda) / na * du[j] / data.shape_std;
+                    }
+                }
+            }
+        }
+        Ok(Some(ModalFit {
+            pairing,
+            frequencies_hz,
+            mac,
+            residuals,
+            jacobian,
+            sensitivity_status: sens.status,
+        }))
+    }
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+fn norm(a: &[f64]) -> f64 {
+    dot(a, a).sqrt()
+}
+
+/// Modal assurance criterion of two real shapes (1: parallel, 0: orthogonal).
+pub fn mac_of(a: &[f64], b: &[f64]) -> f64 {
+    let d = dot(a, a) * dot(b, b);
+    if d > 0.0 { dot(a, b).powi(2) / d } else { 0.0 }
+}
+
+impl LeastSquares for ModalObjective {
+    fn n_params(&self) -> usize {
+        self.specs.len()
+    }
+
+    fn evaluate(&mut self, u: &[f64]) -> Result<Option<Evaluation>> {
+        let values = self.to_values(u);
+        Ok(self.fit_values(&values)?.map(|f| Evaluation {
+            residuals: f.residuals,
+            jacobian: f.jacobian,
+        }))
+    }
+}
+
+/// The outcome of [`calibrate_modal`].
+#[derive(Debug, Clone)]
+pub struct ModalCalibration {
+    /// The calibrated parameters.
+    pub params: Vec<Param>,
+    /// The estimate.
+    pub estimate: Vec<f64>,
+    /// Status of the best optimisation.
+    pub status: Status,
+    /// Every candidate: the model's values first, then the Latin hypercube.
+    pub candidates: Vec<Candidate>,
+    /// The optimisations, best first.
+    pub runs: Vec<StartRun>,
+    /// Cramér–Rao bound at the estimate.
+    pub cramer_rao: CramerRao,
+    /// Parameters whose estimate sits on a bound.
+    pub at_bound: Vec<bool>,
+    /// The model against the data at the estimate.
+    pub fit: ModalFit,
+    /// Cost `½‖r‖²` at the estimate.
+    pub cost: f64,
+}
+
+/// Calibrates FE-level parameters on modal data: Latin-hypercube candidates (in parallel,
+/// each worker with its own copy of the model), Levenberg–Marquardt from the best
+/// `config.starts`, and the Cramér–Rao bound at the optimum. `config.folds` is not used (a
+/// handful of modes does not split into folds). Bit-identical for any thread count.
+pub fn calibrate_modal(
+    objective: &ModalObjective,
+    config: &CalibrationConfig,
+) -> Result<ModalCalibration> {
+    config.lm.validate()?;
+    let specs = objective.specs.clone();
+    let n = specs.len();
+    let params: Vec<Param> = specs.iter().map(|s| s.param.clone()).collect();
+    let current = params
+        .iter()
+        .zip(&specs)
+        .map(|(p, s)| Ok(objective.model.param(p)?.clamp(s.lower, s.upper)))
+        .collect::<Result<Vec<_>>>()?;
+    let mut starts = vec![current];
+    for t in maximin_latin_hypercube(config.lhs_samples, n, config.seed, config.maximin_swaps) {
+        starts.push(
+            t.iter()
+                .zip(&specs)
+                .map(|(&t, s)| to_range(t, s.lower, s.upper, s.spacing))
+                .collect::<Result<Vec<_>>>()?,
+        );
+    }
+    let costs: Vec<Result<f64>> = starts
+        .par_iter()
+        .map_init(
+            || objective.clone(),
+            |obj, v| {
+                Ok(obj.fit_values(v)?.map_or(f64::INFINITY, |f| {
+                    0.5 * f.residuals.iter().map(|r| r * r).sum::<f64>()
+                }))
+            },
+        )
+        .collect();
+    let mut candidates = Vec::with_capacity(starts.len());
+    for (values, c) in starts.into_iter().zip(costs) {
+        candidates.push(Candidate { values, cost: c? });
+    }
+    let mut order: Vec<usize> = (0..candidates.len())
+        .filter(|&i| candidates[i].cost.is_finite())
+        .collect();
+    if order.is_empty() {
+        return Err(Error::Numerical {
+            what: "modal calibration".into(),
+            detail: "the eigen solve failed for every candidate".into(),
+        });
+    }
+    order.sort_by(|&a, &b| {
+        candidates[a]
+            .cost
+            .total_cmp(&candidates[b].cost)
+            .then(a.cmp(&b))
+    });
+    order.truncate(config.starts.max(1));
+    let (lo, hi) = objective.internal_bounds();
+    let runs: Vec<Result<StartRun>> = order
+        .par_iter()
+        .map(|&i| {
+            let mut obj = objective.clone();
+            let start = candidates[i].values.clone();
+            let u0 = obj.to_internal(&start);
+            let report = levenberg_marquardt(&mut obj, &u0, &lo, &hi, &config.lm)?;
+            let values = obj.to_values(&report.u);
+            Ok(StartRun {
+                start,
+                values,
+                report,
+            })
+        })
+        .collect();
+    let mut runs = runs.into_iter().collect::<Result<Vec<_>>>()?;
+    runs.sort_by(|a, b| a.report.cost.total_cmp(&b.report.cost));
+    let estimate = runs[0].values.clone();
+    let mut obj = objective.clone();
+    let fit = obj.fit_values(&estimate)?.ok_or_else(|| Error::Numerical {
+        what: "modal calibration".into(),
+        detail: "the eigen solve failed at the estimate".into(),
+    })?;
+    let cost = 0.5 * fit.residuals.iter().map(|r| r * r).sum::<f64>();
+    let du: Vec<f64> = specs
+        .iter()
+        .zip(&estimate)
+        .map(|(s, &v)| s.dvalue(s.to_internal(v)))
+        .collect();
+    let jp = Mat::from_fn(fit.jacobian.nrows(), n, |i, c| fit.jacobian[(i, c)] / du[c]);
+    let cramer_rao = CramerRao::new(&jp, &fit.residuals, &estimate);
+    Ok(ModalCalibration {
+        params,
+        status: runs[0].report.status,
+        at_bound: runs[0].report.active_bounds.clone(),
+        estimate,
+        candidates,
+        runs,
+        cramer_rao,
+        fit,
+        cost,
+    })
+}
