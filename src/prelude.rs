@@ -3,8 +3,9 @@
 //! parameters. No file or plotting dependency is involved (see the `io` feature).
 
 pub use nlsim_calib::{
-    Calibration, CalibrationConfig, Channel, Form, FrfObjective, Noise, ObjectiveConfig, ParamSpec,
-    Step, Sweep, SweepDirection, TestData, calibrate,
+    Calibration, CalibrationConfig, Channel, Form, FrfObjective, MeasuredMode, ModalData,
+    ModalObjective, Noise, ObjectiveConfig, ParamSpec, Step, Sweep, SweepDirection, SweepPlan,
+    TestData, calibrate, calibrate_modal, synthesize,
 };
 pub use nlsim_hb::{
     Branch, ContinuationConfig, ContinuationReport, Forcing, HarmonicSet, HbConfig, HbSystem,

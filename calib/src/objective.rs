@@ -444,8 +444,16 @@ impl FrfObjective {
                             let sigma = data.channels[c].noise.sigma(yd);
                             if sigma <= 0.0 {
                                 return Err(Error::invalid(
-                                    format!("test data channel '{}'", data.channels[c].name),
-                                    "noise is zero: give an absolute or relative noise estimate",
+                                    format!(
+                                        "test data channel '{}', sweep '{}' step {} ({} Hz), \
+                                         harmonic {k}",
+                                        data.channels[c].name,
+                                        sw.label,
+                                        i + 1,
+                                        st.frequency_hz
+                                    ),
+                                    "the noise estimate is zero here (a relative noise on a \
+                                     zero response): give an absolute noise floor",
                                 ));
                             }
                             let ym = response[(c, k - 1)];
