@@ -60,6 +60,8 @@ pub mod spec;
 pub mod summary;
 #[cfg(feature = "io")]
 pub mod testdata;
+#[cfg(feature = "io")]
+pub mod uff;
 
 pub use error::{Error, Result};
 pub use nlsim_calib as calib;

@@ -1550,3 +1550,363 @@ mod examples {
         assert!(phase >= 1.0, "phase ratio {phase}: {text}");
     }
 }
+
+mod uff58 {
+    use super::*;
+    use faer::c64;
+    use nlsim::calib::{Noise, SweepPlan, synthesize};
+    use nlsim::prelude::*;
+    use nlsim::uff::{self, Uff58};
+    use std::sync::Arc;
+
+    fn record(id: &str, dir: i64) -> Uff58 {
+        let f: Vec<f64> = (0..7).map(|i| 10.0 + 0.5 * i as f64).collect();
+        Uff58 {
+            id: id.into(),
+            function_type: 4,
+            response_node: 21,
+            response_direction: dir,
+            reference_node: 21,
+            reference_direction: 3,
+            ordinate_type: 12,
+            denominator_type: 13,
+            values: f
+                .iter()
+                .map(|&x| c64::new(1.0 / (x * x - 100.0 + 0.3), -0.01 * x))
+                .collect(),
+            frequencies_hz: f,
+        }
+    }
+
+    #[test]
+    fn ascii_and_binary_round_trip() {
+        let dir = scratch("uff-round");
+        let recs = vec![record("tip", 3), record("NONE", -2)];
+        for binary in [false, true] {
+            let p = dir.join(if binary { "b.uff" } else { "a.uff" });
+            uff::write(&p, &recs, binary).unwrap();
+            let back = uff::read(&p).unwrap();
+            assert_eq!(back.len(), 2);
+            for (a, b) in recs.iter().zip(&back) {
+                assert_eq!(
+                    (a.response_node, a.response_direction, a.ordinate_type),
+                    (b.response_node, b.response_direction, b.ordinate_type)
+                );
+                for (x, y) in a.values.iter().zip(&b.values) {
+                    // ASCII E20.11 keeps 12 significant digits; binary is exact.
+                    let tol = if binary { 0.0 } else { 1e-11 * x.norm() };
+                    assert!((x - y).norm() <= tol, "{x} vs {y}");
+                }
+                for (x, y) in a.frequencies_hz.iter().zip(&b.frequencies_hz) {
+                    // The abscissa is written as E13.5.
+                    assert!((x - y).abs() <= 1e-5 * x, "{x} vs {y}");
+                }
+            }
+            let data = uff::to_test_data(&back, "shaker", Noise::relative(0.01)).unwrap();
+            assert_eq!(data.channels[0].name, "tip");
+            // The second FRF has no ID: named by its DOF, turned to the +y sense.
+            assert_eq!(data.channels[1].name, "21:uy");
+            let y = data.sweeps[0].steps[2].response[(1, 0)];
+            assert!((y + back[1].values[2]).norm() == 0.0);
+        }
+    }
+
+    /// A file as a test system writes it: a dataset 151 header first (skipped), then a 58
+    /// with complex single-precision values on an even grid in 6E13.5 columns.
+    #[test]
+    fn reads_even_single_precision_complex_and_skips_other_datasets() {
+        let text = "    -1
+   151
+model
+NONE
+NONE
+    -1
+    -1
+    58
+tip accelerance
+NONE
+NONE
+NONE
+NONE
+    4         1    1         0 NONE             5   3 NONE             5   3
+         5         4         1  1.00000E+01  2.50000E-01  0.00000E+00
+        18    0    0    0 Frequency            Hz                  
+        12    1    0    0 Acceleration         m/s^2               
+        13    0    1    0 Force                N                   
+         0    0    0    0 NONE                 NONE                
+  1.00000E+00 -2.00000E+00  3.00000E+00  4.00000E+00 -5.00000E-01  6.00000E+00
+  7.00000E+00  8.00000E+00
+    -1
+";
+        let recs = uff::parse(text.as_bytes(), Path::new("lab.unv")).unwrap();
+        assert_eq!(recs.len(), 1);
+        let r = &recs[0];
+        assert_eq!(r.id, "tip accelerance");
+        assert_eq!((r.response_node, r.response_direction), (5, 3));
+        assert_eq!(r.frequencies_hz, vec![10.0, 10.25, 10.5, 10.75]);
+        assert_eq!(
+            r.values,
+            vec![
+                c64::new(1.0, -2.0),
+                c64::new(3.0, 4.0),
+                c64::new(-0.5, 6.0),
+                c64::new(7.0, 8.0)
+            ]
+        );
+        assert_eq!(r.quantity(), Some(Quantity::Acceleration));
+
+        // Errors name the file and line.
+        let cut = &text[..text.find("  7.00000E+00").unwrap()];
+        let e = uff::parse(cut.as_bytes(), Path::new("lab.unv")).unwrap_err();
+        assert!(e.to_string().starts_with("lab.unv:"), "{e}");
+        assert!(
+            e.to_string().contains("ends after 6 of its 8 numbers"),
+            "{e}"
+        );
+        let bad = text.replace("    4         1    1", "    x         1    1");
+        let e = uff::parse(bad.as_bytes(), Path::new("lab.unv")).unwrap_err();
+        assert!(
+            e.to_string().contains("lab.unv:14: record 6: field 1"),
+            "{e}"
+        );
+        let huge = text.replace(
+            "         5         4         1",
+            "         5 900000000         1",
+        );
+        let e = uff::parse(huge.as_bytes(), Path::new("lab.unv")).unwrap_err();
+        assert!(
+            e.to_string().contains("lab.unv:15") && e.to_string().contains("cannot be"),
+            "{e}"
+        );
+        let nan = text.replace("-5.00000E-01", "         NaN");
+        let e = uff::parse(nan.as_bytes(), Path::new("lab.unv")).unwrap_err();
+        assert!(e.to_string().contains("not finite"), "{e}");
+        let e = uff::parse(b"    -1\n   151\nx\n    -1\n", Path::new("x.unv")).unwrap_err();
+        assert!(e.to_string().contains("no dataset 58"), "{e}");
+    }
+
+    /// Big-endian binary, real double precision, even grid, written byte by byte here.
+    #[test]
+    fn reads_big_endian_binary_real_data() {
+        let mut b = Vec::new();
+        b.extend(b"    -1\n    58b     2     2          11          24     0     0           0           0\n");
+        b.extend(b"drive point\nNONE\nNONE\nNONE\nNONE\n");
+        b.extend(b"    4         1    1         0 NONE             1   1 NONE             1   1\n");
+        b.extend(b"         4         3         1  2.00000E+00  1.00000E+00  0.00000E+00\n");
+        b.extend(b"        18    0    0    0 NONE                 NONE\n");
+        b.extend(b"         8    1    0    0 NONE                 NONE\n");
+        b.extend(b"        13    0    1    0 NONE                 NONE\n");
+        b.extend(b"         0    0    0    0 NONE                 NONE\n");
+        for v in [1.5f64, -2.25, 1e-7] {
+            b.extend(v.to_be_bytes());
+        }
+        b.extend(b"\n    -1\n");
+        let recs = uff::parse(&b, Path::new("drive.uff")).unwrap();
+        assert_eq!(recs[0].frequencies_hz, vec![2.0, 3.0, 4.0]);
+        assert_eq!(
+            recs[0].values,
+            vec![
+                c64::new(1.5, 0.0),
+                c64::new(-2.25, 0.0),
+                c64::new(1e-7, 0.0)
+            ]
+        );
+        assert_eq!(recs[0].quantity(), Some(Quantity::Displacement));
+        // A byte count beyond the file is refused before reading.
+        let short = &b[..b.len() - 12];
+        let e = uff::parse(short, Path::new("drive.uff")).unwrap_err();
+        assert!(
+            e.to_string().contains("drive.uff:") && e.to_string().contains("data bytes"),
+            "{e}"
+        );
+    }
+
+    /// The linear stage from low-level FRFs: the accelerances of the linear ECL beam, written
+    /// to UFF and read back, give the driven mode's frequency and damping back.
+    #[test]
+    fn modal_parameters_from_uff_frfs() {
+        let fx = nlsim::fixtures::ecl_beam();
+        let red = reduce(&fx.model, &ReductionConfig::lowest(4)).unwrap();
+        let mut sys = HbSystem::from_model(
+            &fx.model,
+            &red,
+            HarmonicSet::new(1, 1).unwrap(),
+            HbConfig::default(),
+        )
+        .unwrap();
+        sys.set_param(&Param::element("tip_spring", "k3"), 0.0)
+            .unwrap();
+        let port = sys.sensors()[0].port;
+        let phi = sys.linear().participation();
+        let driven = usize::from(phi[(port, 1)].abs() > phi[(port, 0)].abs());
+        let params = [Param::ModalFrequency(driven), Param::ModalDamping(driven)];
+        let truth = sys.param_values(&params).unwrap();
+        let plan = SweepPlan::linear("frf", 20.0, 27.0, 29, 1.0);
+        let test = synthesize(&sys, "shaker", &[plan], 1, Noise::relative(0.0), 1).unwrap();
+        let recs: Vec<Uff58> = test
+            .channels
+            .iter()
+            .enumerate()
+            .map(|(c, ch)| Uff58 {
+                id: ch.name.clone(),
+                function_type: 4,
+                response_node: 21,
+                response_direction: 3,
+                reference_node: 21,
+                reference_direction: 3,
+                ordinate_type: 12,
+                denominator_type: 13,
+                frequencies_hz: test.sweeps[0]
+                    .steps
+                    .iter()
+                    .map(|s| s.frequency_hz)
+                    .collect(),
+                values: test.sweeps[0]
+                    .steps
+                    .iter()
+                    .map(|s| s.response[(c, 0)])
+                    .collect(),
+            })
+            .collect();
+        let p = scratch("uff-frf").join("ecl.uff");
+        uff::write(&p, &recs, true).unwrap();
+        let data =
+            uff::to_test_data(&uff::read(&p).unwrap(), "shaker", Noise::relative(0.01)).unwrap();
+        let mut start = sys.clone();
+        start.set_param(&params[0], truth[0] * 1.05).unwrap();
+        start.set_param(&params[1], truth[1] * 2.5).unwrap();
+        let specs = vec![
+            ParamSpec::new(params[0].clone(), truth[0] * 0.9, truth[0] * 1.1),
+            ParamSpec::new(params[1].clone(), 0.001, 0.05),
+        ];
+        let obj =
+            FrfObjective::new(&start, Arc::new(data), specs, ObjectiveConfig::default()).unwrap();
+        let cal = calibrate(
+            &obj,
+            &CalibrationConfig {
+                lhs_samples: 16,
+                folds: 0,
+                ..CalibrationConfig::default()
+            },
+        )
+        .unwrap();
+        assert!(cal.status.is_converged());
+        for (e, t) in cal.estimate.iter().zip(&truth) {
+            assert!(
+                ((e - t) / t).abs() < 1e-6,
+                "{:?} vs {truth:?}",
+                cal.estimate
+            );
+        }
+    }
+}
+
+mod test_data_hdf5 {
+    use super::*;
+    use faer::c64;
+    use hdf5_metno as hdf5;
+    use nlsim::calib::{Noise, SweepPlan, synthesize};
+    use nlsim::prelude::*;
+
+    fn synthetic() -> TestData {
+        let fx = nlsim::fixtures::ecl_beam();
+        let red = reduce(&fx.model, &ReductionConfig::lowest(6)).unwrap();
+        let sys = HbSystem::from_model(
+            &fx.model,
+            &red,
+            HarmonicSet::new(3, 1).unwrap(),
+            HbConfig::default(),
+        )
+        .unwrap();
+        let plans = [
+            SweepPlan::linear("0.05 N up", 22.0, 26.0, 9, 0.05),
+            SweepPlan::linear("0.2 N/down", 27.0, 22.0, 11, 0.2),
+        ];
+        let mut d = synthesize(&sys, "shaker", &plans, 3, Noise::relative(0.02), 5).unwrap();
+        // A harmonic not measured.
+        d.sweeps[1].steps[3].response[(1, 2)] = c64::new(f64::NAN, f64::NAN);
+        d
+    }
+
+    /// Written and read back bit for bit (a label with '/' is an attribute, not a name), and
+    /// `nlsim calibrate` takes the file; a wrong shape names the dataset.
+    #[test]
+    fn round_trip_calibrate_and_errors() {
+        let d = synthetic();
+        let dir = scratch("testdata-h5");
+        let p = dir.join("test.h5");
+        nlsim::testdata::write_h5(&p, &d).unwrap();
+        let back = nlsim::testdata::read_h5(&p).unwrap();
+        assert_eq!(back.input, d.input);
+        assert_eq!(back.harmonics, 3);
+        assert_eq!(back.channels, d.channels);
+        assert_eq!(back.sweeps.len(), 2);
+        for (a, b) in d.sweeps.iter().zip(&back.sweeps) {
+            assert_eq!((&a.label, a.direction), (&b.label, b.direction));
+            for (x, y) in a.steps.iter().zip(&b.steps) {
+                assert_eq!(x.frequency_hz.to_bits(), y.frequency_hz.to_bits());
+                assert_eq!(x.force, y.force);
+                for c in 0..2 {
+                    for k in 0..3 {
+                        let (u, v) = (x.response[(c, k)], y.response[(c, k)]);
+                        assert!(u == v || (u.re.is_nan() && v.re.is_nan()), "{u} vs {v}");
+                    }
+                }
+            }
+        }
+        let (rc, out, err) = nlsim(&[
+            "calibrate",
+            "ecl_beam",
+            p.to_str().unwrap(),
+            "--param",
+            "tip_spring.k3=6e7:6e11",
+            "--modes",
+            "12",
+            "--lhs",
+            "8",
+            "--starts",
+            "1",
+            "--folds",
+            "0",
+        ]);
+        assert_eq!(rc, 0, "{out}{err}");
+        assert!(out.contains("converged in"), "{out}");
+
+        // A response of the wrong shape.
+        let bad = dir.join("bad.h5");
+        std::fs::copy(&p, &bad).unwrap();
+        {
+            let f = hdf5::File::open_rw(&bad).unwrap();
+            let g = f.group("sweeps/sweep1").unwrap();
+            g.unlink("response").unwrap();
+            g.new_dataset::<c64>()
+                .shape((11, 2, 2))
+                .create("response")
+                .unwrap()
+                .write_raw(&vec![c64::new(0.0, 0.0); 44])
+                .unwrap();
+        }
+        let e = nlsim::testdata::read_h5(&bad).unwrap_err().to_string();
+        assert!(
+            e.contains("bad.h5")
+                && e.contains("sweeps/sweep1/response")
+                && e.contains("[11, 2, 3]"),
+            "{e}"
+        );
+        // Not test data at all.
+        let other = dir.join("other.h5");
+        hdf5::File::create(&other).unwrap();
+        let e = nlsim::testdata::read_h5(&other).unwrap_err().to_string();
+        assert!(e.contains("other.h5") && e.contains("format"), "{e}");
+        // An unknown extension is a usage error that lists the formats.
+        let (rc, _, err) = nlsim(&[
+            "calibrate",
+            "ecl_beam",
+            "data.xlsx",
+            "--param",
+            "tip_spring.k3=1e8:1e11",
+        ]);
+        assert_ne!(rc, 0);
+        assert!(err.contains("data.xlsx") && err.contains(".uff"), "{err}");
+    }
+}

@@ -281,7 +281,7 @@ fn check_factor(
     pencil.solve_in_place(factor, x.as_mut());
     let s = modes.eigenvalues[0] - factor.shift();
     let err = (&x * faer::Scale(s) - phi0).norm_l2() / phi0.norm_l2();
-    if !(err <= 1e-6) {
+    if err.is_nan() || err > 1e-6 {
         return Err(Error::invalid(
             "eigen-sensitivities",
             format!(

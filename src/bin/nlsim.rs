@@ -177,7 +177,8 @@ enum Command {
     Calibrate {
         /// Model file (.toml) or built-in model, e.g. `ecl_beam`.
         model: String,
-        /// Test data (CSV).
+        /// Test data: stepped-sine CSV or HDF5 (docs/file-formats.md), or linear FRFs in
+        /// universal file dataset 58 (.uff/.unv, ASCII or binary; 1 % noise assumed).
         data: std::path::PathBuf,
         /// A parameter and its bounds, `NAME=LOWER:UPPER` (repeatable), e.g.
         /// `--param tip_spring.k3=1e8:1e11 --param mode2.zeta=0.002:0.05`.
@@ -1085,6 +1086,42 @@ enum CalibForm {
     LogMagnitude,
 }
 
+/// Test data by file extension: CSV, HDF5 (`.h5`, `.hdf5`) or linear FRFs in universal
+/// file dataset 58 (`.uff`, `.unv`, `.uf`; ASCII or binary), whose drive point is the
+/// model's excitation and whose noise is taken as 1 % of each value.
+fn read_test_data(
+    path: &std::path::Path,
+    model: &nlsim::kernel::Model,
+) -> nlsim::Result<nlsim::calib::TestData> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    match ext.as_str() {
+        "csv" => nlsim::testdata::read_csv(path),
+        "h5" | "hdf5" => nlsim::testdata::read_h5(path),
+        "uff" | "unv" | "uf" => {
+            let records = nlsim::uff::read(path)?;
+            let inputs: Vec<&str> = model.excitation().iter().map(|e| e.name.as_str()).collect();
+            let [input] = inputs.as_slice() else {
+                return Err(nlsim::Error::Usage(format!(
+                    "{}: FRFs name no drive point in the model's terms, so the model needs \
+                     exactly one excitation (it has: {})",
+                    path.display(),
+                    inputs.join(", ")
+                )));
+            };
+            nlsim::uff::to_test_data(&records, input, nlsim::calib::Noise::relative(0.01))
+        }
+        _ => Err(nlsim::Error::Usage(format!(
+            "{}: test data must be .csv, .h5/.hdf5 or universal file dataset 58 \
+             (.uff/.unv/.uf)",
+            path.display()
+        ))),
+    }
+}
+
 /// `nlsim calibrate`.
 #[allow(clippy::too_many_arguments)]
 fn calibrate_cmd(
@@ -1129,8 +1166,8 @@ fn calibrate_cmd(
             o.display()
         )));
     }
-    let data = std::sync::Arc::new(nlsim::testdata::read_csv(data_path)?);
     let model = nlsim::run::load_for_run(spec, &[])?;
+    let data = std::sync::Arc::new(read_test_data(data_path, &model)?);
     let t = Instant::now();
     let cfg = nlsim::reduction::ReductionConfig::lowest(modes.min(model.n_dofs()));
     let reduced = nlsim::reduction::reduce(&model, &cfg)?;
