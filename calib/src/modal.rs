@@ -23,7 +23,7 @@ use crate::CalibrationConfig;
 use crate::calibrate::{Candidate, StartRun};
 use crate::lhs::{maximin_latin_hypercube, to_range};
 use crate::lm::{Evaluation, LeastSquares, levenberg_marquardt};
-use crate::objective::ParamSpec;
+use crate::objective::{ParamSpec, specs_to_internal, specs_to_values};
 use crate::stats::CramerRao;
 use faer::{Mat, Par};
 use nlsim_kernel::{Error, Model, Param, Parameterized, Result, Status};
@@ -219,20 +219,12 @@ impl ModalObjective {
 
     /// Internal variables of values `p`.
     pub fn to_internal(&self, p: &[f64]) -> Vec<f64> {
-        self.specs
-            .iter()
-            .zip(p)
-            .map(|(s, &v)| s.to_internal(v))
-            .collect()
+        specs_to_internal(&self.specs, p)
     }
 
     /// Values of internal variables `u`.
     pub fn to_values(&self, u: &[f64]) -> Vec<f64> {
-        self.specs
-            .iter()
-            .zip(u)
-            .map(|(s, &v)| s.to_value(v))
-            .collect()
+        specs_to_values(&self.specs, u)
     }
 
     /// Internal bounds (lower, upper).

@@ -110,6 +110,20 @@ impl ParamSpec {
     }
 }
 
+/// Internal variables of values `p` under `specs`.
+pub(crate) fn specs_to_internal(specs: &[ParamSpec], p: &[f64]) -> Vec<f64> {
+    specs
+        .iter()
+        .zip(p)
+        .map(|(s, &v)| s.to_internal(v))
+        .collect()
+}
+
+/// Values of internal variables `u` under `specs`.
+pub(crate) fn specs_to_values(specs: &[ParamSpec], u: &[f64]) -> Vec<f64> {
+    specs.iter().zip(u).map(|(s, &v)| s.to_value(v)).collect()
+}
+
 /// Residual form.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Form {
@@ -334,20 +348,12 @@ impl FrfObjective {
 
     /// Internal variables of parameter values `p`.
     pub fn to_internal(&self, p: &[f64]) -> Vec<f64> {
-        self.specs
-            .iter()
-            .zip(p)
-            .map(|(s, &v)| s.to_internal(v))
-            .collect()
+        specs_to_internal(&self.specs, p)
     }
 
     /// Parameter values of internal variables `u`.
     pub fn to_values(&self, u: &[f64]) -> Vec<f64> {
-        self.specs
-            .iter()
-            .zip(u)
-            .map(|(s, &v)| s.to_value(v))
-            .collect()
+        specs_to_values(&self.specs, u)
     }
 
     /// Internal bounds `(lower, upper)`.
