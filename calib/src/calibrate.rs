@@ -5,9 +5,11 @@
 //! Every random draw comes from the recorded seed, and every parallel task is independent and
 //! sequential inside, so the estimates are bit-identical for any number of threads.
 
-use crate::lhs::maximin_latin_hypercube;
-use crate::lm::{LmConfig, LmReport, levenberg_marquardt};
-use crate::objective::{FrfObjective, SweepEvaluation};
+use crate::lhs::{maximin_latin_hypercube, to_range};
+use crate::lm::{LeastSquares, LmConfig, LmReport, levenberg_marquardt};
+use crate::objective::{
+    FrfObjective, ParamSpec, SweepEvaluation, specs_to_internal, specs_to_values,
+};
 use crate::stats::{CramerRao, mean_and_covariance};
 use faer::Mat;
 use nlsim_kernel::{Error, Param, Parameterized, Result, Status};
@@ -197,22 +199,7 @@ pub fn calibrate_with_progress(
     let n = specs.len();
     let params: Vec<Param> = specs.iter().map(|s| s.param.clone()).collect();
     let current = objective.system().param_values(&params)?;
-    let mut starts: Vec<Vec<f64>> = Vec::with_capacity(config.lhs_samples + 1);
-    let clamp = |v: Vec<f64>| -> Vec<f64> {
-        v.iter()
-            .zip(&specs)
-            .map(|(x, s)| x.clamp(s.lower, s.upper))
-            .collect()
-    };
-    starts.push(clamp(current));
-    for t in maximin_latin_hypercube(config.lhs_samples, n, config.seed, config.maximin_swaps) {
-        let v = t
-            .iter()
-            .zip(&specs)
-            .map(|(&t, s)| crate::lhs::to_range(t, s.lower, s.upper, s.spacing))
-            .collect::<Result<Vec<_>>>()?;
-        starts.push(v);
-    }
+    let starts = start_points(&specs, &current, config)?;
     let total = starts.len();
     let done = AtomicUsize::new(0);
     let costs: Vec<Result<f64>> = starts
@@ -234,9 +221,7 @@ pub fn calibrate_with_progress(
             cost: c?,
         });
     }
-    let mut order: Vec<usize> = (0..total)
-        .filter(|&i| candidates[i].cost.is_finite())
-        .collect();
+    let order = best_candidates(&candidates, config.starts);
     if order.is_empty() {
         return Err(Error::Numerical {
             what: "calibration".into(),
@@ -246,38 +231,14 @@ pub fn calibrate_with_progress(
             ),
         });
     }
-    order.sort_by(|&a, &b| {
-        candidates[a]
-            .cost
-            .total_cmp(&candidates[b].cost)
-            .then(a.cmp(&b))
-    });
-    order.truncate(config.starts);
-    let (lo, hi) = objective.internal_bounds();
-    let done = AtomicUsize::new(0);
-    let n_starts = order.len();
-    let runs: Vec<Result<StartRun>> = order
-        .par_iter()
-        .map(|&i| {
-            let mut obj = objective.clone();
-            let start = candidates[i].values.clone();
-            let u0 = obj.to_internal(&start);
-            let report = levenberg_marquardt(&mut obj, &u0, &lo, &hi, &config.lm)?;
-            let values = obj.to_values(&report.u);
-            let d = done.fetch_add(1, Ordering::Relaxed) + 1;
-            progress(Progress::Start {
-                done: d,
-                total: n_starts,
-            });
-            Ok(StartRun {
-                start,
-                values,
-                report,
-            })
-        })
-        .collect();
-    let mut runs = runs.into_iter().collect::<Result<Vec<_>>>()?;
-    runs.sort_by(|a, b| a.report.cost.total_cmp(&b.report.cost));
+    let runs = run_starts(
+        objective,
+        &specs,
+        &candidates,
+        &order,
+        &config.lm,
+        &|done, total| progress(Progress::Start { done, total }),
+    )?;
     let best = &runs[0];
     let estimate = best.values.clone();
     let mut obj = objective.clone();
@@ -285,14 +246,7 @@ pub fn calibrate_with_progress(
     let cost = 0.5 * fit.residuals.iter().map(|r| r * r).sum::<f64>();
     let cramer_rao = match (&fit.jacobian, fit.failed.is_empty()) {
         (Some(j), true) => {
-            // The objective's Jacobian is per internal variable: back to parameter units.
-            let du: Vec<f64> = specs
-                .iter()
-                .zip(&estimate)
-                .map(|(s, &v)| s.dvalue(s.to_internal(v)))
-                .collect();
-            let jp = Mat::from_fn(j.nrows(), n, |i, c| j[(i, c)] / du[c]);
-            CramerRao::new(&jp, &fit.residuals, &estimate)
+            CramerRao::new(&per_value(&specs, &estimate, j), &fit.residuals, &estimate)
         }
         _ => CramerRao::new(&Mat::zeros(0, n), &[], &estimate),
     };
@@ -410,5 +364,97 @@ pub fn kfold(
         covariance,
         std,
         jackknife_std,
+    })
+}
+
+/// The start candidates: the model's `current` values clamped to the bounds, then the
+/// maximin Latin hypercube of `config` mapped onto the ranges of `specs`.
+pub(crate) fn start_points(
+    specs: &[ParamSpec],
+    current: &[f64],
+    config: &CalibrationConfig,
+) -> Result<Vec<Vec<f64>>> {
+    let mut starts = Vec::with_capacity(config.lhs_samples + 1);
+    starts.push(
+        current
+            .iter()
+            .zip(specs)
+            .map(|(x, s)| x.clamp(s.lower, s.upper))
+            .collect(),
+    );
+    for t in maximin_latin_hypercube(
+        config.lhs_samples,
+        specs.len(),
+        config.seed,
+        config.maximin_swaps,
+    ) {
+        starts.push(
+            t.iter()
+                .zip(specs)
+                .map(|(&t, s)| to_range(t, s.lower, s.upper, s.spacing))
+                .collect::<Result<Vec<_>>>()?,
+        );
+    }
+    Ok(starts)
+}
+
+/// Indices of the `starts` candidates of lowest finite cost, best first (ties by index).
+pub(crate) fn best_candidates(candidates: &[Candidate], starts: usize) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..candidates.len())
+        .filter(|&i| candidates[i].cost.is_finite())
+        .collect();
+    order.sort_by(|&a, &b| {
+        candidates[a]
+            .cost
+            .total_cmp(&candidates[b].cost)
+            .then(a.cmp(&b))
+    });
+    order.truncate(starts);
+    order
+}
+
+/// Levenberg–Marquardt from each candidate in `order`, in parallel (each run on its own copy
+/// of `objective`), best first; `done(finished, total)` after each run.
+pub(crate) fn run_starts<O: LeastSquares + Clone + Sync>(
+    objective: &O,
+    specs: &[ParamSpec],
+    candidates: &[Candidate],
+    order: &[usize],
+    lm: &LmConfig,
+    done: &(dyn Fn(usize, usize) + Sync),
+) -> Result<Vec<StartRun>> {
+    let (lo, hi): (Vec<f64>, Vec<f64>) = specs.iter().map(ParamSpec::internal_bounds).unzip();
+    let finished = AtomicUsize::new(0);
+    let runs: Vec<Result<StartRun>> = order
+        .par_iter()
+        .map(|&i| {
+            let mut obj = objective.clone();
+            let start = candidates[i].values.clone();
+            let u0 = specs_to_internal(specs, &start);
+            let report = levenberg_marquardt(&mut obj, &u0, &lo, &hi, lm)?;
+            let values = specs_to_values(specs, &report.u);
+            done(finished.fetch_add(1, Ordering::Relaxed) + 1, order.len());
+            Ok(StartRun {
+                start,
+                values,
+                report,
+            })
+        })
+        .collect();
+    let mut runs = runs.into_iter().collect::<Result<Vec<_>>>()?;
+    runs.sort_by(|a, b| a.report.cost.total_cmp(&b.report.cost));
+    Ok(runs)
+}
+
+/// A Jacobian per internal variable (the optimiser's) turned per parameter value at
+/// `values`: column `j` divided by `dp_j/du_j`.
+pub(crate) fn per_value(specs: &[ParamSpec], values: &[f64], jacobian: &Mat<f64>) -> Mat<f64> {
+    let du: Vec<f64> = specs
+        .iter()
+        .zip(values)
+        .map(|(s, &v)| s.dvalue(s.to_internal(v)))
+        .collect();
+    Mat::from_fn(jacobian.nrows(), jacobian.ncols(), |i, c| {
+        jacobian[(i, c)] / du[c]
     })
 }

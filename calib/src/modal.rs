@@ -20,9 +20,8 @@
 //! reported.
 
 use crate::CalibrationConfig;
-use crate::calibrate::{Candidate, StartRun};
-use crate::lhs::{maximin_latin_hypercube, to_range};
-use crate::lm::{Evaluation, LeastSquares, levenberg_marquardt};
+use crate::calibrate::{Candidate, StartRun, best_candidates, per_value, run_starts, start_points};
+use crate::lm::{Evaluation, LeastSquares};
 use crate::objective::{ParamSpec, specs_to_internal, specs_to_values};
 use crate::stats::CramerRao;
 use faer::{Mat, Par};
@@ -404,22 +403,12 @@ pub fn calibrate_modal(
 ) -> Result<ModalCalibration> {
     config.lm.validate()?;
     let specs = objective.specs.clone();
-    let n = specs.len();
     let params: Vec<Param> = specs.iter().map(|s| s.param.clone()).collect();
     let current = params
         .iter()
-        .zip(&specs)
-        .map(|(p, s)| Ok(objective.model.param(p)?.clamp(s.lower, s.upper)))
+        .map(|p| objective.model.param(p))
         .collect::<Result<Vec<_>>>()?;
-    let mut starts = vec![current];
-    for t in maximin_latin_hypercube(config.lhs_samples, n, config.seed, config.maximin_swaps) {
-        starts.push(
-            t.iter()
-                .zip(&specs)
-                .map(|(&t, s)| to_range(t, s.lower, s.upper, s.spacing))
-                .collect::<Result<Vec<_>>>()?,
-        );
-    }
+    let starts = start_points(&specs, &current, config)?;
     let costs: Vec<Result<f64>> = starts
         .par_iter()
         .map_init(
@@ -435,40 +424,21 @@ pub fn calibrate_modal(
     for (values, c) in starts.into_iter().zip(costs) {
         candidates.push(Candidate { values, cost: c? });
     }
-    let mut order: Vec<usize> = (0..candidates.len())
-        .filter(|&i| candidates[i].cost.is_finite())
-        .collect();
+    let order = best_candidates(&candidates, config.starts.max(1));
     if order.is_empty() {
         return Err(Error::Numerical {
             what: "modal calibration".into(),
             detail: "the eigen solve failed for every candidate".into(),
         });
     }
-    order.sort_by(|&a, &b| {
-        candidates[a]
-            .cost
-            .total_cmp(&candidates[b].cost)
-            .then(a.cmp(&b))
-    });
-    order.truncate(config.starts.max(1));
-    let (lo, hi) = objective.internal_bounds();
-    let runs: Vec<Result<StartRun>> = order
-        .par_iter()
-        .map(|&i| {
-            let mut obj = objective.clone();
-            let start = candidates[i].values.clone();
-            let u0 = obj.to_internal(&start);
-            let report = levenberg_marquardt(&mut obj, &u0, &lo, &hi, &config.lm)?;
-            let values = obj.to_values(&report.u);
-            Ok(StartRun {
-                start,
-                values,
-                report,
-            })
-        })
-        .collect();
-    let mut runs = runs.into_iter().collect::<Result<Vec<_>>>()?;
-    runs.sort_by(|a, b| a.report.cost.total_cmp(&b.report.cost));
+    let runs = run_starts(
+        objective,
+        &specs,
+        &candidates,
+        &order,
+        &config.lm,
+        &|_, _| {},
+    )?;
     let estimate = runs[0].values.clone();
     let mut obj = objective.clone();
     let fit = obj.fit_values(&estimate)?.ok_or_else(|| Error::Numerical {
@@ -476,13 +446,11 @@ pub fn calibrate_modal(
         detail: "the eigen solve failed at the estimate".into(),
     })?;
     let cost = 0.5 * fit.residuals.iter().map(|r| r * r).sum::<f64>();
-    let du: Vec<f64> = specs
-        .iter()
-        .zip(&estimate)
-        .map(|(s, &v)| s.dvalue(s.to_internal(v)))
-        .collect();
-    let jp = Mat::from_fn(fit.jacobian.nrows(), n, |i, c| fit.jacobian[(i, c)] / du[c]);
-    let cramer_rao = CramerRao::new(&jp, &fit.residuals, &estimate);
+    let cramer_rao = CramerRao::new(
+        &per_value(&specs, &estimate, &fit.jacobian),
+        &fit.residuals,
+        &estimate,
+    );
     Ok(ModalCalibration {
         params,
         status: runs[0].report.status,
