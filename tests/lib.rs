@@ -1736,9 +1736,10 @@ NONE
         .unwrap();
         sys.set_param(&Param::element("tip_spring", "k3"), 0.0)
             .unwrap();
-        let port = sys.sensors()[0].port;
-        let phi = sys.linear().participation();
-        let driven = usize::from(phi[(port, 1)].abs() > phi[(port, 0)].abs());
+        let driven = sys
+            .linear()
+            .dominant_mode(sys.sensors()[0].port, 0..2)
+            .unwrap();
         let params = [Param::ModalFrequency(driven), Param::ModalDamping(driven)];
         let truth = sys.param_values(&params).unwrap();
         let plan = SweepPlan::linear("frf", 20.0, 27.0, 29, 1.0);

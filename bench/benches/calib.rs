@@ -32,9 +32,10 @@ fn objective() -> FrfObjective {
         HbConfig::default(),
     )
     .unwrap();
-    let port = sys.sensors()[0].port;
-    let phi = sys.linear().participation();
-    let driven = usize::from(phi[(port, 1)].abs() > phi[(port, 0)].abs());
+    let driven = sys
+        .linear()
+        .dominant_mode(sys.sensors()[0].port, 0..2)
+        .unwrap();
     let plans = vec![
         SweepPlan::linear("0.05 N", 22.0, 26.0, 17, 0.05),
         SweepPlan::linear("0.2 N", 22.0, 27.0, 21, 0.2),

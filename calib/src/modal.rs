@@ -317,16 +317,20 @@ impl ModalObjective {
                 let npsi = norm(psi);
                 let sign = if dot(&a, psi) < 0.0 { -1.0 } else { 1.0 };
                 let b: Vec<f64> = a.iter().map(|v| v / na).collect();
+                // ∂b = (∂a − b (bᵀ∂a)) / ‖a‖, with ∂a the shape derivative at the sensors.
+                let da: Vec<Vec<f64>> = (0..n)
+                    .map(|j| {
+                        (0..data.dofs.len())
+                            .map(|k| sens.shapes[j][(k, r)])
+                            .collect()
+                    })
+                    .collect();
+                let btda: Vec<f64> = da.iter().map(|d| dot(&b, d)).collect();
                 for (i, (&bi, &pi)) in b.iter().zip(psi).enumerate() {
                     residuals.push((sign * bi - pi / npsi) / data.shape_std);
                     for j in 0..n {
-                        // ∂b = (∂a − b (bᵀ∂a)) / ‖a‖.
-                        let da: Vec<f64> = (0..data.dofs.len())
-                            .map(|k| sens.shapes[j][(k, r)])
-                            .collect();
-                        let btda = dot(&b, &da);
                         jacobian[(row + 1 + i, j)] =
-                            sign * (da[i] - bi * btda) / na * du[j] / data.shape_std;
+                            sign * (da[j][i] - bi * btda[j]) / na * du[j] / data.shape_std;
                     }
                 }
             }

@@ -35,13 +35,9 @@ fn plans() -> Vec<SweepPlan> {
 /// two bending planes degenerate, so the mode with the larger participation at the tip
 /// (the `uz` plane) is picked rather than assumed to be mode 1.
 fn driven_mode(sys: &HbSystem) -> usize {
-    let port = sys.sensors()[0].port;
-    let phi = sys.linear().participation();
-    if phi[(port, 0)].abs() >= phi[(port, 1)].abs() {
-        0
-    } else {
-        1
-    }
+    sys.linear()
+        .dominant_mode(sys.sensors()[0].port, 0..2)
+        .unwrap()
 }
 
 fn params(sys: &HbSystem) -> Vec<Param> {

@@ -89,6 +89,20 @@ impl LinearPart {
         &self.phi
     }
 
+    /// The mode among `modes` with the largest participation `|Φ_P(port, r)|` at `port`
+    /// (ties to the lower mode): the one a drive or sensor at that port sees most, e.g. the
+    /// bending mode a tip force drives when two bending planes share one frequency. `None`
+    /// when the range holds no retained mode or the port does not exist.
+    pub fn dominant_mode(&self, port: usize, modes: std::ops::Range<usize>) -> Option<usize> {
+        if port >= self.phi.nrows() {
+            return None;
+        }
+        (modes.start..modes.end.min(self.phi.ncols())).fold(None, |best, r| match best {
+            Some(b) if self.phi[(port, b)].abs() >= self.phi[(port, r)].abs() => Some(b),
+            _ => Some(r),
+        })
+    }
+
     /// Residual flexibility `D` (ports × ports; m/N).
     pub fn residual(&self) -> &Mat<f64> {
         &self.residual

@@ -870,10 +870,9 @@ fn demo_calibration(
         HbSystem::from_model(model, reduced, HarmonicSet::new(3, 1)?, HbConfig::default())?;
     // The mode the drive excites most at the first sensor, among the two lowest (a square
     // beam has two bending planes at one frequency).
-    let port = sys.sensors()[0].port;
-    let phi = sys.linear().participation();
-    let driven = (0..sys.linear().n_modes().min(2))
-        .max_by(|&a, &b| phi[(port, a)].abs().total_cmp(&phi[(port, b)].abs()))
+    let driven = sys
+        .linear()
+        .dominant_mode(sys.sensors()[0].port, 0..2)
         .unwrap_or(0);
     let Some(element_param) = sys
         .parameters()
