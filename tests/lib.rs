@@ -1894,6 +1894,27 @@ mod test_data_hdf5 {
                 && e.contains("[11, 2, 3]"),
             "{e}"
         );
+        // A sweep that declares 2²⁷ steps (chunked and compressed, so the file stays small):
+        // refused from the shape, before anything is read.
+        let huge = dir.join("huge.h5");
+        std::fs::copy(&p, &huge).unwrap();
+        {
+            let f = hdf5::File::open_rw(&huge).unwrap();
+            let g = f.group("sweeps/sweep0").unwrap();
+            g.unlink("frequency_hz").unwrap();
+            g.new_dataset::<f64>()
+                .shape(1usize << 27)
+                .chunk(1usize << 16)
+                .deflate(4)
+                .create("frequency_hz")
+                .unwrap();
+        }
+        assert!(std::fs::metadata(&huge).unwrap().len() < 1 << 20);
+        let e = nlsim::testdata::read_h5(&huge).unwrap_err().to_string();
+        assert!(
+            e.contains("huge.h5") && e.contains("exceed the budget"),
+            "{e}"
+        );
         // Not test data at all.
         let other = dir.join("other.h5");
         hdf5::File::create(&other).unwrap();
