@@ -5,7 +5,7 @@
 //!
 //! ```toml
 //! name = "duffing-k3"           # names the output directory and the SLURM job
-//! command = "frf"               # frf | simulate
+//! command = "frf"               # frf | simulate | calibrate-candidates | calibrate-folds
 //! model = "duffing_fig3"        # model file or built-in model
 //! seed = 7                      # seed of the Latin hypercube (recorded in every file)
 //! set = { "spring.c" = 0.5 }    # fixed element-parameter overrides
@@ -26,12 +26,20 @@
 //! params = [{ set = "spring.k3", min = 1e3, max = 1e4, log = true }]
 //! ```
 //!
+//! A calibration spreads over a cluster in two batches of the same `[calibrate]` table (the
+//! keys of a calibration file, [`crate::calibration`], without `model`):
+//! `calibrate-candidates` evaluates candidate `i` (0: the model's values, then the Latin
+//! hypercube) in job `i`, and `nlsim calibrate --candidates merged.h5` goes on from them;
+//! `calibrate-folds` runs fold `f` of the cross validation in job `f`, from the top-level
+//! `estimate = { "tip.k3" = 1.2e9 }`, and the merge adds the fold statistics.
+//!
 //! Job `i` belongs to shard `i mod T` of `T`. A shard computes its jobs in parallel (rayon),
 //! each job single-threaded inside, so results do not depend on the thread count or on the
 //! number of shards; it writes each finished job to a temporary file and renames the file into
 //! place only when every job is in it. A shard file that exists is therefore complete; a
 //! resubmitted shard whose file exists for the same jobs file is skipped.
 
+use crate::calibration::{CalibrationRequest, Prepared};
 use crate::error::{Error, Result};
 use crate::output::{h5err, provenance, str_attr};
 use crate::run::{FrfRequest, Method, SimRequest, SweepMode, run_frf, run_simulation};
@@ -117,6 +125,8 @@ struct JobsFile {
     #[serde(default)]
     sweep: Vec<SweepTable>,
     lhs: Option<LhsTable>,
+    calibrate: Option<crate::calibration::CalibrationTable>,
+    estimate: Option<BTreeMap<String, f64>>,
 }
 
 /// The command every job of a batch runs, with its base options.
@@ -126,6 +136,11 @@ pub enum BatchCommand {
     Frf(FrfRequest),
     /// `nlsim simulate`.
     Simulate(SimRequest),
+    /// The candidates of a calibration: job `i` evaluates the cost at candidate `i`.
+    CalibrateCandidates(Box<CalibrationRequest>),
+    /// The cross validation of a calibration: job `f` runs fold `f` from the estimate
+    /// (parameter values in the request's order).
+    CalibrateFolds(Box<CalibrationRequest>, Vec<f64>),
 }
 
 impl BatchCommand {
@@ -134,6 +149,8 @@ impl BatchCommand {
         match self {
             BatchCommand::Frf(_) => "frf",
             BatchCommand::Simulate(_) => "simulate",
+            BatchCommand::CalibrateCandidates(_) => "calibrate-candidates",
+            BatchCommand::CalibrateFolds(..) => "calibrate-folds",
         }
     }
 }
@@ -149,6 +166,10 @@ pub enum Assignment {
     Excitation(String),
     /// The model.
     Model(String),
+    /// Candidate `i` of a calibration (0: the model's values, then the Latin hypercube).
+    Candidate(usize),
+    /// Fold `f` of a calibration's cross validation (0-based).
+    Fold(usize),
 }
 
 impl std::fmt::Display for Assignment {
@@ -158,6 +179,8 @@ impl std::fmt::Display for Assignment {
             Assignment::Force(v) => write!(f, "force={v:e}"),
             Assignment::Excitation(s) => write!(f, "excitation={s}"),
             Assignment::Model(s) => write!(f, "model={s}"),
+            Assignment::Candidate(i) => write!(f, "candidate={i}"),
+            Assignment::Fold(i) => write!(f, "fold={}", i + 1),
         }
     }
 }
@@ -253,6 +276,9 @@ impl Batch {
                 ),
             ));
         }
+        // The axes of the job grid: each sweep, then the Latin hypercube (or the candidates
+        // or folds of a calibration).
+        let mut axes: Vec<Vec<Vec<Assignment>>> = Vec::new();
         let command = match f.command.as_str() {
             "frf" => {
                 if f.simulate.is_some() {
@@ -345,16 +371,138 @@ impl Batch {
                     .map_err(|e| err(at("[simulate]"), "simulate", e.to_string()))?;
                 BatchCommand::Simulate(req)
             }
+            c @ ("calibrate-candidates" | "calibrate-folds") => {
+                for (present, key) in [
+                    (f.frf.is_some(), "[frf]"),
+                    (f.simulate.is_some(), "[simulate]"),
+                    (!f.sweep.is_empty(), "[[sweep]]"),
+                    (f.lhs.is_some(), "[lhs]"),
+                    (!f.set.is_empty(), "set"),
+                    (f.seed.is_some(), "seed"),
+                ] {
+                    if present {
+                        return Err(err(
+                            at(key),
+                            key.trim_matches(['[', ']']),
+                            format!(
+                                "a batch of '{c}' takes its settings from [calibrate] (`set` and \
+                                 `seed` there); its jobs are the candidates or folds"
+                            ),
+                        ));
+                    }
+                }
+                let Some(t) = f.calibrate else {
+                    return Err(err(
+                        at("command"),
+                        "calibrate",
+                        format!(
+                            "command '{c}' needs a [calibrate] table (the keys of a \
+                             calibration file without `model`)"
+                        ),
+                    ));
+                };
+                if t.model.is_some() {
+                    return Err(err(
+                        at("model"),
+                        "calibrate.model",
+                        "the model of a batch is its top-level `model`".into(),
+                    ));
+                }
+                let req = t.into_request(f.model.clone(), text, path)?;
+                if c == "calibrate-candidates" {
+                    if f.estimate.is_some() {
+                        return Err(err(
+                            at("estimate"),
+                            "estimate",
+                            "`estimate` is where the folds of 'calibrate-folds' start; \
+                             candidates come from the Latin hypercube"
+                                .into(),
+                        ));
+                    }
+                    BatchCommand::CalibrateCandidates(Box::new(req))
+                } else {
+                    let Some(est) = &f.estimate else {
+                        return Err(err(
+                            at("command"),
+                            "estimate",
+                            "'calibrate-folds' needs `estimate = { NAME = VALUE, ... }`: the \
+                             calibrated values the folds start from"
+                                .into(),
+                        ));
+                    };
+                    let mut values = Vec::with_capacity(req.params.len());
+                    for p in &req.params {
+                        let name = p.param.to_string();
+                        let v = est.get(&name).copied().ok_or_else(|| {
+                            err(
+                                at("estimate"),
+                                "estimate",
+                                format!("no value for calibrated parameter {name}"),
+                            )
+                        })?;
+                        if !(v.is_finite() && p.lower <= v && v <= p.upper) {
+                            return Err(err(
+                                at("estimate"),
+                                "estimate",
+                                format!(
+                                    "{name} = {v} is outside its bounds [{}, {}]",
+                                    p.lower, p.upper
+                                ),
+                            ));
+                        }
+                        values.push(v);
+                    }
+                    if let Some(extra) = est
+                        .keys()
+                        .find(|k| !req.params.iter().any(|p| p.param.to_string() == **k))
+                    {
+                        return Err(err(
+                            at("estimate"),
+                            "estimate",
+                            format!("{extra} is not a calibrated parameter of [calibrate]"),
+                        ));
+                    }
+                    if req.config.folds < 2 {
+                        return Err(err(
+                            at("folds"),
+                            "calibrate.folds",
+                            format!(
+                                "'calibrate-folds' needs folds >= 2, not {}",
+                                req.config.folds
+                            ),
+                        ));
+                    }
+                    BatchCommand::CalibrateFolds(Box::new(req), values)
+                }
+            }
             other => {
                 return Err(err(
                     at("command"),
                     "command",
-                    format!("unknown command '{other}'; a batch runs frf or simulate"),
+                    format!(
+                        "unknown command '{other}'; a batch runs frf, simulate, \
+                         calibrate-candidates or calibrate-folds"
+                    ),
                 ));
             }
         };
-        // The axes of the job grid: each sweep, then the Latin hypercube.
-        let mut axes: Vec<Vec<Vec<Assignment>>> = Vec::new();
+        match &command {
+            BatchCommand::CalibrateCandidates(req) => {
+                axes.push(
+                    (0..=req.config.lhs_samples)
+                        .map(|i| vec![Assignment::Candidate(i)])
+                        .collect(),
+                );
+            }
+            BatchCommand::CalibrateFolds(req, _) => {
+                axes.push(
+                    (0..req.config.folds)
+                        .map(|i| vec![Assignment::Fold(i)])
+                        .collect(),
+                );
+            }
+            _ => {}
+        }
         for (i, s) in f.sweep.iter().enumerate() {
             let key = format!("sweep[{i}]");
             let line = text
@@ -415,7 +563,12 @@ impl Batch {
             };
             axes.push(axis);
         }
-        let seed = f.seed.unwrap_or(0);
+        let seed = match &command {
+            BatchCommand::CalibrateCandidates(r) | BatchCommand::CalibrateFolds(r, _) => {
+                r.config.seed
+            }
+            _ => f.seed.unwrap_or(0),
+        };
         if let Some(l) = &f.lhs {
             let line = at("[lhs]");
             if l.samples == 0 || l.params.is_empty() {
@@ -653,9 +806,39 @@ fn write_root_attrs(root: &hdf5::Group, b: &Batch) -> hdf5::Result<()> {
 enum JobResult {
     Frf(Box<crate::run::FrfRun>),
     Simulate(Box<crate::run::SimRun>),
+    /// A calibration candidate: its values and cost.
+    Candidate(Vec<f64>, f64),
+    /// A fold of a calibration's cross validation.
+    Fold(nlsim_calib::FoldResult),
 }
 
-fn run_job(b: &Batch, job: &Job) -> Result<JobResult> {
+/// What the jobs of a calibration shard share: the objective (model loaded and reduced once)
+/// and the candidate points.
+struct CalibContext {
+    prepared: Prepared,
+    candidates: Vec<Vec<f64>>,
+}
+
+/// The shared part of a calibration batch's jobs (`None` for other batches).
+fn calib_context(b: &Batch) -> Result<Option<CalibContext>> {
+    let req = match &b.command {
+        BatchCommand::CalibrateCandidates(r) | BatchCommand::CalibrateFolds(r, _) => r,
+        _ => return Ok(None),
+    };
+    let prepared = crate::calibration::prepare(req)?;
+    let candidates = match &b.command {
+        BatchCommand::CalibrateCandidates(_) => {
+            nlsim_calib::candidate_points(&prepared.objective, &req.config)?
+        }
+        _ => Vec::new(),
+    };
+    Ok(Some(CalibContext {
+        prepared,
+        candidates,
+    }))
+}
+
+fn run_job(b: &Batch, job: &Job, ctx: Option<&CalibContext>) -> Result<JobResult> {
     let mut spec = b.model.clone();
     let mut sets = b.sets.clone();
     let mut force = None;
@@ -666,6 +849,25 @@ fn run_job(b: &Batch, job: &Job) -> Result<JobResult> {
             Assignment::Force(v) => force = Some(*v),
             Assignment::Excitation(s) => excitation = Some(s.clone()),
             Assignment::Model(m) => spec = m.clone(),
+            &Assignment::Candidate(i) => {
+                let ctx = ctx.ok_or_else(|| Error::Failed("no calibration context".into()))?;
+                let values = ctx.candidates.get(i).cloned().ok_or_else(|| {
+                    Error::Failed(format!(
+                        "candidate {i} is beyond the {} candidates",
+                        ctx.candidates.len()
+                    ))
+                })?;
+                let cost = ctx.prepared.objective.clone().cost_values(&values)?;
+                return Ok(JobResult::Candidate(values, cost));
+            }
+            &Assignment::Fold(f) => {
+                let (Some(ctx), BatchCommand::CalibrateFolds(req, estimate)) = (ctx, &b.command)
+                else {
+                    return Err(Error::Failed("no calibration context".into()));
+                };
+                let r = nlsim_calib::fold(&ctx.prepared.objective, estimate, &req.config, f)?;
+                return Ok(JobResult::Fold(r));
+            }
         }
     }
     let model = crate::run::load_for_run(&spec, &sets)?;
@@ -692,7 +894,18 @@ fn run_job(b: &Batch, job: &Job) -> Result<JobResult> {
                 &mut |_, _| {},
             )?)))
         }
+        BatchCommand::CalibrateCandidates(_) | BatchCommand::CalibrateFolds(..) => Err(
+            Error::Failed(format!("job {} names no candidate or fold", job.index)),
+        ),
     }
+}
+
+/// The parameter values of a calibration job, as dataset `values`.
+fn write_values(g: &hdf5::Group, values: &[f64]) -> hdf5::Result<()> {
+    g.new_dataset::<f64>()
+        .shape(values.len())
+        .create("values")?
+        .write_raw(values)
 }
 
 fn job_group_name(index: usize) -> String {
@@ -727,12 +940,27 @@ fn write_job(
                 JobResult::Frf(run) => {
                     crate::frf::write_group(&g, &run.system, &run.branch, &run.responses)
                 }
+                JobResult::Candidate(values, cost) => {
+                    write_values(&g, values)?;
+                    g.new_attr::<f64>().create("cost")?.write_scalar(cost)
+                }
+                JobResult::Fold(r) => {
+                    write_values(&g, &r.values)?;
+                    str_attr(&g, "status", r.status.as_str())?;
+                    for (name, v) in [
+                        ("held_out_rms", r.held_out_rms),
+                        ("training_rms", r.training_rms),
+                    ] {
+                        g.new_attr::<f64>().create(name)?.write_scalar(&v)?;
+                    }
+                    Ok(())
+                }
                 JobResult::Simulate(run) => {
                     let info = crate::simulate::RunInfo {
                         model_spec: b.model.clone(),
                         method: match &b.command {
                             BatchCommand::Simulate(r) => r.method.as_str().into(),
-                            BatchCommand::Frf(_) => String::new(),
+                            _ => String::new(),
                         },
                         excitation: run.excitation.clone(),
                         modes: run.modes,
@@ -782,6 +1010,7 @@ pub fn run_shard(
         )));
     }
     let start = Instant::now();
+    let ctx = calib_context(b)?;
     let mine: Vec<&Job> = b.shard_jobs(task, count).collect();
     let total = mine.len();
     let mut failed = Vec::new();
@@ -798,7 +1027,10 @@ pub fn run_shard(
         let mut done = 0;
         let mut outcome = Ok(());
         for chunk in mine.chunks(width) {
-            let results: Vec<Result<JobResult>> = chunk.par_iter().map(|j| run_job(b, j)).collect();
+            let results: Vec<Result<JobResult>> = chunk
+                .par_iter()
+                .map(|j| run_job(b, j, ctx.as_ref()))
+                .collect();
             for (job, r) in chunk.iter().zip(&results) {
                 if let Err(e) = write_job(&jobs, b, job, r).map_err(&err) {
                     outcome = Err(e);
@@ -845,6 +1077,9 @@ pub struct MergeOutcome {
     pub jobs: usize,
     /// Jobs that had failed.
     pub failed: usize,
+    /// What a calibration batch found (best candidates, or the fold statistics), one line
+    /// each; empty for other batches.
+    pub summary: Vec<String>,
 }
 
 /// Joins the complete shard files of `b` (all `count` of one split) into `merged.h5`, jobs in
@@ -903,8 +1138,16 @@ pub fn merge(b: &Batch) -> Result<MergeOutcome> {
         return Err(Error::Usage(msg));
     };
     let path = b.merged_path();
-    // Swept parameter names, in order of first appearance.
-    let mut names: Vec<String> = Vec::new();
+    let calib_req = match &b.command {
+        BatchCommand::CalibrateCandidates(r) | BatchCommand::CalibrateFolds(r, _) => Some(r),
+        _ => None,
+    };
+    // Swept parameter names, in order of first appearance (a calibration's parameters).
+    let mut names: Vec<String> = calib_req
+        .map(|r| r.params.iter().map(|p| p.param.to_string()).collect())
+        .unwrap_or_default();
+    // Per job of a calibration: its values and its cost or fold result.
+    let mut calib_rows: Vec<Option<CalibRow>> = Vec::new();
     for j in &b.jobs {
         for a in &j.assignments {
             if let Assignment::Set(n, _) = a
@@ -915,6 +1158,7 @@ pub fn merge(b: &Batch) -> Result<MergeOutcome> {
         }
     }
     let mut failed = 0;
+    let mut summary = Vec::new();
     crate::output::write_atomically(&path, ".h5", |tmp, _| {
         let err = h5err(tmp);
         let out = hdf5::File::create(tmp).map_err(&err)?;
@@ -941,9 +1185,22 @@ pub fn merge(b: &Batch) -> Result<MergeOutcome> {
             }
             let dst = jobs.create_group(&name).map_err(&err)?;
             copy_group(&src, &dst).map_err(h5err(&p))?;
+            if calib_req.is_some() {
+                calib_rows.push(read_calib_job(&src));
+            }
         }
         // The parameter table: NaN where a job does not set the parameter.
         let mut table = vec![f64::NAN; b.jobs.len() * names.len()];
+        for (j, row) in calib_rows.iter().enumerate() {
+            if let Some((v, _, _)) = row
+                && v.len() == names.len()
+            {
+                table[j * names.len()..(j + 1) * names.len()].copy_from_slice(v);
+            }
+        }
+        if calib_req.is_some() {
+            summary = write_calib_summary(&out, b, &names, &calib_rows).map_err(&err)?;
+        }
         for j in &b.jobs {
             for a in &j.assignments {
                 if let Assignment::Set(n, v) = a {
@@ -970,7 +1227,206 @@ pub fn merge(b: &Batch) -> Result<MergeOutcome> {
         shards: count,
         jobs: b.jobs.len(),
         failed,
+        summary,
     })
+}
+
+/// A calibration job read back: values, `[cost, NaN]` (a candidate) or `[held-out rms,
+/// training rms]` and the status (a fold).
+type CalibRow = (Vec<f64>, [f64; 2], String);
+
+/// The values and `[cost, NaN]` (a candidate) or `[held-out rms, training rms]` and status
+/// (a fold) of a calibration job group; `None` for a job that failed.
+fn read_calib_job(g: &hdf5::Group) -> Option<CalibRow> {
+    if g.attr("ok").and_then(|a| a.read_scalar::<u8>()).ok() != Some(1) {
+        return None;
+    }
+    let values = g.dataset("values").ok()?.read_raw::<f64>().ok()?;
+    let f = |n: &str| g.attr(n).and_then(|a| a.read_scalar::<f64>()).ok();
+    if let Some(c) = f("cost") {
+        return Some((values, [c, f64::NAN], String::new()));
+    }
+    let status: hdf5::types::VarLenUnicode = g.attr("status").ok()?.read_scalar().ok()?;
+    Some((
+        values,
+        [f("held_out_rms")?, f("training_rms")?],
+        status.as_str().to_string(),
+    ))
+}
+
+/// Root datasets of a merged calibration batch: `cost` per candidate, or per fold
+/// `held_out_rms`, `training_rms` and the fold statistics `kfold_mean`, `kfold_std`,
+/// `jackknife_std`, `kfold_covariance` (when every fold ran). Returns summary lines.
+fn write_calib_summary(
+    out: &hdf5::File,
+    b: &Batch,
+    names: &[String],
+    rows: &[Option<CalibRow>],
+) -> hdf5::Result<Vec<String>> {
+    let col = |i: usize| -> Vec<f64> {
+        rows.iter()
+            .map(|r| r.as_ref().map_or(f64::NAN, |r| r.1[i]))
+            .collect()
+    };
+    let put = |name: &str, v: &[f64], dims: &str| -> hdf5::Result<()> {
+        let d = out.new_dataset::<f64>().shape(v.len()).create(name)?;
+        d.write_raw(v)?;
+        str_attr(&d, "dims", dims)
+    };
+    let mut lines = Vec::new();
+    match &b.command {
+        BatchCommand::CalibrateCandidates(req) => {
+            let cost = col(0);
+            put(
+                "cost",
+                &cost,
+                "job (= candidate; NaN: failed); cost ½‖r‖², infinite where a point failed",
+            )?;
+            let mut order: Vec<usize> = (0..cost.len()).filter(|&i| cost[i].is_finite()).collect();
+            order.sort_by(|&a, &c| cost[a].total_cmp(&cost[c]).then(a.cmp(&c)));
+            for &i in order.iter().take(req.config.starts) {
+                let v = rows[i].as_ref().map(|r| &r.0[..]).unwrap_or(&[]);
+                let vals: Vec<String> = names
+                    .iter()
+                    .zip(v)
+                    .map(|(n, x)| format!("{n} = {x:.6e}"))
+                    .collect();
+                lines.push(format!(
+                    "candidate {i}: cost {:.6e} at {}",
+                    cost[i],
+                    vals.join(", ")
+                ));
+            }
+            lines.push(format!(
+                "{} of {} candidates with a finite cost; go on with `nlsim calibrate --config \
+                 FILE --candidates {}`",
+                order.len(),
+                cost.len(),
+                b.merged_path().display()
+            ));
+        }
+        BatchCommand::CalibrateFolds(req, estimate) => {
+            put("held_out_rms", &col(0), "job (= fold)")?;
+            put("training_rms", &col(1), "job (= fold)")?;
+            let folds: Option<Vec<nlsim_calib::FoldResult>> = rows
+                .iter()
+                .map(|r| {
+                    let (values, [h, t], status) = r.as_ref()?;
+                    Some(nlsim_calib::FoldResult {
+                        values: values.clone(),
+                        status: status.parse().ok()?,
+                        held_out_rms: *h,
+                        training_rms: *t,
+                    })
+                })
+                .collect();
+            let n_points = req_points(req);
+            match (folds, n_points) {
+                (Some(folds), Some(n_points)) => {
+                    let fold_of =
+                        nlsim_calib::fold_assignment(n_points, req.config.folds, req.config.seed);
+                    if let Ok(k) = nlsim_calib::KFold::from_folds(fold_of, folds) {
+                        put("kfold_mean", &k.mean, "parameter")?;
+                        put("kfold_std", &k.std, "parameter")?;
+                        put("jackknife_std", &k.jackknife_std, "parameter")?;
+                        let n = k.mean.len();
+                        let cov: Vec<f64> =
+                            (0..n * n).map(|i| k.covariance[(i / n, i % n)]).collect();
+                        let d = out
+                            .new_dataset::<f64>()
+                            .shape((n, n))
+                            .create("kfold_covariance")?;
+                        d.write_raw(&cov)?;
+                        for (j, name) in names.iter().enumerate() {
+                            lines.push(format!(
+                                "{name}: estimate {:.6e}, {}-fold mean {:.6e}, jackknife std \
+                                 {:.3e} ({:.3} % of the estimate)",
+                                estimate[j],
+                                k.k,
+                                k.mean[j],
+                                k.jackknife_std[j],
+                                100.0 * k.jackknife_std[j] / estimate[j].abs()
+                            ));
+                        }
+                        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+                        lines.push(format!(
+                            "mean rms weighted residual: training {:.3}, held out {:.3}",
+                            mean(&k.training_rms),
+                            mean(&k.held_out_rms)
+                        ));
+                    }
+                }
+                _ => lines.push(
+                    "fold statistics left out: a fold failed or the test data cannot be read"
+                        .into(),
+                ),
+            }
+        }
+        _ => {}
+    }
+    Ok(lines)
+}
+
+/// Data points of a calibration request's test data (`None` if it cannot be read now).
+fn req_points(req: &CalibrationRequest) -> Option<usize> {
+    let model = crate::run::load_for_run(&req.model, &req.set).ok()?;
+    crate::calibration::read_test_data(&req.data, &model, req.uff_noise)
+        .ok()
+        .map(|d| d.n_points())
+}
+
+/// Most values a merged candidates file may declare (parameters × candidates): 2²⁶.
+const CANDIDATE_BUDGET: usize = 1 << 26;
+
+/// The evaluated candidates of a merged `calibrate-candidates` batch (for
+/// `nlsim calibrate --candidates`): values from `parameters`, costs from `cost`. Fails on
+/// another kind of file, an incomplete merge or a failed candidate.
+pub fn read_candidates(path: &Path) -> Result<Vec<nlsim_calib::Candidate>> {
+    let err = h5err(path);
+    let bad = |m: String| Error::Usage(format!("{}: {m}", path.display()));
+    let file = hdf5::File::open(path).map_err(&err)?;
+    let command: Option<hdf5::types::VarLenUnicode> =
+        file.attr("command").and_then(|a| a.read_scalar()).ok();
+    if command.as_ref().map(|c| c.as_str()) != Some("calibrate-candidates") {
+        return Err(bad(format!(
+            "not a merged 'calibrate-candidates' batch (command: {})",
+            command.as_ref().map_or("none", |c| c.as_str())
+        )));
+    }
+    if u64_attr(&file, "complete") != Some(1) {
+        return Err(bad("the merge did not complete".into()));
+    }
+    let table = file.dataset("parameters").map_err(&err)?;
+    let cost = file.dataset("cost").map_err(&err)?;
+    let shape = table.shape();
+    let (Some(&rows), Some(&cols)) = (shape.first(), shape.get(1)) else {
+        return Err(bad(format!(
+            "`parameters` has shape {shape:?}, not jobs × parameters"
+        )));
+    };
+    if rows.saturating_mul(cols) > CANDIDATE_BUDGET || cost.shape() != [rows] {
+        return Err(bad(format!(
+            "`parameters` {rows}×{cols} and `cost` {:?} do not agree or exceed 2^26 values",
+            cost.shape()
+        )));
+    }
+    let values = table.read_raw::<f64>().map_err(&err)?;
+    let costs = cost.read_raw::<f64>().map_err(&err)?;
+    let mut out = Vec::with_capacity(rows);
+    for (i, c) in costs.iter().enumerate() {
+        let v = values[i * cols..(i + 1) * cols].to_vec();
+        if c.is_nan() || v.iter().any(|x| x.is_nan()) {
+            return Err(bad(format!(
+                "candidate {i} failed (see jobs/{}/error); rerun its shard",
+                job_group_name(i)
+            )));
+        }
+        out.push(nlsim_calib::Candidate {
+            values: v,
+            cost: *c,
+        });
+    }
+    Ok(out)
 }
 
 /// Copies the attributes of `src` onto `dst` (the types nlsim writes).

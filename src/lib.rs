@@ -39,6 +39,8 @@
 pub mod batch;
 #[cfg(feature = "io")]
 pub mod cache;
+#[cfg(feature = "io")]
+pub mod calibration;
 pub mod error;
 #[cfg(feature = "io")]
 pub mod frf;

@@ -209,3 +209,136 @@ impl Figure for Lines {
         Ok(())
     }
 }
+
+/// One group of [`Bars`]: a label, its bars and an optional band drawn behind them.
+pub struct BarGroup {
+    /// Label written above the group.
+    pub label: String,
+    /// Bar heights, left to right.
+    pub values: Vec<f64>,
+    /// A `(low, high)` band across the group, e.g. a ±1σ interval.
+    pub band: Option<(f64, f64)>,
+}
+
+/// Grouped bars rising from a baseline, one panel (with its own scale) per group, e.g. fold
+/// estimates normalised by the full-data estimate per parameter (thesis Fig. 14).
+pub struct Bars {
+    /// Title above the panels.
+    pub title: String,
+    /// What one bar of a group is, e.g. `fold`.
+    pub bar_desc: String,
+    /// y-axis label with unit.
+    pub y_desc: String,
+    /// Where bars start (a horizontal line is drawn there).
+    pub baseline: f64,
+    /// What the band means, for the legend.
+    pub band_desc: String,
+    /// The groups, left to right.
+    pub groups: Vec<BarGroup>,
+}
+
+impl Figure for Bars {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult
+    where
+        DB::ErrorType: 'static,
+    {
+        root.fill(&WHITE)?;
+        let root = root.titled(&self.title, ("sans-serif", 20))?;
+        let panels = root.split_evenly((1, self.groups.len().max(1)));
+        let band_colour = RGBColor(255, 200, 120);
+        for (group, area) in self.groups.iter().zip(&panels) {
+            let b = self.baseline;
+            // The scale follows the bars; a band much wider than them is clipped (and says so).
+            let extent = group
+                .values
+                .iter()
+                .filter(|v| v.is_finite())
+                .map(|v| (v - b).abs())
+                .fold(1e-6 * b.abs().max(1e-300), f64::max);
+            let limit = 4.0 * extent;
+            let band = group
+                .band
+                .filter(|(lo, hi)| lo.is_finite() && hi.is_finite())
+                .map(|(lo, hi)| (lo.max(b - limit), hi.min(b + limit), hi - lo > 2.0 * limit));
+            let mut y0 = b - 0.1 * extent;
+            let mut y1 = b + 0.1 * extent;
+            for &v in group.values.iter().filter(|v| v.is_finite()) {
+                y0 = y0.min(v);
+                y1 = y1.max(v);
+            }
+            if let Some((lo, hi, _)) = band {
+                y0 = y0.min(lo);
+                y1 = y1.max(hi);
+            }
+            let pad = 0.08 * (y1 - y0);
+            let m = group.values.len().max(1) as f64;
+            let caption = match band {
+                Some((_, _, true)) => format!("{} ({} clipped)", group.label, self.band_desc),
+                _ => group.label.clone(),
+            };
+            let mut chart = ChartBuilder::on(area)
+                .caption(caption, ("sans-serif", 15))
+                .margin(8)
+                .x_label_area_size(36)
+                .y_label_area_size(70)
+                .build_cartesian_2d(0.5..m + 0.5, (y0 - pad)..(y1 + pad))?;
+            chart
+                .configure_mesh()
+                .disable_x_mesh()
+                .x_labels(group.values.len().min(10))
+                .x_label_formatter(&|v| {
+                    if (v - v.round()).abs() < 1e-9 {
+                        format!("{v:.0}")
+                    } else {
+                        String::new()
+                    }
+                })
+                .x_desc(&self.bar_desc)
+                .y_desc(&self.y_desc)
+                .y_label_formatter(&|v| {
+                    if v.abs() < 100.0 {
+                        format!("{v:.4}")
+                    } else {
+                        format!("{v:.3e}")
+                    }
+                })
+                .draw()?;
+            if let Some((lo, hi, _)) = band {
+                chart
+                    .draw_series([Rectangle::new(
+                        [(0.5, lo), (m + 0.5, hi)],
+                        band_colour.mix(0.5).filled(),
+                    )])?
+                    .label(&self.band_desc)
+                    .legend(move |(px, py)| {
+                        Rectangle::new([(px, py - 5), (px + 20, py + 5)], band_colour.filled())
+                    });
+            }
+            chart.draw_series(
+                group
+                    .values
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, v)| v.is_finite())
+                    .map(|(i, &v)| {
+                        let x = (i + 1) as f64;
+                        Rectangle::new([(x - 0.35, b), (x + 0.35, v)], BLUE.mix(0.7).filled())
+                    }),
+            )?;
+            chart
+                .draw_series(LineSeries::new(
+                    [(0.5, b), (m + 0.5, b)],
+                    BLACK.stroke_width(1),
+                ))?
+                .label(format!("{b}"))
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .position(SeriesLabelPosition::LowerRight)
+                .draw()?;
+        }
+        Ok(())
+    }
+}

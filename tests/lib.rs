@@ -1932,3 +1932,375 @@ mod test_data_hdf5 {
         assert!(err.contains("data.xlsx") && err.contains(".uff"), "{err}");
     }
 }
+
+mod calibration_files {
+    use super::*;
+    use hdf5_metno as hdf5;
+    use nlsim::calib::{Noise, SweepPlan, synthesize};
+    use nlsim::prelude::*;
+
+    /// A 2 %-noise stepped-sine test of the ECL beam (tip_spring.k3 = 6e9 N/m³) written as
+    /// CSV, and the damping parameter of the mode its drive excites.
+    fn test_csv(dir: &Path) -> (PathBuf, String) {
+        let fx = nlsim::fixtures::ecl_beam();
+        let red = reduce(&fx.model, &ReductionConfig::lowest(12)).unwrap();
+        let sys = HbSystem::from_model(
+            &fx.model,
+            &red,
+            HarmonicSet::new(3, 1).unwrap(),
+            HbConfig::default(),
+        )
+        .unwrap();
+        let driven = sys
+            .linear()
+            .dominant_mode(sys.sensors()[0].port, 0..2)
+            .unwrap();
+        let plans = [
+            SweepPlan::linear("0.05 N up", 22.0, 26.0, 9, 0.05),
+            SweepPlan::linear("0.2 N down", 27.0, 22.0, 11, 0.2),
+        ];
+        let d = synthesize(&sys, "shaker", &plans, 3, Noise::relative(0.02), 11).unwrap();
+        let p = dir.join("test.csv");
+        nlsim::testdata::write_csv(&p, &d).unwrap();
+        (p, Param::ModalDamping(driven).to_string())
+    }
+
+    fn csv_rows(path: &Path) -> Vec<Vec<String>> {
+        std::fs::read_to_string(path)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').map(String::from).collect())
+            .collect()
+    }
+
+    fn h5_vec(file: &hdf5::File, name: &str) -> Vec<f64> {
+        file.dataset(name).unwrap().read_raw::<f64>().unwrap()
+    }
+
+    const SETTINGS: &str = r#"harmonics = 3
+compare = [1, 3]
+modes = 12
+lhs = 12
+starts = 2
+folds = 4
+seed = 9
+"#;
+
+    fn params(zeta: &str) -> String {
+        format!(
+            "[[{0}param]]\nname = \"tip_spring.k3\"\nlower = 6e7\nupper = 6e11\n\n\
+             [[{0}param]]\nname = \"{zeta}\"\nlower = 1e-3\nupper = 0.2\n",
+            "{prefix}"
+        )
+    }
+
+    /// `nlsim calibrate --config` writes the report: its tables agree with the summary and
+    /// the data (one fit row per point, channel and harmonic; costs fall along each
+    /// optimisation; one row per fold), the plots exist, and k3 comes back within 3
+    /// Cramér–Rao deviations. The same calibration spread over `calibrate-candidates` and
+    /// `calibrate-folds` batches (two and three shards) gives bit-identical estimates and
+    /// fold statistics.
+    #[test]
+    fn config_file_report_and_cluster_batches_agree() {
+        let dir = scratch("calibration-files");
+        let (_, zeta) = test_csv(&dir);
+        let body = format!(
+            "model = \"ecl_beam\"\ndata = \"test.csv\"\nreport = \"report\"\nout = \"estimates.csv\"\n{SETTINGS}\n{}",
+            params(&zeta).replace("{prefix}", "")
+        );
+        std::fs::write(dir.join("cal.toml"), &body).unwrap();
+        let cfg = dir.join("cal.toml");
+        let (rc, out, err) = nlsim(&["calibrate", "--config", cfg.to_str().unwrap()]);
+        assert_eq!(rc, 0, "{out}{err}");
+        assert!(
+            out.contains("converged in") && out.contains("report: 18 files"),
+            "{out}"
+        );
+        let report = dir.join("report");
+        let est = csv_rows(&dir.join("estimates.csv"));
+        assert_eq!(
+            std::fs::read(dir.join("estimates.csv")).unwrap(),
+            std::fs::read(report.join("estimates.csv")).unwrap()
+        );
+        assert_eq!(est[0][0], "tip_spring.k3");
+        assert_eq!(est[1][0], zeta);
+        let (k3, cr): (f64, f64) = (est[0][1].parse().unwrap(), est[0][2].parse().unwrap());
+        assert!(cr > 0.0 && (k3 - 6e9).abs() < 3.0 * cr, "k3 {k3} ± {cr}");
+        // 20 points × 2 channels × 3 harmonics, every one converged.
+        let fit = csv_rows(&report.join("fit.csv"));
+        assert_eq!(fit.len(), 20 * 2 * 3);
+        assert!(fit.iter().all(|r| r[13] == "converged"), "{fit:?}");
+        // Accepted iterates only: the cost never rises within a run.
+        let conv = csv_rows(&report.join("convergence.csv"));
+        for w in conv.windows(2) {
+            if w[0][0] == w[1][0] {
+                let (a, b): (f64, f64) = (w[0][2].parse().unwrap(), w[1][2].parse().unwrap());
+                assert!(b <= a, "cost rose from {a} to {b}");
+            }
+        }
+        assert_eq!(csv_rows(&report.join("kfold.csv")).len(), 4);
+        assert_eq!(csv_rows(&report.join("candidates.csv")).len(), 13);
+        for f in [
+            "kfold",
+            "convergence",
+            "frf_tip_h1",
+            "frf_tip_h3",
+            "frf_mid_h1",
+        ] {
+            for ext in ["svg", "png"] {
+                let p = report.join(format!("{f}.{ext}"));
+                assert!(
+                    std::fs::metadata(&p).is_ok_and(|m| m.len() > 1000),
+                    "{}",
+                    p.display()
+                );
+            }
+        }
+        let summary = std::fs::read_to_string(report.join("summary.txt")).unwrap();
+        assert!(summary.contains("tip_spring.k3") && summary.contains("Cramér–Rao"));
+
+        // The candidates on a cluster: two shards, merged, then the calibration goes on.
+        let table = params(&zeta).replace("{prefix}", "calibrate.");
+        let jobs = |name: &str, command: &str, extra: &str| {
+            let p = dir.join(format!("{name}.toml"));
+            std::fs::write(
+                &p,
+                format!(
+                    "name = \"{name}\"\ncommand = \"{command}\"\nmodel = \"ecl_beam\"\n{extra}\n\
+                     [calibrate]\ndata = \"test.csv\"\n{SETTINGS}\n{table}"
+                ),
+            )
+            .unwrap();
+            p
+        };
+        let cand = jobs("cand", "calibrate-candidates", "");
+        for t in ["0", "1"] {
+            let (rc, out, err) = nlsim(&[
+                "batch",
+                cand.to_str().unwrap(),
+                "--task-count",
+                "2",
+                "--task-index",
+                t,
+            ]);
+            assert_eq!(rc, 0, "{out}{err}");
+        }
+        let (rc, out, err) = nlsim(&["batch", "merge", cand.to_str().unwrap()]);
+        assert_eq!(rc, 0, "{out}{err}");
+        assert!(
+            out.contains(" of 13 candidates with a finite cost"),
+            "{out}"
+        );
+        let merged = dir.join("cand-results/merged.h5");
+        let (rc, out, err) = nlsim(&[
+            "calibrate",
+            "--config",
+            cfg.to_str().unwrap(),
+            "--candidates",
+            merged.to_str().unwrap(),
+            "--out",
+            dir.join("est2.csv").to_str().unwrap(),
+        ]);
+        assert_eq!(rc, 0, "{out}{err}");
+        assert!(out.contains("evaluated in"), "{out}");
+        assert_eq!(
+            std::fs::read(dir.join("est2.csv")).unwrap(),
+            std::fs::read(dir.join("estimates.csv")).unwrap()
+        );
+        // The folds on a cluster, from the estimate: three shards.
+        let estimate = format!(
+            "estimate = {{ \"tip_spring.k3\" = {}, \"{zeta}\" = {} }}",
+            est[0][1], est[1][1]
+        );
+        let folds = jobs("folds", "calibrate-folds", &estimate);
+        let (rc, out, err) = nlsim(&["batch", folds.to_str().unwrap(), "--task-count", "3"]);
+        assert_eq!(rc, 0, "{out}{err}");
+        let (rc, out, err) = nlsim(&["batch", "merge", folds.to_str().unwrap()]);
+        assert_eq!(rc, 0, "{out}{err}");
+        assert!(out.contains("4-fold mean"), "{out}");
+        let f = hdf5::File::open(dir.join("folds-results/merged.h5")).unwrap();
+        let (mean, jk) = (h5_vec(&f, "kfold_mean"), h5_vec(&f, "jackknife_std"));
+        for j in 0..2 {
+            assert_eq!(
+                mean[j],
+                est[j][3].parse::<f64>().unwrap(),
+                "mean of {}",
+                est[j][0]
+            );
+            assert_eq!(
+                jk[j],
+                est[j][5].parse::<f64>().unwrap(),
+                "jackknife of {}",
+                est[j][0]
+            );
+        }
+        let kf = csv_rows(&report.join("kfold.csv"));
+        let held = h5_vec(&f, "held_out_rms");
+        for (row, h) in kf.iter().zip(&held) {
+            assert_eq!(row[4].parse::<f64>().unwrap(), *h);
+        }
+
+        // Candidates of another seed are refused, naming the file.
+        let other = std::fs::read_to_string(&cfg)
+            .unwrap()
+            .replace("seed = 9", "seed = 10");
+        std::fs::write(dir.join("other.toml"), other).unwrap();
+        let (rc, _, err) = nlsim(&[
+            "calibrate",
+            "--config",
+            dir.join("other.toml").to_str().unwrap(),
+            "--candidates",
+            merged.to_str().unwrap(),
+        ]);
+        assert_eq!(rc, 2, "{err}");
+        assert!(
+            err.contains("merged.h5") && err.contains("are not the 13"),
+            "{err}"
+        );
+        // A folds merge is not a candidates file.
+        let (rc, _, err) = nlsim(&[
+            "calibrate",
+            "--config",
+            cfg.to_str().unwrap(),
+            "--candidates",
+            dir.join("folds-results/merged.h5").to_str().unwrap(),
+        ]);
+        assert_ne!(rc, 0);
+        assert!(
+            err.contains("not a merged 'calibrate-candidates' batch"),
+            "{err}"
+        );
+    }
+
+    /// Bad calibration files and calibration batches: one line naming the file, the line
+    /// and the key.
+    #[test]
+    fn bad_files_name_file_line_and_key() {
+        let dir = scratch("calibration-bad");
+        let base = "model = \"ecl_beam\"\ndata = \"test.csv\"\n\n[[param]]\nname = \"tip_spring.k3\"\nlower = 1e8\nupper = 1e11\n";
+        let cases: &[(&str, String, &[&str])] = &[
+            (
+                "unknown key",
+                base.replace("data =", "dta = 1\ndata ="),
+                &["bad.toml:2: dta: unknown field"],
+            ),
+            (
+                "spacing",
+                format!("{base}spacing = \"cubic\"\n"),
+                &["bad.toml:8", "param.spacing", "cubic"],
+            ),
+            (
+                "no model",
+                base.replace("model = \"ecl_beam\"\n", ""),
+                &["bad.toml:1", "model"],
+            ),
+            (
+                "bounds",
+                base.replace("upper = 1e11", "upper = 1e7"),
+                &["bad.toml:4", "bounds"],
+            ),
+            (
+                "form",
+                format!("form = \"db\"\n{base}"),
+                &["bad.toml:1", "form", "'db'"],
+            ),
+            (
+                "compare",
+                format!("compare = [4]\n{base}"),
+                &["bad.toml:1", "compare", "[4]"],
+            ),
+            (
+                "out",
+                format!("out = \"e.txt\"\n{base}"),
+                &["bad.toml:1", "out", ".csv"],
+            ),
+            (
+                "lm",
+                format!("{base}[lm]\nftol = -1\n"),
+                &["bad.toml:8", "lm"],
+            ),
+            (
+                "twice",
+                format!("{base}\n[[param]]\nname = \"tip_spring.k3\"\nlower = 1\nupper = 2\n"),
+                &["named twice"],
+            ),
+        ];
+        for (what, text, needles) in cases {
+            let p = dir.join("bad.toml");
+            std::fs::write(&p, text).unwrap();
+            let (rc, out, err) = nlsim(&["calibrate", "--config", p.to_str().unwrap()]);
+            assert_ne!(rc, 0, "{what}: {out}");
+            assert_eq!(err.trim().lines().count(), 1, "{what}: {err}");
+            for n in *needles {
+                assert!(err.contains(n), "{what}: '{n}' not in {err}");
+            }
+        }
+        // Unreadable data (relative to the calibration file) names the data file.
+        let p = dir.join("unknown.toml");
+        std::fs::write(&p, base.replace("tip_spring.k3", "tip_spring.k9")).unwrap();
+        std::fs::write(dir.join("test.csv"), "not a test\n").unwrap();
+        let (rc, _, err) = nlsim(&["calibrate", "--config", p.to_str().unwrap()]);
+        assert_ne!(rc, 0);
+        assert!(err.contains("test.csv"), "{err}");
+        // MODEL and DATA beside --config are refused by the parser.
+        let (rc, _, err) = nlsim(&["calibrate", "ecl_beam", "x.csv", "--config", "c.toml"]);
+        assert_eq!(rc, 2, "{err}");
+        // Batches.
+        let table = "[calibrate]\ndata = \"test.csv\"\nfolds = 4\n[[calibrate.param]]\nname = \"tip_spring.k3\"\nlower = 1e8\nupper = 1e11\n";
+        let batch_cases: &[(&str, String, &[&str])] = &[
+            (
+                "no estimate",
+                format!(
+                    "name = \"f\"\ncommand = \"calibrate-folds\"\nmodel = \"ecl_beam\"\n{table}"
+                ),
+                &["jobs.toml:2", "estimate"],
+            ),
+            (
+                "outside",
+                format!(
+                    "name = \"f\"\ncommand = \"calibrate-folds\"\nmodel = \"ecl_beam\"\nestimate = {{ \"tip_spring.k3\" = 1e12 }}\n{table}"
+                ),
+                &["jobs.toml:4", "outside its bounds"],
+            ),
+            (
+                "extra",
+                format!(
+                    "name = \"f\"\ncommand = \"calibrate-folds\"\nmodel = \"ecl_beam\"\nestimate = {{ \"tip_spring.k3\" = 1e9, \"x.k\" = 1 }}\n{table}"
+                ),
+                &["jobs.toml:4", "x.k"],
+            ),
+            (
+                "sweep",
+                format!(
+                    "name = \"c\"\ncommand = \"calibrate-candidates\"\nmodel = \"ecl_beam\"\n[[sweep]]\nset = \"tip_spring.k3\"\nvalues = [1.0]\n{table}"
+                ),
+                &["jobs.toml:4", "sweep", "[calibrate]"],
+            ),
+            (
+                "no table",
+                "name = \"c\"\ncommand = \"calibrate-candidates\"\nmodel = \"ecl_beam\"\n"
+                    .to_string(),
+                &["jobs.toml:2", "[calibrate] table"],
+            ),
+            (
+                "model twice",
+                format!(
+                    "name = \"c\"\ncommand = \"calibrate-candidates\"\nmodel = \"ecl_beam\"\n{}",
+                    table.replace("[calibrate]\n", "[calibrate]\nmodel = \"x\"\n")
+                ),
+                &["calibrate.model"],
+            ),
+        ];
+        for (what, text, needles) in batch_cases {
+            let p = dir.join("jobs.toml");
+            std::fs::write(&p, text).unwrap();
+            let (rc, out, err) = nlsim(&["batch", p.to_str().unwrap()]);
+            assert_ne!(rc, 0, "{what}: {out}");
+            assert_eq!(err.trim().lines().count(), 1, "{what}: {err}");
+            for n in *needles {
+                assert!(err.contains(n), "{what}: '{n}' not in {err}");
+            }
+        }
+    }
+}

@@ -188,18 +188,18 @@ pub fn calibrate(objective: &FrfObjective, config: &CalibrationConfig) -> Result
 /// Calibrates: candidates from a maximin Latin hypercube over the bounds (and the model's
 /// current values) in parallel, Levenberg–Marquardt from the best `starts`, statistics at the
 /// best optimum, then k-fold cross validation from it. Runs in the caller's rayon pool.
+///
+/// The phases are public for callers that spread them over a cluster:
+/// [`candidate_points`] and [`FrfObjective::cost_values`] for the candidates,
+/// [`calibrate_from_candidates`] for the rest, [`fold`] and [`KFold::from_folds`] for the
+/// cross validation; run that way the estimates are bit-identical to this function's.
 pub fn calibrate_with_progress(
     objective: &FrfObjective,
     config: &CalibrationConfig,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Calibration> {
-    let n_points = objective.data().n_points();
-    config.validate(n_points)?;
-    let specs = objective.specs().to_vec();
-    let n = specs.len();
-    let params: Vec<Param> = specs.iter().map(|s| s.param.clone()).collect();
-    let current = objective.system().param_values(&params)?;
-    let starts = start_points(&specs, &current, config)?;
+    config.validate(objective.data().n_points())?;
+    let starts = candidate_points(objective, config)?;
     let total = starts.len();
     let done = AtomicUsize::new(0);
     let costs: Vec<Result<f64>> = starts
@@ -221,6 +221,45 @@ pub fn calibrate_with_progress(
             cost: c?,
         });
     }
+    calibrate_from_candidates(objective, candidates, config, progress)
+}
+
+/// The start candidates of a calibration: the model's current values clamped to the bounds,
+/// then the maximin Latin hypercube of `config` (seed, samples, swaps) over the bounds.
+pub fn candidate_points(
+    objective: &FrfObjective,
+    config: &CalibrationConfig,
+) -> Result<Vec<Vec<f64>>> {
+    let specs = objective.specs();
+    let params: Vec<Param> = specs.iter().map(|s| s.param.clone()).collect();
+    let current = objective.system().param_values(&params)?;
+    start_points(specs, &current, config)
+}
+
+/// The calibration after the candidates: Levenberg–Marquardt from the best `config.starts`
+/// of `candidates` (evaluated costs, infinite where a point failed), the Cramér–Rao bound at
+/// the best optimum and, when `config.folds ≥ 2`, the k-fold cross validation.
+pub fn calibrate_from_candidates(
+    objective: &FrfObjective,
+    candidates: Vec<Candidate>,
+    config: &CalibrationConfig,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<Calibration> {
+    config.validate(objective.data().n_points())?;
+    let specs = objective.specs().to_vec();
+    let n = specs.len();
+    if let Some((i, c)) = candidates
+        .iter()
+        .enumerate()
+        .find(|(_, c)| c.values.len() != n)
+    {
+        return Err(Error::invalid(
+            format!("candidate {i}"),
+            format!("holds {} values for {n} parameters", c.values.len()),
+        ));
+    }
+    let params: Vec<Param> = specs.iter().map(|s| s.param.clone()).collect();
+    let total = candidates.len();
     let order = best_candidates(&candidates, config.starts);
     if order.is_empty() {
         return Err(Error::Numerical {
@@ -297,8 +336,78 @@ pub fn fold_assignment(n_points: usize, k: usize, seed: u64) -> Vec<usize> {
     fold
 }
 
-/// k-fold cross validation from `estimate`: each fold is held out in turn, the others are
-/// calibrated (Levenberg–Marquardt from `estimate`), and the held-out error is measured.
+/// One fold of the cross validation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FoldResult {
+    /// The fold's estimate (trained on the other folds).
+    pub values: Vec<f64>,
+    /// Status of its optimisation.
+    pub status: Status,
+    /// Root-mean-square weighted residual on its held-out points (infinite where the
+    /// harmonic balance failed at one of them).
+    pub held_out_rms: f64,
+    /// Root-mean-square weighted residual on its training points.
+    pub training_rms: f64,
+}
+
+/// Fold `f` of `config.folds` (assignment [`fold_assignment`] from `config.seed`): the
+/// other folds calibrated by Levenberg–Marquardt from `estimate`, the held-out error
+/// measured. Sequential inside.
+pub fn fold(
+    objective: &FrfObjective,
+    estimate: &[f64],
+    config: &CalibrationConfig,
+    f: usize,
+) -> Result<FoldResult> {
+    let n_points = objective.data().n_points();
+    config.validate(n_points)?;
+    let k = config.folds;
+    if f >= k {
+        return Err(Error::invalid(
+            "cross validation",
+            format!("fold {f} is not below the fold count {k}"),
+        ));
+    }
+    if estimate.len() != objective.specs().len() {
+        return Err(Error::invalid(
+            "cross validation",
+            format!(
+                "the estimate holds {} values for {} parameters",
+                estimate.len(),
+                objective.specs().len()
+            ),
+        ));
+    }
+    let fold_of = fold_assignment(n_points, k, config.seed);
+    let (lo, hi) = objective.internal_bounds();
+    let rms = |r: &[f64]| (r.iter().map(|v| v * v).sum::<f64>() / r.len().max(1) as f64).sqrt();
+    let mut obj = objective.clone();
+    let train: Vec<bool> = fold_of.iter().map(|&g| g != f).collect();
+    let held: Vec<bool> = train.iter().map(|t| !t).collect();
+    obj.set_training(train)?;
+    let u0 = obj.to_internal(estimate);
+    let rep = levenberg_marquardt(&mut obj, &u0, &lo, &hi, &config.lm)?;
+    let values = obj.to_values(&rep.u);
+    let training_rms = rep
+        .evaluation
+        .as_ref()
+        .map_or(f64::NAN, |e| rms(&e.residuals));
+    let ho = obj.evaluate_values(&values, Some(&held), false)?;
+    let held_out_rms = if ho.failed.is_empty() {
+        rms(&ho.residuals)
+    } else {
+        f64::INFINITY
+    };
+    Ok(FoldResult {
+        values,
+        status: rep.status,
+        held_out_rms,
+        training_rms,
+    })
+}
+
+/// k-fold cross validation from `estimate`: each fold is held out in turn ([`fold`], in
+/// parallel), the others are calibrated from `estimate`, and the held-out error is measured.
 pub fn kfold(
     objective: &FrfObjective,
     estimate: &[f64],
@@ -308,63 +417,62 @@ pub fn kfold(
     let n_points = objective.data().n_points();
     let k = config.folds;
     config.validate(n_points)?;
-    let fold_of = fold_assignment(n_points, k, config.seed);
-    let (lo, hi) = objective.internal_bounds();
     let done = AtomicUsize::new(0);
-    let rms = |r: &[f64]| (r.iter().map(|v| v * v).sum::<f64>() / r.len().max(1) as f64).sqrt();
-    type FoldOutcome = (Vec<f64>, Status, f64, f64);
-    let results: Vec<Result<FoldOutcome>> = (0..k)
+    let results: Vec<Result<FoldResult>> = (0..k)
         .into_par_iter()
         .map(|f| {
-            let mut obj = objective.clone();
-            let train: Vec<bool> = fold_of.iter().map(|&g| g != f).collect();
-            let held: Vec<bool> = train.iter().map(|t| !t).collect();
-            obj.set_training(train)?;
-            let u0 = obj.to_internal(estimate);
-            let rep = levenberg_marquardt(&mut obj, &u0, &lo, &hi, &config.lm)?;
-            let values = obj.to_values(&rep.u);
-            let tr = rep
-                .evaluation
-                .as_ref()
-                .map_or(f64::NAN, |e| rms(&e.residuals));
-            let ho = obj.evaluate_values(&values, Some(&held), false)?;
-            let ho_rms = if ho.failed.is_empty() {
-                rms(&ho.residuals)
-            } else {
-                f64::INFINITY
-            };
+            let r = fold(objective, estimate, config, f);
             let d = done.fetch_add(1, Ordering::Relaxed) + 1;
             progress(Progress::Fold { done: d, total: k });
-            Ok((values, rep.status, ho_rms, tr))
+            r
         })
         .collect();
-    let mut estimates = Vec::with_capacity(k);
-    let mut status = Vec::with_capacity(k);
-    let mut held_out_rms = Vec::with_capacity(k);
-    let mut training_rms = Vec::with_capacity(k);
-    for r in results {
-        let (v, s, h, t) = r?;
-        estimates.push(v);
-        status.push(s);
-        held_out_rms.push(h);
-        training_rms.push(t);
+    let folds = results.into_iter().collect::<Result<Vec<_>>>()?;
+    KFold::from_folds(fold_assignment(n_points, k, config.seed), folds)
+}
+
+impl KFold {
+    /// The statistics of the folds `folds` (fold `f` at index `f`) of the assignment
+    /// `fold_of`: mean, covariance, standard deviation and the jackknife spread.
+    pub fn from_folds(fold_of: Vec<usize>, folds: Vec<FoldResult>) -> Result<Self> {
+        let k = folds.len();
+        let n = folds.first().map_or(0, |f| f.values.len());
+        if k < 2 || folds.iter().any(|f| f.values.len() != n) || fold_of.iter().any(|&g| g >= k) {
+            return Err(Error::invalid(
+                "cross validation",
+                format!(
+                    "needs at least 2 folds of equal parameter count covering the assignment \
+                     ({k} folds given)"
+                ),
+            ));
+        }
+        let mut estimates = Vec::with_capacity(k);
+        let mut status = Vec::with_capacity(k);
+        let mut held_out_rms = Vec::with_capacity(k);
+        let mut training_rms = Vec::with_capacity(k);
+        for r in folds {
+            estimates.push(r.values);
+            status.push(r.status);
+            held_out_rms.push(r.held_out_rms);
+            training_rms.push(r.training_rms);
+        }
+        let (mean, covariance) = mean_and_covariance(&estimates);
+        let std: Vec<f64> = (0..mean.len()).map(|j| covariance[(j, j)].sqrt()).collect();
+        let jk = (k as f64 - 1.0) / (k as f64).sqrt();
+        let jackknife_std = std.iter().map(|s| s * jk).collect();
+        Ok(KFold {
+            k,
+            fold_of,
+            estimates,
+            status,
+            held_out_rms,
+            training_rms,
+            mean,
+            covariance,
+            std,
+            jackknife_std,
+        })
     }
-    let (mean, covariance) = mean_and_covariance(&estimates);
-    let std: Vec<f64> = (0..mean.len()).map(|j| covariance[(j, j)].sqrt()).collect();
-    let jk = (k as f64 - 1.0) / (k as f64).sqrt();
-    let jackknife_std = std.iter().map(|s| s * jk).collect();
-    Ok(KFold {
-        k,
-        fold_of,
-        estimates,
-        status,
-        held_out_rms,
-        training_rms,
-        mean,
-        covariance,
-        std,
-        jackknife_std,
-    })
 }
 
 /// The start candidates: the model's `current` values clamped to the bounds, then the

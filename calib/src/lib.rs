@@ -30,8 +30,9 @@ pub mod stats;
 pub mod synthetic;
 
 pub use calibrate::{
-    Calibration, CalibrationConfig, Candidate, KFold, Progress, StartRun, calibrate,
-    calibrate_with_progress, fold_assignment, kfold,
+    Calibration, CalibrationConfig, Candidate, FoldResult, KFold, Progress, StartRun, calibrate,
+    calibrate_from_candidates, calibrate_with_progress, candidate_points, fold, fold_assignment,
+    kfold,
 };
 pub use data::{Channel, Noise, PointId, Step, Sweep, SweepDirection, TestData};
 pub use lhs::{Spacing, latin_hypercube, maximin_latin_hypercube};

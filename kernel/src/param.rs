@@ -354,9 +354,50 @@ impl fmt::Display for Status {
     }
 }
 
+impl Status {
+    /// Every status, in declaration order.
+    pub const ALL: [Status; 6] = [
+        Status::Converged,
+        Status::IterationLimit,
+        Status::StepTooSmall,
+        Status::Diverged,
+        Status::NonFinite,
+        Status::Singular,
+    ];
+}
+
+impl std::str::FromStr for Status {
+    type Err = Error;
+
+    /// The inverse of [`Status::as_str`] (as files written by nlsim hold it).
+    fn from_str(text: &str) -> Result<Self> {
+        Status::ALL
+            .into_iter()
+            .find(|s| s.as_str() == text)
+            .ok_or_else(|| {
+                Error::invalid(
+                    "status",
+                    format!(
+                        "'{text}' is none of: {}",
+                        Status::ALL.map(Status::as_str).join(", ")
+                    ),
+                )
+            })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn status_text_round_trips() {
+        for s in Status::ALL {
+            assert_eq!(s.as_str().parse::<Status>().unwrap(), s);
+        }
+        let e = "done".parse::<Status>().unwrap_err().to_string();
+        assert!(e.contains("'done'") && e.contains("step too small"), "{e}");
+    }
 
     #[test]
     fn text_forms_are_unique_and_checked() {

@@ -174,43 +174,65 @@ enum Command {
     /// Calibrate model parameters on stepped-sine test data (CSV, docs/file-formats.md):
     /// Latin-hypercube candidates, bounded Levenberg–Marquardt on the multi-harmonic
     /// responses with the measured force, Cramér–Rao bounds and k-fold cross validation.
+    /// Give MODEL DATA --param ..., or a calibration file with --config (docs/calibration.md;
+    /// options given beside it override the file).
     Calibrate {
         /// Model file (.toml) or built-in model, e.g. `ecl_beam`.
-        model: String,
+        #[arg(required_unless_present = "config", conflicts_with = "config")]
+        model: Option<String>,
         /// Test data: stepped-sine CSV or HDF5 (docs/file-formats.md), or linear FRFs in
         /// universal file dataset 58 (.uff/.unv, ASCII or binary; 1 % noise assumed).
-        data: std::path::PathBuf,
+        #[arg(required_unless_present = "config", conflicts_with = "config")]
+        data: Option<std::path::PathBuf>,
+        /// Calibration file (TOML): model, data, parameters, bounds and every setting.
+        #[arg(long)]
+        config: Option<std::path::PathBuf>,
         /// A parameter and its bounds, `NAME=LOWER:UPPER` (repeatable), e.g.
         /// `--param tip_spring.k3=1e8:1e11 --param mode2.zeta=0.002:0.05`.
-        #[arg(long = "param", required = true)]
+        #[arg(
+            long = "param",
+            required_unless_present = "config",
+            conflicts_with = "config"
+        )]
         params: Vec<String>,
-        /// Harmonics compared (1 = fundamental only), e.g. `1,3`.
-        #[arg(long, value_delimiter = ',', default_value = "1")]
-        compare: Vec<usize>,
-        /// Residual form: complex differences or log-magnitude and phase.
-        #[arg(long, value_enum, default_value = "complex")]
-        form: CalibForm,
-        /// Harmonics H kept by the harmonic balance.
-        #[arg(long, default_value_t = 3)]
-        harmonics: usize,
-        /// Retained modes of the reduced model.
-        #[arg(long, default_value_t = 20)]
-        modes: usize,
-        /// Latin-hypercube candidates.
-        #[arg(long, default_value_t = 64)]
-        lhs: usize,
-        /// Levenberg–Marquardt runs from the best candidates.
-        #[arg(long, default_value_t = 3)]
-        starts: usize,
-        /// Folds of the cross validation (0: none).
-        #[arg(long, default_value_t = 10)]
-        folds: usize,
-        /// Seed of the Latin hypercube and of the folds.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
+        /// Fixed overrides `element.param=value` applied before calibrating (repeatable).
+        #[arg(long, conflicts_with = "config")]
+        set: Vec<String>,
+        /// Harmonics compared (1 = fundamental only), e.g. `1,3` [default: 1].
+        #[arg(long, value_delimiter = ',')]
+        compare: Option<Vec<usize>>,
+        /// Residual form: complex differences or log-magnitude and phase [default: complex].
+        #[arg(long, value_enum)]
+        form: Option<CalibForm>,
+        /// Harmonics H kept by the harmonic balance [default: 3].
+        #[arg(long)]
+        harmonics: Option<usize>,
+        /// Retained modes of the reduced model [default: 20].
+        #[arg(long)]
+        modes: Option<usize>,
+        /// Latin-hypercube candidates [default: 64].
+        #[arg(long)]
+        lhs: Option<usize>,
+        /// Levenberg–Marquardt runs from the best candidates [default: 3].
+        #[arg(long)]
+        starts: Option<usize>,
+        /// Folds of the cross validation (0: none) [default: 10].
+        #[arg(long)]
+        folds: Option<usize>,
+        /// Seed of the Latin hypercube and of the folds [default: 1].
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Candidates already evaluated: the merged file of a `calibrate-candidates` batch
+        /// of this calibration (docs/batch.md).
+        #[arg(long)]
+        candidates: Option<std::path::PathBuf>,
         /// Estimates and statistics as CSV.
         #[arg(long)]
         out: Option<std::path::PathBuf>,
+        /// Report folder: summary, tables (estimates, candidates, convergence, folds, fit)
+        /// and plots as SVG and PNG (per-harmonic FRFs, k-fold bars, convergence).
+        #[arg(long)]
+        report: Option<std::path::PathBuf>,
     },
     /// Run the pipeline on a built-in model, print a readable summary and write a report
     /// folder with plots.
@@ -495,7 +517,9 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
         Command::Calibrate {
             model,
             data,
+            config,
             params,
+            set,
             compare,
             form,
             harmonics,
@@ -504,31 +528,58 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             starts,
             folds,
             seed,
+            candidates,
             out,
+            report,
         } => {
-            let config = nlsim::calib::CalibrationConfig {
-                lhs_samples: *lhs,
-                seed: *seed,
-                starts: *starts,
-                folds: *folds,
-                ..Default::default()
+            let mut req = match (config, model, data) {
+                (Some(path), _, _) => nlsim::calibration::CalibrationRequest::load(path)?,
+                (None, Some(model), Some(data)) => {
+                    let specs = params
+                        .iter()
+                        .map(|p| nlsim::calibration::parse_param_bounds(p))
+                        .collect::<nlsim::Result<Vec<_>>>()?;
+                    let mut r = nlsim::calibration::CalibrationRequest::new(
+                        model.clone(),
+                        data.clone(),
+                        specs,
+                    );
+                    r.set = set.clone();
+                    r
+                }
+                _ => unreachable!("clap requires MODEL and DATA without --config"),
             };
-            let form = match form {
-                CalibForm::Complex => nlsim::calib::Form::Complex,
-                CalibForm::LogMagnitude => nlsim::calib::Form::LogMagnitudePhase,
-            };
-            calibrate_cmd(
-                model,
-                data,
-                params,
-                compare,
-                form,
-                *harmonics,
-                *modes,
-                &config,
-                out.as_deref(),
-                cli,
-            )
+            if let Some(v) = compare {
+                req.compare = v.clone();
+            }
+            if let Some(f) = form {
+                req.form = match f {
+                    CalibForm::Complex => nlsim::calib::Form::Complex,
+                    CalibForm::LogMagnitude => nlsim::calib::Form::LogMagnitudePhase,
+                };
+            }
+            let c = &mut req.config;
+            for (dst, src) in [
+                (&mut req.harmonics, harmonics),
+                (&mut req.modes, modes),
+                (&mut c.lhs_samples, lhs),
+                (&mut c.starts, starts),
+                (&mut c.folds, folds),
+            ] {
+                if let Some(v) = src {
+                    *dst = *v;
+                }
+            }
+            if let Some(s) = seed {
+                c.seed = *s;
+            }
+            if out.is_some() {
+                req.out = out.clone();
+            }
+            if report.is_some() {
+                req.report = report.clone();
+            }
+            calibrate_cmd(&req, candidates.as_deref(), cli)
         }
         Command::Batch {
             action,
@@ -1049,25 +1100,29 @@ fn demo_calibration(
         rms(&kf.training_rms),
         rms(&kf.held_out_rms)
     ));
-    let bars = params
+    let groups = params
         .iter()
         .enumerate()
         .map(|(j, p)| {
-            (
-                p.to_string(),
-                kf.estimates
+            let rel = cal.cramer_rao.std[j] / cal.estimate[j].abs();
+            nlsim::plot::BarGroup {
+                label: p.to_string(),
+                values: kf
+                    .estimates
                     .iter()
-                    .enumerate()
-                    .map(|(f, e)| ((f + 1) as f64, e[j] / cal.estimate[j]))
+                    .map(|e| e[j] / cal.estimate[j])
                     .collect(),
-            )
+                band: rel.is_finite().then_some((1.0 - rel, 1.0 + rel)),
+            }
         })
         .collect();
-    let fig = nlsim::plot::Lines {
+    let fig = nlsim::plot::Bars {
         title: format!("{}: fold estimates / full-data estimate", model.name()),
-        x_desc: "fold".into(),
-        y_desc: "estimate ratio (1)".into(),
-        series: bars,
+        bar_desc: "fold".into(),
+        y_desc: "fold estimate / estimate (1)".into(),
+        baseline: 1.0,
+        band_desc: "Cramér–Rao ±1σ".into(),
+        groups,
     };
     say(&format!(
         "  plots: {}",
@@ -1085,116 +1140,23 @@ enum CalibForm {
     LogMagnitude,
 }
 
-/// Test data by file extension: CSV, HDF5 (`.h5`, `.hdf5`) or linear FRFs in universal
-/// file dataset 58 (`.uff`, `.unv`, `.uf`; ASCII or binary), whose drive point is the
-/// model's excitation and whose noise is taken as 1 % of each value.
-fn read_test_data(
-    path: &std::path::Path,
-    model: &nlsim::kernel::Model,
-) -> nlsim::Result<nlsim::calib::TestData> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
-    match ext.as_str() {
-        "csv" => nlsim::testdata::read_csv(path),
-        "h5" | "hdf5" => nlsim::testdata::read_h5(path),
-        "uff" | "unv" | "uf" => {
-            let records = nlsim::uff::read(path)?;
-            let inputs: Vec<&str> = model.excitation().iter().map(|e| e.name.as_str()).collect();
-            let [input] = inputs.as_slice() else {
-                return Err(nlsim::Error::Usage(format!(
-                    "{}: FRFs name no drive point in the model's terms, so the model needs \
-                     exactly one excitation (it has: {})",
-                    path.display(),
-                    inputs.join(", ")
-                )));
-            };
-            nlsim::uff::to_test_data(&records, input, nlsim::calib::Noise::relative(0.01))
-        }
-        _ => Err(nlsim::Error::Usage(format!(
-            "{}: test data must be .csv, .h5/.hdf5 or universal file dataset 58 \
-             (.uff/.unv/.uf)",
-            path.display()
-        ))),
-    }
-}
-
-/// `nlsim calibrate`.
-#[allow(clippy::too_many_arguments)]
+/// `nlsim calibrate`: the run, its summary, the estimates CSV and the report folder.
 fn calibrate_cmd(
-    spec: &str,
-    data_path: &std::path::Path,
-    params: &[String],
-    compare: &[usize],
-    form: nlsim::calib::Form,
-    harmonics: usize,
-    modes: usize,
-    config: &nlsim::calib::CalibrationConfig,
-    out: Option<&std::path::Path>,
+    req: &nlsim::calibration::CalibrationRequest,
+    candidates: Option<&std::path::Path>,
     cli: &Cli,
 ) -> nlsim::Result<()> {
-    use nlsim::calib::{FrfObjective, ObjectiveConfig, ParamSpec, Progress};
-    use nlsim::hb::{HarmonicSet, HbConfig, HbSystem};
-    use nlsim::kernel::Param;
-    let say = |s: String| {
+    use nlsim::calib::Progress;
+    req.check()?;
+    let say = |s: &str| {
         if !cli.quiet {
             println!("{s}");
         }
     };
-    let mut specs = Vec::new();
-    for p in params {
-        let bad = || {
-            nlsim::Error::Usage(format!(
-                "--param {p}: expected NAME=LOWER:UPPER, e.g. tip_spring.k3=1e8:1e11"
-            ))
-        };
-        let (name, range) = p.split_once('=').ok_or_else(bad)?;
-        let (lo, hi) = range.split_once(':').ok_or_else(bad)?;
-        let lo: f64 = lo.trim().parse().map_err(|_| bad())?;
-        let hi: f64 = hi.trim().parse().map_err(|_| bad())?;
-        let param: Param = name.trim().parse()?;
-        specs.push(ParamSpec::new(param, lo, hi));
-    }
-    if let Some(o) = out
-        && o.extension().is_none_or(|e| e != "csv")
-    {
-        return Err(nlsim::Error::Usage(format!(
-            "--out {}: name a .csv file",
-            o.display()
-        )));
-    }
-    let model = nlsim::run::load_for_run(spec, &[])?;
-    let data = std::sync::Arc::new(read_test_data(data_path, &model)?);
-    let t = Instant::now();
-    let cfg = nlsim::reduction::ReductionConfig::lowest(modes.min(model.n_dofs()));
-    let reduced = nlsim::reduction::reduce(&model, &cfg)?;
-    let sys = HbSystem::from_model(
-        &model,
-        &reduced,
-        HarmonicSet::new(harmonics, 1)?,
-        HbConfig::default(),
-    )?;
-    let obj = FrfObjective::new(
-        &sys,
-        data.clone(),
-        specs.clone(),
-        ObjectiveConfig {
-            harmonics: compare.to_vec(),
-            form,
-        },
-    )?;
-    say(format!(
-        "calibrating {} parameters of '{}' on {} ({} sweeps, {} steps, {} channels); reduction {:.2} s",
-        specs.len(),
-        model.name(),
-        data_path.display(),
-        data.sweeps.len(),
-        data.n_points(),
-        data.channels.len(),
-        t.elapsed().as_secs_f64()
-    ));
+    let candidates = match candidates {
+        None => None,
+        Some(p) => Some((p.to_path_buf(), nlsim::batch::read_candidates(p)?)),
+    };
     let show = !cli.quiet && std::io::IsTerminal::is_terminal(&std::io::stderr());
     let progress = |p: Progress| {
         if show {
@@ -1209,71 +1171,24 @@ fn calibrate_cmd(
             }
         }
     };
-    let t = Instant::now();
-    let cal = nlsim::calib::calibrate_with_progress(&obj, config, &progress)?;
-    let best = &cal.runs[0].report;
-    say(format!(
-        "{} in {} LM iterations ({} evaluations, {} rejected, {} failed) from the best of {} candidates; {:.2} s",
-        cal.status,
-        best.iterations,
-        best.evaluations,
-        best.rejected,
-        best.failed_evaluations,
-        cal.candidates.len(),
-        t.elapsed().as_secs_f64()
-    ));
-    say(format!(
-        "cost {:.6e}, reduced chi2 {:.3} (1 when the noise model fits), collinearity index {:.2}",
-        cal.cost, cal.cramer_rao.reduced_chi2, cal.cramer_rao.collinearity
-    ));
-    if !cal.fit.failed.is_empty() {
-        say(format!(
-            "{} points did not converge at the estimate",
-            cal.fit.failed.len()
-        ));
+    let run = nlsim::calibration::run_calibration(req, candidates, &progress)?;
+    for line in run.summary() {
+        say(&line);
     }
-    say(format!(
-        "{:<22} {:>14} {:>14} {:>14}  flags",
-        "parameter", "estimate", "Cramér–Rao", "k-fold (jk)"
-    ));
-    let mut csv = String::from(
-        "param,estimate,cramer_rao_std,kfold_mean,kfold_std,jackknife_std,at_bound,poorly_identified\n",
-    );
-    for (j, p) in cal.params.iter().enumerate() {
-        let kf = cal.kfold.as_ref();
-        let flags = [
-            (cal.at_bound[j], "at bound"),
-            (cal.poorly_identified[j], "poorly identified"),
-        ]
-        .iter()
-        .filter(|f| f.0)
-        .map(|f| f.1)
-        .collect::<Vec<_>>()
-        .join(", ");
-        say(format!(
-            "{:<22} {:>14.6e} {:>14.3e} {:>14.3e}  {flags}",
-            p.to_string(),
-            cal.estimate[j],
-            cal.cramer_rao.std[j],
-            kf.map_or(f64::NAN, |k| k.jackknife_std[j])
-        ));
-        csv.push_str(&format!(
-            "{p},{:?},{:?},{:?},{:?},{:?},{},{}\n",
-            cal.estimate[j],
-            cal.cramer_rao.std[j],
-            kf.map_or(f64::NAN, |k| k.mean[j]),
-            kf.map_or(f64::NAN, |k| k.std[j]),
-            kf.map_or(f64::NAN, |k| k.jackknife_std[j]),
-            cal.at_bound[j],
-            cal.poorly_identified[j]
-        ));
-    }
-    if let Some(o) = out {
-        std::fs::write(o, csv).map_err(|source| nlsim::Error::Io {
-            path: o.to_path_buf(),
+    if let Some(o) = &req.out {
+        std::fs::write(o, run.estimates_csv()).map_err(|source| nlsim::Error::Io {
+            path: o.clone(),
             source,
         })?;
-        say(format!("wrote {}", o.display()));
+        say(&format!("wrote {}", o.display()));
+    }
+    if let Some(dir) = &req.report {
+        let files = nlsim::calibration::write_report(dir, &run)?;
+        say(&format!(
+            "report: {} files in {} (summary.txt, tables, plots as SVG and PNG)",
+            files.len(),
+            dir.display()
+        ));
     }
     Ok(())
 }
@@ -1824,6 +1739,9 @@ fn batch_merge(
                 String::new()
             }
         );
+        for line in &m.summary {
+            println!("  {line}");
+        }
     }
     Ok(())
 }
