@@ -43,6 +43,8 @@ pub mod cache;
 pub mod calibration;
 pub mod error;
 #[cfg(feature = "io")]
+pub mod demo;
+#[cfg(feature = "io")]
 pub mod frf;
 #[cfg(feature = "io")]
 pub mod modes;
