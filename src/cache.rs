@@ -9,7 +9,7 @@
 //! stamp differs from its source, or that fails any structural check, is ignored and
 //! rewritten. `NLSIM_CACHE=off` turns the cache off.
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use nlsim_kernel::SparseSym;
 use std::io::Write as _;
@@ -53,10 +53,7 @@ pub fn load_matrix_market(path: &Path, name: &str) -> Result<SparseSym> {
     {
         return Ok(m);
     }
-    let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let text = crate::output::read_text(path)?;
     let m = crate::mtx::parse_matrix_market(&text, path, name)?;
     if enabled && let Some(st) = st {
         let _ = write_cache(&cache_path(path), st, &m);

@@ -158,10 +158,7 @@ impl CalibrationRequest {
 
     /// Reads a calibration file (the module docs show one).
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::output::read_text(path)?;
         Self::parse(&text, path)
     }
 
@@ -776,15 +773,6 @@ fn write_text(path: &Path, text: &str) -> Result<()> {
     std::fs::rename(&tmp, path).map_err(io)
 }
 
-/// Writes `fig` as `dir/NAME.svg` and `dir/NAME.png`.
-fn both(dir: &Path, name: &str, fig: &impl crate::plot::Figure) -> Result<[PathBuf; 2]> {
-    let paths = ["svg", "png"].map(|e| dir.join(format!("{name}.{e}")));
-    for p in &paths {
-        crate::plot::write(p, fig)?;
-    }
-    Ok(paths)
-}
-
 /// Most FRF plots a report draws (channels × compared harmonics); the fit table holds all.
 pub const MAX_FRF_PLOTS: usize = 24;
 
@@ -878,7 +866,11 @@ pub fn write_report(dir: &Path, run: &CalibrationRun) -> Result<Vec<PathBuf>> {
                     }
                 })
                 .collect();
-            written.extend(both(dir, &format!("frf_{safe}_h{k}"), &fig)?);
+            written.extend(crate::plot::write_both(
+                dir,
+                &format!("frf_{safe}_h{k}"),
+                &fig,
+            )?);
             plots += 1;
         }
     }
@@ -900,7 +892,7 @@ pub fn write_report(dir: &Path, run: &CalibrationRun) -> Result<Vec<PathBuf>> {
         .filter(|(_, p): &(String, Vec<(f64, f64)>)| !p.is_empty())
         .collect();
     if !history.is_empty() {
-        written.extend(both(
+        written.extend(crate::plot::write_both(
             dir,
             "convergence",
             &Lines {
@@ -929,7 +921,7 @@ pub fn write_report(dir: &Path, run: &CalibrationRun) -> Result<Vec<PathBuf>> {
                 }
             })
             .collect();
-        written.extend(both(
+        written.extend(crate::plot::write_both(
             dir,
             "kfold",
             &Bars {

@@ -233,18 +233,9 @@ fn demo_frf(
 }
 
 /// Writes `fig` as `DIR/NAME.svg` and `DIR/NAME.png`; returns the two paths for the summary.
-fn plot_both(
-    dir: &Path,
-    name: &str,
-    fig: &impl crate::plot::Figure,
-) -> Result<String> {
-    let mut v = Vec::new();
-    for ext in ["svg", "png"] {
-        let p = dir.join(format!("{name}.{ext}"));
-        crate::plot::write(&p, fig)?;
-        v.push(p.display().to_string());
-    }
-    Ok(v.join(", "))
+fn plot_both(dir: &Path, name: &str, fig: &impl crate::plot::Figure) -> Result<String> {
+    let paths = crate::plot::write_both(dir, name, fig)?;
+    Ok(format!("{}, {}", paths[0].display(), paths[1].display()))
 }
 
 /// Stages 7 and 8 of the demo: a synthetic stepped-sine test of the model itself (two force
@@ -606,4 +597,3 @@ pub fn run_demo(model: &str, report_dir: &Path, show: &dyn Fn(&str)) -> Result<(
         })?;
     Ok(())
 }
-

@@ -41,9 +41,9 @@ pub mod batch;
 pub mod cache;
 #[cfg(feature = "io")]
 pub mod calibration;
-pub mod error;
 #[cfg(feature = "io")]
 pub mod demo;
+pub mod error;
 #[cfg(feature = "io")]
 pub mod frf;
 #[cfg(feature = "io")]

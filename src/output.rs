@@ -53,6 +53,14 @@ pub fn write_atomically(
     })
 }
 
+/// Reads a text file; the error names it.
+pub(crate) fn read_text(path: &Path) -> Result<String> {
+    std::fs::read_to_string(path).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
 /// The temporary name `path` is written under first: `NAME.tmp-PID`, beside it.
 pub(crate) fn temp_path(path: &Path) -> PathBuf {
     let mut name = path

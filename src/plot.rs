@@ -148,6 +148,15 @@ pub fn write(path: &Path, fig: &impl Figure) -> Result<()> {
     std::fs::rename(&tmp, path).map_err(|e| io(e.to_string()))
 }
 
+/// Writes `fig` as `dir/NAME.svg` and `dir/NAME.png`; returns the two paths.
+pub fn write_both(dir: &Path, name: &str, fig: &impl Figure) -> Result<[PathBuf; 2]> {
+    let paths = ["svg", "png"].map(|e| dir.join(format!("{name}.{e}")));
+    for p in &paths {
+        write(p, fig)?;
+    }
+    Ok(paths)
+}
+
 /// Line plots sharing axes: `(label, points, dashed)` each.
 pub struct Lines {
     /// Title above the plot.

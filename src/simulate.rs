@@ -143,10 +143,7 @@ pub fn parse_excitation(spec: &str, default_amp: f64, duration: f64, rate: f64) 
 
 /// Reads one force (N) per line; blank lines and `#` comments are skipped.
 fn read_force_file(path: &Path, rate_hz: f64) -> Result<Signal> {
-    let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let text = crate::output::read_text(path)?;
     let mut values = Vec::new();
     for (i, line) in text.lines().enumerate() {
         let l = line.split('#').next().unwrap_or("").trim();

@@ -33,10 +33,7 @@ pub struct LoadedModel {
 pub fn load_model(arg: &str) -> Result<LoadedModel> {
     let path = Path::new(arg);
     if path.exists() || arg.ends_with(".toml") {
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::output::read_text(path)?;
         return parse_model_file(&text, path);
     }
     let (name, opts) = split_fixture_arg(arg);

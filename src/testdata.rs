@@ -33,10 +33,7 @@ fn quantity(s: &str) -> Option<Quantity> {
 
 /// Reads test data from the CSV layout above; errors name the file, line and column.
 pub fn read_csv(path: &Path) -> Result<TestData> {
-    let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let text = crate::output::read_text(path)?;
     parse_csv(&text, path)
 }
 

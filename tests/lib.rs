@@ -22,6 +22,21 @@ fn nlsim(args: &[&str]) -> (i32, String, String) {
     )
 }
 
+/// The ECL beam reduced to its lowest `modes` modes, as a harmonic balance system with
+/// H = 3: the model the calibration tests make synthetic tests of.
+fn ecl_hb(modes: usize) -> nlsim::hb::HbSystem {
+    use nlsim::prelude::*;
+    let fx = nlsim::fixtures::ecl_beam();
+    let red = reduce(&fx.model, &ReductionConfig::lowest(modes)).unwrap();
+    HbSystem::from_model(
+        &fx.model,
+        &red,
+        HarmonicSet::new(3, 1).unwrap(),
+        HbConfig::default(),
+    )
+    .unwrap()
+}
+
 mod model_files {
     use super::*;
 
@@ -1810,15 +1825,7 @@ mod test_data_hdf5 {
     use nlsim::prelude::*;
 
     fn synthetic() -> TestData {
-        let fx = nlsim::fixtures::ecl_beam();
-        let red = reduce(&fx.model, &ReductionConfig::lowest(6)).unwrap();
-        let sys = HbSystem::from_model(
-            &fx.model,
-            &red,
-            HarmonicSet::new(3, 1).unwrap(),
-            HbConfig::default(),
-        )
-        .unwrap();
+        let sys = ecl_hb(6);
         let plans = [
             SweepPlan::linear("0.05 N up", 22.0, 26.0, 9, 0.05),
             SweepPlan::linear("0.2 N/down", 27.0, 22.0, 11, 0.2),
@@ -1942,15 +1949,7 @@ mod calibration_files {
     /// A 2 %-noise stepped-sine test of the ECL beam (tip_spring.k3 = 6e9 N/m³) written as
     /// CSV, and the damping parameter of the mode its drive excites.
     fn test_csv(dir: &Path) -> (PathBuf, String) {
-        let fx = nlsim::fixtures::ecl_beam();
-        let red = reduce(&fx.model, &ReductionConfig::lowest(12)).unwrap();
-        let sys = HbSystem::from_model(
-            &fx.model,
-            &red,
-            HarmonicSet::new(3, 1).unwrap(),
-            HbConfig::default(),
-        )
-        .unwrap();
+        let sys = ecl_hb(12);
         let driven = sys
             .linear()
             .dominant_mode(sys.sensors()[0].port, 0..2)

@@ -102,10 +102,7 @@ fn line_of(text: &str, offset: usize) -> usize {
 impl Batch {
     /// Reads and checks a jobs file.
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::output::read_text(path)?;
         Self::parse(&text, path)
     }
 
