@@ -2302,4 +2302,58 @@ seed = 9
             }
         }
     }
+
+    /// A candidates file is checked before it is trusted: a declared size beyond the budget
+    /// is refused from the shape alone (the file is small: chunked and compressed), and a
+    /// failed candidate names its job.
+    #[test]
+    fn candidates_file_is_bounded_and_checked() {
+        let dir = scratch("calibration-candidates");
+        let make = |name: &str, rows: usize, cols: usize, cost: &[f64]| {
+            let p = dir.join(name);
+            let f = hdf5::File::create(&p).unwrap();
+            let s: hdf5::types::VarLenUnicode = "calibrate-candidates".parse().unwrap();
+            f.new_attr::<hdf5::types::VarLenUnicode>()
+                .create("command")
+                .unwrap()
+                .write_scalar(&s)
+                .unwrap();
+            f.new_attr::<u64>()
+                .create("complete")
+                .unwrap()
+                .write_scalar(&1)
+                .unwrap();
+            f.new_dataset::<f64>()
+                .shape((rows, cols))
+                .chunk((rows.min(1024), cols))
+                .deflate(4)
+                .create("parameters")
+                .unwrap();
+            let d = f
+                .new_dataset::<f64>()
+                .shape(rows)
+                .chunk(rows.min(1024))
+                .deflate(4)
+                .create("cost")
+                .unwrap();
+            if !cost.is_empty() {
+                d.write_raw(cost).unwrap();
+            }
+            p
+        };
+        let huge = make("huge.h5", 1 << 25, 4, &[]);
+        assert!(std::fs::metadata(&huge).unwrap().len() < 1 << 20);
+        let e = nlsim::batch::read_candidates(&huge)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("huge.h5") && e.contains("2^26"), "{e}");
+        let failed = make("failed.h5", 3, 2, &[1.0, f64::NAN, 2.0]);
+        let e = nlsim::batch::read_candidates(&failed)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("candidate 1 failed") && e.contains("job-00000001"),
+            "{e}"
+        );
+    }
 }
