@@ -106,23 +106,8 @@ impl CalibrationRequest {
             );
         }
         for p in &self.params {
-            if !(p.lower.is_finite() && p.upper.is_finite() && p.lower < p.upper) {
-                return bad(
-                    "param",
-                    format!(
-                        "{}: bounds [{}, {}] must be finite with lower < upper",
-                        p.param, p.lower, p.upper
-                    ),
-                );
-            }
-            if p.spacing == Spacing::Log && p.lower <= 0.0 {
-                return bad(
-                    "param",
-                    format!(
-                        "{}: log spacing needs a positive lower bound, not {}",
-                        p.param, p.lower
-                    ),
-                );
+            if let Err(e) = p.check() {
+                return bad("param", e.to_string());
             }
         }
         for (i, p) in self.params.iter().enumerate() {
@@ -167,7 +152,9 @@ impl CalibrationRequest {
     pub fn parse(text: &str, path: &Path) -> Result<Self> {
         let f: CalibrationTable = toml::from_str(text).map_err(|e| Error::Spec {
             file: path.to_path_buf(),
-            line: e.span().map_or(1, |s| line_of(text, s.start)),
+            line: e
+                .span()
+                .map_or(1, |s| crate::output::line_of(text, s.start)),
             key: toml_key(e.message()),
             message: e.message().to_string(),
         })?;
@@ -198,11 +185,6 @@ pub(crate) fn toml_key(message: &str) -> String {
         .and_then(|r| r.split('`').next())
         .unwrap_or("toml")
         .to_string()
-}
-
-/// 1-based line of byte `offset` in `text`.
-fn line_of(text: &str, offset: usize) -> usize {
-    text[..offset.min(text.len())].matches('\n').count() + 1
 }
 
 /// Line of the first `key = ` (or `[key]`) in `text`, for errors found after parsing.

@@ -53,6 +53,11 @@ pub fn write_atomically(
     })
 }
 
+/// 1-based line of byte `offset` in `text` (where a TOML parser's error span starts).
+pub(crate) fn line_of(text: &str, offset: usize) -> usize {
+    text[..offset.min(text.len())].matches('\n').count() + 1
+}
+
 /// Reads a text file; the error names it.
 pub(crate) fn read_text(path: &Path) -> Result<String> {
     std::fs::read_to_string(path).map_err(|source| Error::Io {

@@ -200,27 +200,12 @@ pub fn calibrate_with_progress(
 ) -> Result<Calibration> {
     config.validate(objective.data().n_points())?;
     let starts = candidate_points(objective, config)?;
-    let total = starts.len();
-    let done = AtomicUsize::new(0);
-    let costs: Vec<Result<f64>> = starts
-        .par_iter()
-        .map_init(
-            || objective.clone(),
-            |obj, v| {
-                let c = obj.cost_values(v);
-                let d = done.fetch_add(1, Ordering::Relaxed) + 1;
-                progress(Progress::Candidates { done: d, total });
-                c
-            },
-        )
-        .collect();
-    let mut candidates = Vec::with_capacity(total);
-    for (v, c) in starts.into_iter().zip(costs) {
-        candidates.push(Candidate {
-            values: v,
-            cost: c?,
-        });
-    }
+    let candidates = evaluate_candidates(
+        objective,
+        starts,
+        |obj, v| obj.cost_values(v),
+        &|done, total| progress(Progress::Candidates { done, total }),
+    )?;
     calibrate_from_candidates(objective, candidates, config, progress)
 }
 
@@ -504,6 +489,34 @@ pub(crate) fn start_points(
         );
     }
     Ok(starts)
+}
+
+/// The cost of every start point, in parallel (each worker on its own copy of `objective`),
+/// in the order given; `done(finished, total)` after each.
+pub(crate) fn evaluate_candidates<O: Clone + Send + Sync>(
+    objective: &O,
+    starts: Vec<Vec<f64>>,
+    cost: impl Fn(&mut O, &[f64]) -> Result<f64> + Sync,
+    done: &(dyn Fn(usize, usize) + Sync),
+) -> Result<Vec<Candidate>> {
+    let total = starts.len();
+    let finished = AtomicUsize::new(0);
+    let costs: Vec<Result<f64>> = starts
+        .par_iter()
+        .map_init(
+            || objective.clone(),
+            |obj, v| {
+                let c = cost(obj, v);
+                done(finished.fetch_add(1, Ordering::Relaxed) + 1, total);
+                c
+            },
+        )
+        .collect();
+    starts
+        .into_iter()
+        .zip(costs)
+        .map(|(values, c)| Ok(Candidate { values, cost: c? }))
+        .collect()
 }
 
 /// Indices of the `starts` candidates of lowest finite cost, best first (ties by index).

@@ -20,7 +20,9 @@
 //! reported.
 
 use crate::CalibrationConfig;
-use crate::calibrate::{Candidate, StartRun, best_candidates, per_value, run_starts, start_points};
+use crate::calibrate::{
+    Candidate, StartRun, best_candidates, evaluate_candidates, per_value, run_starts, start_points,
+};
 use crate::lm::{Evaluation, LeastSquares};
 use crate::objective::{ParamSpec, specs_to_internal, specs_to_values};
 use crate::stats::CramerRao;
@@ -29,7 +31,6 @@ use nlsim_kernel::{Error, Model, Param, Parameterized, Result, Status};
 use nlsim_reduction::{
     EigenConfig, EigenSolver, ModeSelection, SensitivityConfig, eigen_sensitivities,
 };
-use rayon::prelude::*;
 use std::sync::Arc;
 
 /// One measured mode.
@@ -413,21 +414,16 @@ pub fn calibrate_modal(
         .map(|p| objective.model.param(p))
         .collect::<Result<Vec<_>>>()?;
     let starts = start_points(&specs, &current, config)?;
-    let costs: Vec<Result<f64>> = starts
-        .par_iter()
-        .map_init(
-            || objective.clone(),
-            |obj, v| {
-                Ok(obj.fit_values(v)?.map_or(f64::INFINITY, |f| {
-                    0.5 * f.residuals.iter().map(|r| r * r).sum::<f64>()
-                }))
-            },
-        )
-        .collect();
-    let mut candidates = Vec::with_capacity(starts.len());
-    for (values, c) in starts.into_iter().zip(costs) {
-        candidates.push(Candidate { values, cost: c? });
-    }
+    let candidates = evaluate_candidates(
+        objective,
+        starts,
+        |obj, v| {
+            Ok(obj.fit_values(v)?.map_or(f64::INFINITY, |f| {
+                0.5 * f.residuals.iter().map(|r| r * r).sum::<f64>()
+            }))
+        },
+        &|_, _| {},
+    )?;
     let order = best_candidates(&candidates, config.starts.max(1));
     if order.is_empty() {
         return Err(Error::Numerical {

@@ -54,7 +54,9 @@ impl ParamSpec {
         }
     }
 
-    pub(crate) fn check(&self) -> Result<()> {
+    /// Checks the bounds: finite with `lower < upper`, and a positive lower bound for log
+    /// spacing.
+    pub fn check(&self) -> Result<()> {
         if !(self.lower.is_finite() && self.upper.is_finite() && self.lower < self.upper) {
             return Err(Error::invalid(
                 format!("bounds of {}", self.param),
