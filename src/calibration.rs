@@ -394,8 +394,6 @@ pub fn read_test_data(path: &Path, model: &Model, uff_noise: f64) -> Result<Test
 pub struct Prepared {
     /// The model's name.
     pub model_name: String,
-    /// The test data.
-    pub data: Arc<TestData>,
     /// The objective.
     pub objective: FrfObjective,
     /// Wall time of loading and reduction (s).
@@ -418,7 +416,7 @@ pub fn prepare(req: &CalibrationRequest) -> Result<Prepared> {
     )?;
     let objective = FrfObjective::new(
         &sys,
-        data.clone(),
+        data,
         req.params.clone(),
         ObjectiveConfig {
             harmonics: req.compare.clone(),
@@ -427,7 +425,6 @@ pub fn prepare(req: &CalibrationRequest) -> Result<Prepared> {
     )?;
     Ok(Prepared {
         model_name: model.name().to_string(),
-        data,
         objective,
         seconds: t.elapsed().as_secs_f64(),
     })
@@ -506,7 +503,7 @@ impl CalibrationRun {
     /// flags (on a bound, poorly identified).
     pub fn summary(&self) -> Vec<String> {
         let c = &self.calibration;
-        let d = &self.prepared.data;
+        let d = self.prepared.objective.data();
         let best = &c.runs[0].report;
         let mut v = vec![
             format!(
@@ -695,7 +692,7 @@ impl CalibrationRun {
     /// Measured and calibrated harmonics at every point, channel and harmonic, with the
     /// status of the harmonic balance there.
     pub fn fit_csv(&self) -> String {
-        let d = &self.prepared.data;
+        let d = self.prepared.objective.data();
         let mut s = String::from(
             "sweep,label,direction,step,frequency_hz,force1_re,force1_im,channel,harmonic,\
              measured_re,measured_im,model_re,model_im,status\n",
@@ -788,7 +785,7 @@ pub fn write_report(dir: &Path, run: &CalibrationRun) -> Result<Vec<PathBuf>> {
     text("kfold.csv", run.kfold_csv())?;
     text("fit.csv", run.fit_csv())?;
     let c = &run.calibration;
-    let d = &run.prepared.data;
+    let d = run.prepared.objective.data();
     let mut plots = 0;
     'channels: for (ci, ch) in d.channels.iter().enumerate() {
         for &k in &run.request.compare {
