@@ -35,7 +35,7 @@ use nlsim_calib::{
     Calibration, CalibrationConfig, Candidate, Form, FrfObjective, LmConfig, Noise,
     ObjectiveConfig, ParamSpec, Progress, Spacing, TestData,
 };
-use nlsim_hb::{HarmonicSet, HbConfig, HbSystem};
+use nlsim_hb::{HarmonicSet, HbConfig};
 use nlsim_kernel::{Model, Param};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -407,15 +407,11 @@ pub fn prepare(req: &CalibrationRequest) -> Result<Prepared> {
     let model = crate::run::load_for_run(&req.model, &req.set)?;
     let data = Arc::new(read_test_data(&req.data, &model, req.uff_noise)?);
     let cfg = nlsim_reduction::ReductionConfig::lowest(req.modes.min(model.n_dofs()));
-    let reduced = nlsim_reduction::reduce(&model, &cfg)?;
-    let sys = HbSystem::from_model(
+    let objective = FrfObjective::from_model(
         &model,
-        &reduced,
+        &cfg,
         HarmonicSet::new(req.harmonics, 1)?,
         HbConfig::default(),
-    )?;
-    let objective = FrfObjective::new(
-        &sys,
         data,
         req.params.clone(),
         ObjectiveConfig {

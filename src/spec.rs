@@ -270,6 +270,53 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
             .map_err(|e| doc.err(span, "damping", e.to_string()))?;
     }
 
+    for mut g in top.array_of_tables("group")? {
+        let (gname, span) = g.str("name")?.ok_or_else(|| {
+            g.missing(
+                "name",
+                "a group name, e.g. name = \"flange\" (parameters group:flange.k_scale, ...)",
+            )
+        })?;
+        let n = model.n_dofs();
+        let mut part = |key: &str, what: &str| -> Result<Option<SparseSym>> {
+            let Some(v) = g.get(key) else {
+                return Ok(None);
+            };
+            let m = read_matrix(&g, key, v, &format!("group '{gname}' {what}"), &base_dir)?;
+            if m.n() != n {
+                return Err(g.err(
+                    v,
+                    key,
+                    format!("the matrix has order {}, the model {n} DOFs", m.n()),
+                ));
+            }
+            Ok(Some(m))
+        };
+        let stiffness = part("stiffness", "stiffness")?;
+        let mass = part("mass", "mass")?;
+        if stiffness.is_none() && mass.is_none() {
+            return Err(doc.err(
+                span,
+                &g.key("name"),
+                "a group needs its stiffness or mass part (or both): the share of K or M its \
+                 scale multiplies",
+            ));
+        }
+        g.finish("a group takes name, stiffness and mass")?;
+        model
+            .add_group(gname, stiffness, mass)
+            .map_err(|err| g.at_table(err))?;
+    }
+    for mut s in top.array_of_tables("spring")? {
+        let dof = read_dof(&mut s, "dof", model.dofs())?
+            .ok_or_else(|| s.missing("dof", "the DOF the spring grounds, e.g. dof = \"12:uz\""))?;
+        let k = s.req_f64("k", "the spring stiffness in N/m (N m/rad on a rotation)")?;
+        s.finish("a boundary spring takes dof and k")?;
+        model
+            .add_boundary_spring(dof, k)
+            .map_err(|err| s.at_table(err))?;
+    }
+
     let elements = top.array_of_tables("element")?;
     let excitation = top.array_of_tables("excitation")?;
     let sensors = top.array_of_tables("sensor")?;
@@ -322,7 +369,7 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
             })
             .map_err(|err| s.at_table(err))?;
     }
-    top.finish("the top level takes name, units, [matrices], [damping], [[element]], [[excitation]], [[sensor]]")?;
+    top.finish("the top level takes name, units, [matrices], [damping], [[group]], [[spring]], [[element]], [[excitation]], [[sensor]]")?;
     Ok(LoadedModel {
         model,
         source: file.display().to_string(),
@@ -331,29 +378,19 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
     })
 }
 
-/// A copy of `m` named `name` that keeps only the lists asked for.
+/// A copy of `m` named `name` that keeps only the lists asked for (groups and boundary
+/// springs always stay).
 fn rebuild(m: &Model, name: &str, keep_el: bool, keep_ex: bool, keep_se: bool) -> Result<Model> {
-    let mut out = Model::new(
-        name,
-        m.dofs().clone(),
-        m.mass().clone(),
-        m.stiffness().clone(),
-    )?;
-    out.set_damping(m.damping().clone())?;
-    if keep_el {
-        for e in m.elements() {
-            out.add_element(e.clone())?;
-        }
+    let mut out = m.clone();
+    out.set_name(name);
+    if !keep_el {
+        out.clear_elements();
     }
-    if keep_ex {
-        for e in m.excitation() {
-            out.add_excitation(e.clone())?;
-        }
+    if !keep_ex {
+        out.clear_excitation();
     }
-    if keep_se {
-        for s in m.sensors() {
-            out.add_sensor(s.clone())?;
-        }
+    if !keep_se {
+        out.clear_sensors();
     }
     Ok(out)
 }

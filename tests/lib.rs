@@ -106,6 +106,23 @@ k3 = 1e9
         );
         assert_eq!(m.sensors().len(), 1);
         assert_eq!(m.excitation().len(), 1, "the fixture's excitation is kept");
+        // Groups and a boundary spring: their parameters, and K holds the spring.
+        let m = nlsim::load_model(dir.join("grouped_chain6.toml").to_str().unwrap())
+            .unwrap()
+            .model;
+        assert_eq!(
+            nlsim::kernel::Parameterized::parameters(&m)
+                .iter()
+                .map(ToString::to_string)
+                .collect::<Vec<_>>(),
+            [
+                "tip.k3",
+                "group:root.k_scale",
+                "group:tip.m_scale",
+                "spring:6:ux.k"
+            ]
+        );
+        assert_eq!(m.stiffness().get(5, 5), 1.05e4);
     }
 
     /// Every rejected input: (what to change in GOOD, the line, words the error must hold).
@@ -204,6 +221,36 @@ k3 = 1e9
                 "name = \"s s\"",
                 7,
                 &["element[1]", "letters, digits"],
+            ),
+            (
+                "[[element]]",
+                "[[group]]\nname = \"g\"\n\n[[element]]",
+                8,
+                &["group[1].name", "stiffness or mass"],
+            ),
+            (
+                "[[element]]",
+                "[[group]]\nname = \"g\"\nstiffness = [[1.0]]\n\n[[element]]",
+                9,
+                &["group[1].stiffness", "order 1", "2 DOFs"],
+            ),
+            (
+                "[[element]]",
+                "[[group]]\nname = \"g\"\nmass = [[1.0, 0.0], [0.0, 1.0]]\nk_scale = 2\n\n[[element]]",
+                10,
+                &["group[1].k_scale", "unknown key"],
+            ),
+            (
+                "[[element]]",
+                "[[spring]]\ndof = \"3:u\"\nk = 1.0\n\n[[element]]",
+                8,
+                &["spring[1].dof", "unknown DOF '3:u'"],
+            ),
+            (
+                "[[element]]",
+                "[[spring]]\ndof = \"2:u\"\nk = -1.0\n\n[[element]]",
+                7,
+                &["spring[1]", "spring:2:u.k"],
             ),
         ];
         let dir = scratch("rejected");
@@ -2355,5 +2402,84 @@ seed = 9
             e.contains("candidate 1 failed") && e.contains("job-00000001"),
             "{e}"
         );
+    }
+
+    /// FE-level parameters from the command line: a model file with `[[group]]` and
+    /// `[[spring]]` tables (examples/models/grouped_chain6.toml), noise-free stepped-sine
+    /// data of it with the clamp 30 % stiffer, the tip masses 10 % lighter, the tip spring
+    /// at 800 N/m and k3 = 8e6 N/m³ (the 1 N sweep folds): `nlsim calibrate` gives the four
+    /// back from a Latin hypercube, and the group scale is reported as such.
+    #[test]
+    fn fe_level_parameters_from_a_model_file() {
+        let dir = scratch("calibration-fe");
+        let model_file =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/models/grouped_chain6.toml");
+        let mut truth = nlsim::load_model(model_file.to_str().unwrap())
+            .unwrap()
+            .model;
+        let names = [
+            "group:root.k_scale",
+            "group:tip.m_scale",
+            "spring:6:ux.k",
+            "tip.k3",
+        ];
+        let values = [1.3, 0.9, 800.0, 8e6];
+        for (n, v) in names.iter().zip(values) {
+            truth.set_param(&n.parse().unwrap(), v).unwrap();
+        }
+        let red = reduce(&truth, &ReductionConfig::lowest(6)).unwrap();
+        let sys = HbSystem::from_model(
+            &truth,
+            &red,
+            HarmonicSet::new(3, 1).unwrap(),
+            HbConfig::default(),
+        )
+        .unwrap();
+        let plans = [
+            SweepPlan::linear("0.2 N up", 4.5, 5.6, 12, 0.2),
+            SweepPlan::linear("1 N down", 5.6, 4.5, 12, 1.0),
+        ];
+        let mut d = synthesize(&sys, "shaker", &plans, 3, Noise::relative(0.0), 1).unwrap();
+        for c in &mut d.channels {
+            c.noise = Noise::relative(0.01);
+        }
+        nlsim::testdata::write_csv(&dir.join("test.csv"), &d).unwrap();
+        let est = dir.join("est.csv");
+        let (rc, out, err) = nlsim(&[
+            "calibrate",
+            model_file.to_str().unwrap(),
+            dir.join("test.csv").to_str().unwrap(),
+            "--param",
+            "group:root.k_scale=0.5:2",
+            "--param",
+            "group:tip.m_scale=0.5:1.5",
+            "--param",
+            "spring:6:ux.k=100:5000",
+            "--param",
+            "tip.k3=1e5:1e8",
+            "--harmonics",
+            "3",
+            "--compare",
+            "1,3",
+            "--modes",
+            "6",
+            "--lhs",
+            "16",
+            "--starts",
+            "2",
+            "--folds",
+            "0",
+            "--out",
+            est.to_str().unwrap(),
+        ]);
+        assert_eq!(rc, 0, "{out}{err}");
+        assert!(out.contains("group:root.k_scale"), "{out}");
+        let rows = csv_rows(&est);
+        assert_eq!(rows.len(), 4);
+        for ((row, name), t) in rows.iter().zip(names).zip(values) {
+            assert_eq!(row[0], name);
+            let e: f64 = row[1].parse().unwrap();
+            assert!(((e - t) / t).abs() < 1e-6, "{name}: {e} vs {t}\n{out}");
+        }
     }
 }

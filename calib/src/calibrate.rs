@@ -12,7 +12,7 @@ use crate::objective::{
 };
 use crate::stats::{CramerRao, mean_and_covariance};
 use faer::Mat;
-use nlsim_kernel::{Error, Param, Parameterized, Result, Status};
+use nlsim_kernel::{Error, Param, Result, Status};
 use rand::{RngExt, SeedableRng};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -216,8 +216,10 @@ pub fn candidate_points(
     config: &CalibrationConfig,
 ) -> Result<Vec<Vec<f64>>> {
     let specs = objective.specs();
-    let params: Vec<Param> = specs.iter().map(|s| s.param.clone()).collect();
-    let current = objective.system().param_values(&params)?;
+    let current = specs
+        .iter()
+        .map(|s| objective.param_value(&s.param))
+        .collect::<Result<Vec<_>>>()?;
     start_points(specs, &current, config)
 }
 

@@ -18,8 +18,13 @@ use crate::data::{PointId, TestData};
 use crate::lhs::Spacing;
 use crate::lm::{Evaluation, LeastSquares};
 use faer::{Mat, c64};
-use nlsim_hb::{ForceTerm, Forcing, HbSystem};
-use nlsim_kernel::{Error, Param, Parameterized, Quantity, Result, Status};
+use nlsim_hb::{
+    ForceTerm, Forcing, HarmonicSet, HbConfig, HbSystem, LinearPart, LinearVariation, Sensitivity,
+};
+use nlsim_kernel::{Error, Model, Param, Parameterized, Quantity, Result, Status};
+use nlsim_reduction::{
+    EigenSolver, ReductionConfig, SensitivityConfig, reduce_with, reduced_sensitivities,
+};
 use std::f64::consts::PI;
 use std::sync::Arc;
 
@@ -179,11 +184,48 @@ pub struct SweepEvaluation {
     pub failed: Vec<PointId>,
 }
 
+/// The FE model behind an objective with FE-level parameters (group scales, boundary
+/// springs): set on the model, which is reduced again at each evaluation; their Jacobian
+/// columns come from the reduced model's analytic sensitivities on the same factor.
+#[derive(Debug)]
+struct FeLink {
+    model: Model,
+    reduction: ReductionConfig,
+    solver: EigenSolver,
+    /// Indices (in the specs) of the FE-level parameters.
+    fe: Vec<usize>,
+}
+
+impl Clone for FeLink {
+    /// A copy with a fresh eigen solver (its symbolic analysis is redone once).
+    fn clone(&self) -> Self {
+        Self {
+            model: self.model.clone(),
+            reduction: self.reduction.clone(),
+            solver: EigenSolver::new(),
+            fe: self.fe.clone(),
+        }
+    }
+}
+
+/// True for the parameters of the reduced model's linear part, which an FE-level parameter
+/// would overwrite when the model is reduced again.
+fn is_linear_part_param(p: &Param) -> bool {
+    matches!(
+        p,
+        Param::ModalFrequency(_)
+            | Param::ModalDamping(_)
+            | Param::ModalMass(_)
+            | Param::StiffnessScale
+    )
+}
+
 /// The objective: a harmonic balance system, test data, parameters and which points are
 /// trained on. Cloning is cheap enough for one clone per parallel task.
 #[derive(Debug, Clone)]
 pub struct FrfObjective {
     sys: HbSystem,
+    fe: Option<FeLink>,
     data: Arc<TestData>,
     specs: Vec<ParamSpec>,
     config: ObjectiveConfig,
@@ -216,13 +258,88 @@ impl FrfObjective {
         specs: Vec<ParamSpec>,
         config: ObjectiveConfig,
     ) -> Result<Self> {
+        Self::build(sys, None, data, specs, config)
+    }
+
+    /// The objective of `data` on `model` reduced by `reduction` and balanced with the
+    /// harmonics `set`: as [`FrfObjective::new`], and the parameters may also be FE-level
+    /// ones of the model (`group:NAME.k_scale`, `group:NAME.m_scale`, `spring:NODE:COMP.k`),
+    /// next to element law parameters. The model is then reduced again at every evaluation
+    /// (one eigen solve; the symbolic analysis is kept), and their Jacobian columns come from
+    /// the analytic sensitivities of the reduced model
+    /// ([`nlsim_reduction::reduced_sensitivities`]), never from finite differences; these
+    /// reductions run on one thread (`Par::Seq`: the calibration runs its candidates and
+    /// folds in parallel, and the estimates must not depend on the thread count). Modal
+    /// parameters (`modeN.f`, ...) cannot be mixed with FE-level ones, which define them.
+    pub fn from_model(
+        model: &Model,
+        reduction: &ReductionConfig,
+        set: HarmonicSet,
+        hb: HbConfig,
+        data: Arc<TestData>,
+        specs: Vec<ParamSpec>,
+        config: ObjectiveConfig,
+    ) -> Result<Self> {
+        let mut solver = EigenSolver::new();
+        let reduced = reduce_with(model, reduction, &mut solver, &mut |_| {})?;
+        let sys = HbSystem::from_model(model, &reduced, set, hb)?;
+        let fe: Vec<usize> = specs
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| model.matrix_derivative(&s.param).is_ok())
+            .map(|(i, _)| i)
+            .collect();
+        if fe.is_empty() {
+            return Self::build(&sys, None, data, specs, config);
+        }
+        if let Some(s) = specs.iter().find(|s| is_linear_part_param(&s.param)) {
+            return Err(Error::invalid(
+                "calibration",
+                format!(
+                    "{} is a parameter of the reduced model, which the FE-level parameter {} \
+                     changes: calibrate one kind or the other",
+                    s.param, specs[fe[0]].param
+                ),
+            ));
+        }
+        // The candidates and folds run in parallel: each reduction runs on one thread, so
+        // that the results do not depend on the thread count.
+        let mut reduction = reduction.clone();
+        reduction.eigen.par = faer::Par::Seq;
+        let link = FeLink {
+            model: model.clone(),
+            reduction,
+            solver,
+            fe,
+        };
+        Self::build(&sys, Some(link), data, specs, config)
+    }
+
+    fn build(
+        sys: &HbSystem,
+        fe: Option<FeLink>,
+        data: Arc<TestData>,
+        specs: Vec<ParamSpec>,
+        config: ObjectiveConfig,
+    ) -> Result<Self> {
         data.validate()?;
         if specs.is_empty() {
             return Err(Error::invalid("calibration", "no parameters to calibrate"));
         }
-        let known = sys.parameters();
-        for s in &specs {
+        let mut known = sys.parameters();
+        if let Some(link) = &fe {
+            known.extend(
+                link.model
+                    .parameters()
+                    .into_iter()
+                    .filter(|p| !matches!(p, Param::Element { .. })),
+            );
+        }
+        for (i, s) in specs.iter().enumerate() {
             s.check()?;
+            if fe.as_ref().is_some_and(|l| l.fe.contains(&i)) {
+                continue;
+            }
             sys.param(&s.param)?;
             if !known.contains(&s.param) {
                 return Err(nlsim_kernel::param::unknown_param(&s.param, &known));
@@ -300,6 +417,7 @@ impl FrfObjective {
         let points = data.points();
         Ok(Self {
             sys: sys.clone(),
+            fe,
             training: vec![true; points.len()],
             points,
             data,
@@ -374,8 +492,23 @@ impl FrfObjective {
         mask: Option<&[bool]>,
         jacobian: bool,
     ) -> Result<SweepEvaluation> {
+        if values.len() != self.specs.len() {
+            return Err(Error::DimensionMismatch {
+                what: "calibration parameter values".into(),
+                expected: self.specs.len(),
+                found: values.len(),
+            });
+        }
         let params: Vec<Param> = self.specs.iter().map(|s| s.param.clone()).collect();
-        self.sys.set_params(&params, values)?;
+        let fe_idx: Vec<usize> = self.fe.as_ref().map_or(Vec::new(), |l| l.fe.clone());
+        let sys_idx: Vec<usize> = (0..params.len()).filter(|i| !fe_idx.contains(i)).collect();
+        let sys_params: Vec<Param> = sys_idx.iter().map(|&i| params[i].clone()).collect();
+        let sys_values: Vec<f64> = sys_idx.iter().map(|&i| values[i]).collect();
+        self.sys.set_params(&sys_params, &sys_values)?;
+        let variations = match self.update_fe(values, jacobian)? {
+            Some(v) => v,
+            None => return Ok(self.all_failed(Status::NonFinite)),
+        };
         let dvalue: Vec<f64> = self
             .specs
             .iter()
@@ -438,7 +571,11 @@ impl FrfObjective {
                     }
                 }
                 let sens = if jacobian && train {
-                    Some(self.sys.sensitivities(&x, omega, 1.0, &params)?)
+                    let a = self.sys.sensitivities(&x, omega, 1.0, &sys_params)?;
+                    let b = self
+                        .sys
+                        .variation_sensitivities(&x, omega, 1.0, &variations)?;
+                    Some(in_spec_order(a, &sys_idx, b, &fe_idx))
                 } else {
                     None
                 };
@@ -535,6 +672,91 @@ impl FrfObjective {
         })
     }
 
+    /// Sets the FE-level parameters of `values` on the model, reduces it again and puts the
+    /// new linear part into the system; with `jacobian`, the variations of the linear part
+    /// along each FE-level parameter (in their spec order). `Ok(None)` when the eigen solve
+    /// fails numerically at these values. Nothing to do (an empty list) without FE-level
+    /// parameters.
+    fn update_fe(
+        &mut self,
+        values: &[f64],
+        jacobian: bool,
+    ) -> Result<Option<Vec<LinearVariation>>> {
+        let Some(link) = &mut self.fe else {
+            return Ok(Some(Vec::new()));
+        };
+        let params: Vec<Param> = link
+            .fe
+            .iter()
+            .map(|&i| self.specs[i].param.clone())
+            .collect();
+        for (p, &i) in params.iter().zip(&link.fe) {
+            link.model.set_param(p, values[i])?;
+        }
+        let reduced = match reduce_with(&link.model, &link.reduction, &mut link.solver, &mut |_| {})
+        {
+            Ok(r) => r,
+            Err(Error::Numerical { .. }) => return Ok(None),
+            Err(e) => return Err(e),
+        };
+        self.sys.set_linear(LinearPart::from_reduced(&reduced)?)?;
+        if !jacobian {
+            return Ok(Some(Vec::new()));
+        }
+        let d = reduced_sensitivities(
+            &link.model,
+            &reduced,
+            &link.solver,
+            &params,
+            &SensitivityConfig {
+                par: link.reduction.eigen.par,
+                ..SensitivityConfig::default()
+            },
+        )?;
+        Ok(Some(
+            params
+                .into_iter()
+                .enumerate()
+                .map(|(j, param)| LinearVariation {
+                    param,
+                    eigenvalues: d.eigen.eigenvalue.col(j).iter().copied().collect(),
+                    damping: d.damping[j].clone(),
+                    participation: d.participation[j].clone(),
+                    residual: d.residual[j].clone(),
+                })
+                .collect(),
+        ))
+    }
+
+    /// Every point failed with `status` (the model could not be set up at these values).
+    fn all_failed(&self, status: Status) -> SweepEvaluation {
+        let h = self.data.harmonics;
+        let nc = self.data.channels.len();
+        SweepEvaluation {
+            residuals: Vec::new(),
+            jacobian: None,
+            points: self
+                .points
+                .iter()
+                .map(|&id| PointResult {
+                    id,
+                    status,
+                    response: Mat::from_fn(nc, h, |_, _| c64::new(f64::NAN, f64::NAN)),
+                })
+                .collect(),
+            failed: self.points.clone(),
+        }
+    }
+
+    /// The current value of a calibrated parameter: on the FE model for an FE-level one,
+    /// else on the system.
+    pub fn param_value(&self, p: &Param) -> Result<f64> {
+        match &self.fe {
+            Some(link) if link.fe.iter().any(|&i| self.specs[i].param == *p) => link.model.param(p),
+            _ => self.sys.param(p),
+        }
+    }
+
     /// One step of the stepped sine: Newton from the previous step's solution; else through
     /// four intermediate frequencies from the previous step; else from the linear response.
     fn solve_step(&self, omega: f64, prev: Option<&(Vec<f64>, f64)>) -> Result<(Vec<f64>, Status)> {
@@ -572,6 +794,24 @@ impl FrfObjective {
         }
         Ok(0.5 * ev.residuals.iter().map(|r| r * r).sum::<f64>())
     }
+}
+
+/// Sensitivities `a` (of the parameters at spec indices `ia`) and `b` (at `ib`) merged in
+/// spec order.
+fn in_spec_order(
+    a: Vec<Sensitivity>,
+    ia: &[usize],
+    b: Vec<Sensitivity>,
+    ib: &[usize],
+) -> Vec<Sensitivity> {
+    let mut all: Vec<(usize, Sensitivity)> = ia
+        .iter()
+        .copied()
+        .zip(a)
+        .chain(ib.iter().copied().zip(b))
+        .collect();
+    all.sort_by_key(|(i, _)| *i);
+    all.into_iter().map(|(_, s)| s).collect()
 }
 
 /// Wraps an angle to `(−π, π]`.

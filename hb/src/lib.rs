@@ -36,6 +36,6 @@ pub use continuation::{
     stepped_sine_with_progress,
 };
 pub use harmonics::{ForceTerm, Forcing, HarmonicSet};
-pub use linear::LinearPart;
+pub use linear::{LinearPart, LinearVariation};
 pub use stability::Stability;
 pub use system::{HbConfig, HbSystem, HbSystemBuilder, NewtonReport, Sensitivity, SensorSpec};

@@ -37,6 +37,67 @@ pub struct LinearPart {
     pub(crate) modal_mass: Vec<f64>,
 }
 
+/// A first-order change of the linear part's data with respect to one parameter that acts
+/// on the FE model (a group scale, a boundary spring): the derivatives of the eigenvalues,
+/// the modal damping, the participation and the residual flexibility, e.g. from
+/// `nlsim_reduction::reduced_sensitivities`. Harmonic balance differentiates its receptances
+/// along it without reducing the model again.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinearVariation {
+    /// The parameter this is the derivative with respect to.
+    pub param: Param,
+    /// `∂ω_r²/∂p` (rad²/s² per unit of the parameter), one per retained mode.
+    pub eigenvalues: Vec<f64>,
+    /// `∂C̃/∂p` (modes × modes; 1/s per unit).
+    pub damping: Mat<f64>,
+    /// `∂Φ_P/∂p` (ports × modes; m/√kg per unit).
+    pub participation: Mat<f64>,
+    /// `∂D/∂p` (ports × ports; m/N per unit).
+    pub residual: Mat<f64>,
+}
+
+impl LinearVariation {
+    /// Checks the shapes against a linear part of `modes` modes and `ports` ports, and that
+    /// every entry is finite.
+    pub fn check(&self, modes: usize, ports: usize) -> Result<()> {
+        let what = |part: &str| format!("variation along {}: {part}", self.param);
+        for (part, (r, c), (er, ec)) in [
+            ("eigenvalues", (self.eigenvalues.len(), 1), (modes, 1)),
+            (
+                "damping",
+                (self.damping.nrows(), self.damping.ncols()),
+                (modes, modes),
+            ),
+            (
+                "participation",
+                (self.participation.nrows(), self.participation.ncols()),
+                (ports, modes),
+            ),
+            (
+                "residual",
+                (self.residual.nrows(), self.residual.ncols()),
+                (ports, ports),
+            ),
+        ] {
+            if (r, c) != (er, ec) {
+                return Err(Error::DimensionMismatch {
+                    what: format!("{} (rows × columns = {r} × {c})", what(part)),
+                    expected: er * ec,
+                    found: r * c,
+                });
+            }
+        }
+        let finite = self.eigenvalues.iter().all(|v| v.is_finite())
+            && [&self.damping, &self.participation, &self.residual]
+                .iter()
+                .all(|m| m.col_iter().all(|c| c.iter().all(|v| v.is_finite())));
+        if !finite {
+            return Err(Error::invalid(what("entries"), "must be finite"));
+        }
+        Ok(())
+    }
+}
+
 /// `Z(ω)⁻¹ Φ_Pᵀ` restricted to some ports, for a full (non-diagonal) `C̃`.
 enum ModalSolve {
     Diagonal(Vec<c64>),
@@ -255,6 +316,45 @@ impl LinearPart {
             _ => return Err(unknown_param(p, &self.parameters())),
         }
         Ok(self.sandwich(omega, rows, cols, &dz, dd))
+    }
+
+    /// `∂H/∂p` (m/N per unit of `p`) between `rows` and `cols` at `omega` (rad/s) along a
+    /// variation of the data (checked with [`LinearVariation::check`] by the caller):
+    /// `∂Φ_rows Z⁻¹ Φ_colsᵀ + Φ_rows Z⁻¹ ∂Φ_colsᵀ − Φ_rows Z⁻¹ ∂Z Z⁻¹ Φ_colsᵀ + ∂D`, with
+    /// `∂Z = diag(∂ω_r²) + iω ∂C̃`.
+    pub fn receptance_dvariation(
+        &self,
+        v: &LinearVariation,
+        omega: f64,
+        rows: &[usize],
+        cols: &[usize],
+    ) -> Mat<c64> {
+        let m = self.n_modes();
+        let dz = Mat::from_fn(m, m, |r, s| {
+            let d = c64::new(0.0, omega * v.damping[(r, s)]);
+            if r == s {
+                d + c64::new(v.eigenvalues[r], 0.0)
+            } else {
+                d
+            }
+        });
+        let z = self.solve(omega);
+        let x = self.zinv_phi(&z, cols);
+        let y = self.zinv_phi(&z, rows);
+        let mut h = -(y.transpose() * (&dz * &x));
+        let dphi = |ports: &[usize]| {
+            Mat::from_fn(ports.len(), m, |i, r| {
+                c64::new(v.participation[(ports[i], r)], 0.0)
+            })
+        };
+        h += dphi(rows) * &x;
+        h += y.transpose() * dphi(cols).transpose();
+        for (i, &a) in rows.iter().enumerate() {
+            for (j, &b) in cols.iter().enumerate() {
+                h[(i, j)] += c64::new(v.residual[(a, b)], 0.0);
+            }
+        }
+        h
     }
 
     /// `−Φ_rows Z⁻¹ dZ Z⁻¹ Φ_colsᵀ + dd · D`.

@@ -11,7 +11,7 @@
 use crate::aft::{AftPlan, samples_for};
 use crate::dense::{Lu, norm_inf};
 use crate::harmonics::{Forcing, HarmonicSet};
-use crate::linear::LinearPart;
+use crate::linear::{LinearPart, LinearVariation};
 use faer::{Mat, c64};
 use nlsim_kernel::param::{element_parameters, find_element_param, unknown_param};
 use nlsim_kernel::{
@@ -86,6 +86,13 @@ pub struct Sensitivity {
     /// `dY/dp` of every sensor (rows) and harmonic `k = 0..=H` (columns), in the sensor's unit
     /// per parameter unit.
     pub dy: Mat<c64>,
+}
+
+/// What a sensitivity is taken along: a parameter of the system, or a variation of its
+/// linear part's data.
+enum Direction<'a> {
+    Param(&'a Param),
+    Variation(&'a LinearVariation),
 }
 
 /// Receptances at the harmonics of one frequency, in the real coefficient layout.
@@ -357,6 +364,22 @@ impl HbSystem {
     /// Receptances of the reduced model.
     pub fn linear(&self) -> &LinearPart {
         &self.linear
+    }
+
+    /// Replaces the linear part by `linear`, e.g. the model reduced again after an FE-level
+    /// parameter changed. It must have the same ports (the elements, inputs and sensors stay
+    /// on them); the number of modes may differ.
+    pub fn set_linear(&mut self, linear: LinearPart) -> Result<()> {
+        let (np, nn) = (self.linear.phi.nrows(), linear.phi.nrows());
+        if np != nn {
+            return Err(Error::DimensionMismatch {
+                what: "ports of the new linear part".into(),
+                expected: np,
+                found: nn,
+            });
+        }
+        self.linear = linear;
+        Ok(())
     }
 
     /// The nonlinear elements (couplings folded into their ports).
@@ -769,6 +792,35 @@ impl HbSystem {
         scale: f64,
         params: &[Param],
     ) -> Result<Vec<Sensitivity>> {
+        let dirs: Vec<Direction<'_>> = params.iter().map(Direction::Param).collect();
+        self.sensitivities_along(x, omega, scale, &dirs)
+    }
+
+    /// As [`HbSystem::sensitivities`], along variations of the linear part's data (FE-level
+    /// parameters: group scales, boundary springs), `R_p = ∂H_NL,NL/∂p G − λ ∂H_NL,ext/∂p F`
+    /// from [`LinearPart::receptance_dvariation`]. Each [`Sensitivity::param`] is the
+    /// variation's parameter.
+    pub fn variation_sensitivities(
+        &self,
+        x: &[f64],
+        omega: f64,
+        scale: f64,
+        variations: &[LinearVariation],
+    ) -> Result<Vec<Sensitivity>> {
+        for v in variations {
+            v.check(self.linear.n_modes(), self.linear.phi.nrows())?;
+        }
+        let dirs: Vec<Direction<'_>> = variations.iter().map(Direction::Variation).collect();
+        self.sensitivities_along(x, omega, scale, &dirs)
+    }
+
+    fn sensitivities_along(
+        &self,
+        x: &[f64],
+        omega: f64,
+        scale: f64,
+        dirs: &[Direction<'_>],
+    ) -> Result<Vec<Sensitivity>> {
         let nh = self.set.len();
         let n = self.n_unknowns();
         let w0 = self.set.base(omega);
@@ -786,10 +838,14 @@ impl HbSystem {
         let f = self.force_coefficients();
         let ports_nl = &self.element_ports;
         let inputs = self.input_ports();
-        let mut out = Vec::with_capacity(params.len());
-        for p in params {
+        let mut out = Vec::with_capacity(dirs.len());
+        for dir in dirs {
+            let p = match dir {
+                Direction::Param(p) => *p,
+                Direction::Variation(v) => &v.param,
+            };
             // R_p and the explicit part of dY/dp (sensors, real layout).
-            let (rp, mut dy) = if let Param::Element { .. } = p {
+            let (rp, mut dy) = if let (Param::Element { .. }, Direction::Param(_)) = (p, dir) {
                 let (element, param) = self
                     .element_param(p)
                     .ok_or_else(|| unknown_param(p, &self.parameters()))?;
@@ -810,7 +866,16 @@ impl HbSystem {
             } else {
                 let d = |rows: &[usize], cols: &[usize]| -> Result<Mat<f64>> {
                     let h = (0..=self.set.h)
-                        .map(|k| self.linear.receptance_dparam(p, k as f64 * w0, rows, cols))
+                        .map(|k| match dir {
+                            Direction::Param(p) => {
+                                self.linear.receptance_dparam(p, k as f64 * w0, rows, cols)
+                            }
+                            Direction::Variation(v) => {
+                                Ok(self
+                                    .linear
+                                    .receptance_dvariation(v, k as f64 * w0, rows, cols))
+                            }
+                        })
                         .collect::<Result<Vec<_>>>()?;
                     Ok(expand(&self.set, &h))
                 };

@@ -391,6 +391,32 @@ impl Model {
     pub fn name(&self) -> &str {
         &self.name
     }
+
+    /// Renames the model.
+    pub fn set_name(&mut self, name: impl Into<String>) {
+        self.name = name.into();
+    }
+
+    /// Removes every nonlinear element (the linear structure, groups and springs stay).
+    pub fn clear_elements(&mut self) {
+        self.elements.clear();
+    }
+
+    /// Removes every excitation point.
+    pub fn clear_excitation(&mut self) {
+        self.excitation.clear();
+    }
+
+    /// Removes every sensor.
+    pub fn clear_sensors(&mut self) {
+        self.sensors.clear();
+    }
+
+    /// Boundary springs as `(DOF index, k)` (N/m, or N m/rad on a rotation), in the order
+    /// they were added.
+    pub fn boundary_springs(&self) -> &[(usize, f64)] {
+        &self.springs
+    }
     /// Number of DOFs.
     pub fn n_dofs(&self) -> usize {
         self.dofs.len()

@@ -30,5 +30,8 @@ pub use modal::{
     EffectiveMass, ModelPortMap, Port, PortKind, ReducedModel, ReductionConfig, damping_ratios,
     effective_masses, model_port_map, model_ports, reduce, reduce_with,
 };
-pub use sensitivity::{EigenSensitivities, SensitivityConfig, eigen_sensitivities};
+pub use sensitivity::{
+    EigenSensitivities, ReducedSensitivities, SensitivityConfig, eigen_sensitivities,
+    reduced_sensitivities,
+};
 pub use state_space::{ModalSystem, Response};

@@ -25,7 +25,7 @@ use crate::eigen::{EigenSolver, Modes, factor_below_spectrum};
 use crate::factor::{ShiftFactor, ShiftedPencil};
 use faer::sparse::linalg::matmul::sparse_dense_matmul;
 use faer::{Accum, Mat, MatRef, Par};
-use nlsim_kernel::{Error, Model, Param, Result, SparseSym, Status};
+use nlsim_kernel::{Damping, Error, Model, Param, Result, SparseSym, Status};
 use std::f64::consts::PI;
 
 /// Settings of [`eigen_sensitivities`].
@@ -163,18 +163,8 @@ pub fn eigen_sensitivities(
         return Ok(out);
     }
 
-    // The factor of the eigen solve, or one made here.
-    let own;
-    let (pencil, factor): (&ShiftedPencil, &ShiftFactor) = match solver.pencil_and_factor() {
-        Some(pf) if pf.0.n() == n => pf,
-        _ => {
-            let mut p = ShiftedPencil::new(model.stiffness(), model.mass())?;
-            p.set_par(cfg.par);
-            let f = factor_below_spectrum(&p, model.stiffness(), model.mass(), None)?;
-            own = (p, f);
-            (&own.0, &own.1)
-        }
-    };
+    let mut own = None;
+    let (pencil, factor) = shift_factor(model, solver, cfg.par, &mut own)?;
     let sigma = factor.shift();
     let mass = model.mass();
     check_factor(pencil, factor, mass, modes, cfg.par)?;
@@ -252,6 +242,182 @@ pub fn eigen_sensitivities(
     }
     out.shapes = shapes;
     Ok(out)
+}
+
+/// The factor of `K − σM` the eigen solve holds, or one made here (kept in `own`) when it
+/// holds none of this order (the dense path of small models).
+fn shift_factor<'a>(
+    model: &Model,
+    solver: &'a EigenSolver,
+    par: Par,
+    own: &'a mut Option<(ShiftedPencil, ShiftFactor)>,
+) -> Result<(&'a ShiftedPencil, &'a ShiftFactor)> {
+    match solver.pencil_and_factor() {
+        Some(pf) if pf.0.n() == model.n_dofs() => Ok(pf),
+        _ => {
+            let mut p = ShiftedPencil::new(model.stiffness(), model.mass())?;
+            p.set_par(par);
+            let f = factor_below_spectrum(&p, model.stiffness(), model.mass(), None)?;
+            let o = own.insert((p, f));
+            Ok((&o.0, &o.1))
+        }
+    }
+}
+
+/// Derivatives of a reduced model's port data (thesis eq. 10 in the frequency domain,
+/// `H(ω) = Φ_P Z(ω)⁻¹ Φ_Pᵀ + D`) with respect to FE-level parameters: what harmonic balance
+/// needs to differentiate its receptances without reducing the model again.
+#[derive(Debug, Clone)]
+pub struct ReducedSensitivities {
+    /// The eigen-sensitivities, with the shape derivatives at every port DOF.
+    pub eigen: EigenSensitivities,
+    /// `∂Φ_P/∂p_j` (ports × modes; m/√kg per unit of the parameter), one per parameter.
+    pub participation: Vec<Mat<f64>>,
+    /// `∂D/∂p_j` (ports × ports, symmetric; m/N per unit), one per parameter.
+    pub residual: Vec<Mat<f64>>,
+    /// `∂C̃/∂p_j` (modes × modes; 1/s per unit), one per parameter.
+    pub damping: Vec<Mat<f64>>,
+}
+
+/// Derivatives of `reduced` (made from `model` by `solver`) with respect to FE-level
+/// `params`:
+///
+/// - `∂Φ_P` from the mode-shape derivatives at the port DOFs ([`eigen_sensitivities`];
+///   `cfg.shape_dofs` is replaced by those DOFs);
+/// - `∂D` of the residual flexibility `D = Wᵀ (K − σM)⁻¹ W − Σ_r Φ_P,r Φ_P,rᵀ / (λ_r − σ)`
+///   at its shift `σ` held,
+///   `−Xᵀ (∂K − σ ∂M) X − Σ_r (∂Φ_P,r Φ_P,rᵀ + Φ_P,r ∂Φ_P,rᵀ)/(λ_r − σ) +
+///   Σ_r Φ_P,r Φ_P,rᵀ ∂λ_r / (λ_r − σ)²` with `X = (K − σM)⁻¹ W` (one block solve on the
+///   eigen solve's factor);
+/// - `∂C̃` of the damping law: Rayleigh `β ∂λ_r`, modal ratios held `ζ_r ∂λ_r / ω_r`, none 0.
+///   A damping matrix `V` would need `∂Φ` at every DOF (`∂Φᵀ V Φ + Φᵀ V ∂Φ`) and is refused.
+pub fn reduced_sensitivities(
+    model: &Model,
+    reduced: &crate::ReducedModel,
+    solver: &EigenSolver,
+    params: &[Param],
+    cfg: &SensitivityConfig,
+) -> Result<ReducedSensitivities> {
+    let n = model.n_dofs();
+    let ports = &reduced.ports;
+    let np = ports.len();
+    let m = reduced.n_modes();
+    if matches!(model.damping(), Damping::Matrix(_)) && m > 0 {
+        return Err(Error::invalid(
+            "sensitivities of the reduced model",
+            "FE-level parameters with a damping matrix are not supported (the modal damping \
+             would need the mode-shape derivatives at every DOF); use modal or Rayleigh damping",
+        ));
+    }
+    let mut dofs: Vec<usize> = ports.iter().flat_map(|p| p.dofs.iter().copied()).collect();
+    dofs.sort_unstable();
+    dofs.dedup();
+    let eigen = eigen_sensitivities(
+        model,
+        &reduced.modes,
+        solver,
+        params,
+        &SensitivityConfig {
+            shape_dofs: dofs.clone(),
+            ..cfg.clone()
+        },
+    )?;
+    let row = |d: usize| dofs.binary_search(&d).expect("a port DOF");
+    let participation: Vec<Mat<f64>> = eigen
+        .shapes
+        .iter()
+        .map(|sh| {
+            Mat::from_fn(np, m, |p, r| {
+                ports[p]
+                    .dofs
+                    .iter()
+                    .zip(&ports[p].weights)
+                    .map(|(&d, &w)| w * sh[(row(d), r)])
+                    .sum()
+            })
+        })
+        .collect();
+    let lambda = &reduced.modes.eigenvalues;
+    let damping = (0..params.len())
+        .map(|j| {
+            Mat::from_fn(m, m, |r, s| {
+                if r != s {
+                    return 0.0;
+                }
+                let dl = eigen.eigenvalue[(r, j)];
+                match model.damping() {
+                    Damping::None | Damping::Matrix(_) => 0.0,
+                    Damping::Rayleigh { beta, .. } => beta * dl,
+                    Damping::Modal(md) => {
+                        let w = lambda[r].max(0.0).sqrt();
+                        if w > 0.0 {
+                            md.zeta(r, w / (2.0 * PI)) * dl / w
+                        } else {
+                            0.0
+                        }
+                    }
+                }
+            })
+        })
+        .collect();
+    let phi = &reduced.participation;
+    let residual = if reduced.residual.norm_max() == 0.0 || np == 0 {
+        vec![Mat::zeros(np, np); params.len()]
+    } else {
+        let mut own = None;
+        let (pencil, factor) = shift_factor(model, solver, cfg.par, &mut own)?;
+        let sigma = reduced.residual_shift;
+        if factor.shift() != sigma {
+            return Err(Error::invalid(
+                "sensitivities of the reduced model",
+                format!(
+                    "the solver's shift {:.6e} is not the residual flexibility's {sigma:.6e}: \
+                     pass the solver that reduced this model",
+                    factor.shift()
+                ),
+            ));
+        }
+        let mut x = Mat::<f64>::zeros(n, np);
+        for (p, port) in ports.iter().enumerate() {
+            for (&d, &w) in port.dofs.iter().zip(&port.weights) {
+                x[(d, p)] += w;
+            }
+        }
+        pencil.solve_in_place(factor, x.as_mut());
+        let mut y = vec![0.0; n];
+        let mut out = Vec::with_capacity(params.len());
+        for (j, p) in params.iter().enumerate() {
+            let d = model.matrix_derivative(p)?;
+            let mut dx = Mat::<f64>::zeros(n, np);
+            for b in 0..np {
+                let xb: Vec<f64> = x.col(b).iter().copied().collect();
+                d.apply(sigma, &xb, &mut y);
+                for i in 0..n {
+                    dx[(i, b)] = y[i];
+                }
+            }
+            let mut dd = -(x.transpose() * &dx);
+            let dphi = &participation[j];
+            for r in 0..m {
+                let s = 1.0 / (lambda[r] - sigma);
+                let dl = eigen.eigenvalue[(r, j)] * s * s;
+                for a in 0..np {
+                    for b in 0..np {
+                        dd[(a, b)] += phi[(a, r)] * phi[(b, r)] * dl
+                            - (dphi[(a, r)] * phi[(b, r)] + phi[(a, r)] * dphi[(b, r)]) * s;
+                    }
+                }
+            }
+            out.push(Mat::from_fn(np, np, |a, b| 0.5 * (dd[(a, b)] + dd[(b, a)])));
+        }
+        out
+    };
+    Ok(ReducedSensitivities {
+        eigen,
+        participation,
+        residual,
+        damping,
+    })
 }
 
 fn sparse_times(a: &SparseSym, x: MatRef<'_, f64>, par: Par) -> Mat<f64> {

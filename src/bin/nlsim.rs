@@ -52,7 +52,7 @@ enum Command {
     Modes {
         /// Model file (.toml) or built-in model, e.g. `bracket:dofs=100000`.
         model: String,
-        /// Number of lowest modes (default 10).
+        /// Number of lowest modes (default 10, or every mode of a smaller model).
         #[arg(long, conflicts_with = "fmax")]
         count: Option<usize>,
         /// Every mode below this frequency (Hz) instead of a count.
@@ -384,10 +384,16 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             block,
             no_sturm_check,
         } => {
+            if let Some(path) = out {
+                // Refuse an unknown format before the (possibly long) solve.
+                nlsim::output::Format::of(path, nlsim::modes::HINT)?;
+            }
+            let loaded = nlsim::load_model(model)?;
             let selection = match (count, fmax) {
                 (_, Some(f)) => ModeSelection::Below { f_max_hz: *f },
                 (Some(c), None) => ModeSelection::Lowest(*c),
-                (None, None) => ModeSelection::Lowest(10),
+                // The default: 10 modes, or every mode of a smaller model.
+                (None, None) => ModeSelection::Lowest(10.min(loaded.model.n_dofs())),
             };
             let cfg = EigenConfig {
                 selection,
@@ -397,11 +403,6 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 par: par(cli),
                 ..EigenConfig::default()
             };
-            if let Some(path) = out {
-                // Refuse an unknown format before the (possibly long) solve.
-                nlsim::output::Format::of(path, nlsim::modes::HINT)?;
-            }
-            let loaded = nlsim::load_model(model)?;
             // Symmetry, finiteness, massless DOFs; definiteness shows in the factorisation.
             loaded.model.validate(&ValidationConfig {
                 check_definiteness: false,

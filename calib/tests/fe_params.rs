@@ -1,0 +1,237 @@
+//! FE-level parameters (group scales, a boundary spring) in the nonlinear calibration on
+//! multi-harmonic FRFs, next to an element law parameter: the grouped chain fixture (60
+//! DOFs, first mode 1.08 Hz) with a cubic spring at its free end, driven and measured there.
+
+use nlsim_calib::{
+    CalibrationConfig, Form, FrfObjective, LeastSquares, Noise, ObjectiveConfig, ParamSpec, Status,
+    SweepPlan, TestData, calibrate, synthesize,
+};
+use nlsim_hb::{HarmonicSet, HbConfig, HbSystem};
+use nlsim_kernel::{
+    Coupling, Damping, Excitation, Law, ModalDamping, Model, NonlinearElement, Param,
+    Parameterized, Quantity, Sensor,
+};
+use nlsim_reduction::{ReductionConfig, reduce};
+use std::sync::Arc;
+
+fn chain(damping: Damping) -> Model {
+    let mut m = nlsim_fixtures::grouped_chain(60).unwrap();
+    m.set_damping(damping).unwrap();
+    let cubic = NonlinearElement::new("tip", Law::Cubic { k3: 5e8 }, Coupling::single(59));
+    m.add_element(cubic.unwrap()).unwrap();
+    m.add_excitation(Excitation {
+        name: "shaker".into(),
+        dof: 59,
+        amplitude: 1.0,
+    })
+    .unwrap();
+    for (name, dof, quantity) in [
+        ("tip", 59, Quantity::Displacement),
+        ("mid", 30, Quantity::Acceleration),
+    ] {
+        m.add_sensor(Sensor {
+            name: name.into(),
+            dof,
+            quantity,
+        })
+        .unwrap();
+    }
+    m
+}
+
+fn modal() -> Damping {
+    Damping::Modal(ModalDamping::uniform(0.02))
+}
+
+fn rayleigh() -> Damping {
+    Damping::Rayleigh {
+        alpha: 0.2,
+        beta: 2e-4,
+    }
+}
+
+fn specs() -> Vec<ParamSpec> {
+    let p = |s: &str| s.parse::<Param>().unwrap();
+    vec![
+        ParamSpec::new(p("group:mid.k_scale"), 0.5, 2.0),
+        ParamSpec::new(p("group:tip.m_scale"), 0.5, 1.5),
+        ParamSpec::new(p("spring:60:u.k"), 200.0, 2e4),
+        ParamSpec::new(p("tip.k3"), 1e7, 1e10),
+    ]
+}
+
+const TRUTH: [f64; 4] = [1.3, 0.85, 3500.0, 8e8];
+
+/// Sweeps over the first mode at 0.3 N (mildly nonlinear) and 1 N (the peak falls by a
+/// third, and the third harmonic reaches 13 % of the fundamental).
+fn plans() -> Vec<SweepPlan> {
+    vec![
+        SweepPlan::linear("0.3 N up", 0.95, 1.3, 15, 0.3),
+        SweepPlan::linear("1 N down", 1.3, 0.95, 15, 1.0),
+    ]
+}
+
+fn reduction(lanczos: bool) -> ReductionConfig {
+    let mut r = ReductionConfig::lowest(6);
+    if lanczos {
+        r.eigen.dense_below = 0;
+        r.eigen.tol = 1e-13;
+    }
+    r
+}
+
+fn hb(rtol: f64) -> HbConfig {
+    HbConfig {
+        rtol,
+        ..HbConfig::default()
+    }
+}
+
+/// Noise-free data of the model at the true values, with a 1 % weight per value.
+fn data(damping: Damping, rtol: f64) -> TestData {
+    let mut truth = chain(damping);
+    for (s, v) in specs().iter().zip(TRUTH) {
+        truth.set_param(&s.param, v).unwrap();
+    }
+    let red = reduce(&truth, &reduction(false)).unwrap();
+    let set = HarmonicSet::new(3, 1).unwrap();
+    let sys = HbSystem::from_model(&truth, &red, set, hb(rtol)).unwrap();
+    let mut d = synthesize(&sys, "shaker", &plans(), 3, Noise::relative(0.0), 1).unwrap();
+    for c in &mut d.channels {
+        c.noise = Noise::relative(0.01);
+    }
+    d
+}
+
+fn objective(damping: Damping, lanczos: bool, rtol: f64, form: Form) -> FrfObjective {
+    FrfObjective::from_model(
+        &chain(damping.clone()),
+        &reduction(lanczos),
+        HarmonicSet::new(3, 1).unwrap(),
+        hb(rtol),
+        Arc::new(data(damping, rtol)),
+        specs(),
+        ObjectiveConfig {
+            harmonics: vec![1, 3],
+            form,
+        },
+    )
+    .unwrap()
+}
+
+#[test]
+fn fe_level_jacobian_matches_central_differences() {
+    // Newton to 1e-13 relative (as for the ECL objective): the residuals are weighted by
+    // 1/(1 % of each value), so round-off of the default tolerance would be of the order of
+    // the finite-difference signal. The eigen solves are exact to round-off (dense) or
+    // converged to 1e-13 (Lanczos, whose residual flexibility is evaluated on its own
+    // shift factor).
+    for (damping, lanczos, form) in [
+        (modal(), false, Form::Complex),
+        (rayleigh(), false, Form::LogMagnitudePhase),
+        (modal(), true, Form::Complex),
+    ] {
+        let mut obj = objective(damping.clone(), lanczos, 1e-13, form);
+        // Away from the truth so that the residuals are not zero.
+        let p = [1.1, 0.95, 2500.0, 5e8];
+        let u = obj.to_internal(&p);
+        let ev = obj.evaluate(&u).unwrap().unwrap();
+        for k in 0..p.len() {
+            // Central differences with a step of 1e-5 in the internal variable: truncation
+            // ~1e-10 relative, round-off of the 1e-13 solves ~1e-8.
+            let h = 1e-5 * u[k].abs().max(1e-3);
+            let (mut a, mut b) = (u.clone(), u.clone());
+            a[k] += h;
+            b[k] -= h;
+            let ra = obj.evaluate(&a).unwrap().unwrap().residuals;
+            let rb = obj.evaluate(&b).unwrap().unwrap().residuals;
+            let col_max = (0..ra.len())
+                .map(|i| ev.jacobian[(i, k)].abs())
+                .fold(0.0, f64::max);
+            assert!(col_max > 0.0);
+            let mut worst = 0.0f64;
+            for i in 0..ra.len() {
+                let fd = (ra[i] - rb[i]) / (2.0 * h);
+                worst = worst.max((fd - ev.jacobian[(i, k)]).abs() / col_max);
+            }
+            eprintln!(
+                "{damping:?} lanczos {lanczos} {form:?} {}: worst |J − FD| / max|J| = {worst:.2e}",
+                specs()[k].param
+            );
+            assert!(worst <= 1e-5, "{}: {worst:e}", specs()[k].param);
+        }
+    }
+}
+
+#[test]
+fn fe_level_and_law_parameters_come_back_on_any_thread_count() {
+    let obj = objective(modal(), false, HbConfig::default().rtol, Form::Complex);
+    let cfg = CalibrationConfig {
+        lhs_samples: 16,
+        starts: 2,
+        folds: 0,
+        ..CalibrationConfig::default()
+    };
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| calibrate(&obj, &cfg).unwrap())
+    };
+    let (a, b) = (run(1), run(2));
+    eprintln!(
+        "estimate {:?}, status {:?}, cost {:e}, iterations {}",
+        a.estimate, a.status, a.cost, a.runs[0].report.iterations
+    );
+    assert_eq!(a.status, Status::Converged);
+    assert!(a.fit.failed.is_empty());
+    for (e, t) in a.estimate.iter().zip(TRUTH) {
+        assert!(((e - t) / t).abs() < 1e-6, "{:?} vs {TRUTH:?}", a.estimate);
+    }
+    assert_eq!(a.estimate, b.estimate);
+    assert_eq!(
+        a.candidates.iter().map(|c| c.cost).collect::<Vec<_>>(),
+        b.candidates.iter().map(|c| c.cost).collect::<Vec<_>>()
+    );
+}
+
+#[test]
+fn modal_parameters_do_not_mix_with_fe_level_ones() {
+    let mut mixed = specs();
+    mixed.push(ParamSpec::new("mode1.zeta".parse().unwrap(), 0.001, 0.1));
+    let e = FrfObjective::from_model(
+        &chain(modal()),
+        &reduction(false),
+        HarmonicSet::new(3, 1).unwrap(),
+        HbConfig::default(),
+        Arc::new(data(modal(), 1e-10)),
+        mixed,
+        ObjectiveConfig::default(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("mode1.zeta") && e.contains("group:mid.k_scale"),
+        "{e}"
+    );
+    // A damping matrix has no FE-level sensitivities here: refused when the Jacobian is
+    // first asked for, naming the reason.
+    let n = 60;
+    let v = nlsim_kernel::SparseSym::diagonal("C", &vec![0.1; n]).unwrap();
+    let mut m = chain(Damping::Matrix(v));
+    m.set_name("matrix-damped");
+    let mut obj = FrfObjective::from_model(
+        &m,
+        &reduction(false),
+        HarmonicSet::new(3, 1).unwrap(),
+        HbConfig::default(),
+        Arc::new(data(modal(), 1e-10)),
+        specs(),
+        ObjectiveConfig::default(),
+    )
+    .unwrap();
+    let u = obj.to_internal(&TRUTH);
+    let e = obj.evaluate(&u).unwrap_err().to_string();
+    assert!(e.contains("damping matrix"), "{e}");
+}
