@@ -7,7 +7,7 @@
 //!
 //! ```toml
 //! model = "ecl_beam"              # model file or built-in model
-//! data = "test.csv"               # CSV, HDF5 or UFF 58 (relative to this file)
+//! data = "test.csv"               # CSV, HDF5, UFF 58 or modal CSV (relative to this file)
 //! set = { "tip.c" = 0.5 }         # fixed overrides before calibrating
 //! harmonics = 3                   # harmonics H of the harmonic balance
 //! compare = [1, 3]                # harmonics compared with the data
@@ -33,7 +33,7 @@ use crate::error::{Error, Result};
 use crate::plot::{BarGroup, Bars, Lines};
 use nlsim_calib::{
     Calibration, CalibrationConfig, Candidate, Form, FrfObjective, LmConfig, Noise,
-    ObjectiveConfig, ParamSpec, Progress, Spacing, TestData,
+    ObjectiveConfig, ParamSpec, Progress, Spacing, StartRun, TestData,
 };
 use nlsim_hb::{HarmonicSet, HbConfig};
 use nlsim_kernel::{Model, Param};
@@ -66,6 +66,9 @@ pub struct CalibrationRequest {
     pub modes: usize,
     /// Relative noise assumed for linear FRFs read from UFF 58 (which carry none).
     pub uff_noise: f64,
+    /// Standard deviation of one component of a unit-normalised measured mode shape, for
+    /// modal data ([`crate::modal_calibration`]).
+    pub shape_noise: f64,
     /// The search: candidates, starts, folds, seed, Levenberg–Marquardt settings.
     pub config: CalibrationConfig,
     /// Estimates and statistics as CSV.
@@ -76,7 +79,8 @@ pub struct CalibrationRequest {
 
 impl CalibrationRequest {
     /// A request with the default settings: compare the fundamental as complex
-    /// differences, H = 3, 20 modes, 1 % UFF noise, [`CalibrationConfig::default`].
+    /// differences, H = 3, 20 modes, 1 % UFF noise, shape noise 0.02,
+    /// [`CalibrationConfig::default`].
     pub fn new(model: impl Into<String>, data: impl Into<PathBuf>, params: Vec<ParamSpec>) -> Self {
         Self {
             model: model.into(),
@@ -88,6 +92,7 @@ impl CalibrationRequest {
             harmonics: 3,
             modes: 20,
             uff_noise: 0.01,
+            shape_noise: 0.02,
             config: CalibrationConfig::default(),
             out: None,
             report: None,
@@ -132,6 +137,12 @@ impl CalibrationRequest {
         }
         if !(self.uff_noise.is_finite() && self.uff_noise > 0.0) {
             return bad("uff_noise", format!("{} must be positive", self.uff_noise));
+        }
+        if !(self.shape_noise.is_finite() && self.shape_noise > 0.0) {
+            return bad(
+                "shape_noise",
+                format!("{} must be positive", self.shape_noise),
+            );
         }
         if let Some(o) = &self.out
             && o.extension().is_none_or(|e| e != "csv")
@@ -237,6 +248,7 @@ pub(crate) struct CalibrationTable {
     harmonics: Option<usize>,
     modes: Option<usize>,
     uff_noise: Option<f64>,
+    shape_noise: Option<f64>,
     lhs: Option<usize>,
     starts: Option<usize>,
     folds: Option<usize>,
@@ -317,6 +329,7 @@ impl CalibrationTable {
             harmonics: self.harmonics.unwrap_or(d.harmonics),
             modes: self.modes.unwrap_or(d.modes),
             uff_noise: self.uff_noise.unwrap_or(d.uff_noise),
+            shape_noise: self.shape_noise.unwrap_or(d.shape_noise),
             config: CalibrationConfig {
                 lhs_samples: self.lhs.unwrap_or(dc.lhs_samples),
                 seed: self.seed.unwrap_or(dc.seed),
@@ -366,6 +379,12 @@ pub fn read_test_data(path: &Path, model: &Model, uff_noise: f64) -> Result<Test
         .unwrap_or("")
         .to_ascii_lowercase();
     match ext.as_str() {
+        "csv" if crate::modaldata::is_modal_csv(path)? => Err(Error::Usage(format!(
+            "{}: this is modal data (mode,frequency_hz,...), not a stepped-sine test: \
+             `nlsim calibrate` runs it on its own (crate::modal_calibration); it has no \
+             batch kinds and no harmonic balance",
+            path.display()
+        ))),
         "csv" => crate::testdata::read_csv(path),
         "h5" | "hdf5" => crate::testdata::read_h5(path),
         "uff" | "unv" | "uf" => {
@@ -613,53 +632,18 @@ impl CalibrationRun {
     }
 
     fn param_header(&self) -> String {
-        self.calibration
-            .params
-            .iter()
-            .map(|p| p.to_string())
-            .collect::<Vec<_>>()
-            .join(",")
-    }
-
-    fn values_row(v: &[f64]) -> String {
-        v.iter()
-            .map(|x| format!("{x:?}"))
-            .collect::<Vec<_>>()
-            .join(",")
+        param_header(&self.calibration.params)
     }
 
     /// Every candidate: index (0 = the model's values), values, cost.
     pub fn candidates_csv(&self) -> String {
-        let mut s = format!("candidate,{},cost\n", self.param_header());
-        for (i, c) in self.calibration.candidates.iter().enumerate() {
-            let _ = writeln!(s, "{i},{},{:?}", Self::values_row(&c.values), c.cost);
-        }
-        s
+        candidates_table(&self.calibration.params, &self.calibration.candidates)
     }
 
     /// The convergence history of every Levenberg–Marquardt run (best first): accepted
     /// iterates with cost and trust radius (internal units).
     pub fn convergence_csv(&self) -> String {
-        let specs = &self.request.params;
-        let mut s = format!("run,iteration,cost,radius,{}\n", self.param_header());
-        for (r, run) in self.calibration.runs.iter().enumerate() {
-            for st in &run.report.history {
-                let v: Vec<f64> = specs
-                    .iter()
-                    .zip(&st.u)
-                    .map(|(p, &u)| p.to_value(u))
-                    .collect();
-                let _ = writeln!(
-                    s,
-                    "{r},{},{:?},{:?},{}",
-                    st.iteration,
-                    st.cost,
-                    st.radius,
-                    Self::values_row(&v)
-                );
-            }
-        }
-        s
+        convergence_table(&self.request.params, &self.calibration.runs)
     }
 
     /// The folds: estimate, status, held-out and training rms (empty without folds).
@@ -676,7 +660,7 @@ impl CalibrationRun {
                 s,
                 "{},{},{},{:?},{:?}",
                 f + 1,
-                Self::values_row(&k.estimates[f]),
+                values_row(&k.estimates[f]),
                 k.status[f],
                 k.held_out_rms[f],
                 k.training_rms[f]
@@ -725,6 +709,94 @@ impl CalibrationRun {
     }
 }
 
+fn param_header(params: &[Param]) -> String {
+    params
+        .iter()
+        .map(|p| p.to_string())
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+fn values_row(v: &[f64]) -> String {
+    v.iter()
+        .map(|x| format!("{x:?}"))
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+/// The candidates table: index (0 = the model's values), values of `params`, cost.
+pub(crate) fn candidates_table(params: &[Param], candidates: &[Candidate]) -> String {
+    let mut s = format!("candidate,{},cost\n", param_header(params));
+    for (i, c) in candidates.iter().enumerate() {
+        let _ = writeln!(s, "{i},{},{:?}", values_row(&c.values), c.cost);
+    }
+    s
+}
+
+/// The convergence table of `runs` (best first): accepted iterates with cost, trust radius
+/// (internal units) and the parameter values.
+pub(crate) fn convergence_table(specs: &[ParamSpec], runs: &[StartRun]) -> String {
+    let params: Vec<Param> = specs.iter().map(|s| s.param.clone()).collect();
+    let mut s = format!("run,iteration,cost,radius,{}\n", param_header(&params));
+    for (r, run) in runs.iter().enumerate() {
+        for st in &run.report.history {
+            let v: Vec<f64> = specs
+                .iter()
+                .zip(&st.u)
+                .map(|(p, &u)| p.to_value(u))
+                .collect();
+            let _ = writeln!(
+                s,
+                "{r},{},{:?},{:?},{}",
+                st.iteration,
+                st.cost,
+                st.radius,
+                values_row(&v)
+            );
+        }
+    }
+    s
+}
+
+/// The cost along each optimisation of `runs` as a plot `convergence` (SVG and PNG) in
+/// `dir`; nothing when no run has a positive cost. Returns the files written.
+pub(crate) fn convergence_plot(
+    dir: &Path,
+    model_name: &str,
+    runs: &[StartRun],
+) -> Result<Vec<PathBuf>> {
+    let history: Vec<(String, Vec<(f64, f64)>)> = runs
+        .iter()
+        .enumerate()
+        .map(|(r, run)| {
+            (
+                format!("start {} ({})", r + 1, run.report.status),
+                run.report
+                    .history
+                    .iter()
+                    .filter(|s| s.cost > 0.0)
+                    .map(|s| (s.iteration as f64, s.cost.log10()))
+                    .collect(),
+            )
+        })
+        .filter(|(_, p): &(String, Vec<(f64, f64)>)| !p.is_empty())
+        .collect();
+    if history.is_empty() {
+        return Ok(Vec::new());
+    }
+    let files = crate::plot::write_both(
+        dir,
+        "convergence",
+        &Lines {
+            title: format!("{model_name}: Levenberg–Marquardt convergence"),
+            x_desc: "iteration".into(),
+            y_desc: "log10 cost ½‖r‖² (1)".into(),
+            series: history,
+        },
+    )?;
+    Ok(files.to_vec())
+}
+
 /// A CSV field, quoted when it holds a comma or a quote.
 fn csv_field(s: &str) -> String {
     if s.contains([',', '"', '\n']) {
@@ -735,7 +807,7 @@ fn csv_field(s: &str) -> String {
 }
 
 /// Writes `text` to `path` through a temporary file.
-fn write_text(path: &Path, text: &str) -> Result<()> {
+pub(crate) fn write_text(path: &Path, text: &str) -> Result<()> {
     let tmp = crate::output::temp_path(path);
     let io = |source| Error::Io {
         path: path.to_path_buf(),
@@ -849,38 +921,7 @@ pub fn write_report(dir: &Path, run: &CalibrationRun) -> Result<Vec<PathBuf>> {
             plots += 1;
         }
     }
-    let history: Vec<(String, Vec<(f64, f64)>)> = c
-        .runs
-        .iter()
-        .enumerate()
-        .map(|(r, run)| {
-            (
-                format!("start {} ({})", r + 1, run.report.status),
-                run.report
-                    .history
-                    .iter()
-                    .filter(|s| s.cost > 0.0)
-                    .map(|s| (s.iteration as f64, s.cost.log10()))
-                    .collect(),
-            )
-        })
-        .filter(|(_, p): &(String, Vec<(f64, f64)>)| !p.is_empty())
-        .collect();
-    if !history.is_empty() {
-        written.extend(crate::plot::write_both(
-            dir,
-            "convergence",
-            &Lines {
-                title: format!(
-                    "{}: Levenberg–Marquardt convergence",
-                    run.prepared.model_name
-                ),
-                x_desc: "iteration".into(),
-                y_desc: "log10 cost ½‖r‖² (1)".into(),
-                series: history,
-            },
-        )?);
-    }
+    written.extend(convergence_plot(dir, &run.prepared.model_name, &c.runs)?);
     if let Some(k) = &c.kfold {
         let groups = c
             .params

@@ -47,6 +47,10 @@ pub mod error;
 #[cfg(feature = "io")]
 pub mod frf;
 #[cfg(feature = "io")]
+pub mod modal_calibration;
+#[cfg(feature = "io")]
+pub mod modaldata;
+#[cfg(feature = "io")]
 pub mod modes;
 #[cfg(feature = "io")]
 pub mod mtx;

@@ -180,8 +180,10 @@ enum Command {
         /// Model file (.toml) or built-in model, e.g. `ecl_beam`.
         #[arg(required_unless_present = "config", conflicts_with = "config")]
         model: Option<String>,
-        /// Test data: stepped-sine CSV or HDF5 (docs/file-formats.md), or linear FRFs in
-        /// universal file dataset 58 (.uff/.unv, ASCII or binary; 1 % noise assumed).
+        /// Test data: stepped-sine CSV or HDF5 (docs/file-formats.md), linear FRFs in
+        /// universal file dataset 58 (.uff/.unv, ASCII or binary; 1 % noise assumed), or
+        /// measured modes as CSV (mode,frequency_hz,frequency_std_hz,DOF...: FE-level
+        /// parameters from frequencies and shapes).
         #[arg(required_unless_present = "config", conflicts_with = "config")]
         data: Option<std::path::PathBuf>,
         /// Calibration file (TOML): model, data, parameters, bounds and every setting.
@@ -207,9 +209,14 @@ enum Command {
         /// Harmonics H kept by the harmonic balance [default: 3].
         #[arg(long)]
         harmonics: Option<usize>,
-        /// Retained modes of the reduced model [default: 20].
+        /// Retained modes of the reduced model (modal data: the computed modes paired with
+        /// the measured ones) [default: 20, at most the model's DOFs].
         #[arg(long)]
         modes: Option<usize>,
+        /// Modal data: standard deviation of one component of a unit-normalised measured
+        /// shape [default: 0.02].
+        #[arg(long)]
+        shape_noise: Option<f64>,
         /// Latin-hypercube candidates [default: 64].
         #[arg(long)]
         lhs: Option<usize>,
@@ -525,6 +532,7 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             form,
             harmonics,
             modes,
+            shape_noise,
             lhs,
             starts,
             folds,
@@ -573,6 +581,9 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             }
             if let Some(s) = seed {
                 c.seed = *s;
+            }
+            if let Some(s) = shape_noise {
+                req.shape_noise = *s;
             }
             if out.is_some() {
                 req.out = out.clone();
@@ -691,6 +702,40 @@ fn calibrate_cmd(
             }
         }
     };
+    let modal = req
+        .data
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
+        && nlsim::modaldata::is_modal_csv(&req.data)?;
+    if modal {
+        if candidates.is_some() {
+            return Err(nlsim::Error::Usage(
+                "--candidates: a modal-data calibration evaluates its candidates itself (it \
+                 has no batch kinds)"
+                    .into(),
+            ));
+        }
+        let run = nlsim::modal_calibration::run_modal_calibration(req)?;
+        for line in run.summary() {
+            say(&line);
+        }
+        if let Some(o) = &req.out {
+            std::fs::write(o, run.estimates_csv()).map_err(|source| nlsim::Error::Io {
+                path: o.clone(),
+                source,
+            })?;
+            say(&format!("wrote {}", o.display()));
+        }
+        if let Some(dir) = &req.report {
+            let files = nlsim::modal_calibration::write_modal_report(dir, &run)?;
+            say(&format!(
+                "report: {} files in {} (summary.txt, tables, convergence plot)",
+                files.len(),
+                dir.display()
+            ));
+        }
+        return Ok(());
+    }
     let run = nlsim::calibration::run_calibration(req, candidates, &progress)?;
     for line in run.summary() {
         say(&line);
