@@ -16,6 +16,9 @@ test:
 	cargo build -p nlsim --no-default-features --quiet
 	@! cargo tree -p nlsim --no-default-features -e normal | grep -E 'hdf5|plotters|png '
 	cargo test --workspace
+	@# The matrix adapters (optional features of the kernel).
+	cargo clippy -p nlsim-kernel --all-targets --features nalgebra-sparse,sprs,test-util -- -D warnings
+	cargo test -p nlsim-kernel --features nalgebra-sparse,sprs --lib --test adapters
 	scripts/slurm-e2e.sh $${CARGO_TARGET_DIR:-target}/debug/nlsim
 
 bench:

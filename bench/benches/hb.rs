@@ -70,6 +70,17 @@ fn bench_model(c: &mut Criterion, name: &str, model: &Model) {
     g.bench_function("point", |b| {
         b.iter(|| black_box(sys.solve(omegas[200], 1.0, &x_prev).unwrap()))
     });
+    // The same point through a warm workspace: cached receptances, no allocation (what a
+    // calibration re-solving the test's frequencies does).
+    let mut ws = sys.workspace(64 << 20);
+    let mut xw = x_prev.clone();
+    sys.solve_with(&mut ws, omegas[200], 1.0, &mut xw).unwrap();
+    g.bench_function("point_warm_workspace", |b| {
+        b.iter(|| {
+            xw.copy_from_slice(&x_prev);
+            black_box(sys.solve_with(&mut ws, omegas[200], 1.0, &mut xw).unwrap())
+        })
+    });
     let (x200, _) = sys.solve(omegas[200], 1.0, &x_prev).unwrap();
     g.bench_function("stability", |b| {
         b.iter(|| black_box(sys.stability(&x200, omegas[200]).unwrap()))

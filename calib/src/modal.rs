@@ -249,8 +249,8 @@ impl ModalObjective {
             .solver
             .solve(self.model.stiffness(), self.model.mass(), &self.eigen)
         {
-            Ok(m) => m,
-            Err(Error::Numerical { .. }) => return Ok(None),
+            Ok(m) if m.is_converged() => m,
+            Ok(_) | Err(Error::Numerical { .. }) => return Ok(None),
             Err(e) => return Err(e),
         };
         let data = self.data.clone();

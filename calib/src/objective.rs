@@ -19,7 +19,8 @@ use crate::lhs::Spacing;
 use crate::lm::{Evaluation, LeastSquares};
 use faer::{Mat, c64};
 use nlsim_hb::{
-    ForceTerm, Forcing, HarmonicSet, HbConfig, HbSystem, LinearPart, LinearVariation, Sensitivity,
+    ForceTerm, Forcing, HarmonicSet, HbConfig, HbSystem, HbWorkspace, LinearPart, LinearVariation,
+    Sensitivity,
 };
 use nlsim_kernel::{Error, Model, Param, Parameterized, Quantity, Result, Status};
 use nlsim_reduction::{
@@ -184,6 +185,10 @@ pub struct SweepEvaluation {
     pub failed: Vec<PointId>,
 }
 
+/// Memory an objective may spend on cached receptances (bytes): the data's frequencies and
+/// the sub-steps between them, each `n_x (n_x + inputs (2H+1))` values.
+const RECEPTANCE_BUDGET: usize = 64 << 20;
+
 /// The FE model behind an objective with FE-level parameters (group scales, boundary
 /// springs): set on the model, which is reduced again at each evaluation; their Jacobian
 /// columns come from the reduced model's analytic sensitivities on the same factor.
@@ -225,6 +230,9 @@ fn is_linear_part_param(p: &Param) -> bool {
 #[derive(Debug, Clone)]
 pub struct FrfObjective {
     sys: HbSystem,
+    /// Newton buffers and the receptances at the data's frequencies, reused from one
+    /// evaluation to the next while the linear part is unchanged.
+    ws: HbWorkspace,
     fe: Option<FeLink>,
     data: Arc<TestData>,
     specs: Vec<ParamSpec>,
@@ -416,6 +424,7 @@ impl FrfObjective {
             })?;
         let points = data.points();
         Ok(Self {
+            ws: sys.workspace(RECEPTANCE_BUDGET),
             sys: sys.clone(),
             fe,
             training: vec![true; points.len()],
@@ -759,18 +768,23 @@ impl FrfObjective {
 
     /// One step of the stepped sine: Newton from the previous step's solution; else through
     /// four intermediate frequencies from the previous step; else from the linear response.
-    fn solve_step(&self, omega: f64, prev: Option<&(Vec<f64>, f64)>) -> Result<(Vec<f64>, Status)> {
+    fn solve_step(
+        &mut self,
+        omega: f64,
+        prev: Option<&(Vec<f64>, f64)>,
+    ) -> Result<(Vec<f64>, Status)> {
+        let (sys, ws) = (&self.sys, &mut self.ws);
         if let Some((x0, w0)) = prev {
-            let (x, rep) = self.sys.solve(omega, 1.0, x0)?;
-            if rep.converged() {
-                return Ok((x, rep.status));
-            }
             let mut x = x0.clone();
+            if sys.solve_with(ws, omega, 1.0, &mut x)?.converged() {
+                return Ok((x, Status::Converged));
+            }
+            x.copy_from_slice(x0);
             let mut ok = true;
             for j in 1..=4 {
                 let w = w0 + (omega - w0) * j as f64 / 4.0;
-                let (xs, rep) = self.sys.solve(w, 1.0, &x)?;
-                if !rep.converged() {
+                let mut xs = x.clone();
+                if !sys.solve_with(ws, w, 1.0, &mut xs)?.converged() {
                     ok = false;
                     break;
                 }
@@ -780,9 +794,8 @@ impl FrfObjective {
                 return Ok((x, Status::Converged));
             }
         }
-        let (x, rep) = self
-            .sys
-            .solve(omega, 1.0, &self.sys.linear_guess(omega, 1.0))?;
+        let mut x = sys.linear_guess(omega, 1.0);
+        let rep = sys.solve_with(ws, omega, 1.0, &mut x)?;
         Ok((x, rep.status))
     }
 

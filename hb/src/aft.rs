@@ -8,7 +8,8 @@
 //! precomputed tables: with `2H + 1 ≤ 31` the tables fit in cache and beat an FFT.
 
 use crate::harmonics::HarmonicSet;
-use faer::{Mat, c64};
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, MatMut, Par, c64};
 use nlsim_kernel::{Error, Law, Result};
 use std::f64::consts::PI;
 
@@ -108,9 +109,17 @@ impl AftPlan {
 
     /// Samples of the coordinate (`u`, m) and its velocity (`u̇`, m/s) over one period.
     pub fn to_time(&self, x: &[f64], omega0: f64) -> (Vec<f64>, Vec<f64>) {
+        let (mut u, mut v) = (Vec::new(), Vec::new());
+        self.to_time_into(x, omega0, &mut u, &mut v);
+        (u, v)
+    }
+
+    /// [`AftPlan::to_time`] into `u` and `v` (resized to `N`; no allocation once they hold
+    /// `N` values).
+    fn to_time_into(&self, x: &[f64], omega0: f64, u: &mut Vec<f64>, v: &mut Vec<f64>) {
         let nh = self.set.len();
-        let mut u = vec![0.0; self.n];
-        let mut v = vec![0.0; self.n];
+        u.resize(self.n, 0.0);
+        v.resize(self.n, 0.0);
         for i in 0..self.n {
             let (mut a, mut b) = (0.0, 0.0);
             for j in 0..nh {
@@ -120,14 +129,20 @@ impl AftPlan {
             u[i] = a;
             v[i] = omega0 * b;
         }
-        (u, v)
     }
 
     /// Harmonic coefficients of samples `g`.
     pub fn to_freq(&self, g: &[f64]) -> Vec<f64> {
-        (0..self.set.len())
-            .map(|j| (0..self.n).map(|i| self.p[(j, i)] * g[i]).sum())
-            .collect()
+        let mut out = vec![0.0; self.set.len()];
+        self.to_freq_into(g, &mut out);
+        out
+    }
+
+    /// [`AftPlan::to_freq`] into `out` (2H+1 values).
+    fn to_freq_into(&self, g: &[f64], out: &mut [f64]) {
+        for (j, o) in out.iter_mut().enumerate() {
+            *o = (0..self.n).map(|i| self.p[(j, i)] * g[i]).sum();
+        }
     }
 
     /// Complex Fourier coefficients `c_j = (1/N) Σ g_n e^{−ijθ_n}`, `j = 0..=jmax`, of samples
@@ -152,32 +167,85 @@ impl AftPlan {
     /// (rad/s). History-dependent laws (Jenkins) are marched over repeated periods from a
     /// zero state until the state at the period's start repeats.
     pub fn evaluate(&self, law: &Law, x: &[f64], omega0: f64, jacobian: bool) -> ElementHarmonics {
-        let (u, v) = self.to_time(x, omega0);
+        let nh = self.set.len();
+        let mut scratch = AftScratch::default();
+        let mut force = vec![0.0; nh];
+        let mut jac = jacobian.then(|| Mat::zeros(nh, nh));
+        self.evaluate_into(
+            law,
+            x,
+            omega0,
+            &mut scratch,
+            &mut force,
+            jac.as_mut().map(|j| j.as_mut()),
+        );
+        ElementHarmonics {
+            force,
+            jacobian: jac,
+            stiffness: scratch.kt,
+            damping: scratch.ct,
+        }
+    }
+
+    /// [`AftPlan::evaluate`] into caller buffers: the force coefficients into `force` (2H+1),
+    /// `∂G/∂x` into `jacobian` ((2H+1) × (2H+1)) when given, the samples of `∂g/∂u` and
+    /// `∂g/∂u̇` left in `scratch` ([`AftScratch::stiffness`], [`AftScratch::damping`]). Once
+    /// `scratch` has served a plan with as many samples, nothing is allocated.
+    ///
+    /// # Panics
+    /// When `force` or `jacobian` has the wrong size (a programming error).
+    pub fn evaluate_into(
+        &self,
+        law: &Law,
+        x: &[f64],
+        omega0: f64,
+        scratch: &mut AftScratch,
+        force: &mut [f64],
+        jacobian: Option<MatMut<'_, f64>>,
+    ) {
         let n = self.n;
-        let mut g = vec![0.0; n];
-        let mut kt = vec![0.0; n];
-        let mut ct = vec![0.0; n];
-        let mut state = periodic_start(law, &u, &v);
+        let nh = self.set.len();
+        assert_eq!(force.len(), nh, "AFT force buffer");
+        let AftScratch {
+            u,
+            v,
+            g,
+            kt,
+            ct,
+            state,
+            start,
+            w,
+        } = scratch;
+        self.to_time_into(x, omega0, u, v);
+        g.resize(n, 0.0);
+        kt.resize(n, 0.0);
+        ct.resize(n, 0.0);
+        periodic_start_into(law, u, v, state, start);
         for i in 0..n {
-            let e = law.eval(u[i], v[i], &state);
+            let e = law.eval(u[i], v[i], state);
             g[i] = e.force;
             kt[i] = e.df_du;
             ct[i] = e.df_dv;
-            law.commit_state(u[i], v[i], &mut state);
+            law.commit_state(u[i], v[i], state);
         }
-        let force = self.to_freq(&g);
-        let jacobian = jacobian.then(|| {
-            let nh = self.set.len();
-            let w = Mat::from_fn(n, nh, |i, j| {
-                kt[i] * self.e[(i, j)] + omega0 * ct[i] * self.ed[(i, j)]
-            });
-            &self.p * &w
-        });
-        ElementHarmonics {
-            force,
-            jacobian,
-            stiffness: kt,
-            damping: ct,
+        self.to_freq_into(g, force);
+        if let Some(jac) = jacobian {
+            if w.nrows() != n || w.ncols() != nh {
+                *w = Mat::zeros(n, nh);
+            }
+            for j in 0..nh {
+                for i in 0..n {
+                    w[(i, j)] = kt[i] * self.e[(i, j)] + omega0 * ct[i] * self.ed[(i, j)];
+                }
+            }
+            matmul(
+                jac,
+                Accum::Replace,
+                self.p.as_ref(),
+                w.as_ref(),
+                1.0,
+                Par::Seq,
+            );
         }
     }
 
@@ -204,25 +272,80 @@ impl AftPlan {
 /// from zero over at most 16 periods, until the state at the period's end equals the one at
 /// its start to 1e-13 of the motion. Empty for memoryless laws.
 fn periodic_start(law: &Law, u: &[f64], v: &[f64]) -> Vec<f64> {
-    let mut state = vec![0.0; law.n_states()];
+    let (mut state, mut start) = (Vec::new(), Vec::new());
+    periodic_start_into(law, u, v, &mut state, &mut start);
+    state
+}
+
+/// [`periodic_start`] into `state`, with `start` as scratch.
+fn periodic_start_into(
+    law: &Law,
+    u: &[f64],
+    v: &[f64],
+    state: &mut Vec<f64>,
+    start: &mut Vec<f64>,
+) {
+    state.clear();
+    state.resize(law.n_states(), 0.0);
     if state.is_empty() {
-        return state;
+        return;
     }
     let scale = u.iter().fold(0.0f64, |m, a| m.max(a.abs()));
     for _ in 0..16 {
-        let start = state.clone();
-        for (&ui, &vi) in u.iter().zip(v) {
-            law.commit_state(ui, vi, &mut state);
+        start.clear();
+        start.extend_from_slice(state);
+        for (&ui, &vi) in u.iter().zip(v.iter()) {
+            law.commit_state(ui, vi, state);
         }
         if start
             .iter()
-            .zip(&state)
+            .zip(state.iter())
             .all(|(a, b)| (a - b).abs() <= 1e-13 * scale)
         {
             break;
         }
     }
-    state
+}
+
+/// Reusable buffers of [`AftPlan::evaluate_into`]: the samples of one period and the
+/// history state. Sized on first use; reused without allocation for plans of no more samples.
+#[derive(Debug, Clone)]
+pub struct AftScratch {
+    u: Vec<f64>,
+    v: Vec<f64>,
+    g: Vec<f64>,
+    kt: Vec<f64>,
+    ct: Vec<f64>,
+    state: Vec<f64>,
+    start: Vec<f64>,
+    w: Mat<f64>,
+}
+
+impl Default for AftScratch {
+    fn default() -> Self {
+        Self {
+            u: Default::default(),
+            v: Default::default(),
+            g: Default::default(),
+            kt: Default::default(),
+            ct: Default::default(),
+            state: Default::default(),
+            start: Default::default(),
+            w: Mat::new(),
+        }
+    }
+}
+
+impl AftScratch {
+    /// `∂g/∂u` at each sample of the last evaluation (N/m).
+    pub fn stiffness(&self) -> &[f64] {
+        &self.kt
+    }
+
+    /// `∂g/∂u̇` at each sample of the last evaluation (N s/m).
+    pub fn damping(&self) -> &[f64] {
+        &self.ct
+    }
 }
 
 #[cfg(test)]

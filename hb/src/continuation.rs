@@ -12,7 +12,7 @@
 
 use crate::dense::{Lu, norm_inf};
 use crate::stability::Stability;
-use crate::system::HbSystem;
+use crate::system::{HbSystem, NewtonReport};
 use faer::Mat;
 use nlsim_kernel::{Error, Result, Status};
 use std::f64::consts::PI;
@@ -690,6 +690,12 @@ pub fn stepped_sine_with_progress(
     };
     let mut x = sys.linear_guess(first, scale);
     let mut prev = first;
+    let mut ws = sys.workspace(64 << 20);
+    let mut solve = |w: f64, start: &[f64]| -> Result<(Vec<f64>, NewtonReport)> {
+        let mut xs = start.to_vec();
+        let rep = sys.solve_with(&mut ws, w, scale, &mut xs)?;
+        Ok((xs, rep))
+    };
     let mut points: Vec<SolutionPoint> = Vec::with_capacity(omegas.len());
     let mut stats = ContinuationStats::default();
     let accept = |x: &[f64], om: f64| -> Result<Option<Option<Stability>>> {
@@ -710,7 +716,7 @@ pub fn stepped_sine_with_progress(
             let mut rep = None;
             for i in 1..=sub {
                 let w = prev + (om - prev) * i as f64 / sub as f64;
-                match sys.solve(w, scale, &xt) {
+                match solve(w, &xt) {
                     Ok((xs, r)) if r.converged() => {
                         xt = xs;
                         rep = Some(r);
@@ -740,7 +746,7 @@ pub fn stepped_sine_with_progress(
                     .map(|f| x.iter().map(|v| v * f).collect()),
             );
             for start in starts {
-                if let Ok((xs, r)) = sys.solve(om, scale, &start)
+                if let Ok((xs, r)) = solve(om, &start)
                     && r.converged()
                 {
                     match accept(&xs, om)? {

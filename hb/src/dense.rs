@@ -1,7 +1,10 @@
 //! Small dense helpers: LU with the determinant's sign, norms.
 
-use faer::Mat;
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::linalg::lu::partial_pivoting::{factor, solve};
 use faer::linalg::solvers::{PartialPivLu, Solve};
+use faer::perm::PermRef;
+use faer::{Mat, MatMut, Par};
 use nlsim_kernel::{Error, Result};
 
 /// A factorised square matrix.
@@ -55,6 +58,78 @@ impl Lu {
             }
         }
         s
+    }
+}
+
+/// An LU with partial pivoting factorised in buffers it keeps: after the first matrix of an
+/// order, factorising and solving allocate nothing. The same faer kernels as
+/// [`PartialPivLu`], run sequentially.
+pub(crate) struct LuInPlace {
+    lu: Mat<f64>,
+    fwd: Vec<usize>,
+    bwd: Vec<usize>,
+    stack: Option<MemBuffer>,
+}
+
+impl Default for LuInPlace {
+    fn default() -> Self {
+        Self {
+            lu: Mat::new(),
+            fwd: Default::default(),
+            bwd: Default::default(),
+            stack: Default::default(),
+        }
+    }
+}
+
+impl std::fmt::Debug for LuInPlace {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "LuInPlace({}×{})", self.lu.nrows(), self.lu.ncols())
+    }
+}
+
+impl LuInPlace {
+    /// Factorises `a`; `false` when it is singular or not finite (as [`Lu::new`] refuses).
+    pub(crate) fn factor(&mut self, a: &Mat<f64>) -> bool {
+        let n = a.nrows();
+        if self.lu.nrows() != n || self.stack.is_none() {
+            self.lu = Mat::zeros(n, n);
+            self.fwd = vec![0; n];
+            self.bwd = vec![0; n];
+            let req = StackReq::or(
+                factor::lu_in_place_scratch::<usize, f64>(n, n, Par::Seq, Default::default()),
+                solve::solve_in_place_scratch::<usize, f64>(n, 1, Par::Seq),
+            );
+            self.stack = Some(MemBuffer::new(req));
+        }
+        let scale = a.norm_max();
+        self.lu.copy_from(a);
+        let stack = self.stack.as_mut().expect("sized above");
+        factor::lu_in_place(
+            self.lu.as_mut(),
+            &mut self.fwd,
+            &mut self.bwd,
+            Par::Seq,
+            MemStack::new(stack),
+            Default::default(),
+        );
+        scale.is_finite() && (0..n).all(|i| self.lu[(i, i)].is_finite() && self.lu[(i, i)] != 0.0)
+    }
+
+    /// `A⁻¹ b` in place, `A` the last matrix factorised.
+    pub(crate) fn solve_in_place(&mut self, b: &mut [f64]) {
+        let n = self.lu.nrows();
+        let perm = PermRef::new_checked(&self.fwd, &self.bwd, n);
+        let rhs = MatMut::from_column_major_slice_mut(b, n, 1);
+        let stack = self.stack.as_mut().expect("factorised first");
+        solve::solve_in_place(
+            self.lu.as_ref(),
+            self.lu.as_ref(),
+            perm,
+            rhs,
+            Par::Seq,
+            MemStack::new(stack),
+        );
     }
 }
 

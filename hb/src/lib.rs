@@ -38,4 +38,6 @@ pub use continuation::{
 pub use harmonics::{ForceTerm, Forcing, HarmonicSet};
 pub use linear::{LinearPart, LinearVariation};
 pub use stability::Stability;
-pub use system::{HbConfig, HbSystem, HbSystemBuilder, NewtonReport, Sensitivity, SensorSpec};
+pub use system::{
+    HbConfig, HbSystem, HbSystemBuilder, HbWorkspace, NewtonReport, Sensitivity, SensorSpec,
+};

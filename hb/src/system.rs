@@ -8,8 +8,8 @@
 //! (the element forces `G` act on the structure with a minus sign; `λ` is the force level).
 //! Any sensor is recovered from the same receptances, `Y = λ H_s,ext F − H_s,NL G`.
 
-use crate::aft::{AftPlan, samples_for};
-use crate::dense::{Lu, norm_inf};
+use crate::aft::{AftPlan, AftScratch, samples_for};
+use crate::dense::{Lu, LuInPlace, norm_inf};
 use crate::harmonics::{Forcing, HarmonicSet};
 use crate::linear::{LinearPart, LinearVariation};
 use faer::{Mat, c64};
@@ -114,6 +114,171 @@ pub(crate) struct Evaluation {
     pub jacobian: Option<Mat<f64>>,
 }
 
+/// The forcing-independent receptances at one frequency, in the real coefficient layout.
+#[derive(Debug, Clone)]
+pub(crate) struct ReceptanceParts {
+    /// `H_NL,NL` (n_x × n_x).
+    pub a: Mat<f64>,
+    /// `H_NL,ext` (n_x × inputs·(2H+1)).
+    pub ext: Mat<f64>,
+}
+
+/// The buffers of one Newton solve.
+#[derive(Debug)]
+pub(crate) struct Scratch {
+    aft: AftScratch,
+    /// Force coefficients (inputs × (2H+1)).
+    f: Vec<f64>,
+    /// `H_NL,ext F`.
+    b: Vec<f64>,
+    g: Vec<f64>,
+    r: Vec<f64>,
+    dg: Vec<Mat<f64>>,
+    damping: Vec<Vec<f64>>,
+    jac: Mat<f64>,
+    dx: Vec<f64>,
+    xt: Vec<f64>,
+    lu: LuInPlace,
+}
+
+impl Default for Scratch {
+    fn default() -> Self {
+        Self {
+            aft: Default::default(),
+            f: Default::default(),
+            b: Default::default(),
+            g: Default::default(),
+            r: Default::default(),
+            dg: Default::default(),
+            damping: Default::default(),
+            jac: Mat::new(),
+            dx: Default::default(),
+            xt: Default::default(),
+            lu: Default::default(),
+        }
+    }
+}
+
+impl Scratch {
+    /// Sizes the buffers for `ne` elements of `nh` coefficients (allocates only when they
+    /// change).
+    fn size(&mut self, ne: usize, nh: usize) {
+        let n = ne * nh;
+        self.g.resize(n, 0.0);
+        self.r.resize(n, 0.0);
+        if self.dg.len() != ne || self.dg.first().is_some_and(|d| d.nrows() != nh) {
+            self.dg = (0..ne).map(|_| Mat::zeros(nh, nh)).collect();
+        }
+        self.damping.resize_with(ne, Vec::new);
+        if self.jac.nrows() != n {
+            self.jac = Mat::zeros(n, n);
+        }
+    }
+}
+
+/// Receptances by frequency (the bits of `Ω`), first in first out beyond `capacity`.
+#[derive(Debug)]
+struct ReceptanceCache {
+    capacity: usize,
+    entries: std::collections::HashMap<u64, ReceptanceParts>,
+    order: std::collections::VecDeque<u64>,
+    hits: usize,
+    misses: usize,
+}
+
+impl ReceptanceCache {
+    fn new(capacity: usize) -> Self {
+        Self {
+            capacity: capacity.max(1),
+            entries: std::collections::HashMap::new(),
+            order: std::collections::VecDeque::new(),
+            hits: 0,
+            misses: 0,
+        }
+    }
+
+    fn clear(&mut self) {
+        self.entries.clear();
+        self.order.clear();
+    }
+
+    fn get_or_insert(
+        &mut self,
+        omega: f64,
+        make: impl FnOnce() -> ReceptanceParts,
+    ) -> &ReceptanceParts {
+        let key = omega.to_bits();
+        if self.entries.contains_key(&key) {
+            self.hits += 1;
+        } else {
+            self.misses += 1;
+            if self.entries.len() >= self.capacity
+                && let Some(old) = self.order.pop_front()
+            {
+                self.entries.remove(&old);
+            }
+            self.entries.insert(key, make());
+            self.order.push_back(key);
+        }
+        &self.entries[&key]
+    }
+}
+
+/// Reusable state of [`HbSystem::solve_with`]: the receptances of the frequencies already
+/// solved (valid while the system's linear part is unchanged: a change of a modal parameter
+/// or [`HbSystem::set_linear`] empties it; element parameters and the forcing do not) and
+/// every buffer of the Newton iteration. One per thread; made by [`HbSystem::workspace`].
+#[derive(Debug)]
+pub struct HbWorkspace {
+    /// Stamp of the linear part the cache holds.
+    stamp: u64,
+    cache: ReceptanceCache,
+    scratch: Scratch,
+}
+
+impl Clone for HbWorkspace {
+    /// An empty workspace of the same capacity (for one clone per parallel task).
+    fn clone(&self) -> Self {
+        Self::with_capacity(self.cache.capacity)
+    }
+}
+
+impl HbWorkspace {
+    /// A workspace caching the receptances of at most `frequencies` frequencies (at least 1).
+    pub fn with_capacity(frequencies: usize) -> Self {
+        Self {
+            stamp: 0,
+            cache: ReceptanceCache::new(frequencies),
+            scratch: Scratch::default(),
+        }
+    }
+
+    /// Frequencies whose receptances the cache can hold.
+    pub fn capacity(&self) -> usize {
+        self.cache.capacity
+    }
+
+    /// Solves that found their frequency in the cache, and those that computed it.
+    pub fn cache_counts(&self) -> (usize, usize) {
+        (self.cache.hits, self.cache.misses)
+    }
+
+    /// Serves `sys` from now on: empties the cache if it holds another linear part.
+    fn bind(&mut self, sys: &HbSystem) {
+        if self.stamp != sys.stamp {
+            self.cache.clear();
+            self.stamp = sys.stamp;
+        }
+    }
+}
+
+/// A stamp no system has had: identifies a linear part for the receptance caches.
+fn next_stamp() -> u64 {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static NEXT: AtomicU64 = AtomicU64::new(1);
+    NEXT.fetch_add(1, Ordering::Relaxed)
+}
+
 /// The harmonic balance system of a reduced model with local nonlinearities.
 ///
 /// Built by [`HbSystem::from_model`] or [`HbSystem::builder`]; its parts are read through
@@ -131,6 +296,8 @@ pub struct HbSystem {
     pub(crate) config: HbConfig,
     plans: Vec<AftPlan>,
     hill_plan: AftPlan,
+    /// Changes with the linear part (the receptances), see [`HbWorkspace`].
+    stamp: u64,
 }
 
 /// Assembles an [`HbSystem`] from a [`LinearPart`] part by part:
@@ -343,6 +510,7 @@ impl HbSystem {
             config,
             plans,
             hill_plan,
+            stamp: next_stamp(),
         })
     }
 
@@ -379,6 +547,7 @@ impl HbSystem {
             });
         }
         self.linear = linear;
+        self.stamp = next_stamp();
         Ok(())
     }
 
@@ -434,15 +603,22 @@ impl HbSystem {
 
     /// The forcing in the real layout (inputs × (2H+1)).
     fn force_coefficients(&self) -> Vec<f64> {
+        let mut f = Vec::new();
+        self.force_coefficients_into(&mut f);
+        f
+    }
+
+    /// [`HbSystem::force_coefficients`] into `f` (resized).
+    fn force_coefficients_into(&self, f: &mut Vec<f64>) {
         let nh = self.set.len();
-        let mut f = vec![0.0; self.inputs.len() * nh];
+        f.clear();
+        f.resize(self.inputs.len() * nh, 0.0);
         for i in 0..self.inputs.len() {
             for k in 0..=self.set.h {
                 let z = self.forcing.amplitude(i, k);
                 self.set.set_complex(&mut f[i * nh..(i + 1) * nh], k, z);
             }
         }
-        f
     }
 
     /// Per-harmonic receptances from `rows` to `cols` at fundamental `omega`; with `deriv`,
@@ -474,19 +650,34 @@ impl HbSystem {
 
     /// `H_NL,NL` and `H_NL,ext F` at `omega` (or their `Ω`-derivatives).
     pub(crate) fn receptances(&self, omega: f64, deriv: bool) -> Receptances {
+        let parts = self.receptance_parts(omega, deriv);
+        let mut f = Vec::new();
+        let mut b = Vec::new();
+        self.forced(&parts, &mut f, &mut b);
+        Receptances { a: parts.a, b }
+    }
+
+    /// The forcing-independent receptances at `omega`: `H_NL,NL` and `H_NL,ext` in the real
+    /// layout (or their `Ω`-derivatives).
+    fn receptance_parts(&self, omega: f64, deriv: bool) -> ReceptanceParts {
         let a = expand(
             &self.set,
             &self.harmonic_receptances(omega, &self.element_ports, &self.element_ports, deriv),
         );
-        let bm = expand(
+        let ext = expand(
             &self.set,
             &self.harmonic_receptances(omega, &self.element_ports, &self.input_ports(), deriv),
         );
-        let f = self.force_coefficients();
-        let b = (0..bm.nrows())
-            .map(|i| (0..f.len()).map(|j| bm[(i, j)] * f[j]).sum())
-            .collect();
-        Receptances { a, b }
+        ReceptanceParts { a, ext }
+    }
+
+    /// `b = H_NL,ext F` of `parts` with the current forcing into `b`, `f` holding the force
+    /// coefficients (both resized; no allocation once large enough).
+    fn forced(&self, parts: &ReceptanceParts, f: &mut Vec<f64>, b: &mut Vec<f64>) {
+        self.force_coefficients_into(f);
+        let bm = &parts.ext;
+        b.clear();
+        b.extend((0..bm.nrows()).map(|i| (0..f.len()).map(|j| bm[(i, j)] * f[j]).sum::<f64>()));
     }
 
     /// Element force coefficients and (optionally) their Jacobians at `x`.
@@ -498,44 +689,85 @@ impl HbSystem {
         scale: f64,
         jacobian: bool,
     ) -> Evaluation {
-        let nh = self.set.len();
-        let n = self.n_unknowns();
-        let w0 = self.set.base(omega);
-        let mut g = vec![0.0; n];
-        let mut dg = Vec::with_capacity(self.elements.len());
-        let mut damping = Vec::with_capacity(self.elements.len());
-        for (e, el) in self.elements.iter().enumerate() {
-            let r = self.plans[e].evaluate(el.law(), &x[e * nh..(e + 1) * nh], w0, jacobian);
-            g[e * nh..(e + 1) * nh].copy_from_slice(&r.force);
-            if let Some(j) = r.jacobian {
-                dg.push(j);
-            }
-            damping.push(r.damping);
+        let mut s = Scratch::default();
+        self.evaluate_into(&rec.a, &rec.b, x, omega, scale, jacobian, &mut s);
+        let Scratch {
+            g,
+            r,
+            mut dg,
+            damping,
+            jac,
+            ..
+        } = s;
+        if !jacobian {
+            dg.clear();
         }
-        let mut r = vec![0.0; n];
-        for i in 0..n {
-            let ag: f64 = (0..n).map(|j| rec.a[(i, j)] * g[j]).sum();
-            r[i] = x[i] + ag - scale * rec.b[i];
-        }
-        let jacobian = jacobian.then(|| {
-            // J = I + A blockdiag(∂G_e/∂x_e)
-            let mut j = Mat::<f64>::identity(n, n);
-            for i in 0..n {
-                for (e, d) in dg.iter().enumerate() {
-                    for c in 0..nh {
-                        let s: f64 = (0..nh).map(|l| rec.a[(i, e * nh + l)] * d[(l, c)]).sum();
-                        j[(i, e * nh + c)] += s;
-                    }
-                }
-            }
-            j
-        });
         Evaluation {
             r,
             g,
             dg,
             damping,
-            jacobian,
+            jacobian: jacobian.then_some(jac),
+        }
+    }
+
+    /// [`HbSystem::evaluate`] into the buffers of `s` (`a = H_NL,NL`, `b = H_NL,ext F`): the
+    /// residual in `s.r`, the element forces in `s.g`, the damping samples in `s.damping`
+    /// and, with `jacobian`, `∂G_e/∂x_e` in `s.dg` and `∂R/∂x` in `s.jac`. Allocates only
+    /// while the buffers grow to this system's sizes.
+    #[allow(clippy::too_many_arguments)]
+    fn evaluate_into(
+        &self,
+        a: &Mat<f64>,
+        b: &[f64],
+        x: &[f64],
+        omega: f64,
+        scale: f64,
+        jacobian: bool,
+        s: &mut Scratch,
+    ) {
+        let nh = self.set.len();
+        let n = self.n_unknowns();
+        let ne = self.elements.len();
+        let w0 = self.set.base(omega);
+        s.size(ne, nh);
+        for (e, el) in self.elements.iter().enumerate() {
+            let jac = if jacobian {
+                Some(s.dg[e].as_mut())
+            } else {
+                None
+            };
+            self.plans[e].evaluate_into(
+                el.law(),
+                &x[e * nh..(e + 1) * nh],
+                w0,
+                &mut s.aft,
+                &mut s.g[e * nh..(e + 1) * nh],
+                jac,
+            );
+            s.damping[e].clear();
+            s.damping[e].extend_from_slice(s.aft.damping());
+        }
+        for i in 0..n {
+            let ag: f64 = (0..n).map(|j| a[(i, j)] * s.g[j]).sum();
+            s.r[i] = x[i] + ag - scale * b[i];
+        }
+        if jacobian {
+            // J = I + A blockdiag(∂G_e/∂x_e)
+            let j = &mut s.jac;
+            for c in 0..n {
+                for r in 0..n {
+                    j[(r, c)] = if r == c { 1.0 } else { 0.0 };
+                }
+            }
+            for i in 0..n {
+                for (e, d) in s.dg.iter().enumerate() {
+                    for c in 0..nh {
+                        let v: f64 = (0..nh).map(|l| a[(i, e * nh + l)] * d[(l, c)]).sum();
+                        j[(i, e * nh + c)] += v;
+                    }
+                }
+            }
         }
     }
 
@@ -623,8 +855,27 @@ impl HbSystem {
     /// Returns the last iterate with a report: [`Status::Converged`], or
     /// [`Status::IterationLimit`], [`Status::Singular`], [`Status::NonFinite`] when it
     /// stopped short. `Err` only for invalid input (a non-positive frequency, a start vector
-    /// of the wrong length).
+    /// of the wrong length). A caller that solves many points keeps an [`HbWorkspace`] and
+    /// calls [`HbSystem::solve_with`] instead: same iterates, no allocation.
     pub fn solve(&self, omega: f64, scale: f64, x0: &[f64]) -> Result<(Vec<f64>, NewtonReport)> {
+        let mut ws = HbWorkspace::with_capacity(1);
+        let mut x = x0.to_vec();
+        let rep = self.solve_with(&mut ws, omega, scale, &mut x)?;
+        Ok((x, rep))
+    }
+
+    /// [`HbSystem::solve`] in place: `x` holds the start on entry and the last iterate on
+    /// return; every buffer comes from `ws`, whose receptance cache serves any later solve
+    /// at the same `omega` (bit for bit) while the linear part is unchanged. Once `ws` has
+    /// served this system at `omega`, the solve allocates nothing (checked by a test with a
+    /// counting allocator). The iterates are those of [`HbSystem::solve`].
+    pub fn solve_with(
+        &self,
+        ws: &mut HbWorkspace,
+        omega: f64,
+        scale: f64,
+        x: &mut [f64],
+    ) -> Result<NewtonReport> {
         if !(omega.is_finite() && omega > 0.0 && scale.is_finite()) {
             return Err(Error::invalid(
                 "harmonic balance point",
@@ -633,40 +884,53 @@ impl HbSystem {
                 ),
             ));
         }
-        self.check_unknowns("harmonic balance start vector", x0)?;
-        let rec = self.receptances(omega, false);
-        let reference = norm_inf(&rec.b) * scale.abs();
-        let mut x = x0.to_vec();
+        self.check_unknowns("harmonic balance start vector", x)?;
+        let n = self.n_unknowns();
+        ws.bind(self);
+        let HbWorkspace {
+            cache, scratch: s, ..
+        } = ws;
+        let parts = cache.get_or_insert(omega, || self.receptance_parts(omega, false));
+        self.forced(parts, &mut s.f, &mut s.b);
+        let a = &parts.a;
+        let reference = norm_inf(&s.b) * scale.abs();
         let report = |status, iterations, residual| NewtonReport {
             status,
             iterations,
             residual,
         };
         for it in 0..=self.config.max_iterations {
-            let ev = self.evaluate(&rec, &x, omega, scale, true);
-            let rn = norm_inf(&ev.r);
+            let b = std::mem::take(&mut s.b);
+            self.evaluate_into(a, &b, x, omega, scale, true, s);
+            s.b = b;
+            let rn = norm_inf(&s.r);
             if !rn.is_finite() {
-                return Ok((x, report(Status::NonFinite, it, rn)));
+                return Ok(report(Status::NonFinite, it, rn));
             }
-            let tol = self.config.rtol * norm_inf(&x).max(reference).max(1e-300);
+            let tol = self.config.rtol * norm_inf(x).max(reference).max(1e-300);
             if rn <= tol {
-                return Ok((x, report(Status::Converged, it, rn)));
+                return Ok(report(Status::Converged, it, rn));
             }
             if it == self.config.max_iterations {
-                return Ok((x, report(Status::IterationLimit, it, rn)));
+                return Ok(report(Status::IterationLimit, it, rn));
             }
-            let Ok(lu) = Lu::new(ev.jacobian.as_ref().expect("asked for"), &String::new) else {
-                return Ok((x, report(Status::Singular, it, rn)));
-            };
-            let neg: Vec<f64> = ev.r.iter().map(|v| -v).collect();
-            let dx = lu.solve(&neg);
+            s.dx.clear();
+            s.dx.extend(s.r.iter().map(|v| -v));
+            if !s.lu.factor(&s.jac) {
+                return Ok(report(Status::Singular, it, rn));
+            }
+            s.lu.solve_in_place(&mut s.dx);
             let mut alpha = 1.0;
             let mut accepted = false;
             for _ in 0..16 {
-                let xt: Vec<f64> = x.iter().zip(&dx).map(|(a, d)| a + alpha * d).collect();
-                let rt = norm_inf(&self.evaluate(&rec, &xt, omega, scale, false).r);
+                s.xt.clear();
+                s.xt.extend(x.iter().zip(&s.dx).map(|(a, d)| a + alpha * d));
+                let (b, xt) = (std::mem::take(&mut s.b), std::mem::take(&mut s.xt));
+                self.evaluate_into(a, &b, &xt, omega, scale, false, s);
+                (s.b, s.xt) = (b, xt);
+                let rt = norm_inf(&s.r);
                 if rt < (1.0 - 1e-4 * alpha) * rn {
-                    x = xt;
+                    x.copy_from_slice(&s.xt);
                     accepted = true;
                     break;
                 }
@@ -675,10 +939,19 @@ impl HbSystem {
             if !accepted {
                 // Full step when no damped step decreases the residual (e.g. at a contact
                 // kink where ‖R‖ is not differentiable): Newton still progresses there.
-                x.iter_mut().zip(&dx).for_each(|(a, d)| *a += d);
+                x.iter_mut().zip(&s.dx).for_each(|(a, d)| *a += d);
             }
         }
+        debug_assert!(n == x.len());
         unreachable!("the loop returns at the iteration limit")
+    }
+
+    /// A workspace for [`HbSystem::solve_with`] whose receptance cache holds at most
+    /// `budget_bytes` of receptances (at least one frequency).
+    pub fn workspace(&self, budget_bytes: usize) -> HbWorkspace {
+        let n = self.n_unknowns();
+        let per = 8 * (n * n + n * self.inputs.len() * self.set.len()) + 64;
+        HbWorkspace::with_capacity((budget_bytes / per).max(1))
     }
 
     /// [`HbSystem::solve`] that turns a solve that stopped short into an error naming the
@@ -1080,7 +1353,11 @@ impl Parameterized for HbSystem {
             Param::ModalFrequency(_)
             | Param::ModalDamping(_)
             | Param::ModalMass(_)
-            | Param::StiffnessScale => self.linear.set_param(p, value),
+            | Param::StiffnessScale => {
+                self.linear.set_param(p, value)?;
+                self.stamp = next_stamp();
+                Ok(())
+            }
             _ => Err(unknown_param(p, &self.parameters())),
         }
     }

@@ -18,6 +18,7 @@
 //! Units are SI throughout: m, kg, s, N, rad; frequencies in Hz where named `*_hz`, rad/s
 //! otherwise.
 
+pub mod adapters;
 pub mod damping;
 pub mod dof;
 pub mod element;
@@ -29,6 +30,7 @@ pub mod sparse;
 #[cfg(any(test, feature = "test-util"))]
 pub mod testing;
 
+pub use adapters::Stored;
 pub use damping::{Damping, DampingBand, ModalDamping};
 pub use dof::{Component, DofLabel, DofMap};
 pub use element::{Coupling, Law, LawEval, NonlinearElement, PolyTerm};
@@ -42,3 +44,9 @@ pub use sparse::SparseSym;
 
 /// faer, re-exported so that users of nlsim build matrices with the same version.
 pub use faer;
+/// The nalgebra-sparse crate the adapters take (feature `nalgebra-sparse`).
+#[cfg(feature = "nalgebra-sparse")]
+pub use nalgebra_sparse;
+/// The sprs crate the adapters take (feature `sprs`).
+#[cfg(feature = "sprs")]
+pub use sprs;

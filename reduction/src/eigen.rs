@@ -25,7 +25,7 @@ use crate::factor::{ShiftFactor, ShiftedPencil};
 use faer::linalg::matmul::matmul;
 use faer::sparse::linalg::matmul::sparse_dense_matmul;
 use faer::{Accum, Mat, MatMut, MatRef, Par};
-use nlsim_kernel::{Error, Result, SparseSym};
+use nlsim_kernel::{Error, Result, SparseSym, Status};
 use std::time::Instant;
 
 /// Which modes to compute.
@@ -127,6 +127,12 @@ pub struct EigenStats {
     pub sturm: Option<(usize, f64)>,
     /// Largest backward error `‖Kφ − λMφ‖ / ((‖K‖ + |λ|‖M‖) ‖φ‖)` over the returned modes.
     pub max_residual: f64,
+    /// [`Status::Converged`], or [`Status::IterationLimit`] when the restart limit came
+    /// first or the Sturm count still found missed modes after the retries: the modes are
+    /// then the current Ritz approximations (see [`Modes::into_converged`]).
+    pub status: Status,
+    /// Why the solve stopped short, naming the counts and the remedy; empty when converged.
+    pub detail: String,
 }
 
 /// Progress of a long solve, reported after each restart.
@@ -155,6 +161,23 @@ pub struct Modes {
 }
 
 impl Modes {
+    /// `true` when every returned mode converged (and the Sturm check, when made, agreed).
+    pub fn is_converged(&self) -> bool {
+        self.stats.status.is_converged()
+    }
+
+    /// The modes when the solve converged; else an [`Error::Numerical`] with the solve's
+    /// detail, for callers that need converged modes or nothing (the reduction).
+    pub fn into_converged(self) -> Result<Self> {
+        if self.is_converged() {
+            return Ok(self);
+        }
+        Err(Error::Numerical {
+            what: "shift-invert Lanczos".into(),
+            detail: self.stats.detail,
+        })
+    }
+
     /// Number of modes.
     pub fn len(&self) -> usize {
         self.eigenvalues.len()
@@ -441,14 +464,16 @@ impl EigenSolver {
             let t3 = Instant::now();
             let values: Vec<f64> = ritz.theta[..nev].iter().map(|t| sigma + 1.0 / t).collect();
             let mut vectors = ritz.vectors;
+            let mut stopped = ritz.stopped;
             // Sturm check: eigenvalues below a point just above the last wanted one, against
             // the converged Ritz values there.
             let mut sturm = None;
             let mut missed = false;
-            let check = match cfg.selection {
-                ModeSelection::Lowest(_) => cfg.sturm_check,
-                ModeSelection::Below { .. } => true,
-            };
+            let check = stopped.is_none()
+                && match cfg.selection {
+                    ModeSelection::Lowest(_) => cfg.sturm_check,
+                    ModeSelection::Below { .. } => true,
+                };
             if check {
                 let last = values[nev - 1];
                 let scale = values
@@ -483,16 +508,13 @@ impl EigenSolver {
             }
             if missed {
                 let (count, sc) = sturm.expect("set when missed");
-                return Err(Error::Numerical {
-                    what: "shift-invert Lanczos".into(),
-                    detail: format!(
-                        "the Sturm count finds {count} eigenvalues below {:.6} Hz but only {} \
-                         converged there after {attempt} attempts (block size up to {block}); \
-                         raise the block size",
-                        sc.max(0.0).sqrt() / (2.0 * std::f64::consts::PI),
-                        ritz.converged.iter().filter(|c| **c).count()
-                    ),
-                });
+                stopped = Some(format!(
+                    "the Sturm count finds {count} eigenvalues below {:.6} Hz but only {} \
+                     converged there after {attempt} attempts (block size up to {block}); \
+                     raise the block size",
+                    sc.max(0.0).sqrt() / (2.0 * std::f64::consts::PI),
+                    ritz.converged.iter().filter(|c| **c).count()
+                ));
             }
             let residuals = finish_vectors(k, m, &values, &mut vectors, cfg.par);
             check_seconds += t3.elapsed().as_secs_f64();
@@ -516,6 +538,12 @@ impl EigenSolver {
                     check_seconds,
                     sturm,
                     max_residual,
+                    status: if stopped.is_some() {
+                        Status::IterationLimit
+                    } else {
+                        Status::Converged
+                    },
+                    detail: stopped.unwrap_or_default(),
                 },
             };
             self.factor = Some(factor);
@@ -660,6 +688,8 @@ fn solve_dense(k: &SparseSym, m: &SparseSym, cfg: &EigenConfig) -> Result<Modes>
             check_seconds: t.elapsed().as_secs_f64(),
             sturm: None,
             max_residual,
+            status: Status::Converged,
+            detail: String::new(),
         },
     })
 }
@@ -685,6 +715,8 @@ struct Ritz {
     vectors: Mat<f64>,
     restarts: usize,
     applications: usize,
+    /// Why the iteration stopped before every wanted pair converged (the restart limit).
+    stopped: Option<String>,
 }
 
 impl KrylovSchur<'_> {
@@ -954,20 +986,26 @@ impl KrylovSchur<'_> {
                     vectors,
                     restarts,
                     applications,
+                    stopped: None,
                 });
             }
             if restarts >= self.max_restarts {
                 let worst = (0..nev)
                     .map(|c| resid.col(c).norm_l2() / theta[c].abs())
                     .fold(0.0f64, f64::max);
-                return Err(Error::Numerical {
-                    what: "shift-invert Lanczos".into(),
-                    detail: format!(
+                let vectors = v.subcols(0, j) * y.subcols(0, nev);
+                return Ok(Ritz {
+                    theta,
+                    converged,
+                    vectors,
+                    restarts,
+                    applications,
+                    stopped: Some(format!(
                         "{nconv} of {nev} modes converged after {restarts} restarts (worst \
                          relative Ritz residual {worst:.2e} > tolerance {:.1e}); raise the basis \
                          size or the restart limit",
                         self.tol
-                    ),
+                    )),
                 });
             }
             // Thick restart: keep the best `keep` Ritz vectors.

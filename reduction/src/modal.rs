@@ -317,6 +317,7 @@ pub fn reduce_with(
     let ports = model_ports(model, &cfg.extra_dofs)?;
     let modes = solver
         .solve_with_progress(model.stiffness(), model.mass(), &cfg.eigen, progress)
+        .and_then(Modes::into_converged)
         .map_err(|e| name_dofs(e, model))?;
     let n_ports = ports.len();
     let n_modes = modes.len();

@@ -104,6 +104,16 @@ pub fn eigen_sensitivities(
             found: modes.vectors.nrows(),
         });
     }
+    if !modes.is_converged() {
+        return Err(Error::invalid(
+            "eigen-sensitivities",
+            format!(
+                "the modes did not converge ({}): derivatives of unconverged modes are \
+                 meaningless",
+                modes.stats.detail
+            ),
+        ));
+    }
     if let Some(&d) = cfg.shape_dofs.iter().find(|&&d| d >= n) {
         return Err(Error::invalid(
             "eigen-sensitivity settings",

@@ -3,7 +3,7 @@
 use faer::Mat;
 use nlsim_fixtures::bracket::BracketConfig;
 use nlsim_kernel::linalg::dense_generalized_eigen_low as dense_generalized_eigen;
-use nlsim_kernel::{Error, SparseSym};
+use nlsim_kernel::{Error, SparseSym, Status};
 use nlsim_reduction::{EigenConfig, EigenMethod, EigenSolver, ModeSelection, Modes};
 
 fn lanczos(selection: ModeSelection) -> EigenConfig {
@@ -301,4 +301,41 @@ fn many_modes_converge_in_few_restarts() {
     assert!(modes.stats.restarts <= 6, "{:?}", modes.stats);
     assert_eq!(modes.stats.sturm.unwrap().0, 150);
     assert!(modes.stats.max_residual < 1e-9, "{:?}", modes.stats);
+}
+
+#[test]
+fn a_restart_limit_returns_the_ritz_approximations_with_a_status() {
+    // 40 modes of the clamped bracket with a small basis and no restart: not all converge.
+    let (k, m) = bracket(1, true);
+    let cfg = EigenConfig {
+        basis_size: Some(56),
+        max_restarts: 0,
+        ..lanczos(ModeSelection::Lowest(40))
+    };
+    let modes = EigenSolver::new().solve(&k, &m, &cfg).unwrap();
+    assert_eq!(modes.stats.method, EigenMethod::Lanczos);
+    assert_eq!(modes.stats.status, Status::IterationLimit);
+    assert!(!modes.is_converged());
+    assert_eq!(modes.len(), 40, "every wanted Ritz pair is returned");
+    assert!(
+        modes
+            .stats
+            .detail
+            .contains("of 40 modes converged after 0 restarts"),
+        "{}",
+        modes.stats.detail
+    );
+    // The lowest pairs converge first: they already match the converged solve.
+    let full = EigenSolver::new()
+        .solve(&k, &m, &lanczos(ModeSelection::Lowest(40)))
+        .unwrap();
+    assert!(full.is_converged(), "{}", full.stats.detail);
+    let rel = (modes.eigenvalues[0] - full.eigenvalues[0]).abs() / full.eigenvalues[0];
+    assert!(rel < 1e-8, "lowest Ritz value off by {rel:e}");
+    // A caller that needs converged modes gets the detail as an error.
+    let e = modes.into_converged().unwrap_err().to_string();
+    assert!(
+        e.contains("shift-invert Lanczos") && e.contains("raise the basis"),
+        "{e}"
+    );
 }

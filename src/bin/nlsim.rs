@@ -641,17 +641,19 @@ fn modes(
 ) -> nlsim::Result<nlsim::modes::ModeReport> {
     let t = Instant::now();
     let mut solver = EigenSolver::new();
-    let modes = solver.solve_with_progress(model.stiffness(), model.mass(), &cfg, &mut |p| {
-        if !quiet {
-            eprint!(
-                "\r  modes: {}/{} converged after {} restart(s), {:.1} s ",
-                p.converged,
-                p.wanted,
-                p.restart,
-                t.elapsed().as_secs_f64()
-            );
-        }
-    });
+    let modes = solver
+        .solve_with_progress(model.stiffness(), model.mass(), &cfg, &mut |p| {
+            if !quiet {
+                eprint!(
+                    "\r  modes: {}/{} converged after {} restart(s), {:.1} s ",
+                    p.converged,
+                    p.wanted,
+                    p.restart,
+                    t.elapsed().as_secs_f64()
+                );
+            }
+        })
+        .and_then(nlsim::reduction::Modes::into_converged);
     if !quiet
         && modes
             .as_ref()
