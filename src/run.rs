@@ -8,8 +8,8 @@ use nlsim_kernel::param::parse_known;
 use nlsim_kernel::{Model, Parameterized, Status, ValidationConfig};
 use nlsim_reduction::{EigenConfig, ModalSystem, ModeSelection, ReducedModel, ReductionConfig};
 use nlsim_sim::{
-    FohConfig, Hold, LoadCase, Newmark, NewmarkConfig, Plant, Rk4Config, Rk45Config, Simulator,
-    TimeHistory,
+    FohConfig, Hold, LoadCase, Newmark, NewmarkConfig, Plant, Rk4Config, Rk45Config, Signal,
+    Simulator, TimeHistory,
 };
 use std::f64::consts::PI;
 use std::time::Instant;
@@ -136,10 +136,11 @@ impl Default for FrfRequest {
 }
 
 impl FrfRequest {
-    /// Checks the values that do not need the model; errors are usage errors naming the option.
+    /// Checks the values that do not need the model; errors are usage errors naming the
+    /// request field.
     pub fn check(&self) -> Result<HarmonicSet> {
-        let usage = |m: String| Error::Usage(m);
-        for (what, v) in [("--from", self.from_hz), ("--to", self.to_hz)] {
+        let usage = |m: String| Error::Usage(format!("FRF request: {m}"));
+        for (what, v) in [("from_hz", self.from_hz), ("to_hz", self.to_hz)] {
             if !(v > 0.0 && v.is_finite()) {
                 return Err(usage(format!(
                     "{what} {v} must be a positive frequency in Hz"
@@ -147,21 +148,21 @@ impl FrfRequest {
             }
         }
         if self.from_hz == self.to_hz {
-            return Err(usage("--from and --to are equal".into()));
+            return Err(usage("from_hz and to_hz are equal".into()));
         }
         if self.points < 2 {
-            return Err(usage("--points must be at least 2".into()));
+            return Err(usage("points must be at least 2".into()));
         }
         if self.modes == 0 {
-            return Err(usage("--modes must be at least 1".into()));
+            return Err(usage("modes must be at least 1".into()));
         }
         if let Some(f) = self.force
             && !f.is_finite()
         {
-            return Err(usage(format!("--force {f} is not a finite number")));
+            return Err(usage(format!("force {f} is not a finite number")));
         }
         HarmonicSet::new(self.harmonics, self.subharmonic)
-            .map_err(|e| usage(format!("--harmonics/--subharmonic: {e}")))
+            .map_err(|e| usage(format!("harmonics/subharmonic: {e}")))
     }
 }
 
@@ -182,6 +183,103 @@ pub struct FrfRun {
     pub reduce_seconds: f64,
     /// Wall time of the sweep (s).
     pub seconds: f64,
+}
+
+impl FrfRun {
+    /// The lines `nlsim frf` prints for this run of `req` on `model`: the setup, the forces,
+    /// the point count and time, folds, jumps and branch points, and each sensor's peak;
+    /// with `verbose`, the Newton iteration count too.
+    pub fn summary(&self, model: &Model, req: &FrfRequest, verbose: bool) -> Vec<String> {
+        use nlsim_hb::PointKind;
+        let mut out = Vec::new();
+        let set = *self.system.harmonics();
+        let run = self;
+        let (sys, branch, y) = (&run.system, &run.branch, &run.responses);
+        out.push(format!(
+            "frf {}: {} {:.4}–{:.4} Hz, H = {} harmonics of Ω/{}, {} modes{} (reduced in {:.2} s), \
+             {} unknowns, AFT samples {:?}",
+            model.name(),
+            req.mode.as_str(),
+            req.from_hz,
+            req.to_hz,
+            set.h,
+            set.nu,
+            run.modes,
+            if req.residual {
+                " + residual flexibility"
+            } else {
+                ""
+            },
+            run.reduce_seconds,
+            sys.n_unknowns(),
+            sys.aft_samples()
+        ));
+        for x in &sys.forcing().terms {
+            out.push(format!(
+                "  force {:<10} {:.4e} N at harmonic {} (Ω)",
+                sys.inputs()[x.input].0,
+                x.amplitude.norm(),
+                crate::frf::harmonic_label(x.harmonic, set.nu)
+            ));
+        }
+        let n = branch.points.len();
+        let unstable = branch
+            .points
+            .iter()
+            .filter(|p| p.stable() == Some(false))
+            .count();
+        out.push(format!(
+            "  {n} points in {:.3} s ({:.3} ms per point){}; {unstable} unstable",
+            run.seconds,
+            1e3 * run.seconds / n as f64,
+            if run.status.is_converged() {
+                ""
+            } else {
+                " — stopped at the point limit before the end"
+            }
+        ));
+        if verbose {
+            let its: usize = branch.points.iter().map(|p| p.iterations).sum();
+            out.push(format!(
+                "  Newton: {its} iterations in all, {:.2} per point",
+                its as f64 / n.max(1) as f64
+            ));
+        }
+        for p in branch
+            .points
+            .iter()
+            .filter(|p| matches!(p.kind, PointKind::Fold | PointKind::Jump))
+        {
+            out.push(format!(
+                "  {} at {:.5} Hz",
+                if p.kind == PointKind::Fold {
+                    "fold"
+                } else {
+                    "jump"
+                },
+                p.omega / (2.0 * PI)
+            ));
+        }
+        for bp in &branch.branch_points {
+            out.push(format!(
+                "  branch point near {:.5} Hz",
+                bp.omega / (2.0 * PI)
+            ));
+        }
+        for (s, sen) in sys.sensors().iter().enumerate() {
+            let (i, a) = (0..n)
+                .map(|i| (i, y[i][(s, set.nu)].norm()))
+                .fold((0, 0.0f64), |m, v| if v.1 > m.1 { v } else { m });
+            out.push(format!(
+                "  {:<12} peak |{}| at the fundamental {a:.5e} {} at {:.5} Hz",
+                sen.name,
+                sen.quantity.as_str(),
+                crate::output::unit(sen.quantity),
+                branch.points[i].omega / (2.0 * PI)
+            ));
+        }
+        out
+    }
 }
 
 /// Computes the FRF `req` asks for on `model`, calling `progress` after every point.
@@ -302,6 +400,156 @@ impl Method {
     }
 }
 
+impl SimRun {
+    /// The lines `nlsim simulate` prints for this run of `req` on `model`: the setup, the
+    /// excitation per point, the run's counters, and the peak and rms of every output and
+    /// element; with `verbose`, every contact event.
+    pub fn summary(&self, model: &Model, req: &SimRequest, verbose: bool) -> Vec<String> {
+        let mut out = Vec::new();
+        let run = self;
+        let n_steps = req.check().unwrap_or_default();
+        let history = &run.history;
+        let dt = 1.0 / req.rate;
+        out.push(format!(
+            "simulate {}: {}, {}, dt {dt:.4e} s, {} samples over {} s",
+            model.name(),
+            req.method.as_str(),
+            if req.method.unreduced() {
+                format!(
+                    "unreduced ({} DOFs), effective stiffness factorised in {:.2} s",
+                    model.n_dofs(),
+                    run.setup_seconds
+                )
+            } else {
+                format!(
+                    "{} modes{} (reduced in {:.2} s)",
+                    run.modes,
+                    if req.residual {
+                        " + residual flexibility"
+                    } else {
+                        ""
+                    },
+                    run.setup_seconds
+                )
+            },
+            n_steps + 1,
+            req.duration
+        ));
+        for (x, sp) in model.excitation().iter().zip(&run.excitation) {
+            out.push(format!("  excitation {:<10} {sp}", x.name));
+        }
+        let st = &history.stats;
+        if run.flops_per_state_step > 0 {
+            out.push(format!(
+                "  run: {:.3} s wall, {:.2} ns per mode-step ({} states, {} flops each)",
+                st.seconds,
+                st.seconds / (n_steps as f64 * run.states as f64) * 1e9,
+                run.states,
+                run.flops_per_state_step
+            ));
+        }
+        out.push(format!(
+            "  {} steps ({} rejected), {} evaluations, Newton {} iterations (max {} in a step), {} \
+             contact events, {:.3} s wall",
+            st.steps,
+            st.rejected_steps,
+            st.evaluations,
+            st.newton_iterations,
+            st.max_newton_iterations,
+            st.events.len(),
+            st.seconds
+        ));
+        if verbose {
+            for e in &st.events {
+                out.push(format!(
+                    "    contact event: element {} {} at t = {:.9e} s",
+                    history.element_names[e.element],
+                    if e.closing { "closes" } else { "opens" },
+                    e.time
+                ));
+            }
+        }
+        out.push(format!(
+            "  {:<14} {:<13} {:>13} {:>13}",
+            "output", "quantity", "peak", "rms"
+        ));
+        for s in &history.outputs {
+            let peak = s.values.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            let rms = (s.values.iter().map(|x| x * x).sum::<f64>() / s.values.len() as f64).sqrt();
+            out.push(format!(
+                "  {:<14} {:<13} {peak:>13.5e} {rms:>13.5e}",
+                s.name,
+                s.quantity.as_str()
+            ));
+        }
+        for (e, name) in history.element_names.iter().enumerate() {
+            let pu = history.element_displacements[e]
+                .iter()
+                .fold(0.0f64, |m, x| m.max(x.abs()));
+            let pg = history.element_forces[e]
+                .iter()
+                .fold(0.0f64, |m, x| m.max(x.abs()));
+            out.push(format!(
+                "  element {name:<10} peak |u| {pu:.5e} m, peak |g| {pg:.5e} N"
+            ));
+        }
+        out
+    }
+}
+
+/// What drives the excitation points of a simulation: a signal on one point or on all.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Drive {
+    /// The excitation point's name; `None` drives every point.
+    pub point: Option<String>,
+    /// The force (N); per unit of each point's nominal amplitude when `nominal`.
+    pub signal: Signal,
+    /// Scale `signal` by the point's nominal amplitude (a spec that gave no amplitude).
+    pub nominal: bool,
+    /// How reports and result files name the drive (the spec it was parsed from).
+    pub label: String,
+}
+
+impl Drive {
+    /// `signal` (N) on every excitation point.
+    pub fn all(signal: Signal) -> Self {
+        Self {
+            point: None,
+            label: crate::simulate::describe_signal(&signal),
+            signal,
+            nominal: false,
+        }
+    }
+
+    /// `signal` (N) on excitation point `name`.
+    pub fn at(name: impl Into<String>, signal: Signal) -> Self {
+        Self {
+            point: Some(name.into()),
+            ..Self::all(signal)
+        }
+    }
+
+    /// Parses `SPEC` (every point) or `NAME=SPEC` (one point) in the grammar of
+    /// [`crate::simulate::parse_excitation`]; a sweep without `duration` lasts `duration_s`,
+    /// a force file without `rate` is sampled at `rate_hz`.
+    pub fn parse(text: &str, duration_s: f64, rate_hz: f64) -> Result<Self> {
+        let (point, spec) = match text
+            .split_once('=')
+            .filter(|(n, _)| !n.contains(':') && !n.contains(','))
+        {
+            Some((name, spec)) => (Some(name.to_string()), spec),
+            None => (None, text),
+        };
+        let (signal, nominal) = crate::simulate::parse_signal(spec, 1.0, duration_s, rate_hz)?;
+        Ok(Self {
+            point,
+            signal,
+            nominal,
+            label: spec.to_string(),
+        })
+    }
+}
+
 /// A time response to compute (the options of `nlsim simulate`).
 #[derive(Debug, Clone)]
 pub struct SimRequest {
@@ -311,9 +559,9 @@ pub struct SimRequest {
     pub rate: f64,
     /// Integration method.
     pub method: Method,
-    /// Excitation specs: `SPEC` for every excitation point or `NAME=SPEC` for one (see
-    /// [`crate::simulate::parse_excitation`]); empty: a sine at the first natural frequency.
-    pub excitation: Vec<String>,
+    /// Drives in order (a later one replaces an earlier one on the points it names); a point
+    /// no drive names gets a sine at the first natural frequency of its nominal amplitude.
+    pub excitation: Vec<Drive>,
     /// Retained modes (reduced methods).
     pub modes: usize,
     /// Residual flexibility of the truncated modes.
@@ -354,26 +602,26 @@ impl Default for SimRequest {
 impl SimRequest {
     /// Checks the values that do not need the model and returns the number of steps.
     pub fn check(&self) -> Result<usize> {
-        let usage = |m: String| Error::Usage(m);
+        let usage = |m: String| Error::Usage(format!("simulation request: {m}"));
         if !(self.duration > 0.0 && self.duration.is_finite()) {
             return Err(usage(format!(
-                "--duration {} must be a positive number of seconds",
+                "duration {} must be a positive number of seconds",
                 self.duration
             )));
         }
         if !(self.rate > 0.0 && self.rate.is_finite()) {
             return Err(usage(format!(
-                "--rate {} must be a positive frequency in Hz",
+                "rate {} must be a positive frequency in Hz",
                 self.rate
             )));
         }
         if self.modes == 0 {
-            return Err(usage("--modes must be at least 1".into()));
+            return Err(usage("modes must be at least 1".into()));
         }
         let n_steps = (self.duration * self.rate).round() as usize;
         if n_steps == 0 || n_steps > 200_000_000 {
             return Err(usage(format!(
-                "--duration x --rate gives {n_steps} steps; it must be between 1 and 2e8"
+                "duration x rate gives {n_steps} steps; it must be between 1 and 2e8"
             )));
         }
         Ok(n_steps)
@@ -396,41 +644,45 @@ pub struct SimRun {
     pub flops_per_state_step: usize,
 }
 
-/// One excitation spec per excitation point: a sine at `f1` everywhere, then `specs` in order
-/// (`SPEC` for all points, `NAME=SPEC` for one).
-fn excitation_specs(model: &Model, specs: &[String], f1: f64) -> Result<Vec<String>> {
-    let mut out: Vec<String> = model
-        .excitation()
+/// One signal and label per excitation point: a sine at `f1` (Hz, to 1 µHz) of the point's
+/// nominal amplitude everywhere, then `drives` in order.
+fn point_signals(model: &Model, drives: &[Drive], f1: f64) -> Result<(Vec<Signal>, Vec<String>)> {
+    let points = model.excitation();
+    let f1: f64 = format!("{f1:.6}").parse().expect("a formatted number");
+    let mut signals: Vec<Signal> = points
+        .iter()
+        .map(|x| Signal::sine(x.amplitude, f1))
+        .collect();
+    let mut labels: Vec<String> = points
         .iter()
         .map(|_| format!("sine:freq={f1:.6}"))
         .collect();
-    for e in specs {
-        match e
-            .split_once('=')
-            .filter(|(n, _)| !n.contains(':') && !n.contains(','))
-        {
-            Some((name, sp)) => {
-                let i = model
-                    .excitation()
-                    .iter()
-                    .position(|x| x.name == name)
-                    .ok_or_else(|| {
-                        Error::Usage(format!(
-                            "--excitation '{e}': no excitation point '{name}' (the model has {})",
-                            model
-                                .excitation()
-                                .iter()
-                                .map(|x| x.name.as_str())
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        ))
-                    })?;
-                out[i] = sp.to_string();
-            }
-            None => out.iter_mut().for_each(|s| *s = e.clone()),
+    for (d, drive) in drives.iter().enumerate() {
+        let targets: Vec<usize> = match &drive.point {
+            None => (0..points.len()).collect(),
+            Some(name) => vec![points.iter().position(|x| &x.name == name).ok_or_else(|| {
+                Error::Usage(format!(
+                    "simulation request: excitation[{d}] ('{}'): no excitation point '{name}' \
+                     (the model has {})",
+                    drive.label,
+                    points
+                        .iter()
+                        .map(|x| x.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ))
+            })?],
+        };
+        for i in targets {
+            signals[i] = if drive.nominal {
+                drive.signal.scaled(points[i].amplitude)
+            } else {
+                drive.signal.clone()
+            };
+            labels[i] = drive.label.clone();
         }
     }
-    Ok(out)
+    Ok((signals, labels))
 }
 
 /// Integrates `model` as `req` asks, calling `progress(samples done, total)` about 200 times
@@ -458,13 +710,7 @@ pub fn run_simulation(
     let reduced = reduce(model, modes, req.residual, req.par)?;
     let f1 = reduced.modes.frequencies_hz()[0];
     let reduce_seconds = t0.elapsed().as_secs_f64();
-    let excitation = excitation_specs(model, &req.excitation, f1)?;
-    let forces = model
-        .excitation()
-        .iter()
-        .zip(&excitation)
-        .map(|(x, sp)| crate::simulate::parse_excitation(sp, x.amplitude, req.duration, req.rate))
-        .collect::<Result<Vec<_>>>()?;
+    let (forces, excitation) = point_signals(model, &req.excitation, f1)?;
     let case = LoadCase::new("simulate", forces);
     if unreduced {
         let mut cfg = NewmarkConfig::new(dt);

@@ -22,8 +22,19 @@ use std::path::Path;
 /// `amp` defaults to `default_amp` (the excitation point's nominal amplitude), a sweep's
 /// duration to `duration`, a file's rate to `rate`.
 pub fn parse_excitation(spec: &str, default_amp: f64, duration: f64, rate: f64) -> Result<Signal> {
+    Ok(parse_signal(spec, default_amp, duration, rate)?.0)
+}
+
+/// [`parse_excitation`], and whether the amplitude was `default_amp` (no `amp`, or a
+/// multisine without harmonics): then the signal scales with the point's nominal amplitude.
+pub(crate) fn parse_signal(
+    spec: &str,
+    default_amp: f64,
+    duration: f64,
+    rate: f64,
+) -> Result<(Signal, bool)> {
     let (kind, rest) = spec.split_once(':').unwrap_or((spec, ""));
-    let usage = |msg: String| Error::Usage(format!("--excitation '{spec}': {msg}"));
+    let usage = |msg: String| Error::Usage(format!("excitation '{spec}': {msg}"));
     let mut kv: Vec<(String, String)> = Vec::new();
     if kind != "file" {
         for part in rest.split(',').filter(|p| !p.trim().is_empty()) {
@@ -136,9 +147,60 @@ pub fn parse_excitation(spec: &str, default_amp: f64, duration: f64, rate: f64) 
         }
     };
     signal
-        .validate(&format!("--excitation '{spec}'"))
+        .validate(&format!("excitation '{spec}'"))
         .map_err(|e| Error::Usage(e.to_string()))?;
-    Ok(signal)
+    let defaulted = match kind {
+        "sine" | "sweep" => !kv.iter().any(|(k, _)| k == "amp"),
+        "multisine" => !kv.iter().any(|(k, _)| k != "freq"),
+        _ => false,
+    };
+    Ok((signal, defaulted))
+}
+
+/// A signal in the spec grammar of [`parse_excitation`] (frequencies in Hz, phases in
+/// degrees), for reports of signals built in code.
+pub fn describe_signal(signal: &Signal) -> String {
+    match signal {
+        Signal::Zero => "none".into(),
+        Signal::Sine {
+            amplitude,
+            freq_hz,
+            phase,
+        } => format!(
+            "sine:freq={freq_hz},amp={amplitude},phase={}",
+            phase.to_degrees()
+        ),
+        Signal::MultiSine {
+            fundamental_hz,
+            harmonics,
+        } => {
+            let mut t = format!("multisine:freq={fundamental_hz}");
+            for h in harmonics {
+                // F = −i·mag·e^{iφ} for a sine of phase φ.
+                let z = h.amplitude * c64::new(0.0, 1.0);
+                let key = if h.ratio >= 1.0 {
+                    format!("h{}", h.ratio.round())
+                } else {
+                    format!("h1/{}", (1.0 / h.ratio).round())
+                };
+                let _ = write!(t, ",{key}={}@{}", z.norm(), z.arg().to_degrees());
+            }
+            t
+        }
+        Signal::Sweep {
+            amplitude,
+            f0_hz,
+            f1_hz,
+            duration,
+            logarithmic,
+        } => format!(
+            "sweep:f0={f0_hz},f1={f1_hz},amp={amplitude},duration={duration}{}",
+            if *logarithmic { ",log=true" } else { "" }
+        ),
+        Signal::Sampled { rate_hz, values } => {
+            format!("samples:{} at {rate_hz} Hz", values.len())
+        }
+    }
 }
 
 /// Reads one force (N) per line; blank lines and `#` comments are skipped.

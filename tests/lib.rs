@@ -937,12 +937,63 @@ mod simulate {
     }
 
     #[test]
+    fn typed_drives_equal_the_parsed_specs() {
+        use nlsim::run::{Drive, SimRequest, run_simulation};
+        use nlsim::sim::Signal;
+        let model = nlsim::run::load_for_run("ecl_beam", &[]).unwrap();
+        let point = model.excitation()[0].name.clone();
+        let nominal = model.excitation()[0].amplitude;
+        let run = |drives: Vec<Drive>| {
+            let req = SimRequest {
+                duration: 0.05,
+                rate: 2000.0,
+                excitation: drives,
+                modes: 4,
+                par: faer::Par::Seq,
+                ..SimRequest::default()
+            };
+            run_simulation(&model, &req, &mut |_, _| {}).unwrap()
+        };
+        // A signal built in code and the same signal as a spec.
+        let typed = run(vec![Drive::at(&point, Signal::sine(2.0, 35.0))]);
+        let parsed = run(vec![
+            Drive::parse(&format!("{point}=sine:freq=35,amp=2"), 0.05, 2000.0).unwrap(),
+        ]);
+        assert_eq!(typed.history.inputs, parsed.history.inputs);
+        assert_eq!(typed.history.outputs, parsed.history.outputs);
+        assert_eq!(typed.excitation[0], "sine:freq=35,amp=2,phase=0");
+        assert_eq!(parsed.excitation[0], "sine:freq=35,amp=2");
+        // A spec without an amplitude takes the point's nominal one.
+        let d = Drive::parse("sine:freq=35", 0.05, 2000.0).unwrap();
+        assert!(d.nominal && d.point.is_none());
+        let by_nominal = run(vec![d]);
+        let explicit = run(vec![Drive::all(Signal::sine(nominal, 35.0))]);
+        assert_eq!(by_nominal.history.outputs, explicit.history.outputs);
+        // An unknown point is named with the drive's index and the points there are.
+        let req = SimRequest {
+            duration: 0.01,
+            rate: 1000.0,
+            excitation: vec![Drive::at("nope", Signal::Zero)],
+            modes: 2,
+            ..SimRequest::default()
+        };
+        let e = run_simulation(&model, &req, &mut |_, _| {})
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            e.contains("excitation[0]") && e.contains("no excitation point 'nope'"),
+            "{e}"
+        );
+    }
+
+    #[test]
     fn simulate_errors_print_one_line() {
         let cases: &[(&[&str], i32, &str)] = &[
             (
                 &["simulate", "ecl_beam", "--duration", "0", "--rate", "100"],
                 2,
-                "--duration",
+                "simulation request: duration 0",
             ),
             (
                 &[
@@ -1136,7 +1187,7 @@ mod frf_cli {
             (
                 &["frf", "duffing_fig3", "--from", "0", "--to", "30"],
                 2,
-                "--from",
+                "from_hz 0 must be a positive frequency",
             ),
             (
                 &["frf", "duffing_fig3", "--from", "30", "--to", "30"],

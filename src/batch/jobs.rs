@@ -1,7 +1,7 @@
 //! The jobs file: its TOML tables, parsed and checked into a [`Batch`].
 
 use crate::error::{Error, Result};
-use crate::run::{FrfRequest, Method, SimRequest, SweepMode};
+use crate::run::{Drive, FrfRequest, Method, SimRequest, SweepMode};
 use nlsim_kernel::Parameterized;
 use nlsim_kernel::param::parse_known;
 use serde::Deserialize;
@@ -220,7 +220,13 @@ impl Batch {
                     duration: t.duration,
                     rate: t.rate,
                     method,
-                    excitation: t.excitation.clone().unwrap_or_default(),
+                    excitation: t
+                        .excitation
+                        .iter()
+                        .flatten()
+                        .map(|e| Drive::parse(e, t.duration, t.rate))
+                        .collect::<Result<_>>()
+                        .map_err(|e| err(at("excitation"), "simulate.excitation", e.to_string()))?,
                     modes: t.modes.unwrap_or(d.modes),
                     residual: t.residual.unwrap_or(d.residual),
                     events: t.events.unwrap_or(d.events),

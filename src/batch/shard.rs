@@ -132,7 +132,7 @@ fn run_job(b: &Batch, job: &Job, ctx: Option<&CalibContext>) -> Result<JobResult
         BatchCommand::Simulate(req) => {
             let mut req = req.clone();
             if let Some(e) = excitation {
-                req.excitation = vec![e];
+                req.excitation = vec![crate::run::Drive::parse(&e, req.duration, req.rate)?];
             }
             Ok(JobResult::Simulate(Box::new(run_simulation(
                 &model,

@@ -478,7 +478,10 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 duration: *duration,
                 rate: *rate,
                 method: *method,
-                excitation: excitation.clone(),
+                excitation: excitation
+                    .iter()
+                    .map(|e| nlsim::run::Drive::parse(e, *duration, *rate))
+                    .collect::<nlsim::Result<_>>()?,
                 modes: *modes,
                 residual: !no_residual,
                 events: !no_events,
@@ -796,7 +799,6 @@ fn frf(
     plot: Option<&std::path::Path>,
     cli: &Cli,
 ) -> nlsim::Result<()> {
-    use nlsim::hb::PointKind;
     use std::f64::consts::PI;
     let quiet = cli.quiet;
     // Refuse bad options and output names before the (possibly long) solve.
@@ -833,90 +835,10 @@ fn frf(
     if show {
         eprintln!();
     }
+    for line in run.summary(&model, req, cli.verbose) {
+        say(line);
+    }
     let (sys, branch, y) = (&run.system, &run.branch, &run.responses);
-    say(format!(
-        "frf {}: {} {:.4}–{:.4} Hz, H = {} harmonics of Ω/{}, {} modes{} (reduced in {:.2} s), \
-         {} unknowns, AFT samples {:?}",
-        model.name(),
-        req.mode.as_str(),
-        req.from_hz,
-        req.to_hz,
-        set.h,
-        set.nu,
-        run.modes,
-        if req.residual {
-            " + residual flexibility"
-        } else {
-            ""
-        },
-        run.reduce_seconds,
-        sys.n_unknowns(),
-        sys.aft_samples()
-    ));
-    for x in &sys.forcing().terms {
-        say(format!(
-            "  force {:<10} {:.4e} N at harmonic {} (Ω)",
-            sys.inputs()[x.input].0,
-            x.amplitude.norm(),
-            nlsim::frf::harmonic_label(x.harmonic, set.nu)
-        ));
-    }
-    let n = branch.points.len();
-    let unstable = branch
-        .points
-        .iter()
-        .filter(|p| p.stable() == Some(false))
-        .count();
-    say(format!(
-        "  {n} points in {:.3} s ({:.3} ms per point){}; {unstable} unstable",
-        run.seconds,
-        1e3 * run.seconds / n as f64,
-        if run.status.is_converged() {
-            ""
-        } else {
-            " — stopped at the point limit before the end"
-        }
-    ));
-    if cli.verbose {
-        let its: usize = branch.points.iter().map(|p| p.iterations).sum();
-        say(format!(
-            "  Newton: {its} iterations in all, {:.2} per point",
-            its as f64 / n.max(1) as f64
-        ));
-    }
-    for p in branch
-        .points
-        .iter()
-        .filter(|p| matches!(p.kind, PointKind::Fold | PointKind::Jump))
-    {
-        say(format!(
-            "  {} at {:.5} Hz",
-            if p.kind == PointKind::Fold {
-                "fold"
-            } else {
-                "jump"
-            },
-            p.omega / (2.0 * PI)
-        ));
-    }
-    for bp in &branch.branch_points {
-        say(format!(
-            "  branch point near {:.5} Hz",
-            bp.omega / (2.0 * PI)
-        ));
-    }
-    for (s, sen) in sys.sensors().iter().enumerate() {
-        let (i, a) = (0..n)
-            .map(|i| (i, y[i][(s, set.nu)].norm()))
-            .fold((0, 0.0f64), |m, v| if v.1 > m.1 { v } else { m });
-        say(format!(
-            "  {:<12} peak |{}| at the fundamental {a:.5e} {} at {:.5} Hz",
-            sen.name,
-            sen.quantity.as_str(),
-            nlsim::output::unit(sen.quantity),
-            branch.points[i].omega / (2.0 * PI)
-        ));
-    }
     if let Some(path) = out {
         let info = nlsim::frf::FrfInfo {
             model_spec: spec.to_string(),
@@ -945,7 +867,7 @@ fn simulate(
     cli: &Cli,
 ) -> nlsim::Result<()> {
     let quiet = cli.quiet;
-    let n_steps = req.check()?;
+    req.check()?;
     if let Some(path) = out {
         // Refuse an unknown format before the run.
         nlsim::output::Format::of(path, nlsim::simulate::HINT)?;
@@ -957,91 +879,10 @@ fn simulate(
     };
     let model = nlsim::run::load_for_run(spec, sets)?;
     let run = nlsim::run::run_simulation(&model, req, &mut progress_line(quiet, "simulate"))?;
+    for line in run.summary(&model, req, cli.verbose) {
+        say(line);
+    }
     let history = &run.history;
-    let dt = 1.0 / req.rate;
-    say(format!(
-        "simulate {}: {}, {}, dt {dt:.4e} s, {} samples over {} s",
-        model.name(),
-        req.method.as_str(),
-        if req.method.unreduced() {
-            format!(
-                "unreduced ({} DOFs), effective stiffness factorised in {:.2} s",
-                model.n_dofs(),
-                run.setup_seconds
-            )
-        } else {
-            format!(
-                "{} modes{} (reduced in {:.2} s)",
-                run.modes,
-                if req.residual {
-                    " + residual flexibility"
-                } else {
-                    ""
-                },
-                run.setup_seconds
-            )
-        },
-        n_steps + 1,
-        req.duration
-    ));
-    for (x, sp) in model.excitation().iter().zip(&run.excitation) {
-        say(format!("  excitation {:<10} {sp}", x.name));
-    }
-    let st = &history.stats;
-    if run.flops_per_state_step > 0 {
-        say(format!(
-            "  run: {:.3} s wall, {:.2} ns per mode-step ({} states, {} flops each)",
-            st.seconds,
-            st.seconds / (n_steps as f64 * run.states as f64) * 1e9,
-            run.states,
-            run.flops_per_state_step
-        ));
-    }
-    say(format!(
-        "  {} steps ({} rejected), {} evaluations, Newton {} iterations (max {} in a step), {} \
-         contact events, {:.3} s wall",
-        st.steps,
-        st.rejected_steps,
-        st.evaluations,
-        st.newton_iterations,
-        st.max_newton_iterations,
-        st.events.len(),
-        st.seconds
-    ));
-    if cli.verbose {
-        for e in &st.events {
-            say(format!(
-                "    contact event: element {} {} at t = {:.9e} s",
-                history.element_names[e.element],
-                if e.closing { "closes" } else { "opens" },
-                e.time
-            ));
-        }
-    }
-    say(format!(
-        "  {:<14} {:<13} {:>13} {:>13}",
-        "output", "quantity", "peak", "rms"
-    ));
-    for s in &history.outputs {
-        let peak = s.values.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-        let rms = (s.values.iter().map(|x| x * x).sum::<f64>() / s.values.len() as f64).sqrt();
-        say(format!(
-            "  {:<14} {:<13} {peak:>13.5e} {rms:>13.5e}",
-            s.name,
-            s.quantity.as_str()
-        ));
-    }
-    for (e, name) in history.element_names.iter().enumerate() {
-        let pu = history.element_displacements[e]
-            .iter()
-            .fold(0.0f64, |m, x| m.max(x.abs()));
-        let pg = history.element_forces[e]
-            .iter()
-            .fold(0.0f64, |m, x| m.max(x.abs()));
-        say(format!(
-            "  element {name:<10} peak |u| {pu:.5e} m, peak |g| {pg:.5e} N"
-        ));
-    }
     if let Some(path) = out {
         let info = nlsim::simulate::RunInfo {
             model_spec: spec.to_string(),
