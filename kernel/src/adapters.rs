@@ -86,37 +86,31 @@ mod nalgebra_impl {
     use crate::sparse::SparseSym;
     use nalgebra_sparse::{CooMatrix, CscMatrix, CsrMatrix};
 
-    impl SparseSym {
-        /// The matrix `name` from a `nalgebra-sparse` CSC matrix.
-        pub fn from_nalgebra_csc(name: &str, a: &CscMatrix<f64>, stored: Stored) -> Result<Self> {
-            from_entries(
-                name,
-                (a.nrows(), a.ncols()),
-                stored,
-                a.triplet_iter().map(|(r, c, &v)| (r, c, v)),
-            )
-        }
-
-        /// The matrix `name` from a `nalgebra-sparse` CSR matrix.
-        pub fn from_nalgebra_csr(name: &str, a: &CsrMatrix<f64>, stored: Stored) -> Result<Self> {
-            from_entries(
-                name,
-                (a.nrows(), a.ncols()),
-                stored,
-                a.triplet_iter().map(|(r, c, &v)| (r, c, v)),
-            )
-        }
-
-        /// The matrix `name` from a `nalgebra-sparse` COO matrix (repeated entries summed).
-        pub fn from_nalgebra_coo(name: &str, a: &CooMatrix<f64>, stored: Stored) -> Result<Self> {
-            from_entries(
-                name,
-                (a.nrows(), a.ncols()),
-                stored,
-                a.triplet_iter().map(|(r, c, &v)| (r, c, v)),
-            )
-        }
+    /// `SparseSym::$fn` from a `nalgebra-sparse` matrix of type `$ty` (all three share
+    /// `nrows`, `ncols` and `triplet_iter`, but no trait).
+    macro_rules! from_nalgebra {
+        ($fn:ident, $ty:ident, $what:literal) => {
+            impl SparseSym {
+                #[doc = concat!("The matrix `name` from a `nalgebra-sparse` ", $what, ".")]
+                pub fn $fn(name: &str, a: &$ty<f64>, stored: Stored) -> Result<Self> {
+                    from_entries(
+                        name,
+                        (a.nrows(), a.ncols()),
+                        stored,
+                        a.triplet_iter().map(|(r, c, &v)| (r, c, v)),
+                    )
+                }
+            }
+        };
     }
+
+    from_nalgebra!(from_nalgebra_csc, CscMatrix, "CSC matrix");
+    from_nalgebra!(from_nalgebra_csr, CsrMatrix, "CSR matrix");
+    from_nalgebra!(
+        from_nalgebra_coo,
+        CooMatrix,
+        "COO matrix (repeated entries summed)"
+    );
 }
 
 #[cfg(feature = "sprs")]

@@ -978,34 +978,25 @@ impl KrylovSchur<'_> {
                 converged: nconv,
                 wanted: nev,
             });
-            if nconv == nev {
-                let vectors = v.subcols(0, j) * y.subcols(0, nev);
-                return Ok(Ritz {
-                    theta,
-                    converged,
-                    vectors,
-                    restarts,
-                    applications,
-                    stopped: None,
-                });
-            }
-            if restarts >= self.max_restarts {
-                let worst = (0..nev)
-                    .map(|c| resid.col(c).norm_l2() / theta[c].abs())
-                    .fold(0.0f64, f64::max);
-                let vectors = v.subcols(0, j) * y.subcols(0, nev);
-                return Ok(Ritz {
-                    theta,
-                    converged,
-                    vectors,
-                    restarts,
-                    applications,
-                    stopped: Some(format!(
+            if nconv == nev || restarts >= self.max_restarts {
+                let stopped = (nconv < nev).then(|| {
+                    let worst = (0..nev)
+                        .map(|c| resid.col(c).norm_l2() / theta[c].abs())
+                        .fold(0.0f64, f64::max);
+                    format!(
                         "{nconv} of {nev} modes converged after {restarts} restarts (worst \
                          relative Ritz residual {worst:.2e} > tolerance {:.1e}); raise the basis \
                          size or the restart limit",
                         self.tol
-                    )),
+                    )
+                });
+                return Ok(Ritz {
+                    theta,
+                    converged,
+                    vectors: v.subcols(0, j) * y.subcols(0, nev),
+                    restarts,
+                    applications,
+                    stopped,
                 });
             }
             // Thick restart: keep the best `keep` Ritz vectors.
