@@ -123,43 +123,31 @@ pub(crate) struct ReceptanceParts {
     pub ext: Mat<f64>,
 }
 
-/// The buffers of one Newton solve.
+/// The buffers of one residual evaluation ([`HbSystem::evaluate_into`]).
 #[derive(Debug)]
-pub(crate) struct Scratch {
+pub(crate) struct EvalBuffers {
     aft: AftScratch,
-    /// Force coefficients (inputs × (2H+1)).
-    f: Vec<f64>,
-    /// `H_NL,ext F`.
-    b: Vec<f64>,
     g: Vec<f64>,
     r: Vec<f64>,
     dg: Vec<Mat<f64>>,
     damping: Vec<Vec<f64>>,
     jac: Mat<f64>,
-    dx: Vec<f64>,
-    xt: Vec<f64>,
-    lu: LuInPlace,
 }
 
-impl Default for Scratch {
+impl Default for EvalBuffers {
     fn default() -> Self {
         Self {
             aft: Default::default(),
-            f: Default::default(),
-            b: Default::default(),
             g: Default::default(),
             r: Default::default(),
             dg: Default::default(),
             damping: Default::default(),
             jac: Mat::new(),
-            dx: Default::default(),
-            xt: Default::default(),
-            lu: Default::default(),
         }
     }
 }
 
-impl Scratch {
+impl EvalBuffers {
     /// Sizes the buffers for `ne` elements of `nh` coefficients (allocates only when they
     /// change).
     fn size(&mut self, ne: usize, nh: usize) {
@@ -174,6 +162,19 @@ impl Scratch {
             self.jac = Mat::zeros(n, n);
         }
     }
+}
+
+/// The buffers of one Newton solve: an evaluation's, and the force, step and LU.
+#[derive(Debug, Default)]
+pub(crate) struct Scratch {
+    ev: EvalBuffers,
+    /// Force coefficients (inputs × (2H+1)).
+    f: Vec<f64>,
+    /// `H_NL,ext F`.
+    b: Vec<f64>,
+    dx: Vec<f64>,
+    xt: Vec<f64>,
+    lu: LuInPlace,
 }
 
 /// Receptances by frequency (the bits of `Ω`), first in first out beyond `capacity`.
@@ -689,9 +690,9 @@ impl HbSystem {
         scale: f64,
         jacobian: bool,
     ) -> Evaluation {
-        let mut s = Scratch::default();
+        let mut s = EvalBuffers::default();
         self.evaluate_into(&rec.a, &rec.b, x, omega, scale, jacobian, &mut s);
-        let Scratch {
+        let EvalBuffers {
             g,
             r,
             mut dg,
@@ -724,7 +725,7 @@ impl HbSystem {
         omega: f64,
         scale: f64,
         jacobian: bool,
-        s: &mut Scratch,
+        s: &mut EvalBuffers,
     ) {
         let nh = self.set.len();
         let n = self.n_unknowns();
@@ -885,7 +886,6 @@ impl HbSystem {
             ));
         }
         self.check_unknowns("harmonic balance start vector", x)?;
-        let n = self.n_unknowns();
         ws.bind(self);
         let HbWorkspace {
             cache, scratch: s, ..
@@ -900,10 +900,8 @@ impl HbSystem {
             residual,
         };
         for it in 0..=self.config.max_iterations {
-            let b = std::mem::take(&mut s.b);
-            self.evaluate_into(a, &b, x, omega, scale, true, s);
-            s.b = b;
-            let rn = norm_inf(&s.r);
+            self.evaluate_into(a, &s.b, x, omega, scale, true, &mut s.ev);
+            let rn = norm_inf(&s.ev.r);
             if !rn.is_finite() {
                 return Ok(report(Status::NonFinite, it, rn));
             }
@@ -915,8 +913,8 @@ impl HbSystem {
                 return Ok(report(Status::IterationLimit, it, rn));
             }
             s.dx.clear();
-            s.dx.extend(s.r.iter().map(|v| -v));
-            if !s.lu.factor(&s.jac) {
+            s.dx.extend(s.ev.r.iter().map(|v| -v));
+            if !s.lu.factor(&s.ev.jac) {
                 return Ok(report(Status::Singular, it, rn));
             }
             s.lu.solve_in_place(&mut s.dx);
@@ -925,10 +923,8 @@ impl HbSystem {
             for _ in 0..16 {
                 s.xt.clear();
                 s.xt.extend(x.iter().zip(&s.dx).map(|(a, d)| a + alpha * d));
-                let (b, xt) = (std::mem::take(&mut s.b), std::mem::take(&mut s.xt));
-                self.evaluate_into(a, &b, &xt, omega, scale, false, s);
-                (s.b, s.xt) = (b, xt);
-                let rt = norm_inf(&s.r);
+                self.evaluate_into(a, &s.b, &s.xt, omega, scale, false, &mut s.ev);
+                let rt = norm_inf(&s.ev.r);
                 if rt < (1.0 - 1e-4 * alpha) * rn {
                     x.copy_from_slice(&s.xt);
                     accepted = true;
@@ -942,7 +938,6 @@ impl HbSystem {
                 x.iter_mut().zip(&s.dx).for_each(|(a, d)| *a += d);
             }
         }
-        debug_assert!(n == x.len());
         unreachable!("the loop returns at the iteration limit")
     }
 
