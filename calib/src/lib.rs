@@ -14,7 +14,11 @@
 //! - [`lhs`]: seeded maximin Latin-hypercube start points;
 //! - [`calibrate`](mod@calibrate): the workflow (candidates in parallel → LM from the best few →
 //!   Cramér–Rao bound → k-fold cross validation);
-//! - [`stats`]: Cramér–Rao bounds, identifiability, estimate statistics.
+//! - [`stats`]: Cramér–Rao bounds, identifiability, estimate statistics;
+//! - [`plan`]: pre-test planning by Fisher information (design ranking, sensor placement,
+//!   multi-sine side tones);
+//! - [`shaker`]: a virtual stepped-sine test through an electrodynamic shaker model, with and
+//!   without off-line force control.
 //!
 //! Solvers that stop short return what they computed with a [`Status`];
 //! `Err` means invalid input. Nothing here prints, reads files or exits.
@@ -26,6 +30,8 @@ mod linalg;
 pub mod lm;
 pub mod modal;
 pub mod objective;
+pub mod plan;
+pub mod shaker;
 pub mod stats;
 pub mod synthetic;
 
@@ -43,5 +49,10 @@ pub use modal::{
 };
 pub use nlsim_kernel::Status;
 pub use objective::{Form, FrfObjective, ObjectiveConfig, ParamSpec, PointResult, SweepEvaluation};
+pub use plan::{
+    Band, Criterion, Design, Exciter, FimSummary, Placement, Planner, RankedDesign, SideTone,
+    SweepInformation, dof_information, greedy_placement, rank_designs, subsets,
+};
+pub use shaker::{ControlConfig, Shaker, StepControl, VirtualTest, virtual_test};
 pub use stats::CramerRao;
 pub use synthetic::{Gaussian, SweepPlan, synthesize};

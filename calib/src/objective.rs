@@ -437,6 +437,13 @@ impl FrfObjective {
         })
     }
 
+    /// The same system, FE link and parameters on other test data with other settings
+    /// (the data's channels and drive point checked as in [`FrfObjective::new`]): what the
+    /// test planner uses to evaluate candidate tests.
+    pub fn with_data(&self, data: Arc<TestData>, config: ObjectiveConfig) -> Result<Self> {
+        Self::build(&self.sys, self.fe.clone(), data, self.specs.clone(), config)
+    }
+
     /// The parameters.
     pub fn specs(&self) -> &[ParamSpec] {
         &self.specs
@@ -549,7 +556,7 @@ impl FrfObjective {
                     })
                     .collect();
                 self.sys.set_forcing(Forcing { terms })?;
-                let (x, status) = self.solve_step(omega, prev.as_ref())?;
+                let (x, status) = solve_step(&self.sys, &mut self.ws, omega, prev.as_ref())?;
                 let mut response = Mat::from_fn(data.channels.len(), h_data, |_, _| {
                     c64::new(f64::NAN, f64::NAN)
                 });
@@ -766,39 +773,6 @@ impl FrfObjective {
         }
     }
 
-    /// One step of the stepped sine: Newton from the previous step's solution; else through
-    /// four intermediate frequencies from the previous step; else from the linear response.
-    fn solve_step(
-        &mut self,
-        omega: f64,
-        prev: Option<&(Vec<f64>, f64)>,
-    ) -> Result<(Vec<f64>, Status)> {
-        let (sys, ws) = (&self.sys, &mut self.ws);
-        if let Some((x0, w0)) = prev {
-            let mut x = x0.clone();
-            if sys.solve_with(ws, omega, 1.0, &mut x)?.converged() {
-                return Ok((x, Status::Converged));
-            }
-            x.copy_from_slice(x0);
-            let mut ok = true;
-            for j in 1..=4 {
-                let w = w0 + (omega - w0) * j as f64 / 4.0;
-                let mut xs = x.clone();
-                if !sys.solve_with(ws, w, 1.0, &mut xs)?.converged() {
-                    ok = false;
-                    break;
-                }
-                x = xs;
-            }
-            if ok {
-                return Ok((x, Status::Converged));
-            }
-        }
-        let mut x = sys.linear_guess(omega, 1.0);
-        let rep = sys.solve_with(ws, omega, 1.0, &mut x)?;
-        Ok((x, rep.status))
-    }
-
     /// Cost `½‖r‖²` of the training points at values `values`; infinite when a point fails.
     pub fn cost_values(&mut self, values: &[f64]) -> Result<f64> {
         let ev = self.evaluate_values(values, None, false)?;
@@ -807,6 +781,40 @@ impl FrfObjective {
         }
         Ok(0.5 * ev.residuals.iter().map(|r| r * r).sum::<f64>())
     }
+}
+
+/// One step of a stepped sine on `sys` at `omega` (rad/s): Newton from the previous step's
+/// solution `prev` (solution, frequency); else through four intermediate frequencies from
+/// it; else from the linear response. The last iterate and how its solve ended.
+pub(crate) fn solve_step(
+    sys: &HbSystem,
+    ws: &mut HbWorkspace,
+    omega: f64,
+    prev: Option<&(Vec<f64>, f64)>,
+) -> Result<(Vec<f64>, Status)> {
+    if let Some((x0, w0)) = prev {
+        let mut x = x0.clone();
+        if sys.solve_with(ws, omega, 1.0, &mut x)?.converged() {
+            return Ok((x, Status::Converged));
+        }
+        x.copy_from_slice(x0);
+        let mut ok = true;
+        for j in 1..=4 {
+            let w = w0 + (omega - w0) * j as f64 / 4.0;
+            let mut xs = x.clone();
+            if !sys.solve_with(ws, w, 1.0, &mut xs)?.converged() {
+                ok = false;
+                break;
+            }
+            x = xs;
+        }
+        if ok {
+            return Ok((x, Status::Converged));
+        }
+    }
+    let mut x = sys.linear_guess(omega, 1.0);
+    let rep = sys.solve_with(ws, omega, 1.0, &mut x)?;
+    Ok((x, rep.status))
 }
 
 /// Sensitivities `a` (of the parameters at spec indices `ia`) and `b` (at `ib`) merged in

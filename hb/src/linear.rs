@@ -381,6 +381,18 @@ impl LinearPart {
         h
     }
 
+    /// `Z(ω)⁻¹ f` of modal forces `f` (one per retained mode; N/√kg) at `omega` (rad/s).
+    pub fn modal_solve(&self, omega: f64, f: &[c64]) -> Vec<c64> {
+        match self.solve(omega) {
+            ModalSolve::Diagonal(d) => d.iter().zip(f).map(|(a, b)| a * b).collect(),
+            ModalSolve::Full(lu) => {
+                let rhs = Mat::from_fn(f.len(), 1, |i, _| f[i]);
+                let x = lu.solve(&rhs);
+                (0..f.len()).map(|i| x[(i, 0)]).collect()
+            }
+        }
+    }
+
     /// Modal amplitudes `η = Z(ω)⁻¹ Φ_Pᵀ u` (√kg m) of port forces `u` (N) at `omega`.
     pub fn modal_response(&self, omega: f64, ports: &[usize], u: &[c64]) -> Vec<c64> {
         let z = self.solve(omega);

@@ -1180,6 +1180,184 @@ impl HbSystem {
         Ok(out)
     }
 
+    /// Displacements (m) at every input port (rows) and harmonic `k = 0..=H` (columns) at
+    /// solution `x`, and their Jacobian with respect to the real force coefficients of input
+    /// `input` (real layout `[F_0, Re F_1, −Im F_1, …]` per port; (inputs·(2H+1)) × (2H+1),
+    /// m/N): `dX/dF = λ (H_in,in − H_in,NL ∂G/∂x J⁻¹ H_NL,in)` by implicit differentiation of
+    /// `R(x, F) = 0` (thesis eq. 10). This is what couples a structure to an exciter whose
+    /// force depends on the drive-point motion (a shaker on a stinger).
+    pub fn input_response_jacobian(
+        &self,
+        x: &[f64],
+        omega: f64,
+        scale: f64,
+        input: usize,
+    ) -> Result<(Mat<c64>, Mat<f64>)> {
+        self.check_unknowns("harmonic balance unknowns", x)?;
+        if input >= self.inputs.len() {
+            return Err(Error::invalid(
+                "input response",
+                format!(
+                    "input {input} does not exist ({} inputs)",
+                    self.inputs.len()
+                ),
+            ));
+        }
+        let nh = self.set.len();
+        let n = self.n_unknowns();
+        let rec = self.receptances(omega, false);
+        let ev = self.evaluate(&rec, x, omega, scale, true);
+        let ports = self.input_ports();
+        let y = self.recover(&ports, omega, scale, &ev.g, false);
+        let disp = Mat::from_fn(ports.len(), self.set.h + 1, |i, k| {
+            self.set.complex(&y[i * nh..(i + 1) * nh], k)
+        });
+        let h_in_in = expand(
+            &self.set,
+            &self.harmonic_receptances(omega, &ports, &ports[input..=input], false),
+        );
+        let h_in_nl = expand(
+            &self.set,
+            &self.harmonic_receptances(omega, &ports, &self.element_ports, false),
+        );
+        let h_nl_in = expand(
+            &self.set,
+            &self.harmonic_receptances(omega, &self.element_ports, &ports[input..=input], false),
+        );
+        let mut jac = Mat::from_fn(ports.len() * nh, nh, |i, j| scale * h_in_in[(i, j)]);
+        if n > 0 {
+            let hz = omega / (2.0 * PI);
+            let lu = Lu::new(ev.jacobian.as_ref().expect("asked for"), &|| {
+                format!("input response Jacobian at {hz:.6} Hz")
+            })?;
+            for c in 0..nh {
+                // dx/dF_c = λ J⁻¹ H_NL,in e_c; then −H_in,NL ∂G/∂x dx.
+                let rhs: Vec<f64> = (0..n).map(|i| scale * h_nl_in[(i, c)]).collect();
+                let dx = lu.solve(&rhs);
+                let mut gdx = vec![0.0; n];
+                for (e, dg) in ev.dg.iter().enumerate() {
+                    for l in 0..nh {
+                        gdx[e * nh + l] = (0..nh).map(|q| dg[(l, q)] * dx[e * nh + q]).sum();
+                    }
+                }
+                for i in 0..jac.nrows() {
+                    jac[(i, c)] -= (0..n).map(|j| h_in_nl[(i, j)] * gdx[j]).sum::<f64>();
+                }
+            }
+        }
+        Ok((disp, jac))
+    }
+
+    /// Derivatives of the modal amplitudes `η_k` (see [`HbSystem::modal_amplitudes`]) along
+    /// the sensitivities `sens` computed at the same solution: one modes × (H+1) matrix per
+    /// sensitivity, `dη_k/dp = −Z_k⁻¹ (∂Z_k/∂p η_k + Φ_NLᵀ dG_k/dp)` with
+    /// `dG/dp = ∂G/∂p + ∂G/∂x dx/dp` (mass-normalised modes: √kg m per parameter unit).
+    /// The response at any DOF `i` of the reduced model then follows as `Σ_r φ_ir/√m_r η_r`
+    /// without the residual flexibility of the truncated modes (the mode-displacement
+    /// approximation): what sensor placement over every DOF of a large model needs. Element
+    /// parameters and `modeN.f`, `modeN.zeta`, `stiffness_scale` are supported; others
+    /// (modal masses, FE-level variations) are an error.
+    pub fn modal_sensitivities(
+        &self,
+        x: &[f64],
+        omega: f64,
+        scale: f64,
+        sens: &[Sensitivity],
+    ) -> Result<Vec<Mat<c64>>> {
+        self.check_unknowns("harmonic balance unknowns", x)?;
+        let nh = self.set.len();
+        let n = self.n_unknowns();
+        let m = self.linear.n_modes();
+        let w0 = self.set.base(omega);
+        let rec = self.receptances(omega, false);
+        let ev = self.evaluate(&rec, x, omega, scale, true);
+        let eta = self.modal_amplitudes(x, omega, scale);
+        let mut out = Vec::with_capacity(sens.len());
+        for s in sens {
+            if s.dx.len() != n {
+                return Err(Error::DimensionMismatch {
+                    what: format!("sensitivity to {} (dx/dp)", s.param),
+                    expected: n,
+                    found: s.dx.len(),
+                });
+            }
+            let mut dgp = vec![0.0; n];
+            for (e, dg) in ev.dg.iter().enumerate() {
+                for l in 0..nh {
+                    dgp[e * nh + l] = (0..nh).map(|q| dg[(l, q)] * s.dx[e * nh + q]).sum();
+                }
+            }
+            // ∂Z/∂p of a diagonal entry (per unit of the parameter, at frequency w).
+            let mut dz: Option<Box<dyn Fn(usize, f64) -> c64>> = None;
+            match &s.param {
+                Param::Element { .. } => {
+                    let (element, param) = self
+                        .element_param(&s.param)
+                        .ok_or_else(|| unknown_param(&s.param, &self.parameters()))?;
+                    let d = self.plans[element].dparams(
+                        self.elements[element].law(),
+                        &x[element * nh..(element + 1) * nh],
+                        w0,
+                    );
+                    for l in 0..nh {
+                        dgp[element * nh + l] += d[(l, param)];
+                    }
+                }
+                Param::ModalFrequency(r) | Param::ModalDamping(r) if *r < m => {
+                    let r = *r;
+                    let wr = self.linear.w2[r].sqrt();
+                    let zeta = self.linear.zeta(r);
+                    let freq = matches!(s.param, Param::ModalFrequency(_));
+                    dz = Some(Box::new(move |q, w| {
+                        if q != r {
+                            c64::new(0.0, 0.0)
+                        } else if freq {
+                            c64::new(2.0 * wr, 2.0 * zeta * w) * (2.0 * PI)
+                        } else {
+                            c64::new(0.0, 2.0 * wr * w)
+                        }
+                    }));
+                }
+                Param::StiffnessScale => {
+                    let w2 = self.linear.w2.clone();
+                    let kappa = self.linear.kappa;
+                    dz = Some(Box::new(move |q, _| c64::new(w2[q] / kappa, 0.0)));
+                }
+                p => {
+                    return Err(Error::invalid(
+                        format!("modal sensitivity to {p}"),
+                        "supported for element parameters, modeN.f, modeN.zeta and                          stiffness_scale",
+                    ));
+                }
+            }
+            let mut d = Mat::<c64>::zeros(m, self.set.h + 1);
+            for k in 0..=self.set.h {
+                let w = k as f64 * w0;
+                let mut u: Vec<c64> = (0..self.elements.len())
+                    .map(|e| -self.set.complex(&dgp[e * nh..(e + 1) * nh], k))
+                    .collect();
+                if let Some(dz) = &dz {
+                    // −∂Z η enters as a modal force: map it through Z⁻¹ below.
+                    let f: Vec<c64> = (0..m).map(|q| -dz(q, w) * eta[(q, k)]).collect();
+                    let zf = self.linear.modal_solve(w, &f);
+                    for (r, z) in zf.into_iter().enumerate() {
+                        d[(r, k)] += z;
+                    }
+                }
+                if self.elements.is_empty() {
+                    continue;
+                }
+                let col = self.linear.modal_response(w, &self.element_ports, &u);
+                u.clear();
+                for (r, z) in col.into_iter().enumerate() {
+                    d[(r, k)] += z;
+                }
+            }
+            out.push(d);
+        }
+        Ok(out)
+    }
+
     /// Modal amplitudes `η_k = Z(kω0)⁻¹ Φ_Pᵀ (λ F_k − G_k)` (modes × harmonics `0..=H`) of the
     /// solution `x`: the state of the full formulation, e.g. for initial conditions of a time
     /// integration on the same periodic orbit.
