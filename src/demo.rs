@@ -245,15 +245,16 @@ fn plot_both(dir: &Path, name: &str, fig: &impl crate::plot::Figure) -> Result<S
 fn demo_calibration(
     model: &nlsim_kernel::Model,
     reduced: &nlsim_reduction::ReducedModel,
+    virtual_data: Option<nlsim_calib::TestData>,
     report_dir: &Path,
     say: &dyn Fn(&str),
 ) -> Result<()> {
     use nlsim_calib::{
-        CalibrationConfig, Form, FrfObjective, Noise, ObjectiveConfig, ParamSpec, SweepPlan,
-        calibrate, synthesize,
+        CalibrationConfig, Form, FrfObjective, Noise, ObjectiveConfig, ParamSpec, calibrate,
+        synthesize,
     };
     use nlsim_hb::{HarmonicSet, HbConfig, HbSystem};
-    use nlsim_kernel::{Param, Parameterized};
+    use nlsim_kernel::Parameterized;
     use std::sync::Arc;
     let skip = |why: &str| {
         say(&format!(
@@ -267,49 +268,33 @@ fn demo_calibration(
     let t = Instant::now();
     let mut sys =
         HbSystem::from_model(model, reduced, HarmonicSet::new(3, 1)?, HbConfig::default())?;
-    // The mode the drive excites most at the first sensor, among the two lowest (a square
-    // beam has two bending planes at one frequency).
-    let driven = sys
-        .linear()
-        .dominant_mode(sys.sensors()[0].port, 0..2)
-        .unwrap_or(0);
-    let Some(element_param) = sys
-        .parameters()
-        .into_iter()
-        .find(|p| matches!(p, Param::Element { .. }) && sys.param(p).is_ok_and(|v| v > 0.0))
-    else {
+    let Some(params) = crate::planning::demo_parameters(&sys) else {
         skip("no element parameter with a positive value");
         return Ok(());
     };
-    let params = vec![element_param, Param::ModalDamping(driven)];
     let truth = sys.param_values(&params)?;
-    let f = sys.linear().frequency_hz(driven);
     let force = model.excitation()[0].amplitude;
-    let plans = vec![
-        SweepPlan::linear(
-            format!("{:.3} N up", 0.25 * force),
-            0.92 * f,
-            1.08 * f,
-            17,
-            0.25 * force,
-        ),
-        SweepPlan::linear(format!("{force:.3} N up"), 0.92 * f, 1.12 * f, 21, force),
-    ];
     let noise = 0.02;
-    let input = sys.inputs()[0].0.clone();
-    let data = Arc::new(synthesize(
-        &sys,
-        &input,
-        &plans,
-        3,
-        Noise::relative(noise),
-        2016,
-    )?);
-    let csv = report_dir.join("synthetic_test.csv");
-    crate::testdata::write_csv(&csv, &data)?;
+    let (data, source) = match virtual_data {
+        Some(d) => (
+            Arc::new(d),
+            "the force-controlled virtual test of stage 6".to_string(),
+        ),
+        None => {
+            let plans = crate::planning::demo_sweeps(&sys, &params, force);
+            let input = sys.inputs()[0].0.clone();
+            let d = synthesize(&sys, &input, &plans, 3, Noise::relative(noise), 2016)?;
+            let csv = report_dir.join("synthetic_test.csv");
+            crate::testdata::write_csv(&csv, &d)?;
+            (
+                Arc::new(d),
+                format!("a synthetic stepped-sine test ({})", csv.display()),
+            )
+        }
+    };
     say(&format!(
-        "[7/8] calibration: synthetic stepped-sine test of this model (stage 6 not built): {} \
-         sweeps, {} steps, harmonics 1-3 at {} sensors, {:.0} % noise (seed 2016)",
+        "[7/8] calibration on {source}: {} sweeps, {} steps, harmonics 1-3 at {} sensors, {:.0} % \
+         noise (seed 2016)",
         data.sweeps.len(),
         data.n_points(),
         data.channels.len(),
@@ -428,10 +413,8 @@ fn demo_calibration(
         plot_both(report_dir, "calibration_frf", &fig)?
     ));
     say(&format!(
-        "  test data: {} (try `nlsim calibrate {} {} --param {}={:e}:{:e} --compare 1,3`)",
-        csv.display(),
+        "  try `nlsim calibrate {} REPORT/virtual_test.csv --param {}={:e}:{:e} --compare 1,3`",
         model.name(),
-        csv.display(),
         params[0],
         truth[0] / 100.0,
         truth[0] * 100.0
@@ -566,21 +549,12 @@ pub fn run_demo(model: &str, report_dir: &Path, show: &dyn Fn(&str)) -> Result<(
     say("");
     demo_frf(&loaded.model, &reduced, report_dir, &say)?;
     say("");
-    let stages = [
-        (
-            "[5/8] pre-test planning (Fisher information)",
-            "the planning issue; no planning-ranking plot",
-        ),
-        (
-            "[6/8] virtual force-controlled test with a shaker model",
-            "the planning issue; stage 7 measures a synthetic stepped sine instead",
-        ),
-    ];
-    for (stage, needs) in stages {
-        say(&format!("{stage}: not built yet (needs {needs})"));
-    }
+    crate::planning::demo_planning(&loaded.model, &reduced, report_dir, &say)?;
     say("");
-    demo_calibration(&loaded.model, &reduced, report_dir, &say)?;
+    let virtual_data =
+        crate::planning::demo_virtual_test(&loaded.model, &reduced, report_dir, &say)?;
+    say("");
+    demo_calibration(&loaded.model, &reduced, virtual_data, report_dir, &say)?;
     say("");
     let summary = report_dir.join("summary.txt");
     say(&format!(

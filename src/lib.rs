@@ -57,6 +57,8 @@ pub mod mtx;
 #[cfg(feature = "io")]
 pub mod output;
 #[cfg(feature = "io")]
+pub mod planning;
+#[cfg(feature = "io")]
 pub mod plot;
 pub mod prelude;
 #[cfg(feature = "io")]
