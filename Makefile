@@ -28,3 +28,4 @@ bench:
 	cargo bench -p nlsim-bench --bench sim -- --quick --noplot
 	cargo bench -p nlsim-bench --bench hb -- --quick --noplot
 	cargo bench -p nlsim-bench --bench calib -- --quick --noplot
+	cargo bench -p nlsim-bench --bench plan -- --quick --noplot

@@ -625,6 +625,9 @@ mod cli {
             "stepped_sines",
             "calibration_frf",
             "kfold",
+            "planning_ranking",
+            "virtual_test_force",
+            "virtual_test_response",
         ] {
             let svg = std::fs::read_to_string(report.join(format!("{name}.svg"))).unwrap();
             assert!(svg.contains("<svg") && svg.contains("</svg>"), "{name}.svg");
@@ -645,10 +648,22 @@ mod cli {
             out.contains("[2/8] modes: the lowest 12") && out.contains("23.661478"),
             "{out}"
         );
-        assert!(out.contains("[5/8] pre-test planning (Fisher information): not built yet"));
-        // Stages 7-8: the synthetic test is calibrated with both metrics and cross-validated.
+        // Stages 5-6: candidate tests ranked by Fisher information; the test through a
+        // shaker, open loop and force-controlled.
         for s in [
-            "[7/8] calibration: synthetic stepped-sine test",
+            "[5/8] pre-test planning: 54 candidate tests",
+            "best vs worst: Cramér–Rao std",
+            "[6/8] virtual test: the stepped sines through a shaker model",
+            "17/17",
+            "21/21",
+        ] {
+            assert!(out.contains(s), "{s}: {out}");
+        }
+        assert!(!out.contains("not built yet"), "{out}");
+        // Stages 7-8: the controlled virtual test is calibrated with both metrics and
+        // cross-validated.
+        for s in [
+            "[7/8] calibration on the force-controlled virtual test of stage 6",
             "fundamental only: converged",
             "harmonics 1 and 3: converged",
             "[8/8] k-fold statistics: 10 folds",
@@ -659,10 +674,10 @@ mod cli {
             out.contains("[3/8] time response") && out.contains("FOH vs RK45 max difference"),
             "{out}"
         );
-        // The demo's synthetic test, read back from its CSV and calibrated from the command
+        // The demo's virtual test, read back from its CSV and calibrated from the command
         // line: k3 of the ECL tip spring (6e9 N/m³) comes back within 3 Cramér–Rao
         // deviations (about 0.4 % each with 2 % noise and harmonics 1 and 3).
-        let csv = report.join("synthetic_test.csv");
+        let csv = report.join("virtual_test.csv");
         let est = report.join("estimates.csv");
         let (rc, out, err) = nlsim(&[
             "calibrate",
@@ -696,7 +711,10 @@ mod cli {
             .lines()
             .map(String::from)
             .collect();
-        lines[6] = lines[6].replacen(",0.05,", ",fifty,", 1);
+        // The force_re column (the fifth) of the first data row.
+        let mut fields: Vec<&str> = lines[6].split(',').collect();
+        fields[4] = "fifty";
+        lines[6] = fields.join(",");
         std::fs::write(&bad, lines.join("\n")).unwrap();
         let (rc, _, err) = nlsim(&[
             "calibrate",
