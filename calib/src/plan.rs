@@ -407,15 +407,7 @@ fn relative_specs(params: &[Param], nominal: &[f64]) -> Vec<ParamSpec> {
 
 /// Test data with the system's sensors as channels, one step at `hz`, responses unknown.
 fn template(sys: &HbSystem, input: &str, harmonics: usize, noise: Noise) -> TestData {
-    let channels: Vec<Channel> = sys
-        .sensors()
-        .iter()
-        .map(|s| Channel {
-            name: s.name.clone(),
-            quantity: s.quantity,
-            noise,
-        })
-        .collect();
+    let channels: Vec<Channel> = crate::synthetic::sensor_channels(sys, noise);
     let nan = c64::new(f64::NAN, f64::NAN);
     TestData {
         input: input.into(),

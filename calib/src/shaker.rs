@@ -19,7 +19,7 @@
 //! voltage-driven test shows — and the nonlinearity's harmonics in `X_d` come back as force
 //! harmonics.
 
-use crate::data::{Channel, Noise, Step, Sweep, TestData};
+use crate::data::{Noise, Step, Sweep, TestData};
 use crate::objective::solve_step;
 use crate::synthetic::{Gaussian, SweepPlan};
 use faer::{Mat, c64};
@@ -657,15 +657,7 @@ pub fn virtual_test(
         });
         records.push(record);
     }
-    let channels = sys
-        .sensors()
-        .iter()
-        .map(|s| Channel {
-            name: s.name.clone(),
-            quantity: s.quantity,
-            noise,
-        })
-        .collect();
+    let channels = crate::synthetic::sensor_channels(sys, noise);
     let data = TestData {
         input: input.into(),
         channels,

@@ -64,15 +64,7 @@ pub fn synthesize(
     noise: Noise,
     seed: u64,
 ) -> Result<TestData> {
-    let channels: Vec<Channel> = sys
-        .sensors()
-        .iter()
-        .map(|s| Channel {
-            name: s.name.clone(),
-            quantity: s.quantity,
-            noise,
-        })
-        .collect();
+    let channels: Vec<Channel> = crate::synthetic::sensor_channels(sys, noise);
     // Noise-free data as a template: the objective's own sweep following then computes the
     // model response at the measured force.
     let nan = c64::new(f64::NAN, f64::NAN);
@@ -144,6 +136,18 @@ pub fn synthesize(
         }
     }
     Ok(data)
+}
+
+/// One channel per sensor of `sys` (its name and quantity) with noise `noise`.
+pub(crate) fn sensor_channels(sys: &HbSystem, noise: Noise) -> Vec<Channel> {
+    sys.sensors()
+        .iter()
+        .map(|s| Channel {
+            name: s.name.clone(),
+            quantity: s.quantity,
+            noise,
+        })
+        .collect()
 }
 
 /// Seeded standard normal draws (ChaCha8 and the Box–Muller transform): the noise of every
