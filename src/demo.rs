@@ -233,7 +233,8 @@ fn demo_frf(
 }
 
 /// Writes `fig` as `DIR/NAME.svg` and `DIR/NAME.png`; returns the two paths for the summary.
-fn plot_both(dir: &Path, name: &str, fig: &impl crate::plot::Figure) -> Result<String> {
+/// Writes `fig` as `dir/name.svg` and `.png`; their paths as text.
+pub(crate) fn plot_both(dir: &Path, name: &str, fig: &impl crate::plot::Figure) -> Result<String> {
     let paths = crate::plot::write_both(dir, name, fig)?;
     Ok(format!("{}, {}", paths[0].display(), paths[1].display()))
 }

@@ -2,6 +2,7 @@
 //! table of candidate tests by Fisher information, and a stepped-sine test through a shaker
 //! model with and without force control, whose data the calibration stage then uses.
 
+use crate::demo::plot_both;
 use crate::error::Result;
 use crate::plot::Lines;
 use nlsim_calib::{
@@ -28,13 +29,18 @@ pub fn demo_parameters(sys: &HbSystem) -> Option<Vec<Param>> {
     Some(vec![element, Param::ModalDamping(driven)])
 }
 
+/// The natural frequency (Hz) of the driven mode of [`demo_parameters`].
+fn driven_frequency(sys: &HbSystem, params: &[Param]) -> f64 {
+    match params.get(1) {
+        Some(Param::ModalDamping(r)) => sys.linear().frequency_hz(*r),
+        _ => sys.linear().frequency_hz(0),
+    }
+}
+
 /// The two stepped sines of the demo's test: a quarter of the nominal force over ±8 % of
 /// the driven mode's frequency, and the nominal force from −8 % to +12 %.
 pub fn demo_sweeps(sys: &HbSystem, params: &[Param], force: f64) -> Vec<SweepPlan> {
-    let f = match params.get(1) {
-        Some(Param::ModalDamping(r)) => sys.linear().frequency_hz(*r),
-        _ => sys.linear().frequency_hz(0),
-    };
+    let f = driven_frequency(sys, params);
     vec![
         SweepPlan::linear(
             format!("{:.3} N up", 0.25 * force),
@@ -45,11 +51,6 @@ pub fn demo_sweeps(sys: &HbSystem, params: &[Param], force: f64) -> Vec<SweepPla
         ),
         SweepPlan::linear(format!("{force:.3} N up"), 0.92 * f, 1.12 * f, 21, force),
     ]
-}
-
-fn plot_both(dir: &Path, name: &str, fig: &impl crate::plot::Figure) -> Result<String> {
-    let paths = crate::plot::write_both(dir, name, fig)?;
-    Ok(format!("{}, {}", paths[0].display(), paths[1].display()))
 }
 
 /// Stage 5: candidate tests of `model` ranked by D-optimality: 3 force levels × 3 bands ×
@@ -76,10 +77,7 @@ pub fn demo_planning(
     let planner = Planner::new(&sys, &params)?;
     let force = model.excitation()[0].amplitude;
     let input = sys.inputs()[0].0.clone();
-    let f = match &params[1] {
-        Param::ModalDamping(r) => sys.linear().frequency_hz(*r),
-        _ => sys.linear().frequency_hz(0),
-    };
+    let f = driven_frequency(&sys, &params);
     let bands = [
         ("below", 0.85, 0.97),
         ("across", 0.92, 1.12),

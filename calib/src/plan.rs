@@ -405,9 +405,8 @@ fn relative_specs(params: &[Param], nominal: &[f64]) -> Vec<ParamSpec> {
         .collect()
 }
 
-/// Test data with the system's sensors as channels, one step at `hz`, responses unknown.
-fn template(sys: &HbSystem, input: &str, harmonics: usize, noise: Noise) -> TestData {
-    let channels: Vec<Channel> = crate::synthetic::sensor_channels(sys, noise);
+/// Test data of `channels` driven at `input`, one step at 1 Hz, responses unknown.
+fn template(channels: Vec<Channel>, input: &str, harmonics: usize) -> TestData {
     let nan = c64::new(f64::NAN, f64::NAN);
     TestData {
         input: input.into(),
@@ -436,7 +435,11 @@ impl Planner {
         let input = first_input(sys)?;
         let prototype = FrfObjective::new(
             sys,
-            Arc::new(template(sys, &input, 1, Noise::relative(0.01))),
+            Arc::new(template(
+                crate::synthetic::sensor_channels(sys, Noise::relative(0.01)),
+                &input,
+                1,
+            )),
             relative_specs(params, &nominal),
             ObjectiveConfig::default(),
         )?;
@@ -457,22 +460,36 @@ impl Planner {
         hb: HbConfig,
         params: &[Param],
     ) -> Result<Self> {
-        let red = nlsim_reduction::reduce(model, reduction)?;
-        let sys = HbSystem::from_model(model, &red, set, hb.clone())?;
-        let nominal: Vec<f64> = params
+        let Ok(nominal) = params
             .iter()
-            .map(|p| match model.param(p) {
-                Ok(v) if !matches!(p, Param::Element { .. }) => Ok(v),
-                _ => sys.param(p),
+            .map(|p| model.param(p))
+            .collect::<Result<Vec<f64>>>()
+        else {
+            // Parameters of the reduced model (modal ones), which FE-level ones cannot join:
+            // the planner of the reduced system.
+            let red = nlsim_reduction::reduce(model, reduction)?;
+            return Self::new(&HbSystem::from_model(model, &red, set, hb)?, params);
+        };
+        let input = model
+            .excitation()
+            .first()
+            .map(|e| e.name.clone())
+            .ok_or_else(|| Error::invalid("planning", "the model has no excitation to drive"))?;
+        let channels = model
+            .sensors()
+            .iter()
+            .map(|s| Channel {
+                name: s.name.clone(),
+                quantity: s.quantity,
+                noise: Noise::relative(0.01),
             })
-            .collect::<Result<_>>()?;
-        let input = first_input(&sys)?;
+            .collect();
         let prototype = FrfObjective::from_model(
             model,
             reduction,
             set,
             hb,
-            Arc::new(template(&sys, &input, 1, Noise::relative(0.01))),
+            Arc::new(template(channels, &input, 1)),
             relative_specs(params, &nominal),
             ObjectiveConfig::default(),
         )?;
@@ -550,7 +567,11 @@ impl Planner {
             .iter()
             .chain(exciter.side.iter().map(|t| &t.harmonic))
             .fold(1, |a, &b| a.max(b));
-        let mut data = template(self.system(), &exciter.input, h_data, noise);
+        let mut data = template(
+            crate::synthetic::sensor_channels(self.system(), noise),
+            &exciter.input,
+            h_data,
+        );
         let force = exciter.force(h_data);
         let nan = c64::new(f64::NAN, f64::NAN);
         let freqs = band.frequencies_hz();

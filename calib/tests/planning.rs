@@ -370,3 +370,38 @@ fn greedy_exchange_placement_finds_the_enumerated_optimum() {
         assert!(pl.greedy_log_det >= best - 2f64.ln(), "{pl:?} vs {best}");
     }
 }
+
+#[test]
+fn a_planner_from_the_model_equals_one_from_its_reduced_system() {
+    let model = beam();
+    let (sys, _) = system(&model, 6);
+    let p = vec![Param::element("tip_spring", "k3")];
+    let f = sys.linear().frequency_hz(0);
+    let band = Band {
+        label: "b".into(),
+        from_hz: 0.95 * f,
+        to_hz: 1.1 * f,
+        steps: 8,
+    };
+    let ex = Exciter::sine("shaker", 0.2);
+    let a = Planner::new(&sys, &p)
+        .unwrap()
+        .sweep_information(&ex, &band, noise(), &[1])
+        .unwrap();
+    let b = Planner::from_model(
+        &model,
+        &ReductionConfig::lowest(6),
+        HarmonicSet::new(3, 1).unwrap(),
+        HbConfig::default(),
+        &p,
+    )
+    .unwrap()
+    .sweep_information(&ex, &band, noise(), &[1])
+    .unwrap();
+    let (fa, fb) = (a.fim(&[0, 1, 2], &[0], None), b.fim(&[0, 1, 2], &[0], None));
+    // The same reduction and solves: equal to round-off.
+    assert!(
+        (&fa - &fb).norm_max() <= 1e-10 * fa.norm_max(),
+        "{fa:?} vs {fb:?}"
+    );
+}
