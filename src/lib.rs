@@ -62,6 +62,8 @@ pub mod planning;
 pub mod plot;
 pub mod prelude;
 #[cfg(feature = "io")]
+pub mod pretest;
+#[cfg(feature = "io")]
 pub mod run;
 #[cfg(feature = "io")]
 pub mod simulate;
@@ -72,6 +74,8 @@ pub mod summary;
 pub mod testdata;
 #[cfg(feature = "io")]
 pub mod uff;
+#[cfg(feature = "io")]
+pub mod vtest;
 
 pub use error::{Error, Result};
 pub use nlsim_calib as calib;

@@ -66,6 +66,23 @@ pub(crate) fn read_text(path: &Path) -> Result<String> {
     })
 }
 
+/// Reads a settings file (plan, test, prior) of at most `max_bytes`; the error names it and
+/// says how large it is, so that a wrong path to a huge file does not fill the memory.
+pub(crate) fn read_text_bounded(path: &Path, max_bytes: u64) -> Result<String> {
+    let io = |source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let len = std::fs::metadata(path).map_err(io)?.len();
+    if len > max_bytes {
+        return Err(Error::Usage(format!(
+            "{}: {len} bytes; a settings file holds at most {max_bytes} (is this the right file?)",
+            path.display()
+        )));
+    }
+    read_text(path)
+}
+
 /// The temporary name `path` is written under first: `NAME.tmp-PID`, beside it.
 pub(crate) fn temp_path(path: &Path) -> PathBuf {
     let mut name = path

@@ -2712,3 +2712,324 @@ seed = 9
         );
     }
 }
+
+/// `nlsim plan` and `nlsim test`, and the `plan-candidates` batch.
+mod planning_cli {
+    use super::*;
+
+    const PLAN: &str = r#"params = ["tip_spring.k3", "mode2.zeta"]
+levels = [0.05, 0.2]
+measured = [[1], [1, 3]]
+noise = { relative = 0.01, absolute = 1e-3 }
+
+[[actuator]]
+name = "mid_drive"
+dof = "11:uz"
+
+[[sensor]]
+name = "n7"
+dof = "7:uz"
+
+[[signal]]
+label = "sine"
+
+[[signal]]
+label = "sine+3h"
+side = [{ harmonic = 3, fraction = 0.05 }]
+
+[[band]]
+label = "across"
+from = 22.0
+to = 30.0
+steps = 9
+
+[[band]]
+label = "below"
+from = 20.0
+to = 24.0
+steps = 9
+"#;
+
+    /// Runs the binary under a 3 GB address-space limit, single-threaded: a file that
+    /// asks for too much must be refused before anything is allocated, not abort.
+    fn nlsim_limited(args: &[&str]) -> (i32, String, String) {
+        let mut cmd = format!("ulimit -v 3000000; exec '{}'", env!("CARGO_BIN_EXE_nlsim"));
+        for a in args {
+            cmd.push_str(&format!(" '{a}'"));
+        }
+        let out = Command::new("sh").args(["-c", &cmd]).output().unwrap();
+        (
+            out.status.code().unwrap_or(-1),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    }
+
+    fn csv_rows(path: &Path) -> Vec<Vec<String>> {
+        std::fs::read_to_string(path)
+            .unwrap()
+            .lines()
+            .map(|l| l.split(',').map(str::to_string).collect())
+            .collect()
+    }
+
+    fn col(rows: &[Vec<String>], name: &str) -> usize {
+        rows[0].iter().position(|c| c == name).unwrap()
+    }
+
+    /// The plan ranks 2 drives × 2 levels × 2 signals × 2 bands × 7 sensor sets × 2
+    /// harmonic sets = 224 designs best first; the best design's information written as
+    /// `fim_best.csv` has the ln det and Cramér–Rao deviations of the table (closed form
+    /// for 2 × 2); the ranking is the same on one thread; a prior of the best design's own
+    /// information raises ln det by at least 2 ln 2; the same plan as a two-shard
+    /// `plan-candidates` batch merges into a byte-identical ranking.
+    #[test]
+    fn plan_ranks_reports_takes_a_prior_and_batches() {
+        let dir = scratch("plan");
+        let plan = dir.join("plan.toml");
+        std::fs::write(&plan, PLAN).unwrap();
+        let (rc, out, err) = nlsim(&["plan", "ecl_beam", plan.to_str().unwrap()]);
+        assert_eq!(rc, 0, "{out}\n{err}");
+        assert!(out.contains("224 candidate designs"), "{out}");
+        let report = dir.join("plan-report");
+        for f in [
+            "summary.txt",
+            "ranking.csv",
+            "fim_best.csv",
+            "ranking.svg",
+            "crb.png",
+        ] {
+            assert!(report.join(f).is_file(), "{f} missing");
+        }
+        let rows = csv_rows(&report.join("ranking.csv"));
+        assert_eq!(rows.len(), 225);
+        let ld = col(&rows, "log_det");
+        let v: Vec<f64> = rows[1..].iter().map(|r| r[ld].parse().unwrap()).collect();
+        assert!(v.windows(2).all(|w| w[0] >= w[1]), "not sorted");
+        // Closed form for the best design's 2 × 2 information.
+        let fim = csv_rows(&report.join("fim_best.csv"));
+        let f: Vec<f64> = fim[1..]
+            .iter()
+            .flat_map(|r| r[1..].iter().map(|x| x.parse::<f64>().unwrap()))
+            .collect();
+        let det = f[0] * f[3] - f[1] * f[2];
+        assert!((det.ln() - v[0]).abs() < 1e-9 * v[0].abs().max(1.0));
+        let s0: f64 = rows[1][col(&rows, "std_tip_spring.k3")].parse().unwrap();
+        let s1: f64 = rows[1][col(&rows, "std_mode2.zeta")].parse().unwrap();
+        assert!(((f[3] / det).sqrt() / s0 - 1.0).abs() < 1e-8);
+        assert!(((f[0] / det).sqrt() / s1 - 1.0).abs() < 1e-8);
+
+        // One thread: the same ranking, byte for byte.
+        let one = dir.join("one");
+        let (rc, _, err) = nlsim(&[
+            "--threads",
+            "1",
+            "plan",
+            "ecl_beam",
+            plan.to_str().unwrap(),
+            "--report",
+            one.to_str().unwrap(),
+        ]);
+        assert_eq!(rc, 0, "{err}");
+        let ranking = std::fs::read_to_string(report.join("ranking.csv")).unwrap();
+        assert_eq!(
+            std::fs::read_to_string(one.join("ranking.csv")).unwrap(),
+            ranking
+        );
+
+        // The best design's information as a prior.
+        let with_prior = dir.join("prior.toml");
+        std::fs::write(
+            &with_prior,
+            PLAN.replace(
+                "levels",
+                "prior = \"plan-report/fim_best.csv\"\nreport = \"prior-report\"\nlevels",
+            ),
+        )
+        .unwrap();
+        let (rc, out, err) = nlsim(&["plan", "ecl_beam", with_prior.to_str().unwrap()]);
+        assert_eq!(rc, 0, "{out}\n{err}");
+        assert!(out.contains("prior information added"), "{out}");
+        let p = csv_rows(&dir.join("prior-report/ranking.csv"));
+        let best: f64 = p[1][ld].parse().unwrap();
+        assert!(best >= v[0] + 2.0 * 2f64.ln() - 1e-9, "{best} vs {}", v[0]);
+
+        // The same plan as a batch of candidate sweeps in two shards.
+        let table = PLAN
+            .replace("[[actuator]]", "[[plan.actuator]]")
+            .replace("[[sensor]]", "[[plan.sensor]]")
+            .replace("[[signal]]", "[[plan.signal]]")
+            .replace("[[band]]", "[[plan.band]]");
+        let jobs = dir.join("jobs.toml");
+        std::fs::write(
+            &jobs,
+            format!(
+                "name = \"p\"\ncommand = \"plan-candidates\"\nmodel = \"ecl_beam\"\n[plan]\n{table}"
+            ),
+        )
+        .unwrap();
+        let j = jobs.to_str().unwrap();
+        for t in ["0", "1"] {
+            let (rc, _, err) = nlsim(&["batch", j, "--task-count", "2", "--task-index", t]);
+            assert_eq!(rc, 0, "{err}");
+        }
+        let (rc, out, err) = nlsim(&["batch", "merge", j]);
+        assert_eq!(rc, 0, "{out}\n{err}");
+        assert!(out.contains("224 candidate designs"), "{out}");
+        assert_eq!(
+            std::fs::read_to_string(dir.join("p-results/plan-report/ranking.csv")).unwrap(),
+            ranking
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Bad plans name the file, line and key, or the DOF; a plan of 10^11 designs is
+    /// refused by counting, under a 3 GB address-space limit.
+    #[test]
+    fn bad_plans_are_named_and_huge_ones_refused_before_allocating() {
+        let dir = scratch("plan-errors");
+        let p = dir.join("plan.toml");
+        let p_s = p.to_str().unwrap();
+        let cases: Vec<(String, Vec<&str>)> = vec![
+            (
+                PLAN.replace("dof = \"11:uz\"", "dof = \"99:uz\""),
+                vec!["actuator 'mid_drive'", "99:uz"],
+            ),
+            (
+                PLAN.replace("steps = 9\n", "steps = 9\nspeed = 1\n"),
+                vec!["plan.toml:26", "speed"],
+            ),
+            (
+                PLAN.replace("[[1], [1, 3]]", "[[1], [4]]"),
+                vec!["plan.toml:3", "measured"],
+            ),
+            (
+                PLAN.replace("tip_spring.k3", "tip_spring.k9"),
+                vec!["tip_spring.k9"],
+            ),
+        ];
+        for (text, want) in cases {
+            std::fs::write(&p, &text).unwrap();
+            let (rc, _, err) = nlsim(&["plan", "ecl_beam", p_s]);
+            assert_ne!(rc, 0);
+            for w in want {
+                assert!(err.contains(w), "{w}: {err}");
+            }
+        }
+        // 40 candidate sensors in sets of 20: C(40, 20) ≈ 1.4e11 designs per sweep.
+        let mut huge = PLAN.replace("levels", "sensor_counts = [20]\nlevels");
+        for node in 2..=21 {
+            for c in ["uy", "uz"] {
+                huge.push_str(&format!(
+                    "[[sensor]]\nname = \"s{node}{c}\"\ndof = \"{node}:{c}\"\n"
+                ));
+            }
+        }
+        std::fs::write(&p, &huge).unwrap();
+        let (rc, _, err) = nlsim_limited(&["--threads", "1", "plan", "ecl_beam", p_s]);
+        assert_eq!(rc, 2, "{err}");
+        assert!(
+            err.contains("candidate designs") && err.contains("greedy"),
+            "{err}"
+        );
+        // A settings file that is not one: refused by its size.
+        let big = dir.join("big.toml");
+        std::fs::write(&big, vec![b'#'; 2 << 20]).unwrap();
+        let (rc, _, err) = nlsim_limited(&["plan", "ecl_beam", big.to_str().unwrap()]);
+        assert_eq!(rc, 2, "{err}");
+        assert!(err.contains("at most"), "{err}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    const TEST: &str = r#"drive = "shaker"
+seed = 7
+noise = { relative = 0.02 }
+
+[control]
+tolerance = 0.01
+
+[[sweep]]
+label = "0.2 N up"
+from = 21.0
+to = 30.0
+steps = 19
+force = 0.2
+"#;
+
+    /// `nlsim test`: the controlled force meets its 1 % tolerance at every converged step
+    /// (from control.csv, before noise), the voltage-driven one drops below half the target
+    /// near resonance; the data file reads back with the sweep's steps; `--open-loop`
+    /// writes voltage-driven data; bad files are named.
+    #[test]
+    fn virtual_test_controls_the_force_and_writes_calibration_data() {
+        let dir = scratch("vtest");
+        let t = dir.join("test.toml");
+        std::fs::write(&t, TEST).unwrap();
+        let (rc, out, err) = nlsim(&["test", "ecl_beam", t.to_str().unwrap()]);
+        assert_eq!(rc, 0, "{out}\n{err}");
+        assert!(out.contains("19/19"), "{out}");
+        let rows = csv_rows(&dir.join("test-report/control.csv"));
+        let (run, st) = (col(&rows, "run"), col(&rows, "status"));
+        let (re, im) = (col(&rows, "force1_re"), col(&rows, "force1_im"));
+        let f1 = |r: &Vec<String>| {
+            r[re]
+                .parse::<f64>()
+                .unwrap()
+                .hypot(r[im].parse::<f64>().unwrap())
+        };
+        let controlled: Vec<&Vec<String>> = rows[1..].iter().filter(|r| r[run] == "test").collect();
+        assert_eq!(controlled.len(), 19);
+        for r in &controlled {
+            assert_eq!(r[st], "converged");
+            assert!((f1(r) / 0.2 - 1.0).abs() <= 0.01 + 1e-12, "{r:?}");
+        }
+        let open = rows[1..]
+            .iter()
+            .filter(|r| r[run] == "open-loop")
+            .map(f1)
+            .fold(f64::INFINITY, f64::min);
+        assert!(open < 0.5 * 0.2, "open-loop minimum {open} N");
+        let data = nlsim::testdata::read_csv(&dir.join("virtual_test.csv")).unwrap();
+        assert_eq!(data.sweeps.len(), 1);
+        assert_eq!(data.sweeps[0].steps.len(), 19);
+        assert_eq!(data.input, "shaker");
+
+        let h5 = dir.join("open.h5");
+        let (rc, out, err) = nlsim(&[
+            "test",
+            "ecl_beam",
+            t.to_str().unwrap(),
+            "--open-loop",
+            "--out",
+            h5.to_str().unwrap(),
+        ]);
+        assert_eq!(rc, 0, "{out}\n{err}");
+        assert!(out.contains("voltage-driven"), "{out}");
+        let open = nlsim::testdata::read_h5(&h5).unwrap();
+        let min = open.sweeps[0]
+            .steps
+            .iter()
+            .map(|s| s.force[0].norm())
+            .fold(f64::INFINITY, f64::min);
+        assert!(min < 0.1, "{min}");
+
+        for (text, want) in [
+            (TEST.replace("force = 0.2", "force = 0.0"), "test.toml:8"),
+            (
+                TEST.replace("drive = \"shaker\"", "drive = \"nowhere\""),
+                "nowhere",
+            ),
+            (
+                TEST.replace("drive = \"shaker\"", "drive_dof = \"77:uz\""),
+                "77:uz",
+            ),
+            (TEST.replace("[control]", "[controller]"), "controller"),
+        ] {
+            std::fs::write(&t, &text).unwrap();
+            let (rc, _, err) = nlsim(&["test", "ecl_beam", t.to_str().unwrap()]);
+            assert_ne!(rc, 0);
+            assert!(err.contains(want), "{want}: {err}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

@@ -396,9 +396,22 @@ impl Rig<'_> {
                 });
                 Ok(Some((x, q, jq)))
             };
-        let Some((mut x, mut q, mut jq)) = eval(self, &phi, &(x0, w0))? else {
-            return Ok(Err(Status::NonFinite));
+        let first = match eval(self, &phi, &(x0, w0))? {
+            Some(r) => r,
+            // The warm start's force has no solution near the previous one (a jump past a
+            // fold): start from the coupled linear response instead.
+            None if !cold => {
+                cold = true;
+                phi = self.linear_force(omega, &g, &z, volt)?;
+                let lin = self.sys.linear_guess(omega, 1.0);
+                match eval(self, &phi, &(lin, omega))? {
+                    Some(r) => r,
+                    None => return Ok(Err(Status::NonFinite)),
+                }
+            }
+            None => return Ok(Err(Status::NonFinite)),
         };
+        let (mut x, mut q, mut jq) = first;
         for _ in 0..60 {
             if norm(&q) <= 1e-10 * scale {
                 // dφ/dv = Jq⁻¹ G.

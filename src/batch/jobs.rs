@@ -86,6 +86,7 @@ struct JobsFile {
     lhs: Option<LhsTable>,
     calibrate: Option<crate::calibration::CalibrationTable>,
     estimate: Option<BTreeMap<String, f64>>,
+    plan: Option<crate::pretest::PlanTable>,
 }
 
 /// FNV-1a, 64 bit: a hash that is the same on every machine and Rust version.
@@ -142,6 +143,7 @@ impl Batch {
         // The axes of the job grid: each sweep, then the Latin hypercube (or the candidates
         // or folds of a calibration).
         let mut axes: Vec<Vec<Vec<Assignment>>> = Vec::new();
+        let has_plan = f.plan.is_some();
         let command = match f.command.as_str() {
             "frf" => {
                 if f.simulate.is_some() {
@@ -344,17 +346,66 @@ impl Batch {
                     BatchCommand::CalibrateFolds(Box::new(req), values)
                 }
             }
+            "plan-candidates" => {
+                for (present, key) in [
+                    (f.frf.is_some(), "[frf]"),
+                    (f.simulate.is_some(), "[simulate]"),
+                    (!f.sweep.is_empty(), "[[sweep]]"),
+                    (f.lhs.is_some(), "[lhs]"),
+                    (!f.set.is_empty(), "set"),
+                    (f.seed.is_some(), "seed"),
+                    (f.calibrate.is_some(), "[calibrate]"),
+                    (f.estimate.is_some(), "estimate"),
+                ] {
+                    if present {
+                        return Err(err(
+                            at(key),
+                            key.trim_matches(['[', ']']),
+                            "a batch of 'plan-candidates' takes its settings from [plan] (`set` \
+                             there); its jobs are the candidate sweeps"
+                                .into(),
+                        ));
+                    }
+                }
+                let Some(t) = f.plan else {
+                    return Err(err(
+                        at("command"),
+                        "plan",
+                        "command 'plan-candidates' needs a [plan] table (the keys of a plan \
+                         file)"
+                            .into(),
+                    ));
+                };
+                let req = t.into_request(f.model.clone(), text, path)?;
+                // The jobs are the candidate sweeps, which depend on the model's drive
+                // points and force: load it (no reduction) to count them.
+                let (_, c) = crate::pretest::plan_candidates(&req)
+                    .map_err(|e| err(at("[plan]"), "plan", e.to_string()))?;
+                axes.push(
+                    (0..c.sweeps.len())
+                        .map(|i| vec![Assignment::PlanSweep(i)])
+                        .collect(),
+                );
+                BatchCommand::PlanCandidates(Box::new(req))
+            }
             other => {
                 return Err(err(
                     at("command"),
                     "command",
                     format!(
                         "unknown command '{other}'; a batch runs frf, simulate, \
-                         calibrate-candidates or calibrate-folds"
+                         calibrate-candidates, calibrate-folds or plan-candidates"
                     ),
                 ));
             }
         };
+        if has_plan && !matches!(command, BatchCommand::PlanCandidates(_)) {
+            return Err(err(
+                at("[plan]"),
+                "plan",
+                format!("a [plan] table in a batch of '{}'", f.command),
+            ));
+        }
         match &command {
             BatchCommand::CalibrateCandidates(req) => {
                 axes.push(

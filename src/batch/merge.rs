@@ -20,8 +20,8 @@ pub struct MergeOutcome {
     pub jobs: usize,
     /// Jobs that had failed.
     pub failed: usize,
-    /// What a calibration batch found (best candidates, or the fold statistics), one line
-    /// each; empty for other batches.
+    /// What a calibration batch found (best candidates, or the fold statistics) or a plan
+    /// batch's ranking, one line each; empty for other batches.
     pub summary: Vec<String>,
 }
 
@@ -102,6 +102,7 @@ pub fn merge(b: &Batch) -> Result<MergeOutcome> {
     }
     let mut failed = 0;
     let mut summary = Vec::new();
+    let mut plan_groups: Vec<hdf5::Group> = Vec::new();
     crate::output::write_atomically(&path, ".h5", |tmp, _| {
         let err = h5err(tmp);
         let out = hdf5::File::create(tmp).map_err(&err)?;
@@ -130,6 +131,25 @@ pub fn merge(b: &Batch) -> Result<MergeOutcome> {
             copy_group(&src, &dst).map_err(h5err(&p))?;
             if calib_req.is_some() {
                 calib_rows.push(read_calib_job(&src));
+            }
+            if matches!(b.command, BatchCommand::PlanCandidates(_)) {
+                plan_groups.push(src);
+            }
+        }
+        if let BatchCommand::PlanCandidates(req) = &b.command {
+            match crate::pretest::merged_plan(req, &plan_groups) {
+                Ok(run) => {
+                    crate::pretest::write_ranking(&root, &run).map_err(&err)?;
+                    let dir = b.output.join("plan-report");
+                    crate::pretest::write_plan_report(&dir, &run)?;
+                    summary = run.summary();
+                    summary.push(format!(
+                        "every design: {} (and group /ranking of the merged file); plots in {}",
+                        dir.join("ranking.csv").display(),
+                        dir.display()
+                    ));
+                }
+                Err(e) => summary.push(format!("ranking left out: {e}")),
             }
         }
         // The parameter table: NaN where a job does not set the parameter.

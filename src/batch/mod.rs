@@ -5,7 +5,7 @@
 //!
 //! ```toml
 //! name = "duffing-k3"           # names the output directory and the SLURM job
-//! command = "frf"               # frf | simulate | calibrate-candidates | calibrate-folds
+//! command = "frf"               # frf | simulate | calibrate-candidates | calibrate-folds | plan-candidates
 //! model = "duffing_fig3"        # model file or built-in model
 //! seed = 7                      # seed of the Latin hypercube (recorded in every file)
 //! set = { "spring.c" = 0.5 }    # fixed element-parameter overrides
@@ -32,6 +32,11 @@
 //! hypercube) in job `i`, and `nlsim calibrate --candidates merged.h5` goes on from them;
 //! `calibrate-folds` runs fold `f` of the cross validation in job `f`, from the top-level
 //! `estimate = { "tip.k3" = 1.2e9 }`, and the merge adds the fold statistics.
+//!
+//! A plan spreads the same way: `plan-candidates` with a `[plan]` table (the keys of a plan
+//! file, [`crate::pretest`]) predicts candidate sweep `i` and its Fisher information in job
+//! `i`; the merge ranks every design (sweeps × sensor sets × harmonic sets) and writes the
+//! ranking beside the jobs.
 //!
 //! Job `i` belongs to shard `i mod T` of `T`. A shard computes its jobs in parallel (rayon),
 //! each job single-threaded inside, so results do not depend on the thread count or on the
@@ -74,6 +79,9 @@ pub enum BatchCommand {
     /// The cross validation of a calibration: job `f` runs fold `f` from the estimate
     /// (parameter values in the request's order).
     CalibrateFolds(Box<CalibrationRequest>, Vec<f64>),
+    /// The candidate sweeps of a plan: job `i` predicts sweep `i` and its Fisher
+    /// information; the merge ranks every design.
+    PlanCandidates(Box<crate::pretest::PlanRequest>),
 }
 
 impl BatchCommand {
@@ -84,6 +92,7 @@ impl BatchCommand {
             BatchCommand::Simulate(_) => "simulate",
             BatchCommand::CalibrateCandidates(_) => "calibrate-candidates",
             BatchCommand::CalibrateFolds(..) => "calibrate-folds",
+            BatchCommand::PlanCandidates(_) => "plan-candidates",
         }
     }
 }
@@ -103,6 +112,8 @@ pub enum Assignment {
     Candidate(usize),
     /// Fold `f` of a calibration's cross validation (0-based).
     Fold(usize),
+    /// Candidate sweep `i` of a plan (0-based).
+    PlanSweep(usize),
 }
 
 impl std::fmt::Display for Assignment {
@@ -114,6 +125,7 @@ impl std::fmt::Display for Assignment {
             Assignment::Model(s) => write!(f, "model={s}"),
             Assignment::Candidate(i) => write!(f, "candidate={i}"),
             Assignment::Fold(i) => write!(f, "fold={}", i + 1),
+            Assignment::PlanSweep(i) => write!(f, "sweep={}", i + 1),
         }
     }
 }

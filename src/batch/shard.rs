@@ -56,6 +56,8 @@ enum JobResult {
     Candidate(Vec<f64>, f64),
     /// A fold of a calibration's cross validation.
     Fold(nlsim_calib::FoldResult),
+    /// A candidate sweep of a plan: its information and the nominal parameter values.
+    PlanSweep(Box<nlsim_calib::SweepInformation>, Vec<f64>),
 }
 
 /// What the jobs of a calibration shard share: the objective (model loaded and reduced once)
@@ -63,6 +65,14 @@ enum JobResult {
 struct CalibContext {
     prepared: Prepared,
     candidates: Vec<Vec<f64>>,
+}
+
+/// The planner a plan batch's jobs share (`None` for other batches).
+fn plan_context(b: &Batch) -> Result<Option<crate::pretest::PlanSetup>> {
+    match &b.command {
+        BatchCommand::PlanCandidates(req) => Ok(Some(crate::pretest::prepare_plan(req)?)),
+        _ => Ok(None),
+    }
 }
 
 /// The shared part of a calibration batch's jobs (`None` for other batches).
@@ -84,7 +94,12 @@ fn calib_context(b: &Batch) -> Result<Option<CalibContext>> {
     }))
 }
 
-fn run_job(b: &Batch, job: &Job, ctx: Option<&CalibContext>) -> Result<JobResult> {
+fn run_job(
+    b: &Batch,
+    job: &Job,
+    ctx: Option<&CalibContext>,
+    plan: Option<&crate::pretest::PlanSetup>,
+) -> Result<JobResult> {
     let mut spec = b.model.clone();
     let mut sets = b.sets.clone();
     let mut force = None;
@@ -114,6 +129,16 @@ fn run_job(b: &Batch, job: &Job, ctx: Option<&CalibContext>) -> Result<JobResult
                 let r = nlsim_calib::fold(&ctx.prepared.objective, estimate, &req.config, f)?;
                 return Ok(JobResult::Fold(r));
             }
+            &Assignment::PlanSweep(i) => {
+                let (Some(setup), BatchCommand::PlanCandidates(req)) = (plan, &b.command) else {
+                    return Err(Error::Failed("no planning context".into()));
+                };
+                let info = crate::pretest::sweep_information(setup, i, req.noise)?;
+                return Ok(JobResult::PlanSweep(
+                    Box::new(info),
+                    setup.planner.nominal().to_vec(),
+                ));
+            }
         }
     }
     let model = crate::run::load_for_run(&spec, &sets)?;
@@ -140,9 +165,12 @@ fn run_job(b: &Batch, job: &Job, ctx: Option<&CalibContext>) -> Result<JobResult
                 &mut |_, _| {},
             )?)))
         }
-        BatchCommand::CalibrateCandidates(_) | BatchCommand::CalibrateFolds(..) => Err(
-            Error::Failed(format!("job {} names no candidate or fold", job.index)),
-        ),
+        BatchCommand::CalibrateCandidates(_)
+        | BatchCommand::CalibrateFolds(..)
+        | BatchCommand::PlanCandidates(_) => Err(Error::Failed(format!(
+            "job {} names no candidate, fold or sweep",
+            job.index
+        ))),
     }
 }
 
@@ -196,6 +224,9 @@ fn write_job(
                         g.new_attr::<f64>().create(name)?.write_scalar(&v)?;
                     }
                     Ok(())
+                }
+                JobResult::PlanSweep(info, nominal) => {
+                    crate::pretest::write_sweep_group(&g, info, nominal)
                 }
                 JobResult::Simulate(run) => {
                     let info = crate::simulate::RunInfo {
@@ -253,6 +284,7 @@ pub fn run_shard(
     }
     let start = Instant::now();
     let ctx = calib_context(b)?;
+    let plan = plan_context(b)?;
     let mine: Vec<&Job> = b.shard_jobs(task, count).collect();
     let total = mine.len();
     let mut failed = Vec::new();
@@ -271,7 +303,7 @@ pub fn run_shard(
         for chunk in mine.chunks(width) {
             let results: Vec<Result<JobResult>> = chunk
                 .par_iter()
-                .map(|j| run_job(b, j, ctx.as_ref()))
+                .map(|j| run_job(b, j, ctx.as_ref(), plan.as_ref()))
                 .collect();
             for (job, r) in chunk.iter().zip(&results) {
                 if let Err(e) = write_job(&jobs, b, job, r).map_err(&err) {

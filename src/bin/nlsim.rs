@@ -241,6 +241,49 @@ enum Command {
         #[arg(long)]
         report: Option<std::path::PathBuf>,
     },
+    /// Pre-test planning: rank candidate tests (drive points, force levels, multi-sine
+    /// signals, frequency bands, sensor sets, measured harmonics) by the Fisher information
+    /// of the parameters from the analytic sensitivities, with Cramér–Rao bounds and
+    /// collinearity. PLAN is a plan file (docs/planning.md).
+    Plan {
+        /// Model file (.toml) or built-in model, e.g. `ecl_beam`.
+        model: String,
+        /// Plan file (TOML): parameters and candidates.
+        plan: std::path::PathBuf,
+        /// Ranking criterion: D, T, A, E or max-variance [default: the file's, else D].
+        #[arg(long)]
+        criterion: Option<String>,
+        /// Rows of the printed table [default: the file's, else 10].
+        #[arg(long)]
+        top: Option<usize>,
+        /// Report folder: summary, ranking.csv, fim_best.csv and plots [default: the file's,
+        /// else PLAN's name with `-report`, beside it].
+        #[arg(long)]
+        report: Option<std::path::PathBuf>,
+    },
+    /// Virtual stepped-sine test through an electrodynamic shaker model, voltage-driven or
+    /// force-controlled off line; writes test data that `nlsim calibrate` reads. TEST is a
+    /// test file (docs/planning.md).
+    Test {
+        /// Model file (.toml) or built-in model, e.g. `ecl_beam`.
+        model: String,
+        /// Test file (TOML): drive point, shaker, controller, sweeps, noise.
+        test: std::path::PathBuf,
+        /// Test data, .csv or .h5 [default: the file's `out`, else virtual_test.csv beside
+        /// it].
+        #[arg(long)]
+        out: Option<std::path::PathBuf>,
+        /// Seed of the measurement noise [default: the file's, else 1].
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Run voltage-driven only (no force control).
+        #[arg(long)]
+        open_loop: bool,
+        /// Report folder: summary, control.csv and force/response plots [default: the
+        /// file's, else TEST's name with `-report`, beside it].
+        #[arg(long)]
+        report: Option<std::path::PathBuf>,
+    },
     /// Run the pipeline on a built-in model, print a readable summary and write a report
     /// folder with plots.
     Demo {
@@ -334,12 +377,12 @@ fn main() -> ExitCode {
         let _ = rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build_global();
-        faer::set_global_parallelism(if n == 1 {
-            faer::Par::Seq
-        } else {
-            faer::Par::rayon(n)
-        });
     }
+    // faer's implicit parallelism (dense decompositions that take no `Par`) stays
+    // sequential: a blocked LU or SVD split over another number of threads rounds
+    // differently, and every parallel region of nlsim names its `Par` explicitly, so the
+    // numbers do not depend on the thread count.
+    faer::set_global_parallelism(faer::Par::Seq);
     match run(&cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e @ nlsim::Error::Usage(_)) => {
@@ -525,6 +568,56 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             frf(model, &req, set, out.as_deref(), plot.as_deref(), cli)
         }
         Command::Demo { model, report } => demo(model, report, cli.quiet),
+        Command::Plan {
+            model,
+            plan,
+            criterion,
+            top,
+            report,
+        } => {
+            let mut req = nlsim::pretest::PlanRequest::load(plan, model)?;
+            if let Some(c) = criterion {
+                req.criterion = nlsim::calib::Criterion::parse(c)
+                    .map_err(|e| nlsim::Error::Usage(format!("--criterion: {e}")))?;
+            }
+            if let Some(t) = top {
+                req.top = *t;
+            }
+            if let Some(r) = report {
+                req.report = Some(r.clone());
+            }
+            if req.report.is_none() {
+                req.report = Some(default_report(plan));
+            }
+            plan_cmd(&req, cli)
+        }
+        Command::Test {
+            model,
+            test,
+            out,
+            seed,
+            open_loop,
+            report,
+        } => {
+            let mut req = nlsim::vtest::TestRequest::load(test, model)?;
+            if let Some(o) = out {
+                req.out = o.clone();
+            }
+            if let Some(s) = seed {
+                req.seed = *s;
+            }
+            if *open_loop {
+                req.control.enabled = false;
+                req.compare_open_loop = false;
+            }
+            if let Some(r) = report {
+                req.report = Some(r.clone());
+            }
+            if req.report.is_none() {
+                req.report = Some(default_report(test));
+            }
+            test_cmd(&req, cli)
+        }
         Command::Calibrate {
             model,
             data,
@@ -759,6 +852,65 @@ fn calibrate_cmd(
             files.len(),
             dir.display()
         ));
+    }
+    Ok(())
+}
+
+/// `DIR/NAME-report` for a settings file `DIR/NAME.toml`.
+fn default_report(file: &std::path::Path) -> std::path::PathBuf {
+    let stem = file
+        .file_stem()
+        .map_or("nlsim".into(), |s| s.to_string_lossy());
+    file.with_file_name(format!("{stem}-report"))
+}
+
+/// `nlsim plan`: the ranked table and the report.
+fn plan_cmd(req: &nlsim::pretest::PlanRequest, cli: &Cli) -> nlsim::Result<()> {
+    req.check()?;
+    let progress = std::sync::Mutex::new(progress_line(cli.quiet, "candidate sweeps"));
+    let run = nlsim::pretest::run_plan(req, &|d, n| {
+        if let Ok(mut p) = progress.lock() {
+            p(d, n)
+        }
+    })?;
+    if !cli.quiet {
+        for line in run.summary() {
+            println!("{line}");
+        }
+    }
+    if let Some(dir) = &req.report {
+        let files = nlsim::pretest::write_plan_report(dir, &run)?;
+        if !cli.quiet {
+            println!(
+                "report: {} files in {} (summary.txt, ranking.csv, fim_best.csv, plots as SVG \
+                 and PNG)",
+                files.len(),
+                dir.display()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// `nlsim test`: the virtual test, its data and its report.
+fn test_cmd(req: &nlsim::vtest::TestRequest, cli: &Cli) -> nlsim::Result<()> {
+    let mut progress = progress_line(cli.quiet, "sweeps");
+    let run = nlsim::vtest::run_test(req, &mut progress)?;
+    progress(req.sweeps.len(), req.sweeps.len());
+    if !cli.quiet {
+        for line in run.summary() {
+            println!("{line}");
+        }
+    }
+    if let Some(dir) = &req.report {
+        let files = nlsim::vtest::write_test_report(dir, &run)?;
+        if !cli.quiet {
+            println!(
+                "report: {} files in {} (summary.txt, control.csv, force and response plots)",
+                files.len(),
+                dir.display()
+            );
+        }
     }
     Ok(())
 }
