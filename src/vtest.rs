@@ -560,11 +560,14 @@ impl TestRun {
                 .filter(|x| x.is_finite())
                 .fold(0.0f64, f64::max);
             let ok = c.iter().filter(|st| st.status.is_converged()).count();
+            let shown = |x: f64, f: &dyn Fn(f64) -> String| {
+                if x.is_nan() { "-".to_string() } else { f(x) }
+            };
             v.push(format!(
-                "{:<24} {:>22.3} {:>16.3e}   {:>16.1}/{:<3} {:>14.3} % {:>6}/{}",
+                "{:<24} {:>22} {:>16}   {:>16.1}/{:<3} {:>14.3} % {:>6}/{}",
                 plan.label,
-                min_ratio,
-                dist,
+                shown(min_ratio, &|x| format!("{x:.3}")),
+                shown(dist, &|x| format!("{x:.3e}")),
                 mean,
                 its.iter().max().copied().unwrap_or(0),
                 100.0 * err,
