@@ -161,14 +161,7 @@ impl CalibrationRequest {
     /// Parses calibration-file text; `path` names it in errors, and relative paths in it
     /// are taken from its folder.
     pub fn parse(text: &str, path: &Path) -> Result<Self> {
-        let f: CalibrationTable = toml::from_str(text).map_err(|e| Error::Spec {
-            file: path.to_path_buf(),
-            line: e
-                .span()
-                .map_or(1, |s| crate::output::line_of(text, s.start)),
-            key: toml_key(e.message()),
-            message: e.message().to_string(),
-        })?;
+        let f: CalibrationTable = SettingsFile::parse(text, path)?;
         let dir = path.parent().unwrap_or(Path::new(""));
         let Some(model) = f.model.clone() else {
             return Err(Error::Spec {
@@ -196,6 +189,64 @@ pub(crate) fn toml_key(message: &str) -> String {
         .and_then(|r| r.split('`').next())
         .unwrap_or("toml")
         .to_string()
+}
+
+/// A settings file being read (calibration, plan, test): errors name the file, the line of
+/// the key and the key; relative paths in it are taken from its folder.
+pub(crate) struct SettingsFile<'a> {
+    /// The file's text.
+    pub(crate) text: &'a str,
+    /// The file.
+    pub(crate) path: &'a Path,
+}
+
+impl<'a> SettingsFile<'a> {
+    /// Parses `text` as `T`, a TOML error located at its line and key.
+    pub(crate) fn parse<T: serde::de::DeserializeOwned>(
+        text: &'a str,
+        path: &'a Path,
+    ) -> Result<T> {
+        toml::from_str(text).map_err(|e| Error::Spec {
+            file: path.to_path_buf(),
+            line: e
+                .span()
+                .map_or(1, |s| crate::output::line_of(text, s.start)),
+            key: toml_key(e.message()),
+            message: e.message().to_string(),
+        })
+    }
+
+    /// An error about `key` (dotted: the line of its last part).
+    pub(crate) fn err(&self, key: &str, message: String) -> Error {
+        Error::Spec {
+            file: self.path.to_path_buf(),
+            line: line_of_key(self.text, key.rsplit('.').next().unwrap_or(key)),
+            key: key.to_string(),
+            message,
+        }
+    }
+
+    /// `p` relative to the file's folder (absolute paths as they are).
+    pub(crate) fn rel(&self, p: &str) -> PathBuf {
+        let p = Path::new(p);
+        if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            self.path.parent().unwrap_or(Path::new("")).join(p)
+        }
+    }
+
+    /// A request's `check` error `"{prefix} KEY: ..."` located at `KEY`.
+    pub(crate) fn located(&self, prefix: &str, e: Error) -> Error {
+        let msg = e.to_string();
+        let key = msg
+            .strip_prefix(prefix)
+            .and_then(|m| m.strip_prefix(' '))
+            .and_then(|m| m.split(':').next())
+            .unwrap_or("")
+            .to_string();
+        self.err(&key, msg)
+    }
 }
 
 /// Line of the first `key = ` (or `[key]`) in `text`, for errors found after parsing.
@@ -268,21 +319,9 @@ impl CalibrationTable {
         text: &str,
         path: &Path,
     ) -> Result<CalibrationRequest> {
-        let dir = path.parent().unwrap_or(Path::new(""));
-        let err = |key: &str, message: String| Error::Spec {
-            file: path.to_path_buf(),
-            line: line_of_key(text, key.rsplit('.').next().unwrap_or(key)),
-            key: key.to_string(),
-            message,
-        };
-        let rel = |p: &str| {
-            let p = Path::new(p);
-            if p.is_absolute() {
-                p.to_path_buf()
-            } else {
-                dir.join(p)
-            }
-        };
+        let file = SettingsFile { text, path };
+        let err = |key: &str, message: String| file.err(key, message);
+        let rel = |p: &str| file.rel(p);
         let mut params = Vec::with_capacity(self.param.len());
         for t in &self.param {
             let param: Param = t
@@ -341,15 +380,7 @@ impl CalibrationTable {
             out: self.out.as_deref().map(rel),
             report: self.report.as_deref().map(rel),
         };
-        req.check().map_err(|e| {
-            let msg = e.to_string();
-            let key = msg
-                .strip_prefix("calibration ")
-                .and_then(|m| m.split(':').next())
-                .unwrap_or("")
-                .to_string();
-            err(&key, msg)
-        })?;
+        req.check().map_err(|e| file.located("calibration", e))?;
         Ok(req)
     }
 }

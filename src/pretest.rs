@@ -26,7 +26,7 @@
 //! steps = 15
 //! ```
 
-use crate::calibration::{line_of_key, toml_key, write_text};
+use crate::calibration::{SettingsFile, write_text};
 use crate::error::{Error, Result};
 use crate::plot::{BarGroup, Bars, Lines};
 use faer::Mat;
@@ -258,14 +258,7 @@ impl PlanRequest {
     /// Parses plan-file text for `model`; `path` names it in errors, and relative paths in
     /// it are taken from its folder.
     pub fn parse(text: &str, path: &Path, model: &str) -> Result<Self> {
-        let t: PlanTable = toml::from_str(text).map_err(|e| Error::Spec {
-            file: path.to_path_buf(),
-            line: e
-                .span()
-                .map_or(1, |s| crate::output::line_of(text, s.start)),
-            key: toml_key(e.message()),
-            message: e.message().to_string(),
-        })?;
+        let t: PlanTable = SettingsFile::parse(text, path)?;
         t.into_request(model.to_string(), text, path)
     }
 }
@@ -349,21 +342,9 @@ impl PlanTable {
         text: &str,
         path: &Path,
     ) -> Result<PlanRequest> {
-        let dir = path.parent().unwrap_or(Path::new(""));
-        let err = |key: &str, message: String| Error::Spec {
-            file: path.to_path_buf(),
-            line: line_of_key(text, key.rsplit('.').next().unwrap_or(key)),
-            key: key.to_string(),
-            message,
-        };
-        let rel = |p: &str| {
-            let p = Path::new(p);
-            if p.is_absolute() {
-                p.to_path_buf()
-            } else {
-                dir.join(p)
-            }
-        };
+        let file = SettingsFile { text, path };
+        let err = |key: &str, message: String| file.err(key, message);
+        let rel = |p: &str| file.rel(p);
         let params = self
             .params
             .iter()
@@ -445,15 +426,7 @@ impl PlanTable {
             top: self.top.unwrap_or(d.top),
             report: self.report.as_deref().map(rel),
         };
-        req.check().map_err(|e| {
-            let msg = e.to_string();
-            let key = msg
-                .strip_prefix("plan ")
-                .and_then(|m| m.split(':').next())
-                .unwrap_or("")
-                .to_string();
-            err(&key, msg)
-        })?;
+        req.check().map_err(|e| file.located("plan", e))?;
         Ok(req)
     }
 }

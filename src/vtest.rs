@@ -26,7 +26,7 @@
 //! force = 0.2
 //! ```
 
-use crate::calibration::{line_of_key, toml_key, write_text};
+use crate::calibration::{SettingsFile, write_text};
 use crate::error::{Error, Result};
 use crate::plot::Lines;
 use nlsim_calib::{ControlConfig, Noise, Shaker, SweepPlan, VirtualTest, virtual_test};
@@ -189,14 +189,7 @@ impl TestRequest {
     /// Parses test-file text for `model`; `path` names it in errors, and relative paths in
     /// it are taken from its folder.
     pub fn parse(text: &str, path: &Path, model: &str) -> Result<Self> {
-        let t: TestTable = toml::from_str(text).map_err(|e| Error::Spec {
-            file: path.to_path_buf(),
-            line: e
-                .span()
-                .map_or(1, |s| crate::output::line_of(text, s.start)),
-            key: toml_key(e.message()),
-            message: e.message().to_string(),
-        })?;
+        let t: TestTable = SettingsFile::parse(text, path)?;
         t.into_request(model.to_string(), text, path)
     }
 }
@@ -272,21 +265,9 @@ struct TestTable {
 
 impl TestTable {
     fn into_request(self, model: String, text: &str, path: &Path) -> Result<TestRequest> {
-        let dir = path.parent().unwrap_or(Path::new(""));
-        let err = |key: &str, message: String| Error::Spec {
-            file: path.to_path_buf(),
-            line: line_of_key(text, key.rsplit('.').next().unwrap_or(key)),
-            key: key.to_string(),
-            message,
-        };
-        let rel = |p: &str| {
-            let p = Path::new(p);
-            if p.is_absolute() {
-                p.to_path_buf()
-            } else {
-                dir.join(p)
-            }
-        };
+        let file = SettingsFile { text, path };
+        let err = |key: &str, message: String| file.err(key, message);
+        let rel = |p: &str| file.rel(p);
         let d = TestRequest::new("", Vec::new());
         let ds = Shaker::default();
         let shaker = match &self.shaker {
@@ -343,18 +324,10 @@ impl TestTable {
             noise: NoiseTable::get(&self.noise, d.noise),
             force_noise: NoiseTable::get(&self.force_noise, d.force_noise),
             seed: self.seed.unwrap_or(d.seed),
-            out: self.out.as_deref().map_or_else(|| dir.join(&d.out), rel),
+            out: rel(self.out.as_deref().unwrap_or("virtual_test.csv")),
             report: self.report.as_deref().map(rel),
         };
-        req.check().map_err(|e| {
-            let msg = e.to_string();
-            let key = msg
-                .strip_prefix("test ")
-                .and_then(|m| m.split(':').next())
-                .unwrap_or("")
-                .to_string();
-            err(&key, msg)
-        })?;
+        req.check().map_err(|e| file.located("test", e))?;
         Ok(req)
     }
 }
