@@ -253,34 +253,23 @@ pub fn demo_virtual_test(
     for (s, plan) in plans.iter().enumerate() {
         let o = &open.steps[s];
         let c = &ctl.steps[s];
-        let min_ratio = o
-            .iter()
-            .map(|st| st.force[1].norm() / plan.force)
-            .filter(|v| v.is_finite())
-            .fold(f64::INFINITY, f64::min);
+        let min_ratio = crate::vtest::min_force_ratio(o, plan.force);
         let distortion = o
             .iter()
             .map(|st| st.force[3].norm() / st.force[1].norm())
             .filter(|v| v.is_finite())
             .fold(0.0f64, f64::max);
-        let its: Vec<usize> = c.iter().map(|st| st.iterations).collect();
-        let mean = its.iter().sum::<usize>() as f64 / its.len().max(1) as f64;
-        let max_err = c
-            .iter()
-            .map(|st| st.force_error)
-            .filter(|v| v.is_finite())
-            .fold(0.0f64, f64::max);
-        let ok = c.iter().filter(|st| st.status.is_converged()).count();
+        let cs = crate::vtest::ControlStats::of(c);
         say(&format!(
             "  {:<16} {:>27.3}  {:>13.2e}   {:>21.1}/{:<3}  {:>13.2} %  {:>6}/{}",
             plan.label,
             min_ratio,
             distortion,
-            mean,
-            its.iter().max().copied().unwrap_or(0),
-            100.0 * max_err,
-            ok,
-            c.len()
+            cs.mean_iterations,
+            cs.max_iterations,
+            100.0 * cs.max_force_error,
+            cs.converged,
+            cs.steps
         ));
     }
     let csv = report_dir.join("virtual_test.csv");

@@ -460,6 +460,50 @@ pub fn run_test(req: &TestRequest, progress: &mut dyn FnMut(usize, usize)) -> Re
     })
 }
 
+/// What the force controller did along one sweep.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ControlStats {
+    /// Mean controller iterations per step.
+    pub mean_iterations: f64,
+    /// Most controller iterations at one step.
+    pub max_iterations: usize,
+    /// Largest force error of a step (fraction of the fundamental target; steps whose
+    /// structure was not solved left out).
+    pub max_force_error: f64,
+    /// Steps that met the tolerance.
+    pub converged: usize,
+    /// Steps.
+    pub steps: usize,
+}
+
+impl ControlStats {
+    /// The statistics of the step records `steps`.
+    pub fn of(steps: &[nlsim_calib::StepControl]) -> Self {
+        let total: usize = steps.iter().map(|st| st.iterations).sum();
+        Self {
+            mean_iterations: total as f64 / steps.len().max(1) as f64,
+            max_iterations: steps.iter().map(|st| st.iterations).max().unwrap_or(0),
+            max_force_error: steps
+                .iter()
+                .map(|st| st.force_error)
+                .filter(|x| x.is_finite())
+                .fold(0.0f64, f64::max),
+            converged: steps.iter().filter(|st| st.status.is_converged()).count(),
+            steps: steps.len(),
+        }
+    }
+}
+
+/// The smallest `|F1| / target` along a sweep's step records: the force drop-out of a
+/// voltage-driven test.
+pub fn min_force_ratio(steps: &[nlsim_calib::StepControl], target: f64) -> f64 {
+    steps
+        .iter()
+        .map(|st| st.force[1].norm() / target)
+        .filter(|x| x.is_finite())
+        .fold(f64::INFINITY, f64::min)
+}
+
 /// `sqrt(Σ_{k≥2} |F_k|²) / |F_1|`: the harmonic distortion of a force record.
 fn distortion(force: &[faer::c64]) -> f64 {
     let hi: f64 = force.iter().skip(2).map(|f| f.norm_sqr()).sum();
@@ -512,11 +556,7 @@ impl TestRun {
             let c = &self.test.steps[i];
             let (min_ratio, dist) = match &self.open_loop {
                 Some(o) => (
-                    o.steps[i]
-                        .iter()
-                        .map(|st| st.force[1].norm() / plan.force)
-                        .filter(|x| x.is_finite())
-                        .fold(f64::INFINITY, f64::min),
+                    min_force_ratio(&o.steps[i], plan.force),
                     o.steps[i]
                         .iter()
                         .map(|st| distortion(&st.force))
@@ -525,14 +565,7 @@ impl TestRun {
                 ),
                 None => (f64::NAN, f64::NAN),
             };
-            let its: Vec<usize> = c.iter().map(|st| st.iterations).collect();
-            let mean = its.iter().sum::<usize>() as f64 / its.len().max(1) as f64;
-            let err = c
-                .iter()
-                .map(|st| st.force_error)
-                .filter(|x| x.is_finite())
-                .fold(0.0f64, f64::max);
-            let ok = c.iter().filter(|st| st.status.is_converged()).count();
+            let cs = ControlStats::of(c);
             let shown = |x: f64, f: &dyn Fn(f64) -> String| {
                 if x.is_nan() { "-".to_string() } else { f(x) }
             };
@@ -541,11 +574,11 @@ impl TestRun {
                 plan.label,
                 shown(min_ratio, &|x| format!("{x:.3}")),
                 shown(dist, &|x| format!("{x:.3e}")),
-                mean,
-                its.iter().max().copied().unwrap_or(0),
-                100.0 * err,
-                ok,
-                c.len()
+                cs.mean_iterations,
+                cs.max_iterations,
+                100.0 * cs.max_force_error,
+                cs.converged,
+                cs.steps
             ));
             for st in c.iter().filter(|st| !st.status.is_converged()).take(3) {
                 v.push(format!(
