@@ -214,6 +214,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let objective = ObjectiveConfig {
         harmonics: vec![1],
         form: Form::LogMagnitudePhase,
+        ..ObjectiveConfig::default()
     };
     let config = CalibrationConfig {
         lhs_samples: 48,

@@ -159,6 +159,7 @@ fn run() -> Result<bool, String> {
                     ObjectiveConfig {
                         harmonics: harmonics.clone(),
                         form: Form::Complex,
+                        ..ObjectiveConfig::default()
                     },
                 )
                 .map_err(|e| e.to_string())?;

@@ -12,6 +12,7 @@
 //! harmonics = 3                   # harmonics H of the harmonic balance
 //! compare = [1, 3]                # harmonics compared with the data
 //! form = "complex"                # complex | log-magnitude
+//! branch = "nearest"              # nearest | continuation (multi-valued responses)
 //! modes = 20                      # retained modes
 //! lhs = 64                        # Latin-hypercube candidates
 //! starts = 3                      # Levenberg–Marquardt runs from the best candidates
@@ -32,7 +33,7 @@
 use crate::error::{Error, Result};
 use crate::plot::{BarGroup, Bars, Lines};
 use nlsim_calib::{
-    Calibration, CalibrationConfig, Candidate, Form, FrfObjective, LmConfig, Noise,
+    BranchChoice, Calibration, CalibrationConfig, Candidate, Form, FrfObjective, LmConfig, Noise,
     ObjectiveConfig, ParamSpec, Progress, Spacing, StartRun, TestData,
 };
 use nlsim_hb::{HarmonicSet, HbConfig};
@@ -60,6 +61,8 @@ pub struct CalibrationRequest {
     pub compare: Vec<usize>,
     /// Residual form.
     pub form: Form,
+    /// The branch the model is compared on where the response is multi-valued.
+    pub branch: BranchChoice,
     /// Harmonics `H` kept by the harmonic balance.
     pub harmonics: usize,
     /// Retained modes of the reduced model.
@@ -89,6 +92,7 @@ impl CalibrationRequest {
             params,
             compare: vec![1],
             form: Form::Complex,
+            branch: BranchChoice::NearestToData,
             harmonics: 3,
             modes: 20,
             uff_noise: 0.01,
@@ -296,6 +300,7 @@ pub(crate) struct CalibrationTable {
     param: Vec<ParamTable>,
     compare: Option<Vec<usize>>,
     form: Option<String>,
+    branch: Option<String>,
     harmonics: Option<usize>,
     modes: Option<usize>,
     uff_noise: Option<f64>,
@@ -345,6 +350,10 @@ impl CalibrationTable {
             Some(s) => return Err(err("form", format!("'{s}': use complex or log-magnitude"))),
         };
         let d = CalibrationRequest::new("", "", Vec::new());
+        let branch = match self.branch.as_deref() {
+            None => d.branch,
+            Some(s) => parse_branch(s).map_err(|m| err("branch", m))?,
+        };
         let dl = LmConfig::default();
         let lm = match &self.lm {
             None => dl,
@@ -365,6 +374,7 @@ impl CalibrationTable {
             params,
             compare: self.compare.unwrap_or(d.compare),
             form,
+            branch,
             harmonics: self.harmonics.unwrap_or(d.harmonics),
             modes: self.modes.unwrap_or(d.modes),
             uff_noise: self.uff_noise.unwrap_or(d.uff_noise),
@@ -467,6 +477,7 @@ pub fn prepare(req: &CalibrationRequest) -> Result<Prepared> {
         ObjectiveConfig {
             harmonics: req.compare.clone(),
             form: req.form,
+            branch: req.branch,
         },
     )?;
     Ok(Prepared {
@@ -474,6 +485,16 @@ pub fn prepare(req: &CalibrationRequest) -> Result<Prepared> {
         objective,
         seconds: t.elapsed().as_secs_f64(),
     })
+}
+
+/// The branch choice named `s` (`nearest` or `continuation`, as in a calibration file and
+/// `--branch`); the message says what is accepted.
+pub fn parse_branch(s: &str) -> std::result::Result<BranchChoice, String> {
+    match s {
+        "nearest" => Ok(BranchChoice::NearestToData),
+        "continuation" => Ok(BranchChoice::Continuation),
+        _ => Err(format!("'{s}': use nearest or continuation")),
+    }
 }
 
 /// A finished calibration with what it ran on.

@@ -326,6 +326,7 @@ fn demo_calibration(
             ObjectiveConfig {
                 harmonics,
                 form: Form::Complex,
+                ..ObjectiveConfig::default()
             },
         )?;
         let cal = calibrate(&obj, &config)?;

@@ -265,10 +265,26 @@ impl PlanRequest {
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct PointTable {
+pub(crate) struct PointTable {
     name: String,
     dof: String,
     quantity: Option<String>,
+}
+
+impl PointTable {
+    /// The point, with the quantity parsed (acceleration when not given); errors name
+    /// `key` in `file`.
+    pub(crate) fn spec(&self, file: &SettingsFile<'_>, key: &str) -> Result<PointSpec> {
+        let quantity = match &self.quantity {
+            None => Quantity::Acceleration,
+            Some(q) => Quantity::parse(q).map_err(|e| file.err(key, e.to_string()))?,
+        };
+        Ok(PointSpec {
+            name: self.name.clone(),
+            dof: self.dof.clone(),
+            quantity,
+        })
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -351,17 +367,7 @@ impl PlanTable {
             .map(|n| n.parse::<Param>())
             .collect::<std::result::Result<Vec<_>, _>>()
             .map_err(|e| err("params", e.to_string()))?;
-        let point = |p: &PointTable, key: &str| -> Result<PointSpec> {
-            let quantity = match &p.quantity {
-                None => Quantity::Acceleration,
-                Some(q) => Quantity::parse(q).map_err(|e| err(key, e.to_string()))?,
-            };
-            Ok(PointSpec {
-                name: p.name.clone(),
-                dof: p.dof.clone(),
-                quantity,
-            })
-        };
+        let point = |p: &PointTable, key: &str| p.spec(&file, key);
         let d = PlanRequest::new("", Vec::new(), Vec::new());
         let noise = match &self.noise {
             None => d.noise,
@@ -880,6 +886,100 @@ pub fn fim_csv(params: &[Param], f: &Mat<f64>) -> String {
 }
 
 impl PlanRun {
+    /// The test file (`nlsim test`, docs/planning.md) that runs design `r`: its drive
+    /// (`drive_dof` for a plan actuator), level and band as one `[[sweep]]`, its sensors
+    /// as `channels` (with `[[sensor]]` entries for the plan's added sensors), the plan's
+    /// harmonics, modes, overrides and noise, the data written to `virtual_test.csv`
+    /// beside the file. The compared harmonics are named in a comment (they are
+    /// `nlsim calibrate --compare`). `nlsim test` drives a pure sine: a design's side
+    /// tones are named in a comment and left out.
+    pub fn test_file(&self, r: &RankedDesign) -> String {
+        let req = &self.request;
+        let c = &self.candidates.sweeps[r.design.sweep];
+        let sw = &self.sweeps[r.design.sweep];
+        let q = |s: &str| toml_string(s);
+        let mut t = String::new();
+        let [drive, level, signal, band, sensors, harm] =
+            describe_design(&self.candidates, &self.sweeps, r);
+        let _ = writeln!(
+            t,
+            "# nlsim test file of a planned design of '{}': drive {drive}, {level} N, {signal}, \
+             {band}, sensors {sensors}, harmonics {harm}",
+            self.candidates.model_name
+        );
+        let compare: Vec<String> = r
+            .design
+            .harmonics
+            .iter()
+            .map(|&h| sw.harmonics[h].to_string())
+            .collect();
+        let _ = writeln!(
+            t,
+            "# calibrate the data with: nlsim calibrate MODEL virtual_test.csv --compare {} \
+             --param ...",
+            compare.join(",")
+        );
+        if !c.exciter.side.is_empty() {
+            let _ = writeln!(
+                t,
+                "# the design's side tones ({signal}) are left out: nlsim test drives a pure sine"
+            );
+        }
+        match req.actuators.iter().find(|a| a.name == c.exciter.input) {
+            Some(a) => {
+                let _ = writeln!(t, "drive_dof = {}", q(&a.dof));
+            }
+            None => {
+                let _ = writeln!(t, "drive = {}", q(&c.exciter.input));
+            }
+        }
+        let _ = writeln!(t, "harmonics = {}", req.harmonics);
+        let _ = writeln!(t, "modes = {}", req.modes);
+        let _ = writeln!(
+            t,
+            "noise = {{ relative = {:e}, absolute = {:e} }}",
+            req.noise.relative, req.noise.absolute
+        );
+        let _ = writeln!(t, "out = \"virtual_test.csv\"");
+        let names: Vec<String> = r
+            .design
+            .channels
+            .iter()
+            .map(|&i| q(&sw.channels[i]))
+            .collect();
+        let _ = writeln!(t, "channels = [{}]", names.join(", "));
+        if !req.set.is_empty() {
+            let pairs: Vec<String> = req
+                .set
+                .iter()
+                .filter_map(|kv| kv.split_once('='))
+                .map(|(k, v)| format!("{} = {}", q(k.trim()), v.trim()))
+                .collect();
+            let _ = writeln!(t, "set = {{ {} }}", pairs.join(", "));
+        }
+        for &i in &r.design.channels {
+            if let Some(p) = req.sensors.iter().find(|p| p.name == sw.channels[i]) {
+                let _ = write!(
+                    t,
+                    "\n[[sensor]]\nname = {}\ndof = {}\nquantity = {}\n",
+                    q(&p.name),
+                    q(&p.dof),
+                    q(p.quantity.as_str())
+                );
+            }
+        }
+        let _ = write!(
+            t,
+            "\n[[sweep]]\nlabel = {}\nfrom = {:?}\nto = {:?}\nsteps = {}\nforce = {:?}\n",
+            q(&format!("{} N {}", c.exciter.level, c.band.label)),
+            c.band.from_hz,
+            c.band.to_hz,
+            c.band.steps,
+            c.exciter.level
+        );
+        t
+    }
+
     /// The information of design `r` (prior included).
     pub fn fim(&self, r: &RankedDesign) -> Mat<f64> {
         self.sweeps[r.design.sweep].fim(
@@ -1098,7 +1198,8 @@ fn csv_field(s: &str) -> String {
 
 /// Writes the report of `run` into `dir` (created if needed): `summary.txt`,
 /// `ranking.csv` (every design), `fim_best.csv` (the best design's information, readable
-/// as the `prior` of the next plan) and plots (SVG and PNG): the criterion along the
+/// as the `prior` of the next plan), `best_test.toml` (the best design as an `nlsim test`
+/// file, [`PlanRun::test_file`]) and plots (SVG and PNG): the criterion along the
 /// ranking (`ranking`), the Cramér–Rao standard deviations of the best five designs and
 /// the worst (`crb`), and the best design's predicted responses (`best_prediction`).
 /// Returns the files written.
@@ -1123,6 +1224,7 @@ pub fn write_plan_report(dir: &Path, run: &PlanRun) -> Result<Vec<PathBuf>> {
         return Ok(written);
     };
     text("fim_best.csv", fim_csv(params, &run.fim(best)))?;
+    text("best_test.toml", run.test_file(best))?;
     let crit = run.request.criterion;
     written.extend(crate::plot::write_both(
         dir,
@@ -1402,6 +1504,24 @@ pub(crate) fn write_ranking(out: &hdf5_metno::Group, run: &PlanRun) -> hdf5_metn
     Ok(())
 }
 
+/// `s` as a TOML basic string (quotes, backslashes and control characters escaped).
+fn toml_string(s: &str) -> String {
+    let mut o = String::with_capacity(s.len() + 2);
+    o.push('"');
+    for ch in s.chars() {
+        match ch {
+            '"' => o.push_str("\\\""),
+            '\\' => o.push_str("\\\\"),
+            c if c.is_control() => {
+                let _ = write!(o, "\\u{:04X}", c as u32);
+            }
+            c => o.push(c),
+        }
+    }
+    o.push('"');
+    o
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1488,5 +1608,23 @@ steps = 5
         let e = read_fim_csv(&p, &params).unwrap_err().to_string();
         assert!(e.contains("one row per planned parameter"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn toml_strings_round_trip() {
+        #[derive(serde::Deserialize)]
+        struct T {
+            s: String,
+        }
+        for text in [
+            "plain",
+            "a \"quoted\" name",
+            "back\\slash",
+            "tab\tand\nnewline",
+            "é ü",
+        ] {
+            let t: T = toml::from_str(&format!("s = {}", toml_string(text))).unwrap();
+            assert_eq!(t.s, text);
+        }
     }
 }

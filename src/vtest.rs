@@ -10,6 +10,12 @@
 //! seed = 1                     # measurement noise
 //! noise = { relative = 0.02 }  # response noise
 //! out = "virtual_test.csv"     # .csv or .h5
+//! channels = ["tip", "n7"]     # the sensors recorded [default: every sensor]
+//!
+//! [[sensor]]                   # sensors beside the model's
+//! name = "n7"
+//! dof = "7:uz"
+//! quantity = "acceleration"
 //!
 //! [shaker]                     # any of the fields of nlsim_calib::Shaker
 //! armature_mass = 0.03
@@ -29,9 +35,10 @@
 use crate::calibration::{SettingsFile, write_text};
 use crate::error::{Error, Result};
 use crate::plot::Lines;
+use crate::pretest::{PointSpec, PointTable};
 use nlsim_calib::{ControlConfig, Noise, Shaker, SweepPlan, VirtualTest, virtual_test};
 use nlsim_hb::{HarmonicSet, HbConfig, HbSystem};
-use nlsim_kernel::{Excitation, Status};
+use nlsim_kernel::{Excitation, Sensor, Status};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -75,6 +82,10 @@ pub struct TestRequest {
     pub out: PathBuf,
     /// Report folder.
     pub report: Option<PathBuf>,
+    /// Sensors added to the model's (by DOF label) before the test.
+    pub sensors: Vec<PointSpec>,
+    /// The sensors recorded in the data, by name; empty: every sensor.
+    pub channels: Vec<String>,
 }
 
 impl TestRequest {
@@ -98,6 +109,8 @@ impl TestRequest {
             seed: 1,
             out: PathBuf::from("virtual_test.csv"),
             report: None,
+            sensors: Vec::new(),
+            channels: Vec::new(),
         }
     }
 
@@ -261,6 +274,10 @@ struct TestTable {
     control: Option<ControlTable>,
     #[serde(default)]
     sweep: Vec<SweepTable>,
+    #[serde(default)]
+    sensor: Vec<PointTable>,
+    #[serde(default)]
+    channels: Vec<String>,
 }
 
 impl TestTable {
@@ -296,6 +313,11 @@ impl TestTable {
             ),
         };
         let enabled = control.enabled;
+        let sensors = self
+            .sensor
+            .iter()
+            .map(|p| p.spec(&file, "sensor"))
+            .collect::<Result<Vec<_>>>()?;
         let mut sweeps = Vec::with_capacity(self.sweep.len());
         for (i, s) in self.sweep.iter().enumerate() {
             if !(2..=100_000).contains(&s.steps) {
@@ -326,6 +348,8 @@ impl TestTable {
             seed: self.seed.unwrap_or(d.seed),
             out: rel(self.out.as_deref().unwrap_or("virtual_test.csv")),
             report: self.report.as_deref().map(rel),
+            sensors,
+            channels: self.channels,
         };
         req.check().map_err(|e| file.located("test", e))?;
         Ok(req)
@@ -384,11 +408,37 @@ pub fn run_test(req: &TestRequest, progress: &mut dyn FnMut(usize, usize)) -> Re
                 ))
             })?,
     };
+    for p in &req.sensors {
+        let d = model.dofs().find(&p.dof).map_err(|e| {
+            Error::Usage(format!(
+                "test sensor '{}': DOF '{}' is not in '{}': {e}",
+                p.name,
+                p.dof,
+                model.name()
+            ))
+        })?;
+        model.add_sensor(Sensor {
+            name: p.name.clone(),
+            dof: d,
+            quantity: p.quantity,
+        })?;
+    }
     if model.sensors().is_empty() {
         return Err(Error::Usage(format!(
             "test: '{}' has no sensor to measure",
             model.name()
         )));
+    }
+    for name in &req.channels {
+        if !model.sensors().iter().any(|s| &s.name == name) {
+            let have: Vec<&str> = model.sensors().iter().map(|s| s.name.as_str()).collect();
+            return Err(Error::Usage(format!(
+                "test channels: '{name}' is not a sensor of '{}' (it has {}; add one with \
+                 [[sensor]])",
+                model.name(),
+                have.join(", ")
+            )));
+        }
     }
     // Sequential reduction: the test data are bit-identical whatever the thread count.
     let mut reduction = nlsim_reduction::ReductionConfig::lowest(req.modes.min(model.n_dofs()));
@@ -429,13 +479,21 @@ pub fn run_test(req: &TestRequest, progress: &mut dyn FnMut(usize, usize)) -> Re
         }
         Ok::<_, Error>(out.expect("at least one sweep"))
     };
-    let test = run(&req.control, progress)?;
+    // Every sensor is simulated; the data keep the recorded channels.
+    let keep = |mut t: VirtualTest| -> Result<VirtualTest> {
+        if !req.channels.is_empty() {
+            let names: Vec<&str> = req.channels.iter().map(String::as_str).collect();
+            t.data = t.data.select_channels(&names)?;
+        }
+        Ok(t)
+    };
+    let test = keep(run(&req.control, progress)?)?;
     let open_loop = if req.compare_open_loop {
         let open = ControlConfig {
             enabled: false,
             ..req.control
         };
-        Some(run(&open, &mut |_, _| {})?)
+        Some(keep(run(&open, &mut |_, _| {})?)?)
     } else {
         None
     };

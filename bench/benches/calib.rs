@@ -48,6 +48,7 @@ fn objective() -> FrfObjective {
     let cfg = ObjectiveConfig {
         harmonics: vec![1, 3],
         form: Form::Complex,
+        ..ObjectiveConfig::default()
     };
     FrfObjective::new(&sys, Arc::new(data), specs, cfg).unwrap()
 }

@@ -259,4 +259,56 @@ impl TestData {
             ..self.clone()
         })
     }
+
+    /// The same test with only the channels named in `keep` (in that order): what a test
+    /// that recorded only those sensors would hold. Errors name a channel that is not in
+    /// the data or is named twice.
+    pub fn select_channels(&self, keep: &[&str]) -> Result<TestData> {
+        let mut idx = Vec::with_capacity(keep.len());
+        for name in keep {
+            let i = self
+                .channels
+                .iter()
+                .position(|c| c.name == *name)
+                .ok_or_else(|| {
+                    let have: Vec<&str> = self.channels.iter().map(|c| c.name.as_str()).collect();
+                    Error::invalid(
+                        "test data",
+                        format!("no channel '{name}' (it has {})", have.join(", ")),
+                    )
+                })?;
+            if idx.contains(&i) {
+                return Err(Error::invalid(
+                    "test data",
+                    format!("channel '{name}' is named twice"),
+                ));
+            }
+            idx.push(i);
+        }
+        if idx.is_empty() {
+            return Err(Error::invalid("test data", "keep at least one channel"));
+        }
+        let sweeps = self
+            .sweeps
+            .iter()
+            .map(|sw| Sweep {
+                steps: sw
+                    .steps
+                    .iter()
+                    .map(|st| Step {
+                        response: Mat::from_fn(idx.len(), st.response.ncols(), |r, k| {
+                            st.response[(idx[r], k)]
+                        }),
+                        ..st.clone()
+                    })
+                    .collect(),
+                ..sw.clone()
+            })
+            .collect();
+        Ok(TestData {
+            channels: idx.iter().map(|&i| self.channels[i].clone()).collect(),
+            sweeps,
+            ..self.clone()
+        })
+    }
 }

@@ -3,7 +3,10 @@
 //!
 //! At each step the model is forced with the *measured* force harmonics and solved by
 //! harmonic balance from the previous step's solution, in the sweep's measured direction, so
-//! that a jump lands where the test saw it. Residuals per measured harmonic `Y` of a channel
+//! that it follows a branch the way the test did. Where the test left a branch at another
+//! step than the model folds (the rig, not the structure, decides that), the
+//! [`BranchChoice`] of the configuration compares the model on the branch nearer to the
+//! measurement. Residuals per measured harmonic `Y` of a channel
 //! with noise `σ` (see [`Noise`](crate::data::Noise)):
 //!
 //! - [`Form::Complex`]: `(Y_model − Y_test)/σ`, real and imaginary parts;
@@ -149,6 +152,8 @@ pub struct ObjectiveConfig {
     pub harmonics: Vec<usize>,
     /// Residual form.
     pub form: Form,
+    /// Which solution the model is compared on where the response is multi-valued.
+    pub branch: BranchChoice,
 }
 
 impl Default for ObjectiveConfig {
@@ -156,9 +161,32 @@ impl Default for ObjectiveConfig {
         Self {
             harmonics: vec![1],
             form: Form::Complex,
+            branch: BranchChoice::NearestToData,
         }
     }
 }
+
+/// Which branch of a multi-valued response the model is compared on.
+///
+/// A measured stepped sine follows one stable branch and jumps at a frequency that depends
+/// on the rig as much as on the structure: the shaker's interaction and the force
+/// controller can make the test leave a branch before its fold, and a different step size
+/// shifts the jump by a step. The model's continuation knows none of this.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BranchChoice {
+    /// The continuation from the previous step only: the model jumps where it folds.
+    Continuation,
+    /// Where the continued solution is far from the measurement (mean squared normalised
+    /// residual of the step above [`BRANCH_CHECK`]), the solve is repeated from the linear
+    /// response and the solution nearer to the measurement is kept, and followed from
+    /// there. Where the two agree, or the continued solution fits, nothing changes.
+    NearestToData,
+}
+
+/// The mean squared normalised residual of a step (over its channels and compared
+/// harmonics) above which [`BranchChoice::NearestToData`] looks for another branch: a
+/// 5σ misfit on average, which noise alone gives with negligible probability.
+pub const BRANCH_CHECK: f64 = 25.0;
 
 /// The model at one point of the data.
 #[derive(Debug, Clone)]
@@ -556,34 +584,37 @@ impl FrfObjective {
                     })
                     .collect();
                 self.sys.set_forcing(Forcing { terms })?;
-                let (x, status) = solve_step(&self.sys, &mut self.ws, omega, prev.as_ref())?;
-                let mut response = Mat::from_fn(data.channels.len(), h_data, |_, _| {
-                    c64::new(f64::NAN, f64::NAN)
-                });
+                let (mut x, status) = solve_step(&self.sys, &mut self.ws, omega, prev.as_ref())?;
                 if !status.is_converged() {
                     failed.push(id);
                     points.push(PointResult {
                         id,
                         status,
-                        response,
+                        response: Mat::from_fn(data.channels.len(), h_data, |_, _| {
+                            c64::new(f64::NAN, f64::NAN)
+                        }),
                     });
                     prev = None;
                     continue;
                 }
-                let y = self.sys.sensor_response(&x, omega, 1.0);
-                let conv = |c: usize, k: usize| -> c64 {
-                    let pm = exponent(self.sys.sensors()[self.sensor_of[c]].quantity);
-                    let pd = exponent(data.channels[c].quantity);
-                    let iw = c64::new(0.0, k as f64 * omega);
-                    let mut f = c64::new(1.0, 0.0);
-                    for _ in 0..(pd - pm).abs() {
-                        f *= iw;
-                    }
-                    if pd >= pm { f } else { f.inv() }
-                };
-                for c in 0..data.channels.len() {
-                    for k in 1..=h_data.min(h_model) {
-                        response[(c, k - 1)] = y[(self.sensor_of[c], k)] * conv(c, k);
+                let mut response = self.point_response(&x, omega);
+                if self.config.branch == BranchChoice::NearestToData {
+                    let misfit = self.misfit(st, &response);
+                    if misfit > BRANCH_CHECK {
+                        // Far from the measurement: the test may sit on another branch
+                        // (it jumped earlier or later than the model's continuation).
+                        let mut other = self.sys.linear_guess(omega, 1.0);
+                        if self
+                            .sys
+                            .solve_with(&mut self.ws, omega, 1.0, &mut other)?
+                            .converged()
+                        {
+                            let r = self.point_response(&other, omega);
+                            if self.misfit(st, &r) < misfit {
+                                x = other;
+                                response = r;
+                            }
+                        }
                     }
                 }
                 let sens = if jacobian && train {
@@ -618,7 +649,7 @@ impl FrfObjective {
                                 ));
                             }
                             let ym = response[(c, k - 1)];
-                            let f = conv(c, k);
+                            let f = self.quantity_factor(c, k, omega);
                             let dy: Vec<c64> = sens
                                 .as_ref()
                                 .map(|ss| {
@@ -686,6 +717,58 @@ impl FrfObjective {
             points,
             failed,
         })
+    }
+
+    /// The factor from a model sensor's quantity to data channel `c`'s at harmonic `k` of
+    /// `omega` (rad/s): `(i k ω)^(p_data − p_model)` with `p` 0, 1, 2 for displacement,
+    /// velocity, acceleration.
+    fn quantity_factor(&self, c: usize, k: usize, omega: f64) -> c64 {
+        let pm = exponent(self.sys.sensors()[self.sensor_of[c]].quantity);
+        let pd = exponent(self.data.channels[c].quantity);
+        let iw = c64::new(0.0, k as f64 * omega);
+        let mut f = c64::new(1.0, 0.0);
+        for _ in 0..(pd - pm).abs() {
+            f *= iw;
+        }
+        if pd >= pm { f } else { f.inv() }
+    }
+
+    /// The data channels' harmonics `1..=H_data` (channels × harmonics) of the solution `x`
+    /// at `omega`; NaN beyond the model's harmonics.
+    fn point_response(&self, x: &[f64], omega: f64) -> Mat<c64> {
+        let h_data = self.data.harmonics;
+        let h = h_data.min(self.sys.harmonics().h);
+        let y = self.sys.sensor_response(x, omega, 1.0);
+        Mat::from_fn(self.data.channels.len(), h_data, |c, j| {
+            if j < h {
+                y[(self.sensor_of[c], j + 1)] * self.quantity_factor(c, j + 1, omega)
+            } else {
+                c64::new(f64::NAN, f64::NAN)
+            }
+        })
+    }
+
+    /// The mean squared normalised complex residual of `response` against step `st` over
+    /// the channels and compared harmonics with a measurement and a positive noise (0 when
+    /// there is none).
+    fn misfit(&self, st: &crate::data::Step, response: &Mat<c64>) -> f64 {
+        let mut sum = 0.0;
+        let mut n = 0usize;
+        for (c, ch) in self.data.channels.iter().enumerate() {
+            for &k in &self.config.harmonics {
+                if k == 0 || k > st.response.ncols() || k > response.ncols() {
+                    continue;
+                }
+                let (yd, ym) = (st.response[(c, k - 1)], response[(c, k - 1)]);
+                let sigma = ch.noise.sigma(yd);
+                if yd.re.is_nan() || ym.re.is_nan() || sigma <= 0.0 {
+                    continue;
+                }
+                sum += (ym - yd).norm_sqr() / (sigma * sigma);
+                n += 1;
+            }
+        }
+        if n == 0 { 0.0 } else { sum / n as f64 }
     }
 
     /// Sets the FE-level parameters of `values` on the model, reduces it again and puts the

@@ -22,7 +22,7 @@
 use crate::data::{Channel, Noise, Step, Sweep, SweepDirection, TestData};
 use crate::lhs::Spacing;
 use crate::linalg::Svd;
-use crate::objective::{Form, FrfObjective, ObjectiveConfig, ParamSpec, solve_step};
+use crate::objective::{BranchChoice, Form, FrfObjective, ObjectiveConfig, ParamSpec, solve_step};
 use faer::{Mat, MatRef, c64};
 use nlsim_hb::{ForceTerm, Forcing, HarmonicSet, HbConfig, HbSystem};
 use nlsim_kernel::{Error, Model, Param, Parameterized, Quantity, Result, Status};
@@ -594,6 +594,7 @@ impl Planner {
         let config = ObjectiveConfig {
             harmonics: harmonics.to_vec(),
             form: Form::Complex,
+            branch: BranchChoice::Continuation,
         };
         // The predicted responses: the test's noise-free data.
         let mut obj = self

@@ -55,6 +55,7 @@ fn recover(
         ObjectiveConfig {
             harmonics,
             form: Form::Complex,
+            ..ObjectiveConfig::default()
         },
     )
     .unwrap();

@@ -114,6 +114,7 @@ fn objective(damping: Damping, lanczos: bool, rtol: f64, form: Form) -> FrfObjec
         ObjectiveConfig {
             harmonics: vec![1, 3],
             form,
+            ..ObjectiveConfig::default()
         },
     )
     .unwrap()

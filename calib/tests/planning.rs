@@ -221,6 +221,7 @@ fn brute_force_log_det(
         ObjectiveConfig {
             harmonics: harmonics.to_vec(),
             form: Form::Complex,
+            ..ObjectiveConfig::default()
         },
     )
     .unwrap();

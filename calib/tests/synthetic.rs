@@ -76,6 +76,7 @@ fn objective_jacobian_matches_central_differences() {
         let cfg = ObjectiveConfig {
             harmonics: vec![1, 3],
             form,
+            ..ObjectiveConfig::default()
         };
         let mut obj = FrfObjective::new(&sys, d.clone(), specs_of(&sys), cfg).unwrap();
         // Away from the truth so that residuals are not zero.
@@ -126,6 +127,7 @@ fn noise_free_data_gives_the_parameters_back_from_far_starts() {
             ObjectiveConfig {
                 harmonics,
                 form: Form::Complex,
+                ..ObjectiveConfig::default()
             },
         )
         .unwrap();
@@ -164,6 +166,7 @@ fn with_noise_the_kfold_spread_matches_the_cramer_rao_bound_and_side_harmonics_h
             ObjectiveConfig {
                 harmonics,
                 form: Form::Complex,
+                ..ObjectiveConfig::default()
             },
         )
         .unwrap();
@@ -269,6 +272,7 @@ fn bad_settings_and_unknown_names_are_errors() {
     let h5 = ObjectiveConfig {
         harmonics: vec![5],
         form: Form::Complex,
+        ..ObjectiveConfig::default()
     };
     assert!(FrfObjective::new(&sys, Arc::new(d.clone()), specs_of(&sys), h5).is_err());
     let obj = FrfObjective::new(

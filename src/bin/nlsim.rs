@@ -206,6 +206,12 @@ enum Command {
         /// Residual form: complex differences or log-magnitude and phase [default: complex].
         #[arg(long, value_enum)]
         form: Option<CalibForm>,
+        /// Branch of a multi-valued response the model is compared on: `nearest` repeats a
+        /// step from the linear response where the continued solution is far (5σ) from
+        /// the measurement and keeps the nearer solution (the test jumped elsewhere than
+        /// the model); `continuation` follows the model's own branch [default: nearest].
+        #[arg(long, value_enum)]
+        branch: Option<CalibBranch>,
         /// Harmonics H kept by the harmonic balance [default: 3].
         #[arg(long)]
         harmonics: Option<usize>,
@@ -626,6 +632,7 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             set,
             compare,
             form,
+            branch,
             harmonics,
             modes,
             shape_noise,
@@ -661,6 +668,12 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 req.form = match f {
                     CalibForm::Complex => nlsim::calib::Form::Complex,
                     CalibForm::LogMagnitude => nlsim::calib::Form::LogMagnitudePhase,
+                };
+            }
+            if let Some(b) = branch {
+                req.branch = match b {
+                    CalibBranch::Nearest => nlsim::calib::BranchChoice::NearestToData,
+                    CalibBranch::Continuation => nlsim::calib::BranchChoice::Continuation,
                 };
             }
             let c = &mut req.config;
@@ -767,6 +780,15 @@ enum CalibForm {
     Complex,
     /// Log-magnitude and phase differences.
     LogMagnitude,
+}
+
+/// Branch choice of `nlsim calibrate`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+enum CalibBranch {
+    /// The solution nearer to the measurement where the continued one is far from it.
+    Nearest,
+    /// The model's own continuation from the previous step.
+    Continuation,
 }
 
 /// `nlsim calibrate`: the run, its summary, the estimates CSV and the report folder.
@@ -883,9 +905,11 @@ fn plan_cmd(req: &nlsim::pretest::PlanRequest, cli: &Cli) -> nlsim::Result<()> {
         if !cli.quiet {
             println!(
                 "report: {} files in {} (summary.txt, ranking.csv, fim_best.csv, plots as SVG \
-                 and PNG)",
+                 and PNG); the best design as a test file: nlsim test {} {}",
                 files.len(),
-                dir.display()
+                dir.display(),
+                req.model,
+                dir.join("best_test.toml").display()
             );
         }
     }
