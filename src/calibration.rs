@@ -858,18 +858,9 @@ fn csv_field(s: &str) -> String {
     }
 }
 
-/// Writes `text` to `path` through a temporary file.
+/// Writes `text` to `path` through a temporary file ([`crate::output::write_text_atomically`]).
 pub(crate) fn write_text(path: &Path, text: &str) -> Result<()> {
-    let tmp = crate::output::temp_path(path);
-    let io = |source| Error::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    if let Err(e) = std::fs::write(&tmp, text) {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(io(e));
-    }
-    std::fs::rename(&tmp, path).map_err(io)
+    crate::output::write_text_atomically(path, text)
 }
 
 /// Most FRF plots a report draws (channels × compared harmonics); the fit table holds all.

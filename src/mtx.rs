@@ -80,6 +80,27 @@ pub fn parse_matrix_market(text: &str, file: &Path, name: &str) -> Result<Sparse
                         format!("{name} must be square, the file says {r} x {c}"),
                     ));
                 }
+                if r > MAX_DIM {
+                    return Err(err(
+                        ln,
+                        format!(
+                            "{r} rows: more than {MAX_DIM} DOFs, which no workstation can \
+                             reduce"
+                        ),
+                    ));
+                }
+                // Each entry takes a line of at least 6 bytes ("i j v\n").
+                let room = text.len() / 6 + 1;
+                if nz > room {
+                    return Err(err(
+                        ln,
+                        format!(
+                            "the size line announces {nz} entries; a file of {} bytes holds \
+                             at most {room}",
+                            text.len()
+                        ),
+                    ));
+                }
                 n = r;
                 size = Some((r, nz));
                 trip.reserve(nz);
@@ -163,6 +184,16 @@ pub fn parse_dof_labels(text: &str, file: &Path) -> Result<Vec<DofLabel>> {
     Ok(out)
 }
 
+/// Most rows a matrix file may declare (a model of more DOFs is refused before anything is
+/// allocated).
+pub const MAX_DIM: usize = 50_000_000;
+
+/// Most values one HDF5 dataset of a matrix may declare (2 GiB of `f64`).
+pub const MAX_HDF5_VALUES: usize = 1 << 28;
+
+/// Largest dense HDF5 matrix (n × n ≤ [`MAX_HDF5_VALUES`]).
+pub const MAX_DENSE_DIM: usize = 16_384;
+
 /// Reads a square matrix from an HDF5 file: `object` is either a group holding compressed
 /// sparse rows in scipy's convention (`data`, `indices`, `indptr`, 0-based, and a `shape`
 /// attribute or dataset; repeated entries are summed) or a 2-D dense dataset.
@@ -177,17 +208,48 @@ pub fn read_hdf5_matrix(file: &Path, object: &str, name: &str) -> Result<SparseS
         path: file.to_path_buf(),
         message: e.to_string(),
     })?;
+    // Declared sizes are checked before reading: a small chunked file can declare a
+    // dataset of any size.
+    let bounded = |d: &hdf5::Dataset, k: &str| -> Result<()> {
+        if d.size() > MAX_HDF5_VALUES {
+            return Err(err(format!(
+                "dataset '{k}' declares {} values, more than {MAX_HDF5_VALUES} ({} GiB)",
+                d.size(),
+                (MAX_HDF5_VALUES * 8) >> 30
+            )));
+        }
+        Ok(())
+    };
     if let Ok(g) = f.group(object) {
         let read_i = |k: &str| -> Result<Vec<i64>> {
-            g.dataset(k)
-                .and_then(|d| d.read_raw::<i64>())
+            let d = g
+                .dataset(k)
+                .map_err(|e| err(format!("dataset '{k}' of a CSR group: {e}")))?;
+            bounded(&d, k)?;
+            let integer = d.dtype().and_then(|t| t.to_descriptor()).is_ok_and(|t| {
+                matches!(
+                    t,
+                    hdf5::types::TypeDescriptor::Integer(_)
+                        | hdf5::types::TypeDescriptor::Unsigned(_)
+                )
+            });
+            if !integer {
+                return Err(err(format!(
+                    "dataset '{k}' of a CSR group must hold integers (it would be truncated)"
+                )));
+            }
+            d.read_raw::<i64>()
                 .map_err(|e| err(format!("dataset '{k}' of a CSR group: {e}")))
         };
         let indptr = read_i("indptr")?;
         let indices = read_i("indices")?;
         let data = g
             .dataset("data")
-            .and_then(|d| d.read_raw::<f64>())
+            .map_err(h5)
+            .and_then(|d| {
+                bounded(&d, "data")?;
+                d.read_raw::<f64>().map_err(h5)
+            })
             .map_err(|e| err(format!("dataset 'data' of a CSR group: {e}")))?;
         let shape: Vec<i64> = match g.attr("shape") {
             Ok(a) => a.read_raw::<i64>().map_err(h5)?,
@@ -232,6 +294,13 @@ pub fn read_hdf5_matrix(file: &Path, object: &str, name: &str) -> Result<SparseS
     if shape.len() != 2 || shape[0] != shape[1] {
         return Err(err(format!(
             "a dense matrix must be square and 2-D, this one is {shape:?}"
+        )));
+    }
+    if shape[0] > MAX_DENSE_DIM {
+        return Err(err(format!(
+            "a dense {0} x {0} matrix is larger than {MAX_DENSE_DIM} x {MAX_DENSE_DIM}: store it \
+             as compressed sparse rows (data, indices, indptr)",
+            shape[0]
         )));
     }
     let v = d.read_raw::<f64>().map_err(h5)?;

@@ -34,23 +34,93 @@ impl Format {
     }
 }
 
-/// Writes `path` through `write(temporary path, format)`, then renames it into place; the
-/// temporary file is removed on failure.
+/// Writes `path` through `write(temporary path, format)`, flushes it to the disk and
+/// renames it into place, so that the final name never holds a partial file, even after a
+/// crash of the machine; the temporary file is removed on failure. Temporary files of the
+/// same destination left by runs that no longer exist (killed) are removed first.
 pub fn write_atomically(
     path: &Path,
     hint: &str,
     write: impl FnOnce(&Path, Format) -> Result<()>,
 ) -> Result<()> {
     let format = Format::of(path, hint)?;
+    remove_orphaned_temporaries(path);
     let tmp = temp_path(path);
-    if let Err(e) = write(&tmp, format) {
+    let io = |source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let written = write(&tmp, format).and_then(|()| {
+        std::fs::File::open(&tmp)
+            .and_then(|f| f.sync_all())
+            .map_err(io)
+    });
+    if let Err(e) = written {
         let _ = std::fs::remove_file(&tmp);
         return Err(e);
     }
-    std::fs::rename(&tmp, path).map_err(|source| Error::Io {
+    std::fs::rename(&tmp, path).map_err(io)?;
+    // The rename itself reaches the disk with the folder's entry.
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        let _ = std::fs::File::open(dir).and_then(|d| d.sync_all());
+    }
+    Ok(())
+}
+
+/// Writes `text` to `path` the way [`write_atomically`] writes a result: under a temporary
+/// name, flushed to the disk, then renamed; the final name holds the whole text or nothing
+/// new (a killed run or a full disk leaves the previous file, or none).
+pub fn write_text_atomically(path: &Path, text: &str) -> Result<()> {
+    remove_orphaned_temporaries(path);
+    let tmp = temp_path(path);
+    let io = |source| Error::Io {
         path: path.to_path_buf(),
         source,
-    })
+    };
+    let written = std::fs::File::create(&tmp).and_then(|mut f| {
+        use std::io::Write as _;
+        f.write_all(text.as_bytes())?;
+        f.sync_all()
+    });
+    if let Err(e) = written {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(io(e));
+    }
+    std::fs::rename(&tmp, path).map_err(io)
+}
+
+/// Removes `NAME.tmp-PID` files beside `path` whose process `PID` no longer runs (where
+/// `/proc` tells); those of running processes, another concurrent run included, are kept.
+/// Returns what was removed.
+pub(crate) fn remove_orphaned_temporaries(path: &Path) -> Vec<PathBuf> {
+    let mut removed = Vec::new();
+    let proc_fs = Path::new("/proc/self").exists();
+    let (Some(name), true) = (path.file_name().and_then(|n| n.to_str()), proc_fs) else {
+        return removed;
+    };
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let prefix = format!("{name}.tmp-");
+    let Ok(rd) = std::fs::read_dir(&dir) else {
+        return removed;
+    };
+    for e in rd.flatten() {
+        let file = e.file_name();
+        let Some(pid) = file
+            .to_str()
+            .and_then(|n| n.strip_prefix(&prefix))
+            .and_then(|p| p.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        let alive = Path::new("/proc").join(pid.to_string()).exists();
+        if !alive && std::fs::remove_file(e.path()).is_ok() {
+            removed.push(e.path());
+        }
+    }
+    removed
 }
 
 /// 1-based line of byte `offset` in `text` (where a TOML parser's error span starts).

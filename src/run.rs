@@ -89,6 +89,12 @@ impl SweepMode {
     }
 }
 
+/// Most points of one FRF (a stepped sweep's steps, a continuation's points).
+pub const MAX_FRF_POINTS: usize = 1_000_000;
+
+/// Most harmonics `H` of one FRF.
+pub const MAX_FRF_HARMONICS: usize = 256;
+
 /// A multi-harmonic FRF to compute (the options of `nlsim frf`).
 #[derive(Debug, Clone)]
 pub struct FrfRequest {
@@ -150,8 +156,18 @@ impl FrfRequest {
         if self.from_hz == self.to_hz {
             return Err(usage("from_hz and to_hz are equal".into()));
         }
-        if self.points < 2 {
-            return Err(usage("points must be at least 2".into()));
+        if !(2..=MAX_FRF_POINTS).contains(&self.points) {
+            return Err(usage(format!(
+                "points {} must be from 2 to {MAX_FRF_POINTS} (each point keeps its solution)",
+                self.points
+            )));
+        }
+        if self.harmonics > MAX_FRF_HARMONICS {
+            return Err(usage(format!(
+                "harmonics {} is more than {MAX_FRF_HARMONICS} (the Jacobian and the AFT grow \
+                 as H²; contact rarely needs more than 50)",
+                self.harmonics
+            )));
         }
         if self.modes == 0 {
             return Err(usage("modes must be at least 1".into()));

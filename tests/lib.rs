@@ -532,7 +532,7 @@ mod cli {
             (
                 vec!["--threads".into(), "0".into(), "fixtures".into()],
                 2,
-                "--threads must be at least 1".into(),
+                "--threads 0: give 1 to 1024".into(),
             ),
             (
                 vec!["check".into(), missing.display().to_string()],
@@ -3170,6 +3170,271 @@ steps = 25
             let (rc, _, err) = nlsim(&["test", "ecl_beam", t.to_str().unwrap()]);
             assert_ne!(rc, 0);
             assert!(err.contains(want), "{want}: {err}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
+
+/// Copies the example model `spring_mass` into `dir` without its stiffness file, which a
+/// test then writes (a bad Matrix Market file) or points elsewhere (an HDF5 object).
+fn copy_spring_mass_but_k(dir: &Path) {
+    for f in [
+        "spring_mass.toml",
+        "spring_mass_M.mtx",
+        "spring_mass_dofs.txt",
+    ] {
+        std::fs::copy(
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("examples/models")
+                .join(f),
+            dir.join(f),
+        )
+        .unwrap();
+    }
+}
+
+/// Issue 17's hostile inputs: each is refused with one line on stderr naming what was
+/// wrong, exit 1 or 2, no panic and no allocation abort (run under a 3 GB address-space
+/// limit), and no result file; a closed stdout ends the run quietly with its result file
+/// complete.
+mod hardening {
+    use super::*;
+
+    /// `nlsim ARGS` through `sh -c` with `prefix` before it and `suffix` after it.
+    fn sh(prefix: &str, args: &[&str], suffix: &str) -> (i32, String, String) {
+        let mut cmd = format!("{prefix} '{}'", env!("CARGO_BIN_EXE_nlsim"));
+        for a in args {
+            cmd.push_str(&format!(" '{a}'"));
+        }
+        cmd.push_str(suffix);
+        let out = Command::new("sh").args(["-c", &cmd]).output().unwrap();
+        (
+            out.status.code().unwrap_or(-1),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    }
+
+    #[test]
+    fn oversized_requests_are_refused_in_one_line_before_allocating() {
+        let dir = scratch("hardening");
+        let model = |mtx: &str| {
+            let d = dir.join(format!("m{}", mtx.len()));
+            std::fs::create_dir_all(&d).unwrap();
+            copy_spring_mass_but_k(&d);
+            std::fs::write(d.join("spring_mass.mtx"), mtx).unwrap();
+            d.join("spring_mass.toml").to_str().unwrap().to_string()
+        };
+        let head = "%%MatrixMarket matrix coordinate real symmetric\n";
+        let nz_max = model(&format!("{head}3 3 18446744073709551615\n1 1 2.0\n"));
+        let nz_big = model(&format!("{head}3 3 1000000000000\n1 1 2.0\n"));
+        let dim = model(&format!("{head}1000000000000 1000000000000 1\n1 1 2.0\n"));
+        let out = dir.join("never.h5");
+        let o = out.to_str().unwrap();
+        let jobs = dir.join("jobs.toml");
+        std::fs::write(
+            &jobs,
+            "name = \"huge\"\ncommand = \"frf\"\nmodel = \"duffing_fig3\"\n\n[frf]\nfrom = 25.0\n\
+             to = 35.0\n\n[lhs]\nsamples = 1000000000000\n\
+             params = [{ set = \"spring.k3\", min = 1e3, max = 1e4 }]\n",
+        )
+        .unwrap();
+        let jobs = jobs.to_str().unwrap().to_string();
+        let cases: Vec<(Vec<&str>, &str)> = vec![
+            (vec!["batch", &jobs, "--output", o], "at most 1000000"),
+            (vec!["check", &nz_max], "holds at most"),
+            (vec!["check", &nz_big], "holds at most"),
+            (vec!["check", &dim], "more than 50000000 DOFs"),
+            (
+                vec!["check", "bracket:dofs=1000000000000"],
+                "at most 1500000",
+            ),
+            (vec!["check", "bracket:refinement=16"], "from 1 to 14"),
+            (
+                vec!["--threads", "100000", "check", "chain_2dof"],
+                "1 to 1024",
+            ),
+            (
+                vec![
+                    "frf",
+                    "duffing_fig3",
+                    "--from",
+                    "25",
+                    "--to",
+                    "35",
+                    "--harmonics",
+                    "100000",
+                    "--out",
+                    o,
+                ],
+                "more than 256",
+            ),
+            (
+                vec![
+                    "frf",
+                    "duffing_fig3",
+                    "--from",
+                    "25",
+                    "--to",
+                    "35",
+                    "--mode",
+                    "step-up",
+                    "--points",
+                    "1000000000000",
+                    "--out",
+                    o,
+                ],
+                "from 2 to 1000000",
+            ),
+        ];
+        for (args, want) in &cases {
+            let (rc, _, err) = sh("ulimit -v 3000000; exec", args, "");
+            assert!(rc == 1 || rc == 2, "{args:?}: exit {rc}\n{err}");
+            assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+            assert!(err.contains(want), "{args:?}: want '{want}' in {err}");
+            assert!(!out.exists(), "{args:?} left {o}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_closed_stdout_ends_quietly_with_the_result_complete() {
+        let dir = scratch("hardening-pipe");
+        let (rc, _, err) = sh("", &["check", "ecl_beam"], " | true");
+        assert_eq!(rc, 0);
+        assert!(!err.contains("panicked"), "{err}");
+        let out = dir.join("f.h5");
+        let frf = |out: &Path| -> Vec<String> {
+            vec![
+                "frf".into(),
+                "duffing_fig3".into(),
+                "--from".into(),
+                "25".into(),
+                "--to".into(),
+                "35".into(),
+                "--out".into(),
+                out.to_str().unwrap().into(),
+            ]
+        };
+        // What a complete file holds: every dataset's name and size.
+        let contents = |p: &Path| -> Vec<(String, usize)> {
+            let f = hdf5_metno::File::open(p).unwrap();
+            let mut v = Vec::new();
+            let mut stack = vec![f.as_group().unwrap()];
+            while let Some(g) = stack.pop() {
+                for d in g.datasets().unwrap() {
+                    v.push((d.name(), d.size()));
+                }
+                stack.extend(g.groups().unwrap());
+            }
+            v.sort();
+            v
+        };
+        let reference = dir.join("reference.h5");
+        // What a killed run left (no such process) is removed; a live process's is kept.
+        let orphan = dir.join("reference.h5.tmp-999999999");
+        let live = dir.join(format!("reference.h5.tmp-{}", std::process::id()));
+        std::fs::write(&orphan, b"partial").unwrap();
+        std::fs::write(&live, b"being written").unwrap();
+        let args = frf(&reference);
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let (rc, _, err) = nlsim(&args);
+        assert_eq!(rc, 0, "{err}");
+        let want = contents(&reference);
+        assert!(!want.is_empty());
+        assert!(!orphan.exists());
+        assert!(live.exists());
+        for _ in 0..3 {
+            let _ = std::fs::remove_file(&out);
+            let args = frf(&out);
+            let args: Vec<&str> = args.iter().map(String::as_str).collect();
+            let (_, _, err) = sh("", &args, " | head -c 1 >/dev/null");
+            assert!(!err.contains("panicked"), "{err}");
+            assert_eq!(contents(&out), want);
+        }
+        // Progress is drawn only on a terminal: no carriage returns in a log.
+        let (rc, _, err) = nlsim(&["modes", "bracket", "--count", "4"]);
+        assert_eq!(rc, 0, "{err}");
+        assert!(!err.contains('\r'), "{err:?}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
+
+/// HDF5 matrices that declare more than they hold, or hold what is not an index.
+mod hardening_hdf5 {
+    use super::*;
+
+    #[test]
+    fn hdf5_matrices_are_checked_before_reading() {
+        let dir = scratch("hardening-h5");
+        copy_spring_mass_but_k(&dir);
+        let toml = std::fs::read_to_string(dir.join("spring_mass.toml")).unwrap();
+        let h5 = dir.join("k.h5");
+        {
+            let f = hdf5_metno::File::create(&h5).unwrap();
+            // A dense 10⁶ x 10⁶ dataset in a file of a few KB (no chunk written).
+            f.new_dataset::<f64>()
+                .chunk((1, 1))
+                .shape((1_000_000, 1_000_000))
+                .create("dense")
+                .unwrap();
+            // CSR with fractional column indices.
+            let g = f.create_group("frac").unwrap();
+            g.new_dataset_builder()
+                .with_data(&[0.5f64, 1.0, 2.0])
+                .create("indices")
+                .unwrap();
+            g.new_dataset_builder()
+                .with_data(&[0i64, 1, 2, 3])
+                .create("indptr")
+                .unwrap();
+            g.new_dataset_builder()
+                .with_data(&[1.0f64, 1.0, 1.0])
+                .create("data")
+                .unwrap();
+            g.new_attr::<i64>()
+                .shape(2)
+                .create("shape")
+                .unwrap()
+                .write(&[3i64, 3])
+                .unwrap();
+            // CSR whose data declares 2⁴⁰ values.
+            let g = f.create_group("huge").unwrap();
+            g.new_dataset::<f64>()
+                .chunk(1)
+                .shape(1usize << 40)
+                .create("data")
+                .unwrap();
+            g.new_dataset_builder()
+                .with_data(&[0i64])
+                .create("indices")
+                .unwrap();
+            g.new_dataset_builder()
+                .with_data(&[0i64, 1, 1, 1])
+                .create("indptr")
+                .unwrap();
+        }
+        for (object, want) in [
+            ("dense", "larger than 16384 x 16384"),
+            ("frac", "must hold integers"),
+            ("huge", "more than 268435456"),
+        ] {
+            let text = toml.replace(
+                "stiffness = \"spring_mass.mtx\"",
+                &format!("stiffness = \"k.h5:/{object}\""),
+            );
+            let model = dir.join(format!("{object}.toml"));
+            std::fs::write(&model, text).unwrap();
+            let cmd = format!(
+                "ulimit -v 3000000; exec '{}' check '{}'",
+                env!("CARGO_BIN_EXE_nlsim"),
+                model.display()
+            );
+            let out = Command::new("sh").args(["-c", &cmd]).output().unwrap();
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert_eq!(out.status.code(), Some(1), "{object}: {err}");
+            assert_eq!(err.trim_end().lines().count(), 1, "{object}: {err}");
+            assert!(err.contains(want), "{object}: want '{want}' in {err}");
         }
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -11,6 +11,9 @@ use std::path::{Path, PathBuf};
 use super::{Assignment, Batch, BatchCommand, Job, latin_hypercube};
 use crate::output::line_of;
 
+/// Most samples of a jobs file's `[lhs]` table.
+pub const MAX_LHS_SAMPLES: usize = 1_000_000;
+
 /// The `[frf]` table: the options of `nlsim frf`.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -496,6 +499,16 @@ impl Batch {
                     line,
                     "lhs",
                     "needs samples >= 1 and at least one entry in params".into(),
+                ));
+            }
+            if l.samples > MAX_LHS_SAMPLES {
+                return Err(err(
+                    line,
+                    "lhs.samples",
+                    format!(
+                        "{} samples: at most {MAX_LHS_SAMPLES} (each sample is a job)",
+                        l.samples
+                    ),
                 ));
             }
             for p in &l.params {

@@ -4,8 +4,47 @@
 use clap::{Parser, Subcommand};
 use nlsim::kernel::ValidationConfig;
 use nlsim::reduction::{EigenConfig, EigenSolver, ModeSelection};
+use std::io::Write as _;
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
+
+/// Most worker threads `--threads` accepts.
+const MAX_THREADS: usize = 1024;
+
+/// Set once standard output cannot be written (a closed pipe: `nlsim ... | head`): the run
+/// goes on quietly and still completes its result files.
+static STDOUT_GONE: AtomicBool = AtomicBool::new(false);
+
+/// Writes to standard output without panicking when it is closed: after the first failed
+/// write nothing more is printed there. A broken pipe is silent (the reader has what it
+/// wanted); any other failure is named once on stderr.
+fn emit(args: std::fmt::Arguments<'_>, newline: bool) {
+    if STDOUT_GONE.load(Ordering::Relaxed) {
+        return;
+    }
+    let mut o = std::io::stdout().lock();
+    let r = o
+        .write_fmt(args)
+        .and_then(|()| if newline { o.write_all(b"\n") } else { Ok(()) });
+    if let Err(e) = r {
+        STDOUT_GONE.store(true, Ordering::Relaxed);
+        if e.kind() != std::io::ErrorKind::BrokenPipe {
+            eprintln!("note: standard output cannot be written ({e}); the run goes on");
+        }
+    }
+}
+
+/// `println!` through [`emit`].
+macro_rules! out {
+    () => { emit(format_args!(""), true) };
+    ($($t:tt)*) => { emit(format_args!($($t)*), true) };
+}
+
+/// `print!` through [`emit`].
+macro_rules! out_part {
+    ($($t:tt)*) => { emit(format_args!($($t)*), false) };
+}
 
 #[global_allocator]
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
@@ -20,8 +59,8 @@ struct Cli {
     /// Print more detail (solver statistics, each batch job).
     #[arg(long, short, global = true)]
     verbose: bool,
-    /// Worker threads for the parallel parts (default: every core). Results do not depend on
-    /// it.
+    /// Worker threads for the parallel parts, 1 to 1024 (default: every core). Results do
+    /// not depend on it.
     #[arg(long, global = true, value_name = "N")]
     threads: Option<usize>,
     #[command(subcommand)]
@@ -375,8 +414,11 @@ fn par(cli: &Cli) -> faer::Par {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     if let Some(n) = cli.threads {
-        if n == 0 {
-            eprintln!("error: --threads must be at least 1");
+        if !(1..=MAX_THREADS).contains(&n) {
+            eprintln!(
+                "error: --threads {n}: give 1 to {MAX_THREADS} (each thread reserves a stack; \
+                 more threads than cores only slow the run down)"
+            );
             return ExitCode::from(2);
         }
         // The first and only global pool: cannot fail here.
@@ -415,7 +457,7 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             };
             let report = loaded.model.validate(&cfg)?;
             if !cli.quiet {
-                print!(
+                out_part!(
                     "{}",
                     nlsim::summary::model_summary(&loaded.model, &loaded.source, Some(&report))
                 );
@@ -424,9 +466,9 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
         }
         Command::Fixtures => {
             for f in nlsim::fixtures::CATALOGUE {
-                println!("{:<26} {}", f.name, f.summary);
+                out!("{:<26} {}", f.name, f.summary);
                 for (k, d) in f.options {
-                    println!("    {k:<20} {d}");
+                    out!("    {k:<20} {d}");
                 }
             }
             Ok(())
@@ -466,16 +508,16 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             })?;
             let report = modes(&loaded.model, cfg, cli.quiet)?;
             if !cli.quiet {
-                println!(
+                out!(
                     "{}",
                     nlsim::summary::model_summary(&loaded.model, &loaded.source, None)
                 );
-                print!("{}", nlsim::modes::format_table(&report));
+                out_part!("{}", nlsim::modes::format_table(&report));
             }
             if let Some(path) = out {
                 nlsim::modes::write_modes(path, model, &loaded.model, &report)?;
                 if !cli.quiet {
-                    println!("  written to {}", path.display());
+                    out!("  written to {}", path.display());
                 }
             }
             Ok(())
@@ -495,11 +537,12 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 ("M.mtx", nlsim::mtx::to_matrix_market(m.mass())),
                 ("dofs.txt", labels),
             ] {
-                let path = dir.join(name);
-                std::fs::write(&path, text).map_err(|source| nlsim::Error::Io { path, source })?;
+                // Atomic: a killed export or a full disk leaves no truncated file under
+                // the final name.
+                nlsim::output::write_text_atomically(&dir.join(name), &text)?;
             }
             if !cli.quiet {
-                println!(
+                out!(
                     "wrote K.mtx, M.mtx, dofs.txt ({} DOFs) to {}",
                     m.n_dofs(),
                     dir.display()
@@ -749,10 +792,12 @@ fn modes(
     quiet: bool,
 ) -> nlsim::Result<nlsim::modes::ModeReport> {
     let t = Instant::now();
+    // A progress line only on a terminal: in a log its carriage returns pile up.
+    let show = !quiet && std::io::IsTerminal::is_terminal(&std::io::stderr());
     let mut solver = EigenSolver::new();
     let modes = solver
         .solve_with_progress(model.stiffness(), model.mass(), &cfg, &mut |p| {
-            if !quiet {
+            if show {
                 eprint!(
                     "\r  modes: {}/{} converged after {} restart(s), {:.1} s ",
                     p.converged,
@@ -763,7 +808,7 @@ fn modes(
             }
         })
         .and_then(nlsim::reduction::Modes::into_converged);
-    if !quiet
+    if show
         && modes
             .as_ref()
             .is_ok_and(|m| m.stats.method == nlsim::reduction::EigenMethod::Lanczos)
@@ -801,7 +846,7 @@ fn calibrate_cmd(
     req.check()?;
     let say = |s: &str| {
         if !cli.quiet {
-            println!("{s}");
+            out!("{s}");
         }
     };
     let candidates = match candidates {
@@ -897,13 +942,13 @@ fn plan_cmd(req: &nlsim::pretest::PlanRequest, cli: &Cli) -> nlsim::Result<()> {
     })?;
     if !cli.quiet {
         for line in run.summary() {
-            println!("{line}");
+            out!("{line}");
         }
     }
     if let Some(dir) = &req.report {
         let files = nlsim::pretest::write_plan_report(dir, &run)?;
         if !cli.quiet {
-            println!(
+            out!(
                 "report: {} files in {} (summary.txt, ranking.csv, fim_best.csv, plots as SVG \
                  and PNG); the best design as a test file: nlsim test {} {}",
                 files.len(),
@@ -923,13 +968,13 @@ fn test_cmd(req: &nlsim::vtest::TestRequest, cli: &Cli) -> nlsim::Result<()> {
     progress(req.sweeps.len(), req.sweeps.len());
     if !cli.quiet {
         for line in run.summary() {
-            println!("{line}");
+            out!("{line}");
         }
     }
     if let Some(dir) = &req.report {
         let files = nlsim::vtest::write_test_report(dir, &run)?;
         if !cli.quiet {
-            println!(
+            out!(
                 "report: {} files in {} (summary.txt, control.csv, force and response plots)",
                 files.len(),
                 dir.display()
@@ -943,7 +988,7 @@ fn test_cmd(req: &nlsim::vtest::TestRequest, cli: &Cli) -> nlsim::Result<()> {
 fn demo(model: &str, report_dir: &std::path::Path, quiet: bool) -> nlsim::Result<()> {
     nlsim::demo::run_demo(model, report_dir, &|s: &str| {
         if !quiet {
-            println!("{s}");
+            out!("{s}");
         }
     })
 }
@@ -990,7 +1035,7 @@ fn frf(
     }
     let say = |s: String| {
         if !quiet {
-            println!("{s}");
+            out!("{s}");
         }
     };
     let model = nlsim::run::load_for_run(spec, sets)?;
@@ -1050,7 +1095,7 @@ fn simulate(
     }
     let say = |s: String| {
         if !quiet {
-            println!("{s}");
+            out!("{s}");
         }
     };
     let model = nlsim::run::load_for_run(spec, sets)?;
@@ -1123,7 +1168,7 @@ fn batch_run(
     b.check_models()?;
     let say = |s: String| {
         if !cli.quiet {
-            println!("{s}");
+            out!("{s}");
         }
     };
     say(format!(
@@ -1156,7 +1201,7 @@ fn batch_run(
                 error,
             } => {
                 if verbose {
-                    println!(
+                    out!(
                         "  job {index}: {}",
                         error.map_or("ok".to_string(), |e| format!("failed: {e}"))
                     );
@@ -1203,7 +1248,7 @@ fn batch_merge(
     let b = load_batch(jobs, output)?;
     let m = nlsim::batch::merge(&b)?;
     if !cli.quiet {
-        println!(
+        out!(
             "batch {}: merged {} jobs from {} shard(s) into {}{}",
             b.name,
             m.jobs,
@@ -1216,7 +1261,7 @@ fn batch_merge(
             }
         );
         for line in &m.summary {
-            println!("  {line}");
+            out!("  {line}");
         }
     }
     Ok(())
@@ -1247,7 +1292,7 @@ fn batch_sbatch(
         source,
     })?;
     if !cli.quiet {
-        println!(
+        out!(
             "batch {}: {} jobs in a {}-task array, script {}",
             b.name,
             b.jobs.len(),
@@ -1276,7 +1321,7 @@ fn batch_sbatch(
         }
         let id = String::from_utf8_lossy(&out.stdout).trim().to_string();
         // Scripts read the job id from stdout, even with --quiet.
-        println!("{id}");
+        out!("{id}");
         if !cli.quiet {
             eprintln!(
                 "  submitted; when it is done: nlsim batch merge {}",
