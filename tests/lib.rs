@@ -3240,8 +3240,22 @@ mod hardening {
         )
         .unwrap();
         let jobs = jobs.to_str().unwrap().to_string();
+        // One parameter set by a sweep and by the Latin hypercube.
+        let dup = dir.join("dup.toml");
+        std::fs::write(
+            &dup,
+            "name = \"dup\"\ncommand = \"frf\"\nmodel = \"duffing_fig3\"\n\n[frf]\nfrom = 25.0\n\
+             to = 35.0\n\n[[sweep]]\nset = \"spring.k3\"\nvalues = [1e3, 2e3]\n\n[lhs]\n\
+             samples = 2\nparams = [{ set = \"spring.k3\", min = 1e3, max = 1e4 }]\n",
+        )
+        .unwrap();
+        let dup = dup.to_str().unwrap().to_string();
         let cases: Vec<(Vec<&str>, &str)> = vec![
             (vec!["batch", &jobs, "--output", o], "at most 1000000"),
+            (
+                vec!["batch", &dup, "--output", o],
+                "dup.toml:13: lhs.params: 'spring.k3' is already set by [[sweep]] 1",
+            ),
             (vec!["check", &nz_max], "holds at most"),
             (vec!["check", &nz_big], "holds at most"),
             (vec!["check", &dim], "more than 50000000 DOFs"),

@@ -426,12 +426,29 @@ impl Batch {
             }
             _ => {}
         }
+        // What each axis sets, named once: a parameter or option set by two axes would
+        // be written twice into every job (and one value would silently win).
+        let mut claimed: Vec<(String, String)> = Vec::new();
+        let mut claim = |what: String, by: String, line: usize, key: &str| -> Result<()> {
+            if let Some((_, first)) = claimed.iter().find(|(w, _)| *w == what) {
+                return Err(err(
+                    line,
+                    key,
+                    format!("'{what}' is already set by {first}; set it in one place"),
+                ));
+            }
+            claimed.push((what, by));
+            Ok(())
+        };
         for (i, s) in f.sweep.iter().enumerate() {
             let key = format!("sweep[{i}]");
             let line = text
                 .match_indices("[[sweep]]")
                 .nth(i)
                 .map_or(1, |(o, _)| line_of(text, o));
+            if let Some(what) = s.set.clone().or_else(|| s.option.clone()) {
+                claim(what, format!("[[sweep]] {}", i + 1), line, &key)?;
+            }
             if s.values.is_empty() {
                 return Err(err(line, &key, "`values` is empty".into()));
             }
@@ -512,6 +529,7 @@ impl Batch {
                 ));
             }
             for p in &l.params {
+                claim(p.set.clone(), "[lhs]".into(), line, "lhs.params")?;
                 let ok = p.min.is_finite()
                     && p.max.is_finite()
                     && p.min < p.max
