@@ -115,12 +115,7 @@ fn run(dir: &Path) -> nlsim::Result<Vec<Row>> {
         let data = run_test(&test, &mut |_, _| {})?;
         let sw = &planned.sweeps[r.design.sweep];
         let mut cal = CalibrationRequest::new(MODEL, data.request.out.clone(), specs.clone());
-        cal.compare = r
-            .design
-            .harmonics
-            .iter()
-            .map(|&h| sw.harmonics[h])
-            .collect();
+        cal.compare = sw.harmonic_numbers(&r.design);
         cal.harmonics = plan.harmonics;
         cal.modes = plan.modes;
         cal.config.folds = 10;

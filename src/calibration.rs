@@ -858,11 +858,6 @@ fn csv_field(s: &str) -> String {
     }
 }
 
-/// Writes `text` to `path` through a temporary file ([`crate::output::write_text_atomically`]).
-pub(crate) fn write_text(path: &Path, text: &str) -> Result<()> {
-    crate::output::write_text_atomically(path, text)
-}
-
 /// Most FRF plots a report draws (channels × compared harmonics); the fit table holds all.
 pub const MAX_FRF_PLOTS: usize = 24;
 
@@ -882,7 +877,7 @@ pub fn write_report(dir: &Path, run: &CalibrationRun) -> Result<Vec<PathBuf>> {
     let mut text = |name: &str, body: String| -> Result<()> {
         if !body.is_empty() {
             let p = dir.join(name);
-            write_text(&p, &body)?;
+            crate::output::write_text_atomically(&p, &body)?;
             written.push(p);
         }
         Ok(())

@@ -564,12 +564,5 @@ pub fn run_demo(model: &str, report_dir: &Path, show: &dyn Fn(&str)) -> Result<(
         t0.elapsed().as_secs_f64(),
         report_dir.display()
     ));
-    let tmp = report_dir.join(".summary.txt.tmp");
-    std::fs::write(&tmp, text.borrow().as_bytes())
-        .and_then(|()| std::fs::rename(&tmp, &summary))
-        .map_err(|source| Error::Io {
-            path: summary,
-            source,
-        })?;
-    Ok(())
+    crate::output::write_text_atomically(&summary, &text.borrow())
 }

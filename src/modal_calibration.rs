@@ -212,7 +212,7 @@ pub fn write_modal_report(dir: &Path, run: &ModalRun) -> Result<Vec<PathBuf>> {
         ),
     ] {
         let p = dir.join(name);
-        crate::calibration::write_text(&p, &text)?;
+        crate::output::write_text_atomically(&p, &text)?;
         written.push(p);
     }
     written.extend(convergence_plot(dir, &run.model_name, &c.runs)?);

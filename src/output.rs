@@ -36,21 +36,43 @@ impl Format {
 
 /// Writes `path` through `write(temporary path, format)`, flushes it to the disk and
 /// renames it into place, so that the final name never holds a partial file, even after a
-/// crash of the machine; the temporary file is removed on failure. Temporary files of the
-/// same destination left by runs that no longer exist (killed) are removed first.
+/// crash of the machine; the temporary file is removed on failure, and those of killed runs
+/// of the same destination first.
 pub fn write_atomically(
     path: &Path,
     hint: &str,
     write: impl FnOnce(&Path, Format) -> Result<()>,
 ) -> Result<()> {
     let format = Format::of(path, hint)?;
-    remove_orphaned_temporaries(path);
+    replace_atomically(path, |tmp| write(tmp, format))
+}
+
+/// Writes `text` to `path` the way [`write_atomically`] writes a result.
+pub fn write_text_atomically(path: &Path, text: &str) -> Result<()> {
+    replace_atomically(path, |tmp| {
+        std::fs::write(tmp, text).map_err(|source| Error::Io {
+            path: tmp.to_path_buf(),
+            source,
+        })
+    })
+}
+
+/// Writes `path` through `write(temporary path)`, flushes the temporary file to the disk
+/// and renames it into place, so that the final name never holds a partial file, even after
+/// a crash of the machine (a killed run or a full disk leaves the previous file, or none);
+/// the temporary file is removed on failure. Temporary files of the same destination left
+/// by runs that no longer exist are removed first.
+pub(crate) fn replace_atomically(
+    path: &Path,
+    write: impl FnOnce(&Path) -> Result<()>,
+) -> Result<()> {
+    remove_temporaries(path, true);
     let tmp = temp_path(path);
     let io = |source| Error::Io {
         path: path.to_path_buf(),
         source,
     };
-    let written = write(&tmp, format).and_then(|()| {
+    let written = write(&tmp).and_then(|()| {
         std::fs::File::open(&tmp)
             .and_then(|f| f.sync_all())
             .map_err(io)
@@ -67,35 +89,16 @@ pub fn write_atomically(
     Ok(())
 }
 
-/// Writes `text` to `path` the way [`write_atomically`] writes a result: under a temporary
-/// name, flushed to the disk, then renamed; the final name holds the whole text or nothing
-/// new (a killed run or a full disk leaves the previous file, or none).
-pub fn write_text_atomically(path: &Path, text: &str) -> Result<()> {
-    remove_orphaned_temporaries(path);
-    let tmp = temp_path(path);
-    let io = |source| Error::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let written = std::fs::File::create(&tmp).and_then(|mut f| {
-        use std::io::Write as _;
-        f.write_all(text.as_bytes())?;
-        f.sync_all()
-    });
-    if let Err(e) = written {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(io(e));
-    }
-    std::fs::rename(&tmp, path).map_err(io)
-}
-
-/// Removes `NAME.tmp-PID` files beside `path` whose process `PID` no longer runs (where
-/// `/proc` tells); those of running processes, another concurrent run included, are kept.
-/// Returns what was removed.
-pub(crate) fn remove_orphaned_temporaries(path: &Path) -> Vec<PathBuf> {
+/// Removes the `NAME.tmp-PID` files beside `path` ([`temp_path`]): with `orphans_only`,
+/// those whose process `PID` no longer runs (where `/proc` tells; nothing otherwise), so
+/// that a concurrent run's file is kept; else all of them (a batch shard, which one task
+/// owns at a time). Returns what was removed.
+pub(crate) fn remove_temporaries(path: &Path, orphans_only: bool) -> Vec<PathBuf> {
     let mut removed = Vec::new();
-    let proc_fs = Path::new("/proc/self").exists();
-    let (Some(name), true) = (path.file_name().and_then(|n| n.to_str()), proc_fs) else {
+    if orphans_only && !Path::new("/proc/self").exists() {
+        return removed;
+    }
+    let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
         return removed;
     };
     let dir = match path.parent() {
@@ -108,15 +111,15 @@ pub(crate) fn remove_orphaned_temporaries(path: &Path) -> Vec<PathBuf> {
     };
     for e in rd.flatten() {
         let file = e.file_name();
-        let Some(pid) = file
-            .to_str()
-            .and_then(|n| n.strip_prefix(&prefix))
-            .and_then(|p| p.parse::<u32>().ok())
-        else {
+        let Some(suffix) = file.to_str().and_then(|n| n.strip_prefix(&prefix)) else {
             continue;
         };
-        let alive = Path::new("/proc").join(pid.to_string()).exists();
-        if !alive && std::fs::remove_file(e.path()).is_ok() {
+        let orphan = || {
+            suffix
+                .parse::<u32>()
+                .is_ok_and(|pid| !Path::new("/proc").join(pid.to_string()).exists())
+        };
+        if (!orphans_only || orphan()) && std::fs::remove_file(e.path()).is_ok() {
             removed.push(e.path());
         }
     }

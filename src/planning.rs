@@ -126,17 +126,11 @@ pub fn demo_planning(
     ));
     let describe = |r: &nlsim_calib::RankedDesign| {
         let sw = &sweeps[r.design.sweep];
-        let ch: Vec<&str> = r
-            .design
-            .channels
+        let ch = sw.channel_names(&r.design);
+        let hk: Vec<String> = sw
+            .harmonic_numbers(&r.design)
             .iter()
-            .map(|&c| sw.channels[c].as_str())
-            .collect();
-        let hk: Vec<String> = r
-            .design
-            .harmonics
-            .iter()
-            .map(|&h| sw.harmonics[h].to_string())
+            .map(usize::to_string)
             .collect();
         format!(
             "{:>7.3} N  {:<7} {:<12} {:<6}",

@@ -26,8 +26,9 @@
 //! steps = 15
 //! ```
 
-use crate::calibration::{SettingsFile, write_text};
+use crate::calibration::SettingsFile;
 use crate::error::{Error, Result};
+use crate::output::write_text_atomically as write_text;
 use crate::plot::{BarGroup, Bars, Lines};
 use faer::Mat;
 use nlsim_calib::{
@@ -647,26 +648,22 @@ pub fn plan_candidates(req: &PlanRequest) -> Result<(Model, PlanCandidates)> {
 /// Adds the request's candidate actuators (as excitations of zero nominal amplitude) and
 /// sensors to `model`; errors name the point and its DOF.
 fn add_points(model: &mut Model, req: &PlanRequest) -> Result<()> {
-    let dof = |model: &Model, p: &PointSpec, what: &str| {
-        model.dofs().find(&p.dof).map_err(|e| {
-            Error::Usage(format!(
-                "plan {what} '{}': DOF '{}' is not in '{}': {e}",
-                p.name,
-                p.dof,
-                model.name()
-            ))
-        })
-    };
     for a in &req.actuators {
-        let d = dof(model, a, "actuator")?;
+        let d = point_dof(model, a, "plan actuator")?;
         model.add_excitation(Excitation {
             name: a.name.clone(),
             dof: d,
             amplitude: 0.0,
         })?;
     }
-    for s in &req.sensors {
-        let d = dof(model, s, "sensor")?;
+    add_sensors(model, &req.sensors, "plan sensor")
+}
+
+/// Adds `sensors` to `model` (a plan's or a test file's `[[sensor]]` entries); an unknown
+/// DOF is named with `what` (e.g. `plan sensor`) and the point.
+pub(crate) fn add_sensors(model: &mut Model, sensors: &[PointSpec], what: &str) -> Result<()> {
+    for s in sensors {
+        let d = point_dof(model, s, what)?;
         model.add_sensor(Sensor {
             name: s.name.clone(),
             dof: d,
@@ -674,6 +671,18 @@ fn add_points(model: &mut Model, req: &PlanRequest) -> Result<()> {
         })?;
     }
     Ok(())
+}
+
+/// The DOF of point `p` in `model`; the error names `what`, the point and its DOF.
+fn point_dof(model: &Model, p: &PointSpec, what: &str) -> Result<usize> {
+    model.dofs().find(&p.dof).map_err(|e| {
+        Error::Usage(format!(
+            "{what} '{}': DOF '{}' is not in '{}': {e}",
+            p.name,
+            p.dof,
+            model.name()
+        ))
+    })
 }
 
 /// The information of candidate sweep `i` of `setup`.
@@ -767,17 +776,11 @@ pub fn describe_design(
 ) -> [String; 6] {
     let c = &setup.sweeps[r.design.sweep];
     let sw = &sweeps[r.design.sweep];
-    let ch: Vec<&str> = r
-        .design
-        .channels
+    let ch = sw.channel_names(&r.design);
+    let hk: Vec<String> = sw
+        .harmonic_numbers(&r.design)
         .iter()
-        .map(|&i| sw.channels[i].as_str())
-        .collect();
-    let hk: Vec<String> = r
-        .design
-        .harmonics
-        .iter()
-        .map(|&h| sw.harmonics[h].to_string())
+        .map(usize::to_string)
         .collect();
     [
         c.exciter.input.clone(),
@@ -907,11 +910,10 @@ impl PlanRun {
              {band}, sensors {sensors}, harmonics {harm}",
             self.candidates.model_name
         );
-        let compare: Vec<String> = r
-            .design
-            .harmonics
+        let compare: Vec<String> = sw
+            .harmonic_numbers(&r.design)
             .iter()
-            .map(|&h| sw.harmonics[h].to_string())
+            .map(usize::to_string)
             .collect();
         let _ = writeln!(
             t,
@@ -941,12 +943,7 @@ impl PlanRun {
             req.noise.relative, req.noise.absolute
         );
         let _ = writeln!(t, "out = \"virtual_test.csv\"");
-        let names: Vec<String> = r
-            .design
-            .channels
-            .iter()
-            .map(|&i| q(&sw.channels[i]))
-            .collect();
+        let names: Vec<String> = sw.channel_names(&r.design).into_iter().map(q).collect();
         let _ = writeln!(t, "channels = [{}]", names.join(", "));
         if !req.set.is_empty() {
             let pairs: Vec<String> = req
@@ -957,16 +954,26 @@ impl PlanRun {
                 .collect();
             let _ = writeln!(t, "set = {{ {} }}", pairs.join(", "));
         }
-        for &i in &r.design.channels {
-            if let Some(p) = req.sensors.iter().find(|p| p.name == sw.channels[i]) {
-                let _ = write!(
-                    t,
-                    "\n[[sensor]]\nname = {}\ndof = {}\nquantity = {}\n",
-                    q(&p.name),
-                    q(&p.dof),
-                    q(p.quantity.as_str())
-                );
-            }
+        let added: Vec<&PointSpec> = sw
+            .channel_names(&r.design)
+            .into_iter()
+            .filter_map(|name| req.sensors.iter().find(|p| p.name == name))
+            .collect();
+        if !added.is_empty() {
+            let _ = writeln!(
+                t,
+                "\n# the sensors below are not in the model: calibrate the data with a model \
+                 file that declares them"
+            );
+        }
+        for p in added {
+            let _ = write!(
+                t,
+                "\n[[sensor]]\nname = {}\ndof = {}\nquantity = {}\n",
+                q(&p.name),
+                q(&p.dof),
+                q(p.quantity.as_str())
+            );
         }
         let _ = write!(
             t,

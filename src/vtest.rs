@@ -32,13 +32,14 @@
 //! force = 0.2
 //! ```
 
-use crate::calibration::{SettingsFile, write_text};
+use crate::calibration::SettingsFile;
 use crate::error::{Error, Result};
+use crate::output::write_text_atomically as write_text;
 use crate::plot::Lines;
 use crate::pretest::{PointSpec, PointTable};
 use nlsim_calib::{ControlConfig, Noise, Shaker, SweepPlan, VirtualTest, virtual_test};
 use nlsim_hb::{HarmonicSet, HbConfig, HbSystem};
-use nlsim_kernel::{Excitation, Sensor, Status};
+use nlsim_kernel::{Excitation, Status};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -408,21 +409,7 @@ pub fn run_test(req: &TestRequest, progress: &mut dyn FnMut(usize, usize)) -> Re
                 ))
             })?,
     };
-    for p in &req.sensors {
-        let d = model.dofs().find(&p.dof).map_err(|e| {
-            Error::Usage(format!(
-                "test sensor '{}': DOF '{}' is not in '{}': {e}",
-                p.name,
-                p.dof,
-                model.name()
-            ))
-        })?;
-        model.add_sensor(Sensor {
-            name: p.name.clone(),
-            dof: d,
-            quantity: p.quantity,
-        })?;
-    }
+    crate::pretest::add_sensors(&mut model, &req.sensors, "test sensor")?;
     if model.sensors().is_empty() {
         return Err(Error::Usage(format!(
             "test: '{}' has no sensor to measure",

@@ -3026,12 +3026,7 @@ steps = 25
             nlsim::vtest::run_test(&test, &mut |_, _| {}).unwrap();
             let sw = &run.sweeps[r.design.sweep];
             let mut cal = CalibrationRequest::new("bumpstop_cantilever", &test.out, specs.clone());
-            cal.compare = r
-                .design
-                .harmonics
-                .iter()
-                .map(|&h| sw.harmonics[h])
-                .collect();
+            cal.compare = sw.harmonic_numbers(&r.design);
             cal.config.folds = 5;
             let c = run_calibration(&cal, None, &|_| {}).unwrap().calibration;
             for j in 0..2 {

@@ -350,6 +350,25 @@ pub struct SweepInformation {
 }
 
 impl SweepInformation {
+    /// The names of `design`'s channels (its indices into [`SweepInformation::channels`]).
+    pub fn channel_names(&self, design: &Design) -> Vec<&str> {
+        design
+            .channels
+            .iter()
+            .map(|&c| self.channels[c].as_str())
+            .collect()
+    }
+
+    /// The harmonic numbers `k` `design` measures (its indices into
+    /// [`SweepInformation::harmonics`]).
+    pub fn harmonic_numbers(&self, design: &Design) -> Vec<usize> {
+        design
+            .harmonics
+            .iter()
+            .map(|&h| self.harmonics[h])
+            .collect()
+    }
+
     /// `F = F_prior + Σ_{c ∈ channels} Σ_{h ∈ harmonics} terms[c][h]` (indices into
     /// [`SweepInformation::channels`] and [`SweepInformation::harmonics`]).
     pub fn fim(

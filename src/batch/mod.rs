@@ -178,27 +178,6 @@ fn complete_for(path: &Path, hash: u64) -> Result<bool> {
     Ok(u64_attr(&file, "jobs_hash") == Some(hash) && u64_attr(&file, "complete") == Some(1))
 }
 
-/// Removes `NAME.tmp-*` files beside `path`: what killed runs left.
-fn remove_stale_temporaries(path: &Path) -> Vec<PathBuf> {
-    let (Some(dir), Some(name)) = (path.parent(), path.file_name().and_then(|n| n.to_str())) else {
-        return Vec::new();
-    };
-    let prefix = format!("{name}.tmp-");
-    let mut removed = Vec::new();
-    if let Ok(rd) = std::fs::read_dir(dir) {
-        for e in rd.flatten() {
-            if e.file_name()
-                .to_str()
-                .is_some_and(|n| n.starts_with(&prefix))
-                && std::fs::remove_file(e.path()).is_ok()
-            {
-                removed.push(e.path());
-            }
-        }
-    }
-    removed
-}
-
 /// Writes a scalar `u64` attribute.
 fn u64_attr_write(loc: &hdf5::Location, name: &str, v: u64) -> hdf5::Result<()> {
     loc.new_attr::<u64>().create(name)?.write_scalar(&v)

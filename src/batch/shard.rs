@@ -276,7 +276,7 @@ pub fn run_shard(
         path: b.output.clone(),
         source,
     })?;
-    for p in remove_stale_temporaries(&path) {
+    for p in crate::output::remove_temporaries(&path, false) {
         event(ShardEvent::Note(format!(
             "removed {} (left by a run that was killed)",
             p.display()
