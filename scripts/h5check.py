@@ -45,6 +45,13 @@ def read(path):
     return problems, n
 
 
+def equal_bits(a, b):
+    """Bit-for-bit equality; strings (object arrays of str or bytes) compared by value."""
+    if a.dtype.kind == "O" or b.dtype.kind == "O":
+        return a.shape == b.shape and list(a.ravel()) == list(b.ravel())
+    return a.tobytes() == b.tobytes()
+
+
 def same(a, b, ignore):
     problems = []
     with h5py.File(a, "r") as fa, h5py.File(b, "r") as fb:
@@ -59,7 +66,7 @@ def same(a, b, ignore):
                 problems.append(f"{name}: attribute '{k}' only in one file")
             for k in sorted(ka & kb):
                 va, vb = np.asarray(oa.attrs[k]), np.asarray(ob.attrs[k])
-                if va.dtype != vb.dtype or va.tobytes() != vb.tobytes():
+                if va.dtype != vb.dtype or not equal_bits(va, vb):
                     problems.append(f"{name}: attribute '{k}': {oa.attrs[k]!r} != {ob.attrs[k]!r}")
             if isinstance(oa, h5py.Dataset) != isinstance(ob, h5py.Dataset):
                 problems.append(f"{name}: a dataset in one file, a group in the other")
@@ -67,7 +74,7 @@ def same(a, b, ignore):
                 da, db = oa[()], ob[()]
                 if oa.dtype != ob.dtype or oa.shape != ob.shape:
                     problems.append(f"{name}: {oa.dtype}{oa.shape} != {ob.dtype}{ob.shape}")
-                elif np.asarray(da).tobytes() != np.asarray(db).tobytes():
+                elif not equal_bits(np.asarray(da), np.asarray(db)):
                     problems.append(f"{name}: data differ")
     return problems
 

@@ -3,31 +3,115 @@
 //!
 //! Beside `DIR/K.mtx` the first load writes `DIR/.nlsim-cache/K.mtx.csc` (atomically: a
 //! temporary file, then a rename, so concurrent tasks never read a partial cache). Layout,
-//! little-endian: the magic `NLSIMCSC`, format version (u64), the source's size and
-//! modification time in ns (u64 each), `n` and `nnz` (u64), then the compressed-column arrays
-//! `col_ptr` (`n + 1` u64), `row_idx` (`nnz` u64) and `values` (`nnz` f64). A cache whose
-//! stamp differs from its source, or that fails any structural check, is ignored and
-//! rewritten. `NLSIM_CACHE=off` turns the cache off.
+//! little-endian: the magic `NLSIMCSC`, format version (u64, 2), the source's length and
+//! content hash, the hash of the body (u64 each), `n` and `nnz` (u64), then the body: the
+//! compressed-column arrays `col_ptr` (`n + 1` u64), `row_idx` (`nnz` u64) and `values`
+//! (`nnz` f64). The cache is used only when the source's bytes hash to the recorded value
+//! (an edit that keeps the size and the modification time, as `cp -p`, `rsync -a` and
+//! `tar x` do, is seen), its body hashes to its own record (a damaged cache is seen) and its
+//! structure is valid; otherwise it is ignored and rewritten. Hashing reads the source once
+//! (a few GB/s), far less than parsing it. `NLSIM_CACHE=off` turns the cache off.
 
 use crate::error::Result;
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use nlsim_kernel::SparseSym;
-use std::io::Write as _;
+use std::io::{Seek as _, Write as _};
 use std::path::{Path, PathBuf};
 
 const MAGIC: &[u8; 8] = b"NLSIMCSC";
-const VERSION: u64 = 1;
-const HEADER: usize = 8 + 5 * 8;
+const VERSION: u64 = 2;
+const HEADER: usize = 8 + 6 * 8;
+/// Byte offset of the body hash in the header.
+const BODY_HASH_AT: u64 = 32;
 
-/// The source's size and modification time (ns since the epoch): the cache's validity stamp.
-fn stamp(path: &Path) -> Option<(u64, u64)> {
-    let m = std::fs::metadata(path).ok()?;
-    let t = m
-        .modified()
-        .ok()?
-        .duration_since(std::time::UNIX_EPOCH)
-        .ok()?;
-    Some((m.len(), t.as_nanos() as u64))
+/// A 64-bit hash of a byte stream: four multiply–rotate lanes over 8-byte words and an
+/// avalanche at the end. Not cryptographic: it detects edits and damage, not an adversary
+/// (who could as well edit the cache).
+#[derive(Debug, Clone)]
+pub struct ContentHash {
+    lanes: [u64; 4],
+    pending: [u8; 32],
+    n_pending: usize,
+    len: u64,
+}
+
+const PRIMES: [u64; 4] = [
+    0x9e37_79b9_7f4a_7c15,
+    0xc2b2_ae3d_27d4_eb4f,
+    0x1656_67b1_9e37_79f9,
+    0xd6e8_feb8_6659_fd93,
+];
+
+impl Default for ContentHash {
+    fn default() -> Self {
+        Self {
+            lanes: PRIMES,
+            pending: [0; 32],
+            n_pending: 0,
+            len: 0,
+        }
+    }
+}
+
+impl ContentHash {
+    fn block(&mut self, b: &[u8]) {
+        for (i, lane) in self.lanes.iter_mut().enumerate() {
+            let w = u64::from_le_bytes(b[8 * i..8 * i + 8].try_into().expect("8 bytes"));
+            *lane = (lane.rotate_left(23) ^ w).wrapping_mul(PRIMES[(i + 1) % 4]);
+        }
+    }
+
+    /// Feeds `bytes`.
+    pub fn update(&mut self, mut bytes: &[u8]) {
+        self.len += bytes.len() as u64;
+        if self.n_pending > 0 {
+            let take = (32 - self.n_pending).min(bytes.len());
+            self.pending[self.n_pending..self.n_pending + take].copy_from_slice(&bytes[..take]);
+            self.n_pending += take;
+            bytes = &bytes[take..];
+            if self.n_pending < 32 {
+                return;
+            }
+            let p = self.pending;
+            self.block(&p);
+            self.n_pending = 0;
+        }
+        let mut chunks = bytes.chunks_exact(32);
+        for c in &mut chunks {
+            self.block(c);
+        }
+        let rest = chunks.remainder();
+        self.pending[..rest.len()].copy_from_slice(rest);
+        self.n_pending = rest.len();
+    }
+
+    /// The hash of everything fed.
+    pub fn finish(&self) -> u64 {
+        let mut tail = [0u8; 32];
+        tail[..self.n_pending].copy_from_slice(&self.pending[..self.n_pending]);
+        let mut h = self.clone();
+        if self.n_pending > 0 {
+            h.block(&tail);
+        }
+        let mut r = self.len ^ PRIMES[0];
+        for lane in h.lanes {
+            r = (r ^ lane).wrapping_mul(PRIMES[2]);
+            r ^= r >> 29;
+        }
+        // splitmix64's finaliser.
+        r ^= r >> 30;
+        r = r.wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        r ^= r >> 27;
+        r = r.wrapping_mul(0x94d0_49bb_1331_11eb);
+        r ^ (r >> 31)
+    }
+
+    /// The hash of `bytes`.
+    pub fn of(bytes: &[u8]) -> u64 {
+        let mut h = Self::default();
+        h.update(bytes);
+        h.finish()
+    }
 }
 
 /// Where the cache of `source` lives.
@@ -46,18 +130,16 @@ pub fn cache_path(source: &Path) -> PathBuf {
 /// the next load a parse).
 pub fn load_matrix_market(path: &Path, name: &str) -> Result<SparseSym> {
     let enabled = std::env::var("NLSIM_CACHE").map_or(true, |v| v != "off");
-    let st = stamp(path);
-    if enabled
-        && let Some(st) = st
-        && let Some(m) = read_cache(&cache_path(path), st, name)
-    {
+    let text = crate::output::read_text(path)?;
+    if !enabled {
+        return crate::mtx::parse_matrix_market(&text, path, name);
+    }
+    let st = (text.len() as u64, ContentHash::of(text.as_bytes()));
+    if let Some(m) = read_cache(&cache_path(path), st, name) {
         return Ok(m);
     }
-    let text = crate::output::read_text(path)?;
     let m = crate::mtx::parse_matrix_market(&text, path, name)?;
-    if enabled && let Some(st) = st {
-        let _ = write_cache(&cache_path(path), st, &m);
-    }
+    let _ = write_cache(&cache_path(path), st, &m);
     Ok(m)
 }
 
@@ -66,7 +148,7 @@ fn u64_at(b: &[u8], i: usize) -> u64 {
 }
 
 /// Reads a current, well-formed cache; `None` otherwise.
-fn read_cache(path: &Path, (len, mtime): (u64, u64), name: &str) -> Option<SparseSym> {
+fn read_cache(path: &Path, (len, hash): (u64, u64), name: &str) -> Option<SparseSym> {
     let file = std::fs::File::open(path).ok()?;
     // SAFETY: the map is read-only and only read while `file` is open. Cache files are
     // written under a temporary name and renamed into place, never modified in place, so
@@ -78,14 +160,15 @@ fn read_cache(path: &Path, (len, mtime): (u64, u64), name: &str) -> Option<Spars
         || &b[..8] != MAGIC
         || u64_at(b, 8) != VERSION
         || u64_at(b, 16) != len
-        || u64_at(b, 24) != mtime
+        || u64_at(b, 24) != hash
     {
         return None;
     }
-    let n = usize::try_from(u64_at(b, 32)).ok()?;
-    let nnz = usize::try_from(u64_at(b, 40)).ok()?;
-    let need = HEADER.checked_add((n.checked_add(1)?.checked_add(2 * nnz)?).checked_mul(8)?)?;
-    if b.len() != need {
+    let n = usize::try_from(u64_at(b, 40)).ok()?;
+    let nnz = usize::try_from(u64_at(b, 48)).ok()?;
+    let need = HEADER
+        .checked_add((n.checked_add(1)?.checked_add(nnz.checked_mul(2)?)?).checked_mul(8)?)?;
+    if b.len() != need || ContentHash::of(&b[HEADER..]) != u64_at(b, BODY_HASH_AT as usize) {
         return None;
     }
     let words = |off: usize, k: usize| b[off..off + 8 * k].chunks_exact(8);
@@ -113,7 +196,7 @@ fn read_cache(path: &Path, (len, mtime): (u64, u64), name: &str) -> Option<Spars
     SparseSym::from_faer(name, SparseColMat::new(sym, values)).ok()
 }
 
-fn write_cache(path: &Path, (len, mtime): (u64, u64), m: &SparseSym) -> std::io::Result<()> {
+fn write_cache(path: &Path, (len, hash): (u64, u64), m: &SparseSym) -> std::io::Result<()> {
     let dir = path.parent().unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir)?;
     let a = m.as_faer();
@@ -121,19 +204,28 @@ fn write_cache(path: &Path, (len, mtime): (u64, u64), m: &SparseSym) -> std::io:
     let write = || -> std::io::Result<()> {
         let mut w = std::io::BufWriter::new(std::fs::File::create(&tmp)?);
         w.write_all(MAGIC)?;
-        for v in [VERSION, len, mtime, m.n() as u64, m.nnz() as u64] {
+        // The body hash is filled in once the body is written.
+        for v in [VERSION, len, hash, 0, m.n() as u64, m.nnz() as u64] {
             w.write_all(&v.to_le_bytes())?;
         }
+        let mut body = ContentHash::default();
+        let mut put = |w: &mut std::io::BufWriter<std::fs::File>, bytes: [u8; 8]| {
+            body.update(&bytes);
+            w.write_all(&bytes)
+        };
         for &p in a.col_ptr() {
-            w.write_all(&(p as u64).to_le_bytes())?;
+            put(&mut w, (p as u64).to_le_bytes())?;
         }
         for &r in a.row_idx() {
-            w.write_all(&(r as u64).to_le_bytes())?;
+            put(&mut w, (r as u64).to_le_bytes())?;
         }
         for &v in a.val() {
-            w.write_all(&v.to_le_bytes())?;
+            put(&mut w, v.to_le_bytes())?;
         }
-        w.into_inner().map_err(|e| e.into_error())?.sync_all()
+        let mut f = w.into_inner().map_err(|e| e.into_error())?;
+        f.seek(std::io::SeekFrom::Start(BODY_HASH_AT))?;
+        f.write_all(&body.finish().to_le_bytes())?;
+        f.sync_all()
     };
     if let Err(e) = write() {
         let _ = std::fs::remove_file(&tmp);
@@ -145,6 +237,22 @@ fn write_cache(path: &Path, (len, mtime): (u64, u64), m: &SparseSym) -> std::io:
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The length and content hash of the file at `path`, read in 1 MiB blocks.
+    pub(super) fn stamp(path: &Path) -> Option<(u64, u64)> {
+        let mut f = std::fs::File::open(path).ok()?;
+        let mut h = ContentHash::default();
+        let mut buf = vec![0u8; 1 << 20];
+        loop {
+            match std::io::Read::read(&mut f, &mut buf) {
+                Ok(0) => break,
+                Ok(k) => h.update(&buf[..k]),
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(_) => return None,
+            }
+        }
+        Some((h.len, h.finish()))
+    }
 
     #[test]
     fn the_cache_round_trips_and_goes_stale_with_its_source() {
@@ -173,8 +281,15 @@ mod tests {
         assert_eq!(cached.to_dense(), k.to_dense());
         // Another stamp (the source changed): not used.
         assert!(read_cache(&cache, (st.0 + 1, st.1), "K").is_none());
-        // A damaged cache is ignored, not trusted and not a panic.
-        let mut bytes = std::fs::read(&cache).unwrap();
+        // A damaged cache is ignored, not trusted and not a panic: a flipped bit of a value
+        // (structurally still valid) is seen by the body hash.
+        let good = std::fs::read(&cache).unwrap();
+        let mut bytes = good.clone();
+        let at = bytes.len() - 3; // inside the last value
+        bytes[at] ^= 0x01;
+        std::fs::write(&cache, &bytes).unwrap();
+        assert!(read_cache(&cache, st, "K").is_none());
+        let mut bytes = good.clone();
         let last = bytes.len() - 8 * 5 - 8 * 4; // inside row_idx
         bytes[last] = 0xff;
         std::fs::write(&cache, &bytes).unwrap();
@@ -188,5 +303,45 @@ mod tests {
             k.to_dense()
         );
         assert!(read_cache(&cache, st, "K").is_some());
+        // The source edited in place with its size and modification time kept (what
+        // `cp -p`, `rsync -a` and `tar x` leave): the cache is not used.
+        let text = std::fs::read_to_string(&src).unwrap();
+        let edited = text.replacen("4", "5", 1);
+        assert_eq!(edited.len(), text.len());
+        let mtime = std::fs::metadata(&src).unwrap().modified().unwrap();
+        std::fs::write(&src, &edited).unwrap();
+        std::fs::File::options()
+            .write(true)
+            .open(&src)
+            .unwrap()
+            .set_modified(mtime)
+            .unwrap();
+        assert_eq!(std::fs::metadata(&src).unwrap().modified().unwrap(), mtime);
+        let reloaded = load_matrix_market(&src, "K").unwrap().to_dense();
+        assert_eq!(reloaded[(0, 0)], 5.0);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn the_content_hash_does_not_depend_on_how_the_bytes_arrive() {
+        let bytes: Vec<u8> = (0..1000u32).map(|i| (i * 7 + i / 13) as u8).collect();
+        let whole = ContentHash::of(&bytes);
+        for split in [1, 5, 31, 32, 33, 64, 999] {
+            let mut h = ContentHash::default();
+            for c in bytes.chunks(split) {
+                h.update(c);
+            }
+            assert_eq!(h.finish(), whole, "chunks of {split}");
+        }
+        // Every single-bit change, and a change of length (trailing zeros), changes it.
+        for i in [0, 7, 31, 32, 500, 999] {
+            let mut b = bytes.clone();
+            b[i] ^= 0x10;
+            assert_ne!(ContentHash::of(&b), whole, "bit at byte {i}");
+        }
+        let mut longer = bytes.clone();
+        longer.push(0);
+        assert_ne!(ContentHash::of(&longer), whole);
+        assert_ne!(ContentHash::of(&[]), ContentHash::of(&[0]));
     }
 }

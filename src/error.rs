@@ -12,7 +12,7 @@ pub type Result<T, E = Error> = core::result::Result<T, E>;
 #[non_exhaustive]
 pub enum Error {
     /// A model file is malformed or inconsistent.
-    #[error("{}:{line}: {key}: {message}", file.display())]
+    #[error("{}:{line}: {}{message}", file.display(), key_prefix(key))]
     Spec {
         /// The model file.
         file: PathBuf,
@@ -61,4 +61,14 @@ pub enum Error {
     /// A command-line value is unusable (exit code 2).
     #[error("{0}")]
     Usage(String),
+}
+
+/// `key: ` before a message, or nothing for an error of the file as a whole (a key that the
+/// parser could not name, e.g. an empty one: the message says what it found).
+fn key_prefix(key: &str) -> String {
+    if key.is_empty() {
+        String::new()
+    } else {
+        format!("{key}: ")
+    }
 }

@@ -149,7 +149,54 @@ pub fn parse_matrix_market(text: &str, file: &Path, name: &str) -> Result<Sparse
     } else {
         SparseSym::from_triplets(name, n, &trip)?
     };
+    // Assembly sums repeated entries: fewer stored entries than given means a repeat. Its
+    // lines are found only then (a sort of the entries).
+    let given: usize = trip
+        .iter()
+        .map(|&(i, j, _)| if symmetric && i != j { 2 } else { 1 })
+        .sum();
+    if m.nnz() < given
+        && let Some((first, again)) = repeated_entry(&trip)
+    {
+        let (i, j, _) = trip[again];
+        let line = |k: usize| entry_line(text, k).unwrap_or(0);
+        return Err(err(
+            line(again),
+            format!(
+                "entry ({}, {}) repeats line {}; a Matrix Market file lists each entry once (sum \
+                 repeated entries before writing it, as an assembly does)",
+                i + 1,
+                j + 1,
+                line(first)
+            ),
+        ));
+    }
     Ok(m)
+}
+
+/// The first repeated `(row, col)` of `trip`: the indices of its first and second occurrence.
+fn repeated_entry(trip: &[(usize, usize, f64)]) -> Option<(usize, usize)> {
+    let mut order: Vec<usize> = (0..trip.len()).collect();
+    order.sort_by_key(|&k| (trip[k].0, trip[k].1, k));
+    order
+        .windows(2)
+        .filter(|w| (trip[w[0]].0, trip[w[0]].1) == (trip[w[1]].0, trip[w[1]].1))
+        .map(|w| (w[0], w[1]))
+        .min_by_key(|&(_, again)| again)
+}
+
+/// The line (1-based) of entry `k` (0-based) of Matrix Market `text`: the header, comments,
+/// blank lines and the size line are skipped as the parser skips them.
+fn entry_line(text: &str, k: usize) -> Option<usize> {
+    text.lines()
+        .enumerate()
+        .skip(1)
+        .filter(|(_, l)| {
+            let t = l.trim();
+            !t.is_empty() && !t.starts_with('%')
+        })
+        .nth(k + 1)
+        .map(|(i, _)| i + 1)
 }
 
 /// Writes a symmetric matrix as Matrix Market (lower triangle), e.g. to export a fixture.

@@ -133,10 +133,37 @@ pub(crate) fn line_of(text: &str, offset: usize) -> usize {
 
 /// Reads a text file; the error names it.
 pub(crate) fn read_text(path: &Path) -> Result<String> {
-    std::fs::read_to_string(path).map_err(|source| Error::Io {
+    String::from_utf8(read_bytes(path)?).map_err(|e| {
+        Error::Usage(format!(
+            "{}: not UTF-8 text (byte {} is not valid); is this the right file?",
+            path.display(),
+            e.utf8_error().valid_up_to()
+        ))
+    })
+}
+
+/// Reads the bytes of the regular file `path` (no device, pipe or directory), at most the size
+/// it had when opened.
+pub(crate) fn read_bytes(path: &Path) -> Result<Vec<u8>> {
+    use std::io::Read as _;
+    let io = |source| Error::Io {
         path: path.to_path_buf(),
         source,
-    })
+    };
+    let file = std::fs::File::open(path).map_err(io)?;
+    let meta = file.metadata().map_err(io)?;
+    // A device or a pipe (`/dev/zero`, a FIFO) has no size and may never end.
+    if !meta.is_file() {
+        return Err(Error::Usage(format!(
+            "{}: not a regular file (a directory, a device or a pipe); give a file",
+            path.display()
+        )));
+    }
+    let len = meta.len();
+    let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0).min(1 << 30));
+    // At most the size it had when opened: a file that grows meanwhile cannot fill the memory.
+    file.take(len).read_to_end(&mut bytes).map_err(io)?;
+    Ok(bytes)
 }
 
 /// Reads a settings file (plan, test, prior) of at most `max_bytes`; the error names it and
@@ -188,11 +215,31 @@ pub(crate) fn f64_attr(loc: &hdf5::Location, name: &str, v: f64) -> hdf5::Result
     loc.new_attr::<f64>().create(name)?.write_scalar(&v)
 }
 
+/// `text` as one printable line: its lines trimmed and joined by `; `, and any other control
+/// character (an escape sequence read from a file name or a file, a tab) written as an
+/// escape, so that an error never spans lines or drives the terminal.
+pub fn one_line(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for line in text.lines().map(str::trim).filter(|l| !l.is_empty()) {
+        if !out.is_empty() {
+            out.push_str("; ");
+        }
+        for c in line.chars() {
+            if c.is_control() {
+                out.extend(c.escape_default());
+            } else {
+                out.push(c);
+            }
+        }
+    }
+    out
+}
+
 /// Maps an HDF5 error to [`Error::Hdf5`] naming `path`.
 pub(crate) fn h5err(path: &Path) -> impl Fn(hdf5::Error) -> Error + '_ {
     move |e| Error::Hdf5 {
         path: path.to_path_buf(),
-        message: e.to_string(),
+        message: one_line(&e.to_string()),
     }
 }
 
@@ -221,4 +268,22 @@ pub(crate) fn provenance(
         str_attr(root, "model_file_text", &text)?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn an_error_text_becomes_one_printable_line() {
+        // HDF5's multi-line messages, a file name with an escape sequence, a tab.
+        let text = "H5Dwrite(): can't write data\n    major: Dataset\n\n  minor: Write failed\n";
+        assert_eq!(
+            super::one_line(text),
+            "H5Dwrite(): can't write data; major: Dataset; minor: Write failed"
+        );
+        assert_eq!(
+            super::one_line("model '\u{1b}[2Jx\tbeam.toml': not found"),
+            "model '\\u{1b}[2Jx\\tbeam.toml': not found"
+        );
+        assert_eq!(super::one_line("plain é ∂"), "plain é ∂");
+    }
 }

@@ -156,6 +156,24 @@ impl FrfRequest {
         if self.from_hz == self.to_hz {
             return Err(usage("from_hz and to_hz are equal".into()));
         }
+        let upward = self.from_hz < self.to_hz;
+        match self.mode {
+            SweepMode::StepUp if !upward => {
+                return Err(usage(format!(
+                    "a step-up sweep goes up, but from_hz {} is above to_hz {} (swap them, or \
+                     step down)",
+                    self.from_hz, self.to_hz
+                )));
+            }
+            SweepMode::StepDown if upward => {
+                return Err(usage(format!(
+                    "a step-down sweep goes down, but from_hz {} is below to_hz {} (swap them, \
+                     or step up)",
+                    self.from_hz, self.to_hz
+                )));
+            }
+            _ => {}
+        }
         if !(2..=MAX_FRF_POINTS).contains(&self.points) {
             return Err(usage(format!(
                 "points {} must be from 2 to {MAX_FRF_POINTS} (each point keeps its solution)",
@@ -189,8 +207,11 @@ pub struct FrfRun {
     /// The solution points.
     pub branch: Branch,
     /// [`Status::Converged`] when the whole range was followed,
-    /// [`Status::IterationLimit`] when the continuation stopped at its point limit.
+    /// [`Status::IterationLimit`] when the continuation stopped at its point limit, another
+    /// status when it stopped short (the branch then holds the points found before).
     pub status: Status,
+    /// Where and why the run stopped short (one line); empty when it converged.
+    pub detail: String,
     /// Sensor responses (sensors × harmonics) per point, from [`crate::frf::responses`].
     pub responses: Vec<faer::Mat<faer::c64>>,
     /// Retained modes.
@@ -220,7 +241,7 @@ impl FrfRun {
             req.to_hz,
             set.h,
             set.nu,
-            run.modes,
+            modes_text(run.modes, req.modes),
             if req.residual {
                 " + residual flexibility"
             } else {
@@ -231,10 +252,16 @@ impl FrfRun {
             sys.aft_samples()
         ));
         for x in &sys.forcing().terms {
+            let phase = x.amplitude.im.atan2(x.amplitude.re).to_degrees();
             out.push(format!(
-                "  force {:<10} {:.4e} N at harmonic {} (Ω)",
+                "  force {:<10} {:.4e} N{} at harmonic {} (Ω)",
                 sys.inputs()[x.input].0,
                 x.amplitude.norm(),
+                if phase == 0.0 {
+                    String::new()
+                } else {
+                    format!(" at phase {phase:.1}°")
+                },
                 crate::frf::harmonic_label(x.harmonic, set.nu)
             ));
         }
@@ -248,10 +275,10 @@ impl FrfRun {
             "  {n} points in {:.3} s ({:.3} ms per point){}; {unstable} unstable",
             run.seconds,
             1e3 * run.seconds / n as f64,
-            if run.status.is_converged() {
-                ""
-            } else {
-                " — stopped at the point limit before the end"
+            match run.status {
+                Status::Converged => String::new(),
+                Status::IterationLimit => " — stopped at the point limit before the end".into(),
+                s => format!(" — stopped short ({})", s.as_str()),
             }
         ));
         if verbose {
@@ -355,12 +382,21 @@ pub fn run_frf(
     };
     let seconds = t1.elapsed().as_secs_f64();
     let status = report.status;
-    let branch = report.into_branch()?;
+    let detail = report.detail.replace('\n', ": ");
+    if report.branch.points.is_empty() {
+        // Nothing to return: the start point itself failed.
+        return Err(match report.into_branch() {
+            Err(e) => e.into(),
+            Ok(_) => Error::Failed(format!("{}: no point converged", status.as_str())),
+        });
+    }
+    let branch = report.branch;
     let responses = crate::frf::responses(&system, &branch);
     Ok(FrfRun {
         system,
         branch,
         status,
+        detail,
         responses,
         modes,
         reduce_seconds,
@@ -439,7 +475,7 @@ impl SimRun {
             } else {
                 format!(
                     "{} modes{} (reduced in {:.2} s)",
-                    run.modes,
+                    modes_text(run.modes, req.modes),
                     if req.residual {
                         " + residual flexibility"
                     } else {
@@ -485,6 +521,7 @@ impl SimRun {
                 ));
             }
         }
+        out.extend(req.notes().into_iter().map(|n| format!("  {n}")));
         out.push(format!(
             "  {:<14} {:<13} {:>13} {:>13}",
             "output", "quantity", "peak", "rms"
@@ -640,8 +677,71 @@ impl SimRequest {
                 "duration x rate gives {n_steps} steps; it must be between 1 and 2e8"
             )));
         }
+        for d in &self.excitation {
+            nyquist_check(&d.label, &d.signal, self.rate)?;
+        }
         Ok(n_steps)
     }
+
+    /// Notes on drives that stop before the run ends (a force file shorter than the run: the
+    /// force is zero after its last sample, as for a hammer blow).
+    pub fn notes(&self) -> Vec<String> {
+        self.excitation
+            .iter()
+            .filter_map(|d| match &d.signal {
+                Signal::Sampled { rate_hz, values } => {
+                    let end = values.len().saturating_sub(1) as f64 / rate_hz;
+                    (end < self.duration - 0.5 / self.rate).then(|| {
+                        format!(
+                            "note: the force '{}' ends at {end} s ({} samples at {rate_hz} Hz) \
+                             and is zero for the rest of the {} s run",
+                            d.label,
+                            values.len(),
+                            self.duration
+                        )
+                    })
+                }
+                _ => None,
+            })
+            .collect()
+    }
+}
+
+/// The retained mode count as a summary prints it: `20`, or `all 3` when the request asked
+/// for more modes than the model has.
+fn modes_text(kept: usize, asked: usize) -> String {
+    if asked > kept {
+        format!("all {kept}")
+    } else {
+        kept.to_string()
+    }
+}
+
+/// `v` in plain notation in the usual range, in scientific notation beyond it.
+fn short(v: f64) -> String {
+    if v == 0.0 || (1e-3..1e7).contains(&v.abs()) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
+
+/// Refuses a force with content above the Nyquist frequency of the sample rate `rate` (Hz):
+/// the step (FOH, ZOH, LSOH) or the output samples (the others) would alias it.
+fn nyquist_check(label: &str, signal: &Signal, rate: f64) -> Result<()> {
+    if let Some(f) = signal.max_frequency_hz()
+        && f > 0.5 * rate
+    {
+        return Err(Error::Usage(format!(
+            "excitation '{label}': {} Hz is above the Nyquist frequency {} Hz of the {} Hz \
+             rate, which would alias it; give a rate above {} Hz",
+            short(f),
+            short(0.5 * rate),
+            short(rate),
+            short(2.0 * f)
+        )));
+    }
+    Ok(())
 }
 
 /// A computed time response.
@@ -727,6 +827,9 @@ pub fn run_simulation(
     let f1 = reduced.modes.frequencies_hz()[0];
     let reduce_seconds = t0.elapsed().as_secs_f64();
     let (forces, excitation) = point_signals(model, &req.excitation, f1)?;
+    for (signal, label) in forces.iter().zip(&excitation) {
+        nyquist_check(label, signal, req.rate)?;
+    }
     let case = LoadCase::new("simulate", forces);
     if unreduced {
         let mut cfg = NewmarkConfig::new(dt);

@@ -222,6 +222,14 @@ fn number(v: &Spanned<DeValue<'_>>) -> Option<f64> {
     x.is_finite().then_some(x)
 }
 
+/// A TOML parser's message in nlsim's words: trimmed, and an empty key named as such (serde
+/// writes it as an unknown field ``).
+pub(crate) fn toml_message(message: &str) -> String {
+    message
+        .trim()
+        .replace("unknown field ``", "an empty key \"\" is not a field")
+}
+
 /// Parses a model file's text; `file` is used for relative paths and error locations.
 pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
     let doc = Doc { file, text };
@@ -442,10 +450,7 @@ fn read_matrices(t: &mut Tab<'_, '_>, name: &str, base: &Path) -> Result<Matrice
             let labels = match v.get_ref() {
                 DeValue::String(p) => {
                     let path = base.join(p.as_ref());
-                    let text = std::fs::read_to_string(&path).map_err(|source| Error::Io {
-                        path: path.clone(),
-                        source,
-                    })?;
+                    let text = crate::output::read_text(&path)?;
                     mtx::parse_dof_labels(&text, &path)?
                 }
                 DeValue::Array(a) => a

@@ -89,10 +89,7 @@ fn direction_name(d: i64) -> &'static str {
 
 /// Reads every dataset 58 of a universal file (ASCII or binary).
 pub fn read(path: &Path) -> Result<Vec<Uff58>> {
-    let bytes = std::fs::read(path).map_err(|source| Error::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = crate::output::read_bytes(path)?;
     parse(&bytes, path)
 }
 

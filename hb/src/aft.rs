@@ -214,6 +214,7 @@ impl AftPlan {
             ct,
             state,
             start,
+            slip_ref,
             w,
         } = scratch;
         self.to_time_into(x, omega0, u, v);
@@ -221,12 +222,40 @@ impl AftPlan {
         kt.resize(n, 0.0);
         ct.resize(n, 0.0);
         periodic_start_into(law, u, v, state, start);
+        // A Jenkins slider stuck at sample i sits where the last slip left it, at
+        // `u_j − ±fs/kt` of that sample j (of this period or, periodically, the last one): the
+        // force `kt (u_i − u_j) ± fs` then depends on x through u_j too. `slip_ref[i]` is that
+        // j (NO_SLIP when the joint never slips: the slider stays where it started).
+        let history = jacobian.is_some() && matches!(law, Law::Jenkins { .. });
+        let mut last = NO_SLIP;
+        if history {
+            start.clear();
+            start.extend_from_slice(state);
+            for i in 0..n {
+                let before = start[0];
+                law.commit_state(u[i], v[i], start);
+                if start[0] != before {
+                    last = i;
+                }
+            }
+            slip_ref.clear();
+            slip_ref.resize(n, NO_SLIP);
+        }
         for i in 0..n {
             let e = law.eval(u[i], v[i], state);
             g[i] = e.force;
             kt[i] = e.df_du;
             ct[i] = e.df_dv;
-            law.commit_state(u[i], v[i], state);
+            if history {
+                slip_ref[i] = last;
+                let before = state[0];
+                law.commit_state(u[i], v[i], state);
+                if state[0] != before {
+                    last = i;
+                }
+            } else {
+                law.commit_state(u[i], v[i], state);
+            }
         }
         self.to_freq_into(g, force);
         if let Some(jac) = jacobian {
@@ -236,6 +265,13 @@ impl AftPlan {
             for j in 0..nh {
                 for i in 0..n {
                     w[(i, j)] = kt[i] * self.e[(i, j)] + omega0 * ct[i] * self.ed[(i, j)];
+                }
+                if history {
+                    for i in 0..n {
+                        if slip_ref[i] != NO_SLIP {
+                            w[(i, j)] -= kt[i] * self.e[(slip_ref[i], j)];
+                        }
+                    }
                 }
             }
             matmul(
@@ -318,8 +354,12 @@ pub struct AftScratch {
     ct: Vec<f64>,
     state: Vec<f64>,
     start: Vec<f64>,
+    slip_ref: Vec<usize>,
     w: Mat<f64>,
 }
+
+/// [`AftScratch`]'s mark of a sample whose Jenkins slider has not slipped in the period.
+const NO_SLIP: usize = usize::MAX;
 
 impl Default for AftScratch {
     fn default() -> Self {
@@ -331,6 +371,7 @@ impl Default for AftScratch {
             ct: Default::default(),
             state: Default::default(),
             start: Default::default(),
+            slip_ref: Default::default(),
             w: Mat::new(),
         }
     }
@@ -414,6 +455,55 @@ mod tests {
                         law.kind(),
                         j[(r, c)]
                     );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn jenkins_jacobian_follows_the_slider_history() {
+        // While stuck, the force kt (u_i − u_j) ± fs depends on the sample j of the last slip:
+        // the Jacobian must carry −kt ∂u_j/∂x, an O(1) part (not 1/N) of every entry.
+        let set = HarmonicSet::new(3, 1).unwrap();
+        let law = Law::Jenkins { kt: 2e4, fs: 3.0 };
+        let plan = AftPlan::new(set, samples_for(&law, &set)).unwrap();
+        let w0 = 2.0 * std::f64::consts::PI * 20.0;
+        // Slipping over part of each period (kt·|u| reaches 8 N > 3 N), and stuck throughout.
+        for (amp, slips) in [(4e-4, true), (1e-4, false)] {
+            let x = [
+                1e-5,
+                amp,
+                0.3 * amp,
+                0.0,
+                0.1 * amp,
+                0.05 * amp,
+                -0.02 * amp,
+            ];
+            let j = plan.evaluate(&law, &x, w0, true).jacobian.unwrap();
+            let mut worst = 0.0f64;
+            for c in 0..set.len() {
+                let h = 1e-10;
+                let mut xp = x;
+                xp[c] += h;
+                let mut xm = x;
+                xm[c] -= h;
+                let gp = plan.evaluate(&law, &xp, w0, false).force;
+                let gm = plan.evaluate(&law, &xm, w0, false).force;
+                for r in 0..set.len() {
+                    let fd = (gp[r] - gm[r]) / (2.0 * h);
+                    worst = worst.max((fd - j[(r, c)]).abs());
+                }
+            }
+            // A stick–slip switch inside [x − h, x + h] at one of the N = 448 samples moves an
+            // entry by at most kt/N · 2 ≈ 1e-2 of kt; away from one, round-off (1e-6 kt).
+            assert!(worst <= 2e-2 * j.norm_max(), "amp {amp:e}: {worst:e}");
+            // Stuck throughout, the element is the linear spring kt: ∂G/∂x = kt I.
+            if !slips {
+                for r in 0..set.len() {
+                    for c in 0..set.len() {
+                        let want = if r == c { 2e4 } else { 0.0 };
+                        assert!((j[(r, c)] - want).abs() <= 1e-9 * 2e4, "({r},{c})");
+                    }
                 }
             }
         }

@@ -17,6 +17,11 @@ use faer::Mat;
 use nlsim_kernel::{Error, Result, Status};
 use std::f64::consts::PI;
 
+/// Scaled arclength below which a converged step that turns the tangent sharply (but not
+/// backwards) is accepted as a kink of a non-smooth branch: over so short an arc the corrector
+/// cannot reach another branch.
+const KINK_STEP: f64 = 1e-6;
+
 /// The continuation parameter.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Parameter {
@@ -409,11 +414,10 @@ pub fn continuation_with_progress(
         Parameter::Frequency => (cfg.from, cfg.fixed),
         Parameter::ForceLevel => (cfg.fixed, cfg.from),
     };
-    let guess = match start {
-        Some(x) => x.to_vec(),
-        None => sys.linear_guess(om0, sc0),
+    let (x0, rep) = match start {
+        Some(x) => sys.solve(om0, sc0, x)?,
+        None => sys.solve_from_rest(om0, sc0)?,
     };
-    let (x0, rep) = sys.solve(om0, sc0, &guess)?;
     let mut stats = ContinuationStats::default();
     let mut branch = Branch {
         parameter: cfg.parameter,
@@ -489,7 +493,9 @@ pub fn continuation_with_progress(
         let attempt = tr.correct(&pred, &cur.t).and_then(|(y, a, it)| {
             let (t, d) = tr.tangent(&a, Some(&cur.t)).ok()?;
             let cos: f64 = t.iter().zip(&cur.t).map(|(a, b)| a * b).sum();
-            (cos > 0.95).then_some(State {
+            // A turn of the tangent that persists at a tiny step is a kink of the branch (a
+            // contact grazing, sharpened by the AFT sampling), not a jump to another branch.
+            (cos > 0.95 || ds <= KINK_STEP).then_some(State {
                 y,
                 t,
                 det_sign: d,
@@ -503,7 +509,7 @@ pub fn continuation_with_progress(
                 let what = format!("continuation at {}", tr.where_(&cur.y));
                 let why = format!(
                     "the corrector failed down to the smallest step {:.1e}; the branch may \
-                     have a non-smooth point there (try more AFT samples or harmonics)",
+                     have a non-smooth point there that more harmonics (or AFT samples) may resolve",
                     cfg.ds_min
                 );
                 return Ok(ContinuationReport::stopped(
@@ -688,7 +694,10 @@ pub fn stepped_sine_with_progress(
     let Some(&first) = omegas.first() else {
         return Err(Error::invalid("stepped sine", "no frequency"));
     };
-    let mut x = sys.linear_guess(first, scale);
+    let mut x = match sys.solve_from_rest(first, scale)? {
+        (x, rep) if rep.converged() => x,
+        _ => sys.linear_guess(first, scale),
+    };
     let mut prev = first;
     let mut ws = sys.workspace(64 << 20);
     let mut solve = |w: f64, start: &[f64]| -> Result<(Vec<f64>, NewtonReport)> {

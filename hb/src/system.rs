@@ -850,6 +850,43 @@ impl HbSystem {
             .collect()
     }
 
+    /// Solves `R(x) = 0` at `omega` (rad/s) and level `scale` with no start of the caller's:
+    /// by Newton from [`HbSystem::linear_guess`], and when that fails, along the force level
+    /// from `scale/64`, doubling it, each solve started from the last. At a low level every
+    /// element is near its small-motion law (a Jenkins joint stuck, a gap open), where Newton
+    /// converges at once; the linear guess ignores the elements' stiffness, so at full level
+    /// it can start a stuck joint far into slip, where Newton on the non-smooth force cycles.
+    ///
+    /// Returns the solution and the last report (not converged when the homotopy failed too).
+    pub fn solve_from_rest(&self, omega: f64, scale: f64) -> Result<(Vec<f64>, NewtonReport)> {
+        let first = self.solve(omega, scale, &self.linear_guess(omega, scale))?;
+        if first.1.converged() {
+            return Ok(first);
+        }
+        if scale == 0.0 {
+            return Ok(first);
+        }
+        let mut level = scale / 64.0;
+        let mut x = self.linear_guess(omega, level);
+        loop {
+            let (xs, rep) = self.solve(omega, level, &x)?;
+            if !rep.converged() {
+                return Ok(first);
+            }
+            if level == scale {
+                return Ok((xs, rep));
+            }
+            // The next level starts from this solution, scaled with the level.
+            let next = if (4.0 * level).abs() > scale.abs() {
+                scale
+            } else {
+                2.0 * level
+            };
+            x = xs.iter().map(|v| v * (next / level)).collect();
+            level = next;
+        }
+    }
+
     /// Solves `R(x) = 0` at fundamental `omega` (rad/s) and force level `scale` by Newton
     /// from `x0`, halving the step until `‖R‖` decreases.
     ///

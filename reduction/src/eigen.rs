@@ -441,6 +441,19 @@ impl EigenSolver {
                 .basis_size
                 .unwrap_or((2 * nev).max(nev + 4 * block))
                 .min(n);
+            if let Some(b) = cfg.basis_size
+                && b < nev + block
+                && nev + block <= n
+            {
+                return Err(Error::invalid(
+                    "eigen configuration",
+                    format!(
+                        "a basis of {b} vectors cannot hold {nev} modes and a block of {block}; \
+                         give at least {}",
+                        nev + block
+                    ),
+                ));
+            }
             if basis < nev + block {
                 // Too few DOFs for a Krylov basis: the problem is small, solve it densely.
                 let mut modes = solve_dense(k, m, cfg)?;
@@ -986,7 +999,7 @@ impl KrylovSchur<'_> {
                     format!(
                         "{nconv} of {nev} modes converged after {restarts} restarts (worst \
                          relative Ritz residual {worst:.2e} > tolerance {:.1e}); raise the basis \
-                         size or the restart limit",
+                         size or the restart limit (`nlsim modes --basis`, `--restarts`)",
                         self.tol
                     )
                 });

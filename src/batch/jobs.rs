@@ -116,7 +116,7 @@ impl Batch {
         };
         let f: JobsFile = toml::from_str(text).map_err(|e| {
             let line = e.span().map_or(1, |s| line_of(text, s.start));
-            err(line, "", e.message().to_string())
+            err(line, "", crate::spec::toml_message(e.message()))
         })?;
         // Line of the first occurrence of `key` (for errors found after parsing).
         let at = |key: &str| {

@@ -51,7 +51,8 @@ pub fn merge(b: &Batch) -> Result<MergeOutcome> {
             continue;
         };
         if let (Ok(t), Ok(c)) = (t.parse::<usize>(), c.parse::<usize>())
-            && complete_for(&e.path(), b.hash)?
+            && t < c
+            && on_disk(&e.path(), b.hash, b.shard_jobs(t, c).count()) == OnDisk::Complete
         {
             splits.entry(c).or_default().push(t);
         }

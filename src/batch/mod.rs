@@ -61,8 +61,7 @@ pub use shard::{ShardEvent, ShardOutcome, run_shard};
 pub use slurm::{SbatchOptions, sbatch_script};
 
 use crate::calibration::CalibrationRequest;
-use crate::error::Result;
-use crate::output::{h5err, provenance, str_attr};
+use crate::output::{provenance, str_attr};
 use crate::run::{FrfRequest, SimRequest};
 use hdf5_metno as hdf5;
 use std::path::{Path, PathBuf};
@@ -169,13 +168,52 @@ fn u64_attr(file: &hdf5::File, name: &str) -> Option<u64> {
     file.attr(name).ok()?.read_scalar::<u64>().ok()
 }
 
-/// Whether `path` is a complete shard or merged file written for a jobs file of hash `hash`.
-fn complete_for(path: &Path, hash: u64) -> Result<bool> {
-    if !path.is_file() {
-        return Ok(false);
+/// What a shard or merged file on disk is.
+#[derive(Debug, Clone, PartialEq, Eq)]
+enum OnDisk {
+    /// No file.
+    Missing,
+    /// Complete, for this jobs file.
+    Complete,
+    /// Written for another version of the jobs file, or never completed.
+    Stale,
+    /// Not a readable HDF5 file (zero length, truncated, overwritten): why.
+    Damaged(String),
+}
+
+/// The state of a shard or merged file for the jobs file of hash `hash` holding `n_jobs`
+/// jobs: complete only when it opens, carries the hash and `complete = 1`, and holds a group
+/// for each of its jobs.
+fn on_disk(path: &Path, hash: u64, n_jobs: usize) -> OnDisk {
+    if !path.exists() {
+        return OnDisk::Missing;
     }
-    let file = hdf5::File::open(path).map_err(h5err(path))?;
-    Ok(u64_attr(&file, "jobs_hash") == Some(hash) && u64_attr(&file, "complete") == Some(1))
+    let file = match hdf5::File::open(path) {
+        Ok(f) => f,
+        Err(e) => {
+            let len = std::fs::metadata(path).map_or(0, |m| m.len());
+            let why = if len == 0 {
+                "it is empty".to_string()
+            } else {
+                crate::output::one_line(&e.to_string())
+            };
+            return OnDisk::Damaged(why);
+        }
+    };
+    if u64_attr(&file, "jobs_hash") != Some(hash) || u64_attr(&file, "complete") != Some(1) {
+        return OnDisk::Stale;
+    }
+    let groups = file
+        .group("jobs")
+        .and_then(|g| g.member_names())
+        .map_or(0, |names| {
+            names.iter().filter(|n| n.starts_with("job-")).count()
+        });
+    if groups == n_jobs {
+        OnDisk::Complete
+    } else {
+        OnDisk::Damaged(format!("it holds {groups} of its {n_jobs} jobs"))
+    }
 }
 
 /// Writes a scalar `u64` attribute.

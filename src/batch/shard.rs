@@ -208,7 +208,13 @@ fn write_job(
             g.new_attr::<u8>().create("ok")?.write_scalar(&1u8)?;
             match r {
                 JobResult::Frf(run) => {
-                    crate::frf::write_group(&g, &run.system, &run.branch, &run.responses)
+                    crate::frf::write_group(&g, &run.system, &run.branch, &run.responses)?;
+                    // A branch that stopped short is kept, and says so.
+                    str_attr(&g, "status", run.status.as_str())?;
+                    if !run.detail.is_empty() {
+                        str_attr(&g, "detail", &run.detail)?;
+                    }
+                    Ok(())
                 }
                 JobResult::Candidate(values, cost) => {
                     write_values(&g, values)?;
@@ -262,15 +268,18 @@ pub fn run_shard(
         )));
     }
     let path = b.shard_path(task, count);
-    if complete_for(&path, b.hash)? {
-        return Ok(ShardOutcome::Skipped(path));
-    }
-    if path.exists() {
-        event(ShardEvent::Note(format!(
+    match on_disk(&path, b.hash, b.shard_jobs(task, count).count()) {
+        OnDisk::Complete => return Ok(ShardOutcome::Skipped(path)),
+        OnDisk::Missing => {}
+        OnDisk::Stale => event(ShardEvent::Note(format!(
             "{} was written for another version of {}; recomputing it",
             path.display(),
             b.file.display()
-        )));
+        ))),
+        OnDisk::Damaged(why) => event(ShardEvent::Note(format!(
+            "{} is damaged ({why}); recomputing it",
+            path.display()
+        ))),
     }
     std::fs::create_dir_all(&b.output).map_err(|source| Error::Io {
         path: b.output.clone(),

@@ -88,6 +88,7 @@ enum Command {
         dir: std::path::PathBuf,
     },
     /// Compute the lowest modes: frequencies, damping, effective masses; write them to a file.
+    #[command(allow_negative_numbers = true)]
     Modes {
         /// Model file (.toml) or built-in model, e.g. `bracket:dofs=100000`.
         model: String,
@@ -106,6 +107,12 @@ enum Command {
         /// Lanczos block size (the largest multiplicity found without relying on round-off).
         #[arg(long, default_value_t = 6)]
         block: usize,
+        /// Lanczos basis size before a restart (default max(2 k, k + 4 block) for k modes).
+        #[arg(long)]
+        basis: Option<usize>,
+        /// Most Lanczos restarts before giving up.
+        #[arg(long, default_value_t = 200)]
+        restarts: usize,
         /// Skip the Sturm sequence check (saves one factorisation; `--fmax` always counts).
         #[arg(long)]
         no_sturm_check: bool,
@@ -113,6 +120,7 @@ enum Command {
     /// Time response of a model: the exponential-hold integrator on the reduced model (FOH,
     /// or ZOH/LSOH for bias studies) or a reference (RK45, RK4, Newmark/HHT on the unreduced
     /// model); writes time histories.
+    #[command(allow_negative_numbers = true)]
     Simulate {
         /// Model file (.toml) or built-in model, e.g. `bumpstop_cantilever`.
         model: String,
@@ -165,6 +173,7 @@ enum Command {
     /// Multi-harmonic nonlinear FRF by harmonic balance (condensed on the nonlinear DOFs):
     /// continuation through folds with Hill stability, or a stepped sine up or down as a test
     /// would run it; writes every harmonic at every sensor and an SVG plot.
+    #[command(allow_negative_numbers = true)]
     Frf {
         /// Model file (.toml) or built-in model, e.g. `duffing_fig3`.
         model: String,
@@ -215,6 +224,7 @@ enum Command {
     /// responses with the measured force, Cramér–Rao bounds and k-fold cross validation.
     /// Give MODEL DATA --param ..., or a calibration file with --config (docs/calibration.md;
     /// options given beside it override the file).
+    #[command(allow_negative_numbers = true)]
     Calibrate {
         /// Model file (.toml) or built-in model, e.g. `ecl_beam`.
         #[arg(required_unless_present = "config", conflicts_with = "config")]
@@ -412,7 +422,10 @@ fn par(cli: &Cli) -> faer::Par {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return usage_error(&e),
+    };
     if let Some(n) = cli.threads {
         if !(1..=MAX_THREADS).contains(&n) {
             eprintln!(
@@ -434,14 +447,63 @@ fn main() -> ExitCode {
     match run(&cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e @ nlsim::Error::Usage(_)) => {
-            eprintln!("error: {e}");
+            eprintln!("error: {}", nlsim::output::one_line(&e.to_string()));
             ExitCode::from(2)
         }
         Err(e) => {
-            eprintln!("error: {e}");
+            eprintln!("error: {}", nlsim::output::one_line(&e.to_string()));
             ExitCode::from(1)
         }
     }
+}
+
+/// Prints a command-line error of clap in one line (its first line, with its tip) and
+/// returns exit code 2; help and version go out as clap writes them.
+fn usage_error(e: &clap::Error) -> ExitCode {
+    use clap::error::ErrorKind;
+    if matches!(
+        e.kind(),
+        ErrorKind::DisplayHelp
+            | ErrorKind::DisplayVersion
+            | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+    ) {
+        let _ = e.print();
+        return ExitCode::from(
+            if e.kind() == ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand {
+                2
+            } else {
+                0
+            },
+        );
+    }
+    // clap's text: the message (lines up to `Usage:`), then tips, usage and a pointer.
+    let text = e.render().to_string();
+    let mut message = String::new();
+    let mut tips = Vec::new();
+    for line in text.lines().map(str::trim).filter(|l| !l.is_empty()) {
+        if line.starts_with("Usage:") || line.starts_with("For more information") {
+            break;
+        }
+        if let Some(t) = line.strip_prefix("tip: ") {
+            tips.push(t);
+        } else {
+            let line = line.strip_prefix("error: ").unwrap_or(line);
+            if !message.is_empty() {
+                message.push(' ');
+            }
+            message.push_str(line);
+        }
+    }
+    let tips = if tips.is_empty() {
+        String::new()
+    } else {
+        format!(" ({})", nlsim::output::one_line(&tips.join("; ")))
+    };
+    eprintln!(
+        "error: {}{tips} — see nlsim --help",
+        nlsim::output::one_line(&message)
+    );
+    ExitCode::from(2)
 }
 
 fn run(cli: &Cli) -> nlsim::Result<()> {
@@ -480,6 +542,8 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             out,
             tol,
             block,
+            basis,
+            restarts,
             no_sturm_check,
         } => {
             if let Some(path) = out {
@@ -497,6 +561,8 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 selection,
                 tol: *tol,
                 block_size: *block,
+                basis_size: *basis,
+                max_restarts: *restarts,
                 sturm_check: !no_sturm_check,
                 par: par(cli),
                 ..EigenConfig::default()
@@ -1077,7 +1143,17 @@ fn frf(
         nlsim::frf::plot_frf(&p, sys, branch, y, 0, &title)?;
         say(format!("  plot {}", p.display()));
     }
-    Ok(())
+    if run.status.is_converged() || run.status == nlsim::kernel::Status::IterationLimit {
+        return Ok(());
+    }
+    // Stopped short: what was computed is kept (and written), and the run fails.
+    let last = branch.points.last().map_or(0.0, |p| p.omega / (2.0 * PI));
+    Err(nlsim::Error::Failed(format!(
+        "frf stopped short at {last:.6} Hz ({} points{}): {}",
+        branch.points.len(),
+        out.map_or(String::new(), |p| format!(", written to {}", p.display())),
+        run.detail
+    )))
 }
 
 fn simulate(

@@ -1,0 +1,388 @@
+//! Seeded mutation fuzzing of every reader of user files: model files, Matrix Market, jobs
+//! files, the binary matrix cache and HDF5 matrices. Each input must give `Ok` or `Err`:
+//! never a panic, never an abort, within a memory limit.
+//!
+//! `readers_survive_mutated_inputs` runs the ignored `fuzz_inner` in a child process of this
+//! test binary under `ulimit -v` (an allocation abort or a runaway allocation then fails the
+//! test instead of the machine). The seed is fixed and printed; `NLSIM_FUZZ_SEED` and
+//! `NLSIM_FUZZ_SCALE` (a factor on the iteration counts) explore further by hand.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// splitmix64: a small, seeded generator (the fuzzer's only source of randomness).
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n.max(1) as u64) as usize
+    }
+
+    fn pick<'a, T>(&mut self, v: &'a [T]) -> &'a T {
+        &v[self.below(v.len())]
+    }
+}
+
+/// Values that break careless readers.
+const HOSTILE: &[&str] = &[
+    "0",
+    "-1",
+    "-0.0",
+    "1e308",
+    "1e-320",
+    "nan",
+    "inf",
+    "-inf",
+    "18446744073709551615",
+    "9223372036854775808",
+    "4294967296",
+    "1000000000000",
+    "\"\"",
+    "\"/dev/zero\"",
+    "[]",
+    "{}",
+    "\"\u{1b}[2J\"",
+    "true",
+    "3.5",
+    "\"x\"",
+];
+
+/// One random edit of `text`: delete, duplicate or swap lines, cut the text, replace a number
+/// or a value by a hostile one, or insert odd characters.
+fn mutate(text: &str, rng: &mut Rng) -> String {
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    if lines.is_empty() {
+        lines.push(String::new());
+    }
+    let n = lines.len();
+    match rng.below(8) {
+        0 => {
+            lines.remove(rng.below(n));
+        }
+        1 => {
+            let l = lines[rng.below(n)].clone();
+            lines.insert(rng.below(n + 1), l);
+        }
+        2 => {
+            let (a, b) = (rng.below(n), rng.below(n));
+            lines.swap(a, b);
+        }
+        3 => {
+            let joined = lines.join("\n");
+            let mut cut = rng.below(joined.len() + 1);
+            while !joined.is_char_boundary(cut) {
+                cut -= 1;
+            }
+            return joined[..cut].to_string();
+        }
+        4 | 5 => {
+            // A number (a run of digits, signs, dots, e) or the value after `=` replaced.
+            let i = rng.below(n);
+            let l = lines[i].clone();
+            let hostile = *rng.pick(HOSTILE);
+            lines[i] = if let Some((k, _)) = l.split_once('=') {
+                format!("{k}= {hostile}")
+            } else {
+                let words: Vec<&str> = l.split_whitespace().collect();
+                if words.is_empty() {
+                    hostile.to_string()
+                } else {
+                    let w = rng.below(words.len());
+                    let hostile = hostile.trim_matches('"');
+                    words
+                        .iter()
+                        .enumerate()
+                        .map(|(j, x)| if j == w { hostile } else { x })
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                }
+            };
+        }
+        6 => {
+            let i = rng.below(n);
+            let odd = *rng.pick(&[
+                "\0", "\t", "\r", "\u{feff}", "é", "[", "]", "=", "\"", "#", "%",
+            ]);
+            let mut at = rng.below(lines[i].len() + 1);
+            while !lines[i].is_char_boundary(at) {
+                at -= 1;
+            }
+            lines[i].insert_str(at, odd);
+        }
+        _ => {
+            // Two edits.
+            let once = mutate(text, rng);
+            return mutate(&once, rng);
+        }
+    }
+    lines.join("\n")
+}
+
+/// Runs `f` on every input; returns the inputs that panicked (at most a few, escaped).
+fn survive(name: &str, inputs: usize, mut f: impl FnMut(usize) -> Option<String>) -> Vec<String> {
+    let mut panics = Vec::new();
+    let mut errors = 0usize;
+    // Panics of the readers are counted, not printed.
+    let hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(|_| {}));
+    for k in 0..inputs {
+        match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| f(k))) {
+            Ok(Some(_)) => errors += 1,
+            Ok(None) => {}
+            Err(_) => panics.push(format!("{name} input {k}")),
+        }
+    }
+    std::panic::set_hook(hook);
+    println!(
+        "fuzz {name}: {inputs} inputs, {errors} refused with an error, {} accepted, {} panics",
+        inputs - errors - panics.len(),
+        panics.len()
+    );
+    panics
+}
+
+fn seed() -> u64 {
+    std::env::var("NLSIM_FUZZ_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(17)
+}
+
+fn scale() -> usize {
+    std::env::var("NLSIM_FUZZ_SCALE")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1)
+}
+
+fn scratch() -> PathBuf {
+    let d = std::env::temp_dir().join(format!("nlsim-fuzz-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The fuzzing itself; run by `readers_survive_mutated_inputs` in a memory-limited child.
+#[test]
+#[ignore = "run under a memory limit by readers_survive_mutated_inputs"]
+fn fuzz_inner() {
+    let dir = scratch();
+    let mut rng = Rng(seed());
+    println!("fuzz seed {}", seed());
+    let mut panics = Vec::new();
+
+    // Model files (with their matrix files beside them, in a copy of examples/models).
+    let models = dir.join("models");
+    std::fs::create_dir_all(&models).unwrap();
+    let mut corpus = Vec::new();
+    for e in std::fs::read_dir(root().join("examples/models"))
+        .unwrap()
+        .flatten()
+    {
+        if !e.path().is_file() {
+            continue;
+        }
+        std::fs::copy(e.path(), models.join(e.file_name())).unwrap();
+        if e.file_name().to_string_lossy().ends_with(".toml") {
+            corpus.push(std::fs::read_to_string(e.path()).unwrap());
+        }
+    }
+    let model_path = models.join("fuzzed.toml");
+    panics.extend(survive("model file", 10000 * scale(), |_| {
+        let text = mutate(rng.pick(&corpus).clone().as_str(), &mut rng);
+        match nlsim::parse_model_file(&text, &model_path) {
+            Ok(m) => m
+                .model
+                .validate(&nlsim::kernel::ValidationConfig::default())
+                .err()
+                .map(|e| e.to_string()),
+            Err(e) => Some(e.to_string()),
+        }
+    }));
+
+    // Matrix Market text.
+    let mtx = [
+        std::fs::read_to_string(root().join("examples/models/spring_mass.mtx")).unwrap(),
+        "%%MatrixMarket matrix coordinate real general\n% c\n3 3 5\n1 1 2.0\n2 2 3.0\n\
+         3 3 4.0\n1 2 -1.0\n2 1 -1.0\n"
+            .to_string(),
+    ];
+    panics.extend(survive("matrix market", 10000 * scale(), |_| {
+        let text = mutate(rng.pick(&mtx).clone().as_str(), &mut rng);
+        nlsim::mtx::parse_matrix_market(&text, Path::new("K.mtx"), "stiffness matrix")
+            .err()
+            .map(|e| e.to_string())
+    }));
+
+    // Jobs files (parsed only: running them is the batch tests' work).
+    let jobs = [
+        std::fs::read_to_string(root().join("examples/batch/duffing_k3.toml")).unwrap(),
+        "name = \"s\"\ncommand = \"simulate\"\nmodel = \"duffing_fig3\"\nseed = 3\n\
+         [simulate]\nduration = 1.0\nrate = 1000.0\nexcitation = [\"sine:freq=30\"]\n\
+         [[sweep]]\noption = \"excitation\"\nvalues = [\"sine:freq=20\", \"none\"]\n"
+            .to_string(),
+    ];
+    let jobs_path = dir.join("jobs.toml");
+    panics.extend(survive("jobs file", 10000 * scale(), |_| {
+        let text = mutate(rng.pick(&jobs).clone().as_str(), &mut rng);
+        nlsim::batch::Batch::parse(&text, &jobs_path)
+            .err()
+            .map(|e| e.to_string())
+    }));
+
+    // The binary cache: a valid cache with bytes flipped, cut or extended.
+    let src = dir.join("K.mtx");
+    std::fs::copy(root().join("examples/models/spring_mass.mtx"), &src).unwrap();
+    let want = nlsim::cache::load_matrix_market(&src, "K")
+        .unwrap()
+        .to_dense();
+    let cache = nlsim::cache::cache_path(&src);
+    let good = std::fs::read(&cache).unwrap();
+    panics.extend(survive("matrix cache", 3000 * scale(), |_| {
+        let mut b = good.clone();
+        match rng.below(4) {
+            0 => {
+                let i = rng.below(b.len());
+                b[i] ^= 1 << rng.below(8);
+            }
+            1 => b.truncate(rng.below(b.len())),
+            2 => {
+                // A header word set to a hostile size.
+                let w = 8 * (1 + rng.below(6));
+                let v = *rng.pick(&[0u64, 1, u64::MAX, 1 << 40, 1 << 62]);
+                b[w..w + 8].copy_from_slice(&v.to_le_bytes());
+            }
+            _ => b.extend((0..rng.below(64)).map(|_| rng.next() as u8)),
+        }
+        std::fs::write(&cache, &b).unwrap();
+        // Whatever the cache holds, the matrix is the source's.
+        let m = nlsim::cache::load_matrix_market(&src, "K")
+            .unwrap()
+            .to_dense();
+        assert_eq!(m, want, "a damaged cache was trusted");
+        None
+    }));
+
+    // HDF5 matrices: well-formed files with hostile shapes, types and indices.
+    let h5 = dir.join("m.h5");
+    panics.extend(survive("hdf5 matrix", 1000 * scale(), |_| {
+        let _ = std::fs::remove_file(&h5);
+        let write = |rng: &mut Rng| -> hdf5_metno::Result<()> {
+            let f = hdf5_metno::File::create(&h5)?;
+            let n = *rng.pick(&[0usize, 1, 2, 3, 5]);
+            if rng.below(3) == 0 {
+                let rows = *rng.pick(&[0usize, 1, 2, 3]);
+                let cols = *rng.pick(&[0usize, 1, 2, 3]);
+                let data: Vec<f64> = (0..rows * cols)
+                    .map(|_| *rng.pick(&[1.0, -1.0, 0.0, f64::NAN, 1e308]))
+                    .collect();
+                f.new_dataset::<f64>()
+                    .shape((rows, cols))
+                    .create("obj")?
+                    .write_raw(&data)?;
+                return Ok(());
+            }
+            let g = f.create_group("obj")?;
+            let len = |rng: &mut Rng| *rng.pick(&[0usize, 1, 2, 3, 4, 6]);
+            let idx = |rng: &mut Rng| *rng.pick(&[-1i64, 0, 1, 2, 3, 7, i64::MAX]);
+            // A valid 3 x 3 CSR (a diagonal) with one thing changed, or random arrays.
+            let (mut indices, mut indptr, mut data): (Vec<i64>, Vec<i64>, Vec<f64>) =
+                (vec![0, 1, 2], vec![0, 1, 2, 3], vec![1.0, 2.0, 3.0]);
+            let n = if rng.below(2) == 0 {
+                match rng.below(5) {
+                    0 => indices[rng.below(3)] = idx(rng),
+                    1 => indptr[rng.below(4)] = idx(rng),
+                    2 => data[rng.below(3)] = *rng.pick(&[f64::NAN, -1e308, 0.0]),
+                    3 => {
+                        indices.pop();
+                    }
+                    _ => {}
+                }
+                3
+            } else {
+                indices = (0..len(rng)).map(|_| idx(rng)).collect();
+                indptr = (0..len(rng)).map(|_| idx(rng)).collect();
+                data = (0..len(rng))
+                    .map(|_| *rng.pick(&[1.0, -2.0, f64::INFINITY]))
+                    .collect();
+                n
+            };
+            if rng.below(4) == 0 {
+                let as_f: Vec<f64> = indices.iter().map(|&v| v as f64 + 0.5).collect();
+                g.new_dataset_builder().with_data(&as_f).create("indices")?;
+            } else {
+                g.new_dataset_builder()
+                    .with_data(&indices)
+                    .create("indices")?;
+            }
+            g.new_dataset_builder()
+                .with_data(&indptr)
+                .create("indptr")?;
+            g.new_dataset_builder().with_data(&data).create("data")?;
+            if rng.below(5) != 0 {
+                let shape = [*rng.pick(&[n as i64, -1, 0, 1 << 40]), n as i64];
+                g.new_attr::<i64>()
+                    .shape(2)
+                    .create("shape")?
+                    .write(&shape)?;
+            }
+            Ok(())
+        };
+        if write(&mut rng).is_err() {
+            return Some("not written".into());
+        }
+        nlsim::mtx::read_hdf5_matrix(&h5, "/obj", "K")
+            .err()
+            .map(|e| e.to_string())
+    }));
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert!(panics.is_empty(), "panics: {panics:?}");
+}
+
+#[test]
+fn readers_survive_mutated_inputs() {
+    let exe = std::env::current_exe().unwrap();
+    // 3 GB of address space: the readers need a few MB; a size read from a file and
+    // trusted would need far more.
+    let out = Command::new("sh")
+        .arg("-c")
+        .arg("ulimit -v 3000000; exec \"$0\" fuzz_inner --exact --ignored --nocapture --test-threads 1")
+        .arg(&exe)
+        .env("NLSIM_CACHE", "on")
+        .output()
+        .unwrap();
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    println!("{text}");
+    assert!(
+        out.status.success(),
+        "the fuzzer failed or aborted:\n{text}"
+    );
+    assert!(text.contains("1 passed"), "{text}");
+    for reader in [
+        "model file",
+        "matrix market",
+        "jobs file",
+        "matrix cache",
+        "hdf5 matrix",
+    ] {
+        assert!(
+            text.contains(&format!("fuzz {reader}:")),
+            "{reader} not fuzzed:\n{text}"
+        );
+    }
+}
