@@ -76,7 +76,7 @@ pub fn format_table(r: &ModeReport) -> String {
         EigenMethod::Dense => {
             let _ = writeln!(
                 s,
-                "  solver: dense (small model), {:.3} s",
+                "  solver: dense (a small model, or most of its spectrum), {:.3} s",
                 st.iteration_seconds + st.check_seconds
             );
         }

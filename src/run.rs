@@ -453,6 +453,25 @@ impl Method {
 }
 
 impl SimRun {
+    /// `None` when the run reached its end; otherwise one line saying where it stopped and why
+    /// (the history then holds the samples computed before).
+    pub fn stopped_short(&self, n_steps: usize) -> Option<String> {
+        let h = &self.history;
+        if h.status.is_converged() {
+            return None;
+        }
+        let samples = h.n_samples();
+        Some(format!(
+            "stopped short ({}) at t = {:.6e} s after {samples} of {} samples: {}",
+            h.status.as_str(),
+            samples.saturating_sub(1) as f64 * h.dt,
+            n_steps + 1,
+            h.stopped
+                .as_ref()
+                .map_or_else(|| "no detail".to_string(), |e| e.to_string())
+        ))
+    }
+
     /// The lines `nlsim simulate` prints for this run of `req` on `model`: the setup, the
     /// excitation per point, the run's counters, and the peak and rms of every output and
     /// element; with `verbose`, every contact event.
@@ -520,6 +539,9 @@ impl SimRun {
                     e.time
                 ));
             }
+        }
+        if let Some(line) = run.stopped_short(n_steps) {
+            out.push(format!("  {line}"));
         }
         out.extend(req.notes().into_iter().map(|n| format!("  {n}")));
         out.push(format!(

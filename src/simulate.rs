@@ -268,6 +268,14 @@ fn write_csv(path: &Path, h: &TimeHistory, info: &RunInfo) -> Result<()> {
         h.dt,
         info.excitation.join("; ")
     );
+    if let Some(e) = &h.stopped {
+        let _ = writeln!(
+            s,
+            "# stopped short ({}): {}",
+            h.status.as_str(),
+            crate::output::one_line(&e.to_string())
+        );
+    }
     s.push_str("time_s");
     for o in &h.outputs {
         let _ = write!(
@@ -341,6 +349,11 @@ pub(crate) fn write_group(g: &hdf5::Group, h: &TimeHistory, info: &RunInfo) -> h
     str_attr(g, "case", &h.case)?;
     f64_attr(g, "dt_s", h.dt)?;
     f64_attr(g, "modes", info.modes as f64)?;
+    // A run that stopped short keeps the samples it computed, and says so.
+    str_attr(g, "status", h.status.as_str())?;
+    if let Some(e) = &h.stopped {
+        str_attr(g, "detail", &e.to_string())?;
+    }
     let times: Vec<f64> = h.times();
     series(g, "time", &times, "s")?;
     let go = g.create_group("outputs")?;

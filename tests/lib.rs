@@ -1111,6 +1111,48 @@ mod simulate {
             assert_eq!(err.trim().lines().count(), 1, "{args:?}: {err}");
         }
     }
+
+    #[test]
+    fn a_run_that_stops_short_keeps_its_samples_and_fails() {
+        // A softening spring under a large force: Newmark's Newton fails at step 3. The samples
+        // before are written with the status, and the run exits 1 saying where and why.
+        let dir = scratch("simulate_stopped");
+        let out = dir.join("run.h5");
+        let (rc, stdout, err) = nlsim(&[
+            "simulate",
+            "duffing_fig3",
+            "--set",
+            "spring.k3=-1e14",
+            "--excitation",
+            "sine:freq=30,amp=1e6",
+            "--method",
+            "newmark",
+            "--duration",
+            "0.2",
+            "--rate",
+            "1000",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(rc, 1, "{err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(
+            err.contains("simulate stopped short (iteration limit reached) at t = 2.000000e-3 s")
+                && err.contains("after 3 of 201 samples")
+                && err.contains("written to"),
+            "{err}"
+        );
+        assert!(stdout.contains("stopped short"), "{stdout}");
+        let f = hdf5::File::open(&out).unwrap();
+        let status: hdf5::types::VarLenUnicode = f.attr("status").unwrap().read_scalar().unwrap();
+        assert_eq!(status.as_str(), "iteration limit reached");
+        let detail: hdf5::types::VarLenUnicode = f.attr("detail").unwrap().read_scalar().unwrap();
+        assert!(
+            detail.as_str().contains("Newmark Newton at step 3"),
+            "{detail}"
+        );
+        assert_eq!(f.dataset("time").unwrap().size(), 3);
+    }
 }
 
 mod frf_cli {

@@ -165,6 +165,14 @@ impl SparseSym {
         self.mat.val().iter().fold(0.0_f64, |m, v| m.max(v.abs()))
     }
 
+    /// The infinity norm `max_i Σ_j |A_ij|` (the largest absolute row sum; for a symmetric
+    /// matrix the largest absolute column sum, which is what is summed here).
+    pub fn norm_inf(&self) -> f64 {
+        (0..self.n())
+            .map(|j| self.col(j).1.iter().map(|v| v.abs()).sum::<f64>())
+            .fold(0.0, f64::max)
+    }
+
     /// The first entry (in column order) that is NaN or infinite.
     pub fn first_non_finite(&self) -> Option<(usize, usize, f64)> {
         self.entries().find(|(_, _, v)| !v.is_finite())

@@ -24,6 +24,7 @@ pub mod state_space;
 
 pub use eigen::{
     EigenConfig, EigenMethod, EigenProgress, EigenSolver, EigenStats, ModeSelection, Modes,
+    RIGID_RELATIVE, stiffness_scale,
 };
 pub use factor::{ShiftFactor, ShiftedPencil};
 pub use modal::{

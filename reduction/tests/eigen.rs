@@ -339,3 +339,113 @@ fn a_restart_limit_returns_the_ritz_approximations_with_a_status() {
         "{e}"
     );
 }
+
+/// A clamped planar Euler–Bernoulli beam (steel, 1 m, 20 × 10 mm) of `n` elements with
+/// consistent mass: `2 n` DOFs (deflection and rotation per free node).
+fn planar_beam(n: usize) -> (SparseSym, SparseSym) {
+    let (e, rho, b, h) = (2.1e11, 7800.0, 0.02, 0.01);
+    let (area, inertia, le) = (b * h, b * h * h * h / 12.0, 1.0 / n as f64);
+    let ke = [
+        [12.0, 6.0 * le, -12.0, 6.0 * le],
+        [6.0 * le, 4.0 * le * le, -6.0 * le, 2.0 * le * le],
+        [-12.0, -6.0 * le, 12.0, -6.0 * le],
+        [6.0 * le, 2.0 * le * le, -6.0 * le, 4.0 * le * le],
+    ];
+    let me = [
+        [156.0, 22.0 * le, 54.0, -13.0 * le],
+        [22.0 * le, 4.0 * le * le, 13.0 * le, -3.0 * le * le],
+        [54.0, 13.0 * le, 156.0, -22.0 * le],
+        [-13.0 * le, -3.0 * le * le, -22.0 * le, 4.0 * le * le],
+    ];
+    let (kc, mc) = (e * inertia / le.powi(3), rho * area * le / 420.0);
+    let (mut kt, mut mt) = (Vec::new(), Vec::new());
+    for el in 0..n {
+        // DOFs of the element's nodes el and el + 1; node 0 is clamped.
+        let dofs = [
+            2 * el as isize - 2,
+            2 * el as isize - 1,
+            2 * el as isize,
+            2 * el as isize + 1,
+        ];
+        for a in 0..4 {
+            for c in 0..4 {
+                if dofs[a] >= 0 && dofs[c] >= 0 {
+                    let (i, j) = (dofs[a] as usize, dofs[c] as usize);
+                    kt.push((i, j, kc * ke[a][c]));
+                    mt.push((i, j, mc * me[a][c]));
+                }
+            }
+        }
+    }
+    (
+        SparseSym::from_triplets("K", 2 * n, &kt).unwrap(),
+        SparseSym::from_triplets("M", 2 * n, &mt).unwrap(),
+    )
+}
+
+#[test]
+fn most_of_the_spectrum_is_solved_densely_instead_of_hanging() {
+    // Asking 199 of 400 modes left the Lanczos basis and the next block more than the space:
+    // a fresh random vector could never be made independent, and the solver drew them forever.
+    let (k, m) = planar_beam(200);
+    for wanted in [199, 250, 400] {
+        let modes = EigenSolver::new()
+            .solve(&k, &m, &lanczos(ModeSelection::Lowest(wanted)))
+            .unwrap();
+        assert_eq!(modes.stats.method, EigenMethod::Dense);
+        assert_eq!(modes.len(), wanted);
+        assert!(modes.is_converged());
+        // K is positive definite: no mode is rigid, however wide the spectrum
+        // (λ_max / λ₁ ≈ 1e13 here).
+        assert_eq!(modes.rigid_threshold, 0.0);
+        assert!(modes.eigenvalues[wanted - 1] / modes.eigenvalues[0] > 1e9);
+    }
+    // The lowest modes against the Lanczos solution of a modest request.
+    let few = EigenSolver::new()
+        .solve(&k, &m, &lanczos(ModeSelection::Lowest(10)))
+        .unwrap();
+    let many = EigenSolver::new()
+        .solve(&k, &m, &lanczos(ModeSelection::Lowest(250)))
+        .unwrap();
+    assert_eq!(few.stats.method, EigenMethod::Lanczos);
+    for r in 0..10 {
+        let (a, b) = (few.eigenvalues[r], many.eigenvalues[r]);
+        // The dense path is accurate to ε λ_max in absolute terms, 1e-3 of λ₁ here at worst.
+        assert!(
+            (a - b).abs() <= 64.0 * f64::EPSILON * many.eigenvalues[249].max(a),
+            "mode {r}: {a} vs {b}"
+        );
+    }
+}
+
+#[test]
+fn a_singular_stiffness_sets_the_rigid_body_threshold_from_the_model() {
+    let (k, m) = bracket(1, false);
+    let lanczos_modes = EigenSolver::new()
+        .solve(&k, &m, &lanczos(ModeSelection::Lowest(10)))
+        .unwrap();
+    let dense_modes = EigenSolver::new()
+        .solve(
+            &k,
+            &m,
+            &EigenConfig {
+                selection: ModeSelection::Lowest(10),
+                ..EigenConfig::default()
+            },
+        )
+        .unwrap();
+    for modes in [&lanczos_modes, &dense_modes] {
+        let scale = nlsim_reduction::stiffness_scale(&k, &m);
+        assert_eq!(
+            modes.rigid_threshold,
+            nlsim_reduction::RIGID_RELATIVE * scale
+        );
+        let rigid = (0..10).filter(|&r| modes.is_rigid(r)).count();
+        assert_eq!(rigid, 6, "{:?}", modes.eigenvalues);
+    }
+    let (k, m) = bracket(1, true);
+    let clamped = EigenSolver::new()
+        .solve(&k, &m, &lanczos(ModeSelection::Lowest(10)))
+        .unwrap();
+    assert_eq!(clamped.rigid_threshold, 0.0);
+}

@@ -1190,7 +1190,14 @@ fn simulate(
         nlsim::simulate::write_history(path, &model, history, &info)?;
         say(format!("  written to {}", path.display()));
     }
-    Ok(())
+    // Stopped short: the samples computed are kept (and written), and the run fails.
+    match run.stopped_short(req.check()?) {
+        None => Ok(()),
+        Some(line) => Err(nlsim::Error::Failed(format!(
+            "simulate {line}{}",
+            out.map_or(String::new(), |p| format!(" (written to {})", p.display()))
+        ))),
+    }
 }
 
 /// Loads a jobs file, with `--output` overriding its output directory.
