@@ -11,7 +11,10 @@ use nlsim_sim::{
     FohConfig, Hold, LoadCase, Newmark, NewmarkConfig, Plant, Rk4Config, Rk45Config, Signal,
     Simulator, TimeHistory,
 };
+use std::collections::HashMap;
 use std::f64::consts::PI;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
 
 /// Loads and validates a model for a run (definiteness shows later, in the factorisations)
@@ -57,6 +60,103 @@ fn reduce(model: &Model, modes: usize, residual: bool, par: faer::Par) -> Result
             ..Default::default()
         },
     )?)
+}
+
+type Slot = Arc<OnceLock<std::result::Result<Arc<ReducedModel>, String>>>;
+
+/// Reduced models shared by runs that differ only in what the reduction does not see: the
+/// excitation, the force level, the element parameters (elements act through their ports; their
+/// laws are not part of `K` and `M`). Runs whose linear model differs (a stiffness group or a
+/// boundary spring set by a job, another model) get their own reduction.
+///
+/// A run's reduction is identified by a hash of everything [`nlsim_reduction::reduce`] reads:
+/// `K` and `M` (structure and values), the damping, the ports (element couplings, excitation
+/// and sensor DOFs), the mode count and the residual flexibility switch. The reduction is
+/// deterministic, so a shared one is bit-identical to a fresh one. Thread-safe: parallel jobs
+/// with the same key wait for one reduction. Kept reductions are bounded by
+/// [`Reductions::BUDGET_BYTES`] of mode shapes; past it, runs reduce for themselves.
+#[derive(Debug, Default)]
+pub struct Reductions {
+    slots: Mutex<(HashMap<u64, Slot>, usize)>,
+    computed: AtomicUsize,
+    reused: AtomicUsize,
+}
+
+impl Reductions {
+    /// Mode-shape bytes kept at most (1 GiB).
+    pub const BUDGET_BYTES: usize = 1 << 30;
+
+    /// The reduction of `model` to `modes` modes (with residual flexibility when `residual`),
+    /// computed once per distinct linear model.
+    pub fn get(
+        &self,
+        model: &Model,
+        modes: usize,
+        residual: bool,
+        par: faer::Par,
+    ) -> Result<Arc<ReducedModel>> {
+        let key = reduction_key(model, modes, residual)?;
+        let bytes = model.n_dofs().saturating_mul(modes).saturating_mul(8);
+        let slot = {
+            let mut guard = self.slots.lock().unwrap_or_else(|p| p.into_inner());
+            let (map, used) = &mut *guard;
+            match map.get(&key) {
+                Some(s) => Some(s.clone()),
+                None if used.saturating_add(bytes) <= Self::BUDGET_BYTES => {
+                    *used += bytes;
+                    Some(map.entry(key).or_default().clone())
+                }
+                None => None,
+            }
+        };
+        let Some(slot) = slot else {
+            self.computed.fetch_add(1, Ordering::Relaxed);
+            return Ok(Arc::new(reduce(model, modes, residual, par)?));
+        };
+        let mut fresh = false;
+        let r = slot.get_or_init(|| {
+            fresh = true;
+            self.computed.fetch_add(1, Ordering::Relaxed);
+            reduce(model, modes, residual, par)
+                .map(Arc::new)
+                .map_err(|e| e.to_string())
+        });
+        if !fresh {
+            self.reused.fetch_add(1, Ordering::Relaxed);
+        }
+        r.clone().map_err(Error::Failed)
+    }
+
+    /// How many reductions were computed and how many runs reused one.
+    pub fn counts(&self) -> (usize, usize) {
+        (
+            self.computed.load(Ordering::Relaxed),
+            self.reused.load(Ordering::Relaxed),
+        )
+    }
+}
+
+/// A hash of what the reduction of `model` to `modes` modes reads (see [`Reductions`]).
+fn reduction_key(model: &Model, modes: usize, residual: bool) -> Result<u64> {
+    use std::hash::{Hash, Hasher};
+    fn matrix(a: &nlsim_kernel::SparseSym, h: &mut impl Hasher) {
+        let f = a.as_faer();
+        f.col_ptr().hash(h);
+        f.row_idx().hash(h);
+        for v in f.val() {
+            v.to_bits().hash(h);
+        }
+    }
+    let mut h = std::hash::DefaultHasher::new();
+    matrix(model.stiffness(), &mut h);
+    matrix(model.mass(), &mut h);
+    match model.damping() {
+        nlsim_kernel::Damping::Matrix(v) => matrix(v, &mut h),
+        d => format!("{d:?}").hash(&mut h),
+    }
+    format!("{:?}", nlsim_reduction::model_ports(model, &[])?).hash(&mut h);
+    (modes, residual).hash(&mut h);
+    Ok(h.finish())
 }
 
 /// How an FRF is swept.
@@ -331,6 +431,17 @@ pub fn run_frf(
     req: &FrfRequest,
     progress: &mut dyn FnMut(&SolutionPoint),
 ) -> Result<FrfRun> {
+    run_frf_shared(model, req, progress, &Reductions::default())
+}
+
+/// As [`run_frf`], taking the reduction from `reductions` when a run of the same linear model
+/// made it (a batch's jobs).
+pub fn run_frf_shared(
+    model: &Model,
+    req: &FrfRequest,
+    progress: &mut dyn FnMut(&SolutionPoint),
+    reductions: &Reductions,
+) -> Result<FrfRun> {
     let set = req.check()?;
     let name = model.name();
     if model.elements().is_empty() {
@@ -350,7 +461,7 @@ pub fn run_frf(
     }
     let modes = req.modes.min(model.n_dofs());
     let t0 = Instant::now();
-    let reduced = reduce(model, modes, req.residual, req.par)?;
+    let reduced = reductions.get(model, modes, req.residual, req.par)?;
     let reduce_seconds = t0.elapsed().as_secs_f64();
     let mut system = HbSystem::from_model(model, &reduced, set, HbConfig::default())?;
     if let Some(f) = req.force {
@@ -830,6 +941,17 @@ pub fn run_simulation(
     req: &SimRequest,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<SimRun> {
+    run_simulation_shared(model, req, progress, &Reductions::default())
+}
+
+/// As [`run_simulation`], taking the reduction from `reductions` when a run of the same linear
+/// model made it (a batch's jobs).
+pub fn run_simulation_shared(
+    model: &Model,
+    req: &SimRequest,
+    progress: &mut dyn FnMut(usize, usize),
+    reductions: &Reductions,
+) -> Result<SimRun> {
     let n_steps = req.check()?;
     let dt = 1.0 / req.rate;
     if model.excitation().is_empty() && !req.excitation.is_empty() {
@@ -845,7 +967,7 @@ pub fn run_simulation(
         req.modes.min(model.n_dofs())
     };
     let t0 = Instant::now();
-    let reduced = reduce(model, modes, req.residual, req.par)?;
+    let reduced = reductions.get(model, modes, req.residual, req.par)?;
     let f1 = reduced.modes.frequencies_hz()[0];
     let reduce_seconds = t0.elapsed().as_secs_f64();
     let (forces, excitation) = point_signals(model, &req.excitation, f1)?;
@@ -920,4 +1042,57 @@ pub fn run_simulation(
         states: system.n_states(),
         flops_per_state_step: flops,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nlsim_kernel::Param;
+
+    #[test]
+    fn a_reduction_is_shared_exactly_when_the_linear_model_is_the_same() {
+        let model = nlsim_fixtures::ecl_beam().model;
+        let key =
+            |m: &Model, modes: usize, residual: bool| reduction_key(m, modes, residual).unwrap();
+        let base = key(&model, 10, true);
+        // Element parameters act through the ports: the same reduction.
+        let mut softer = model.clone();
+        softer
+            .set_param(
+                &Param::Element {
+                    element: "tip_spring".into(),
+                    param: "k3".into(),
+                },
+                1e3,
+            )
+            .unwrap();
+        assert_eq!(key(&softer, 10, true), base);
+        // Another mode count, no residual flexibility, a grounded spring (K changes), another
+        // damping: each its own.
+        assert_ne!(key(&model, 11, true), base);
+        assert_ne!(key(&model, 10, false), base);
+        let mut sprung = model.clone();
+        sprung.add_boundary_spring(5, 1e3).unwrap();
+        assert_ne!(key(&sprung, 10, true), base);
+        let mut damped = model.clone();
+        damped
+            .set_damping(nlsim_kernel::Damping::Rayleigh {
+                alpha: 1.0,
+                beta: 0.0,
+            })
+            .unwrap();
+        assert_ne!(key(&damped, 10, true), base);
+
+        // Shared reductions are the ones a run computes for itself, bit for bit.
+        let shared = Reductions::default();
+        let a = shared.get(&model, 10, true, faer::Par::Seq).unwrap();
+        let b = shared.get(&softer, 10, true, faer::Par::Seq).unwrap();
+        let c = shared.get(&sprung, 10, true, faer::Par::Seq).unwrap();
+        assert!(Arc::ptr_eq(&a, &b) && !Arc::ptr_eq(&a, &c));
+        assert_eq!(shared.counts(), (2, 1));
+        let fresh = reduce(&softer, 10, true, faer::Par::Seq).unwrap();
+        assert_eq!(fresh.modes.eigenvalues, b.modes.eigenvalues);
+        assert_eq!(fresh.residual, b.residual);
+        assert_eq!(fresh.participation, b.participation);
+    }
 }

@@ -4,7 +4,7 @@
 use crate::calibration::Prepared;
 use crate::error::{Error, Result};
 use crate::output::{h5err, str_attr};
-use crate::run::{run_frf, run_simulation};
+use crate::run::{Reductions, run_frf_shared, run_simulation_shared};
 use hdf5_metno as hdf5;
 use rayon::prelude::*;
 use std::path::PathBuf;
@@ -27,6 +27,9 @@ pub enum ShardOutcome {
         failed: Vec<(usize, String)>,
         /// Wall time (s).
         seconds: f64,
+        /// Reductions computed for the shard's jobs (jobs that differ only in excitation,
+        /// force or element parameters share one).
+        reductions: usize,
     },
 }
 
@@ -99,6 +102,7 @@ fn run_job(
     job: &Job,
     ctx: Option<&CalibContext>,
     plan: Option<&crate::pretest::PlanSetup>,
+    reductions: &Reductions,
 ) -> Result<JobResult> {
     let mut spec = b.model.clone();
     let mut sets = b.sets.clone();
@@ -148,10 +152,11 @@ fn run_job(
             if force.is_some() {
                 req.force = force;
             }
-            Ok(JobResult::Frf(Box::new(run_frf(
+            Ok(JobResult::Frf(Box::new(run_frf_shared(
                 &model,
                 &req,
                 &mut |_| {},
+                reductions,
             )?)))
         }
         BatchCommand::Simulate(req) => {
@@ -159,10 +164,11 @@ fn run_job(
             if let Some(e) = excitation {
                 req.excitation = vec![crate::run::Drive::parse(&e, req.duration, req.rate)?];
             }
-            Ok(JobResult::Simulate(Box::new(run_simulation(
+            Ok(JobResult::Simulate(Box::new(run_simulation_shared(
                 &model,
                 &req,
                 &mut |_, _| {},
+                reductions,
             )?)))
         }
         BatchCommand::CalibrateCandidates(_)
@@ -295,6 +301,8 @@ pub fn run_shard(
     let ctx = calib_context(b)?;
     let plan = plan_context(b)?;
     let mine: Vec<&Job> = b.shard_jobs(task, count).collect();
+    // Jobs that differ only in excitation, force or element parameters share one reduction.
+    let reductions = Reductions::default();
     let total = mine.len();
     let mut failed = Vec::new();
     crate::output::write_atomically(&path, ".h5", |tmp, _| {
@@ -312,7 +320,7 @@ pub fn run_shard(
         for chunk in mine.chunks(width) {
             let results: Vec<Result<JobResult>> = chunk
                 .par_iter()
-                .map(|j| run_job(b, j, ctx.as_ref(), plan.as_ref()))
+                .map(|j| run_job(b, j, ctx.as_ref(), plan.as_ref(), &reductions))
                 .collect();
             for (job, r) in chunk.iter().zip(&results) {
                 if let Err(e) = write_job(&jobs, b, job, r).map_err(&err) {
@@ -346,5 +354,6 @@ pub fn run_shard(
         jobs: total,
         failed,
         seconds: start.elapsed().as_secs_f64(),
+        reductions: reductions.counts().0,
     })
 }

@@ -1302,9 +1302,19 @@ fn batch_run(
                 jobs,
                 failed,
                 seconds,
+                reductions,
             } => {
+                let shared = if reductions > 0 && reductions < jobs {
+                    format!(
+                        " ({reductions} reduction{} for {jobs} jobs)",
+                        if reductions == 1 { "" } else { "s" }
+                    )
+                } else {
+                    String::new()
+                };
                 say(format!(
-                    "  shard {task} of {count}: {jobs} jobs in {seconds:.2} s, {} failed, written to {}",
+                    "  shard {task} of {count}: {jobs} jobs in {seconds:.2} s{shared}, {} failed, \
+                     written to {}",
                     failed.len(),
                     path.display()
                 ));
