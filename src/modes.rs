@@ -71,6 +71,11 @@ pub fn format_table(r: &ModeReport) -> String {
             e.total
         );
     }
+    if let nlsim_reduction::ModeSelection::Lowest(asked) = r.config.selection
+        && let Some(note) = crate::run::cluster_note(r.modes.len(), asked)
+    {
+        let _ = writeln!(s, "  {note}");
+    }
     let st = &r.modes.stats;
     match st.method {
         EigenMethod::Dense => {

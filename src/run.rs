@@ -351,6 +351,9 @@ impl FrfRun {
             sys.n_unknowns(),
             sys.aft_samples()
         ));
+        if let Some(note) = cluster_note(run.modes, req.modes) {
+            out.push(format!("  {note}"));
+        }
         for x in &sys.forcing().terms {
             let phase = x.amplitude.im.atan2(x.amplitude.re).to_degrees();
             out.push(format!(
@@ -462,6 +465,7 @@ pub fn run_frf_shared(
     let modes = req.modes.min(model.n_dofs());
     let t0 = Instant::now();
     let reduced = reductions.get(model, modes, req.residual, req.par)?;
+    let modes = reduced.modes.len();
     let reduce_seconds = t0.elapsed().as_secs_f64();
     let mut system = HbSystem::from_model(model, &reduced, set, HbConfig::default())?;
     if let Some(f) = req.force {
@@ -619,6 +623,9 @@ impl SimRun {
         ));
         for (x, sp) in model.excitation().iter().zip(&run.excitation) {
             out.push(format!("  excitation {:<10} {sp}", x.name));
+        }
+        if let Some(note) = cluster_note(run.modes, req.modes) {
+            out.push(format!("  {note}"));
         }
         let st = &history.stats;
         if run.flops_per_state_step > 0 {
@@ -850,6 +857,18 @@ fn modes_text(kept: usize, asked: usize) -> String {
     }
 }
 
+/// The note when more modes were kept than asked: the rest complete a degenerate cluster.
+pub(crate) fn cluster_note(kept: usize, asked: usize) -> Option<String> {
+    (kept > asked && asked > 0).then(|| {
+        let which = if kept == asked + 1 {
+            format!("mode {kept} is kept with mode {asked}")
+        } else {
+            format!("modes {}-{kept} are kept with mode {asked}", asked + 1)
+        };
+        format!("{which}: equal frequencies (to 1e-8), and a degenerate cluster is not split at the cut-off")
+    })
+}
+
 /// `v` in plain notation in the usual range, in scientific notation beyond it.
 fn short(v: f64) -> String {
     if v == 0.0 || (1e-3..1e7).contains(&v.abs()) {
@@ -968,6 +987,7 @@ pub fn run_simulation_shared(
     };
     let t0 = Instant::now();
     let reduced = reductions.get(model, modes, req.residual, req.par)?;
+    let modes = if unreduced { 0 } else { reduced.modes.len() };
     let f1 = reduced.modes.frequencies_hz()[0];
     let reduce_seconds = t0.elapsed().as_secs_f64();
     let (forces, excitation) = point_signals(model, &req.excitation, f1)?;

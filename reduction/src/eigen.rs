@@ -181,6 +181,16 @@ pub const DENSE_FALLBACK_MAX: usize = 6000;
 /// Lanczos).
 pub const RIGID_RELATIVE: f64 = 1e3 * f64::EPSILON;
 
+/// Relative gap below which two eigenvalues form one (degenerate) cluster, kept whole at the
+/// mode cut-off: symmetric-section pairs of a beam agree to about 1e-12, physically distinct
+/// modes differ by far more than 1e-8.
+pub const CLUSTER_RELATIVE: f64 = 1e-8;
+
+/// Whether eigenvalues (or inverse Ritz values) `a` and `b` belong to one cluster.
+fn same_cluster(a: f64, b: f64) -> bool {
+    (a - b).abs() <= CLUSTER_RELATIVE * a.abs().max(b.abs())
+}
+
 /// `max_i K_ii / M_ii` over the DOFs with `M_ii > 0` (rad²/s²): the model's stiffness-to-mass
 /// scale. By the Rayleigh quotient of a unit vector it is at most the largest eigenvalue of
 /// `K φ = λ M φ`; for finite-element models it is within a small factor of it. At least
@@ -541,7 +551,8 @@ impl EigenSolver {
             let iteration_seconds = t2.elapsed().as_secs_f64();
 
             let t3 = Instant::now();
-            let values: Vec<f64> = ritz.theta[..nev].iter().map(|t| sigma + 1.0 / t).collect();
+            let kept = ritz.vectors.ncols();
+            let values: Vec<f64> = ritz.theta[..kept].iter().map(|t| sigma + 1.0 / t).collect();
             let mut vectors = ritz.vectors;
             let mut stopped = ritz.stopped;
             // Sturm check: eigenvalues below a point just above the last wanted one, against
@@ -554,7 +565,7 @@ impl EigenSolver {
                     ModeSelection::Below { .. } => true,
                 };
             if check {
-                let last = values[nev - 1];
+                let last = values[kept - 1];
                 let scale = values
                     .iter()
                     .fold(0.0f64, |a, v| a.max(v.abs()))
@@ -573,7 +584,9 @@ impl EigenSolver {
                     .filter(|(t, c)| **c && sigma + 1.0 / **t < sc)
                     .count();
                 sturm = Some((count, sc));
-                missed = count > found;
+                // More eigenvalues below than converged: a mode was missed (often the partner of
+                // a degenerate pair). Fewer: a spurious copy converged. Either way, try again.
+                missed = count != found || count != kept;
                 if let ModeSelection::Below { f_max_hz } = cfg.selection {
                     // All wanted modes must lie below f_max (the count said so).
                     let lim = (2.0 * std::f64::consts::PI * f_max_hz).powi(2);
@@ -588,11 +601,15 @@ impl EigenSolver {
             if missed {
                 let (count, sc) = sturm.expect("set when missed");
                 stopped = Some(format!(
-                    "the Sturm count finds {count} eigenvalues below {:.6} Hz but only {} \
-                     converged there after {attempt} attempts (block size up to {block}); \
-                     raise the block size",
+                    "the Sturm count finds {count} eigenvalues below {:.6} Hz but {} modes \
+                     converged there after {attempt} attempts (block size up to {block}){}",
                     sc.max(0.0).sqrt() / (2.0 * std::f64::consts::PI),
-                    ritz.converged.iter().filter(|c| **c).count()
+                    kept,
+                    if count > kept {
+                        "; raise the block size"
+                    } else {
+                        ": a mode converged twice; try another seed or block size"
+                    }
                 ));
             }
             let residuals = finish_vectors(k, m, &values, &mut vectors, cfg.par);
@@ -742,6 +759,13 @@ fn solve_dense(k: &SparseSym, m: &SparseSym, cfg: &EigenConfig) -> Result<Modes>
             c
         }
     };
+    // A degenerate cluster is not split at the cut-off.
+    let mut count = count;
+    if let ModeSelection::Lowest(_) = cfg.selection {
+        while count < n && same_cluster(d.values[count], d.values[count - 1]) {
+            count += 1;
+        }
+    }
     let values = d.values[..count].to_vec();
     let mut vectors = d.vectors.subcols(0, count).to_owned();
     let iteration_seconds = t.elapsed().as_secs_f64();
@@ -797,7 +821,8 @@ struct KrylovSchur<'a> {
 struct Ritz {
     theta: Vec<f64>,
     converged: Vec<bool>,
-    /// The first `nev` Ritz vectors.
+    /// The first `nev` Ritz vectors, and those of converged Ritz values in the cluster of the
+    /// last wanted one.
     vectors: Mat<f64>,
     restarts: usize,
     applications: usize,
@@ -1078,10 +1103,21 @@ impl KrylovSchur<'_> {
                         self.tol
                     )
                 });
+                // A degenerate cluster is not split at the cut-off: converged Ritz values equal
+                // to the last wanted one join it.
+                let mut keep = nev;
+                if nconv == nev {
+                    while keep < j
+                        && converged[keep]
+                        && same_cluster(1.0 / theta[keep], 1.0 / theta[nev - 1])
+                    {
+                        keep += 1;
+                    }
+                }
                 return Ok(Ritz {
                     theta,
                     converged,
-                    vectors: v.subcols(0, j) * y.subcols(0, nev),
+                    vectors: v.subcols(0, j) * y.subcols(0, keep),
                     restarts,
                     applications,
                     stopped,

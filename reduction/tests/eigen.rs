@@ -449,3 +449,29 @@ fn a_singular_stiffness_sets_the_rigid_body_threshold_from_the_model() {
         .unwrap();
     assert_eq!(clamped.rigid_threshold, 0.0);
 }
+
+#[test]
+fn a_degenerate_pair_is_not_split_at_the_cut_off() {
+    // The ECL beam's symmetric section gives equal pairs: asking 3 modes returns 4 (the pair
+    // 3–4 whole), on both paths, and the Sturm count agrees with the modes listed.
+    let (k, m) = ecl();
+    for dense in [false, true] {
+        for (asked, kept) in [(3, 4), (4, 4), (1, 2)] {
+            let cfg = EigenConfig {
+                selection: ModeSelection::Lowest(asked),
+                dense_below: if dense { 10_000 } else { 0 },
+                sturm_check: true,
+                ..EigenConfig::default()
+            };
+            let modes = EigenSolver::new().solve(&k, &m, &cfg).unwrap();
+            assert!(modes.is_converged(), "{}", modes.stats.detail);
+            assert_eq!(modes.len(), kept, "dense {dense}, asked {asked}");
+            assert_eq!(modes.vectors.ncols(), kept);
+            let (l1, l2) = (modes.eigenvalues[kept - 2], modes.eigenvalues[kept - 1]);
+            assert!((l1 - l2).abs() <= 1e-8 * l2, "{l1} {l2}");
+            if let Some((count, _)) = modes.stats.sturm {
+                assert_eq!(count, kept);
+            }
+        }
+    }
+}
