@@ -627,6 +627,17 @@ impl SimRun {
         if let Some(note) = cluster_note(run.modes, req.modes) {
             out.push(format!("  {note}"));
         }
+        if let Some((a, scaled)) = run.atol {
+            out.push(format!(
+                "  rk45 tolerances: rtol {:e}, atol {a:.3e} √kg m on the modal states{}",
+                req.rtol,
+                if scaled {
+                    " (scaled to the response: 1e-3 rtol of the largest static state)"
+                } else {
+                    ""
+                }
+            ));
+        }
         let st = &history.stats;
         if run.flops_per_state_step > 0 {
             out.push(format!(
@@ -763,8 +774,9 @@ pub struct SimRequest {
     pub events: bool,
     /// RK45 relative tolerance.
     pub rtol: f64,
-    /// RK45 absolute tolerance on the modal states.
-    pub atol: f64,
+    /// RK45 absolute tolerance on the modal states (√kg m); `None` scales it to the response
+    /// (see [`auto_atol`]).
+    pub atol: Option<f64>,
     /// Integration steps per sample (RK4, Newmark, HHT).
     pub substeps: usize,
     /// HHT α in `[−1/3, 0]`.
@@ -784,7 +796,7 @@ impl Default for SimRequest {
             residual: true,
             events: true,
             rtol: 1e-3,
-            atol: 1e-6,
+            atol: None,
             substeps: 1,
             hht_alpha: -0.05,
             par: faer::Par::rayon(0),
@@ -910,6 +922,39 @@ pub struct SimRun {
     pub states: usize,
     /// Flops per state and step of the FOH loop (0 for the other methods).
     pub flops_per_state_step: usize,
+    /// RK45's absolute tolerance and whether it was scaled to the response (RK45 only).
+    pub atol: Option<(f64, bool)>,
+}
+
+/// RK45's absolute tolerance scaled to the response (√kg m): `10⁻³ rtol z_ref`, with
+/// `z_ref = max_s Σ_i |b̃_{s,i}| F_i / |λ_s|` the largest static amplitude of a modal state
+/// under the peak excitation forces `F_i` (sampled over the run). ODE45's fixed default 1e-6
+/// is as large as the states of a typical structure (10⁻⁶–10⁻⁴ √kg m) and was measured 17 % and
+/// 89 % off on the clearance beams; relative to the response, `rtol` governs. Rigid-body states
+/// (`λ = 0`) are left out; with no force at all the floor is 1e-15.
+pub fn auto_atol(plant: &Plant, forces: &[Signal], dt: f64, n_steps: usize, rtol: f64) -> f64 {
+    let peaks: Vec<f64> = forces
+        .iter()
+        .map(|f| {
+            (0..=n_steps)
+                .map(|k| f.eval(k as f64 * dt).abs())
+                .fold(0.0, f64::max)
+        })
+        .collect();
+    let sys = &plant.system;
+    let z_ref = (0..sys.n_states())
+        .filter(|&s| sys.poles[s].norm() > 0.0)
+        .map(|s| {
+            plant
+                .inputs
+                .iter()
+                .zip(&peaks)
+                .map(|((_, p), f)| sys.input[(s, *p)].norm() * f)
+                .sum::<f64>()
+                / sys.poles[s].norm()
+        })
+        .fold(0.0, f64::max);
+    (1e-3 * rtol * z_ref).max(1e-15)
 }
 
 /// One signal and label per excitation point: a sine at `f1` (Hz, to 1 µHz) of the point's
@@ -1012,11 +1057,13 @@ pub fn run_simulation_shared(
             setup_seconds: nm.setup_seconds,
             states: 0,
             flops_per_state_step: 0,
+            atol: None,
         });
     }
     let system = ModalSystem::new(&reduced)?;
     let plant = Plant::from_model(model, &system)?;
     let mut flops = 0;
+    let mut atol = None;
     let history = match req.method {
         Method::Foh | Method::Zoh | Method::Lsoh => {
             let mut cfg = FohConfig::new(dt);
@@ -1030,18 +1077,24 @@ pub fn run_simulation_shared(
             flops = sim.flops_per_state_step();
             sim.run_with_progress(&case, n_steps, progress)?
         }
-        Method::Rk45 => nlsim_sim::rk45_with_progress(
-            &plant,
-            &case,
-            dt,
-            n_steps,
-            &Rk45Config {
-                rtol: req.rtol,
-                atol: req.atol,
-                ..Default::default()
-            },
-            progress,
-        )?,
+        Method::Rk45 => {
+            let a = req
+                .atol
+                .unwrap_or_else(|| auto_atol(&plant, &case.forces, dt, n_steps, req.rtol));
+            atol = Some((a, req.atol.is_none()));
+            nlsim_sim::rk45_with_progress(
+                &plant,
+                &case,
+                dt,
+                n_steps,
+                &Rk45Config {
+                    rtol: req.rtol,
+                    atol: a,
+                    ..Default::default()
+                },
+                progress,
+            )?
+        }
         _ => nlsim_sim::rk4_with_progress(
             &plant,
             &case,
@@ -1061,6 +1114,7 @@ pub fn run_simulation_shared(
         setup_seconds: reduce_seconds,
         states: system.n_states(),
         flops_per_state_step: flops,
+        atol,
     })
 }
 

@@ -1113,6 +1113,53 @@ mod simulate {
     }
 
     #[test]
+    fn rk45_default_tolerance_follows_the_response() {
+        // ODE45's fixed atol 1e-6 is as large as the bump-stop cantilever's modal states; the
+        // default scales it to the response, so rtol 1e-3 governs: against RK45 at rtol 1e-9
+        // the tip acceleration is within 1 % (measured 0.36 %; with atol 1e-6: 2 086 %).
+        let dir = scratch("rk45_atol");
+        let run = |name: &str, extra: &[&str]| {
+            let out = dir.join(name);
+            let mut args = vec![
+                "simulate",
+                "bumpstop_cantilever",
+                "--method",
+                "rk45",
+                "--duration",
+                "0.5",
+                "--rate",
+                "8000",
+                "--out",
+                out.to_str().unwrap(),
+            ];
+            args.extend_from_slice(extra);
+            let (rc, stdout, err) = nlsim(&args);
+            assert_eq!(rc, 0, "{err}");
+            let text = std::fs::read_to_string(&out).unwrap();
+            let tip: Vec<f64> = text
+                .lines()
+                .skip(2)
+                .map(|l| l.split(',').nth(1).unwrap().parse().unwrap())
+                .collect();
+            (stdout, tip)
+        };
+        let (summary, default) = run("default.csv", &[]);
+        assert!(summary.contains("scaled to the response"), "{summary}");
+        let (_, tight) = run("tight.csv", &["--rtol", "1e-9", "--atol", "1e-14"]);
+        let (_, fixed) = run("fixed.csv", &["--atol", "1e-6"]);
+        let peak = tight.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let err = |a: &[f64]| {
+            a.iter()
+                .zip(&tight)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0, f64::max)
+                / peak
+        };
+        assert!(err(&default) < 1e-2, "{:e}", err(&default));
+        assert!(err(&fixed) > 1.0, "{:e}", err(&fixed));
+    }
+
+    #[test]
     fn a_run_that_stops_short_keeps_its_samples_and_fails() {
         // A softening spring under a large force: Newmark's Newton fails at step 3. The samples
         // before are written with the status, and the run exits 1 saying where and why.

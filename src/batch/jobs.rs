@@ -236,7 +236,7 @@ impl Batch {
                     residual: t.residual.unwrap_or(d.residual),
                     events: t.events.unwrap_or(d.events),
                     rtol: t.rtol.unwrap_or(d.rtol),
-                    atol: t.atol.unwrap_or(d.atol),
+                    atol: t.atol.or(d.atol),
                     substeps: t.substeps.unwrap_or(d.substeps),
                     hht_alpha: t.hht_alpha.unwrap_or(d.hht_alpha),
                     par: faer::Par::Seq,

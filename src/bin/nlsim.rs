@@ -156,10 +156,11 @@ enum Command {
         /// RK45 relative tolerance (ODE45's default 1e-3).
         #[arg(long, default_value_t = 1e-3)]
         rtol: f64,
-        /// RK45 absolute tolerance on the modal states (ODE45's default 1e-6; scale it to the
-        /// response).
-        #[arg(long, default_value_t = 1e-6)]
-        atol: f64,
+        /// RK45 absolute tolerance on the modal states, √kg m (default: scaled to the response,
+        /// 1e-3 rtol of the largest static modal state under the peak force; ODE45's fixed 1e-6
+        /// is as large as a typical structure's states)
+        #[arg(long)]
+        atol: Option<f64>,
         /// Integration steps per sample (rk4, newmark, hht).
         #[arg(long, default_value_t = 1)]
         substeps: usize,
