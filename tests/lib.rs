@@ -1402,6 +1402,14 @@ mod batch {
         out
     }
 
+    /// A scratch directory `name` holding [`FRF_JOBS`] as `frf.toml`, and that file's path.
+    fn frf_jobs(name: &str) -> (PathBuf, PathBuf) {
+        let dir = scratch(name);
+        let jobs = dir.join("frf.toml");
+        std::fs::write(&jobs, FRF_JOBS).unwrap();
+        (dir, jobs)
+    }
+
     const FRF_JOBS: &str = r#"
 name = "frfs"
 command = "frf"
@@ -1483,9 +1491,7 @@ params = [{ set = "spring.k3", min = 5e14, max = 5e15, log = true }]
     /// included.
     #[test]
     fn shards_merge_to_the_single_run_and_h5py_reads_every_file() {
-        let dir = scratch("batch-merge");
-        let jobs = dir.join("frf.toml");
-        std::fs::write(&jobs, FRF_JOBS).unwrap();
+        let (dir, jobs) = frf_jobs("batch-merge");
         let j = jobs.to_str().unwrap();
         let out = ok(&["batch", j, "--task-count", "3", "--threads", "2"]);
         assert!(
@@ -1714,9 +1720,7 @@ params = [{ set = "spring.k3", min = 5e14, max = 5e15, log = true }]
     /// checked in `planning_cli`).
     #[test]
     fn results_do_not_depend_on_the_thread_count() {
-        let dir = scratch("threads");
-        let jobs = dir.join("frf.toml");
-        std::fs::write(&jobs, FRF_JOBS).unwrap();
+        let (dir, jobs) = frf_jobs("threads");
         let j = jobs.to_str().unwrap().to_string();
         let runs: Vec<(&str, Vec<&str>)> = vec![
             ("modes-dense", vec!["modes", "ecl_beam", "--count", "12"]),
@@ -1874,9 +1878,7 @@ params = [{ set = "spring.k3", min = 5e14, max = 5e15, log = true }]
     /// The job-array script runs every shard of the batch through this executable.
     #[test]
     fn sbatch_script_names_the_array_and_the_shards() {
-        let dir = scratch("batch-sbatch");
-        let jobs = dir.join("frf.toml");
-        std::fs::write(&jobs, FRF_JOBS).unwrap();
+        let (dir, jobs) = frf_jobs("batch-sbatch");
         let out = ok(&[
             "batch",
             "sbatch",

@@ -11,7 +11,11 @@ use nlsim_sim::{
 };
 
 fn beam_with_tip_displacement() -> Model {
-    let mut model = ecl_beam().model;
+    with_tip_displacement(ecl_beam().model)
+}
+
+/// `model` with a displacement sensor `tip_d` at its excitation point.
+fn with_tip_displacement(mut model: Model) -> Model {
     let tip = model.excitation()[0].dof;
     model
         .add_sensor(Sensor {
@@ -255,18 +259,11 @@ fn a_sensor_on_an_element_port_shares_its_row() {
 /// The ECL beam with `elements` elements, a tip displacement sensor, and the tip spring made
 /// linear (`k3 = 0`) for the load case built by [`linear_case`].
 fn long_beam(elements: usize) -> Model {
-    let mut model = nlsim_fixtures::build("ecl_beam", &[("elements".into(), elements.to_string())])
-        .unwrap()
-        .model;
-    let tip = model.excitation()[0].dof;
-    model
-        .add_sensor(Sensor {
-            name: "tip_d".into(),
-            dof: tip,
-            quantity: Quantity::Displacement,
-        })
-        .unwrap();
-    model
+    with_tip_displacement(
+        nlsim_fixtures::build("ecl_beam", &[("elements".into(), elements.to_string())])
+            .unwrap()
+            .model,
+    )
 }
 
 fn linear_case() -> LoadCase {
