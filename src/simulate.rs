@@ -243,6 +243,11 @@ pub struct RunInfo {
     pub excitation: Vec<String>,
     /// Retained modes (0 for the unreduced Newmark).
     pub modes: usize,
+    /// Compress the HDF5 series (shuffle, then deflate): about 1.8× smaller and 2.5× slower to
+    /// write (a 20 s, 8 kHz bump-stop run: 5.2 MB in 0.22 s against 9.2 MB in 0.09 s, the run
+    /// alone 0.08 s). Off, the series are written at disk speed; `nlsim batch merge` compresses
+    /// its merged file either way.
+    pub compress: bool,
 }
 
 /// Writes a time history: HDF5 for `.h5`/`.hdf5`, CSV for `.csv`, atomically (temporary file,
@@ -329,19 +334,21 @@ fn write_hdf5(path: &Path, model: &Model, h: &TimeHistory, info: &RunInfo) -> Re
 }
 
 /// Writes the datasets of a time history into `g` (the layout of `docs/file-formats.md`; used
-/// for `nlsim simulate` files and for each job of an `nlsim batch` shard). Series are chunked
-/// and compressed (shuffle, then deflate).
+/// for `nlsim simulate` files and for each job of an `nlsim batch` shard). Series are chunked,
+/// and compressed (shuffle, then deflate) when `info.compress`.
 pub(crate) fn write_group(g: &hdf5::Group, h: &TimeHistory, info: &RunInfo) -> hdf5::Result<()> {
     let n = h.n_samples();
     let chunk = n.clamp(1, 1 << 14);
     let series = |g: &hdf5::Group, name: &str, data: &[f64], unit: &str| -> hdf5::Result<()> {
-        let d = g
+        let b = g
             .new_dataset::<f64>()
             .shape(data.len())
-            .chunk(chunk.min(data.len().max(1)))
-            .shuffle()
-            .deflate(4)
-            .create(name)?;
+            .chunk(chunk.min(data.len().max(1)));
+        let d = if info.compress {
+            b.shuffle().deflate(4).create(name)?
+        } else {
+            b.create(name)?
+        };
         d.write_raw(data)?;
         str_attr(&d, "unit", unit)
     };

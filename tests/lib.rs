@@ -1113,6 +1113,42 @@ mod simulate {
     }
 
     #[test]
+    fn compress_deflates_the_series_and_keeps_every_value() {
+        let dir = scratch("simulate_compress");
+        let (raw, packed) = (dir.join("raw.h5"), dir.join("packed.h5"));
+        for (out, extra) in [(&raw, None), (&packed, Some("--compress"))] {
+            let mut args = vec![
+                "simulate",
+                "bumpstop_cantilever",
+                "--duration",
+                "1",
+                "--rate",
+                "8000",
+                "--out",
+                out.to_str().unwrap(),
+            ];
+            args.extend(extra);
+            let (rc, _, err) = nlsim(&args);
+            assert_eq!(rc, 0, "{err}");
+        }
+        let (a, b) = (
+            hdf5::File::open(&raw).unwrap(),
+            hdf5::File::open(&packed).unwrap(),
+        );
+        for name in ["time", "outputs/tip", "elements/stop/force"] {
+            let (da, db) = (a.dataset(name).unwrap(), b.dataset(name).unwrap());
+            assert!(da.filters().is_empty(), "{name}");
+            assert!(!db.filters().is_empty(), "{name}");
+            assert_eq!(
+                da.read_raw::<f64>().unwrap(),
+                db.read_raw::<f64>().unwrap(),
+                "{name}"
+            );
+        }
+        assert!(std::fs::metadata(&packed).unwrap().len() < std::fs::metadata(&raw).unwrap().len());
+    }
+
+    #[test]
     fn rk45_default_tolerance_follows_the_response() {
         // ODE45's fixed atol 1e-6 is as large as the bump-stop cantilever's modal states; the
         // default scales it to the response, so rtol 1e-3 governs: against RK45 at rtol 1e-9

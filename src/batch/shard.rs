@@ -249,6 +249,8 @@ fn write_job(
                         },
                         excitation: run.excitation.clone(),
                         modes: run.modes,
+                        // Shards are intermediate: `batch merge` compresses the merged file.
+                        compress: false,
                     };
                     crate::simulate::write_group(&g, &run.history, &info)
                 }
