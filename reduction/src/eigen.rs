@@ -429,7 +429,7 @@ impl EigenSolver {
         check_config(cfg)?;
         let n = k.n();
         if n <= cfg.dense_below {
-            return solve_dense(k, m, cfg);
+            return solve_dense(k, m, cfg, None);
         }
         let t0 = Instant::now();
         let reused = match self.pencil.as_mut() {
@@ -516,7 +516,7 @@ impl EigenSolver {
             if crowded && n <= DENSE_FALLBACK_MAX {
                 // The basis (and the next block) would fill the space, or most of the spectrum
                 // is wanted: Lanczos has no room. Solve densely.
-                let mut modes = solve_dense(k, m, cfg)?;
+                let mut modes = solve_dense(k, m, cfg, Some(definite))?;
                 modes.stats.factor_seconds += factor_seconds;
                 return Ok(modes);
             }
@@ -729,8 +729,14 @@ pub(crate) fn factor_below_spectrum(
     })
 }
 
-/// The dense path: exact for small models.
-fn solve_dense(k: &SparseSym, m: &SparseSym, cfg: &EigenConfig) -> Result<Modes> {
+/// The dense path: exact for small models. `definite`: whether `K` is positive definite, when the caller knows (else a Cholesky of `K`
+/// decides).
+fn solve_dense(
+    k: &SparseSym,
+    m: &SparseSym,
+    cfg: &EigenConfig,
+    definite: Option<bool>,
+) -> Result<Modes> {
     let t = Instant::now();
     let d = nlsim_kernel::linalg::dense_generalized_eigen_low(
         k.to_dense().as_ref(),
@@ -778,7 +784,7 @@ fn solve_dense(k: &SparseSym, m: &SparseSym, cfg: &EigenConfig) -> Result<Modes>
         vectors,
         residuals,
         stiffness_scale: scale,
-        rigid_threshold: if k.cholesky().is_ok() {
+        rigid_threshold: if definite.unwrap_or_else(|| k.cholesky().is_ok()) {
             0.0
         } else {
             RIGID_RELATIVE * scale

@@ -91,10 +91,14 @@ impl ModalSystem {
                 ),
             ));
         }
-        let lambda: Vec<f64> = modes
-            .eigenvalues
-            .iter()
-            .map(|&l| if l.abs() <= rigid { 0.0 } else { l })
+        let lambda: Vec<f64> = (0..m)
+            .map(|r| {
+                if modes.is_rigid(r) {
+                    0.0
+                } else {
+                    modes.eigenvalues[r]
+                }
+            })
             .collect();
         let phi = &reduced.participation;
         let accel_feedthrough = phi * phi.transpose();

@@ -369,24 +369,24 @@ impl Newmark {
                     .fold(0.0f64, |m, w| m.max(w.abs()))
             })
             .collect();
-        #[allow(clippy::too_many_arguments)]
-        let floor = |d: &[f64],
-                     v: &[f64],
-                     a: &[f64],
-                     dn: &[f64],
-                     vn: &[f64],
-                     an: &[f64],
-                     f_now: &[f64],
-                     f_next: &[f64],
-                     p_old: &[f64],
-                     g: &[f64]| {
-            let span = inf(d) + inf(dn) + h * inf(vn);
+        // Per step: the span of displacements that a and v are formed from (minus the
+        // iterate's own), and the terms that stay fixed while Newton iterates.
+        let step_terms = |dn: &[f64], vn: &[f64], an: &[f64], f: [&[f64]; 3]| {
+            let [f_now, f_next, p_old] = f;
+            let fixed = (1.0 + alpha) * inf(f_next)
+                + alpha.abs() * (inf(f_now) + inf(p_old))
+                + norm_m * c3 * inf(an);
+            (inf(dn) + h * inf(vn), fixed)
+        };
+        // Per iteration: the floor at the iterate (d, v, a) with element forces g.
+        let floor = |d: &[f64], v: &[f64], a: &[f64], g: &[f64], (span0, fixed): (f64, f64)| {
+            let span = inf(d) + span0;
             let elem: f64 = g.iter().zip(&wmax).map(|(g, w)| g.abs() * w).sum();
             FLOOR_ULPS
                 * f64::EPSILON
-                * ((1.0 + alpha) * (inf(f_next) + norm_k * inf(d) + elem)
-                    + alpha.abs() * (inf(f_now) + inf(p_old))
-                    + norm_m * (inf(a) + c0 * span + c3 * inf(an))
+                * (fixed
+                    + (1.0 + alpha) * (norm_k * inf(d) + elem)
+                    + norm_m * (inf(a) + c0 * span)
                     + (1.0 + alpha) * norm_v * (inf(v) + cv * span))
         };
         let mut col = Mat::<f64>::zeros(n, 1);
@@ -400,6 +400,7 @@ impl Newmark {
                 dn.copy_from_slice(&d);
                 vn.copy_from_slice(&v);
                 an.copy_from_slice(&a);
+                let terms = step_terms(&dn, &vn, &an, [&f_now, &f_next, &p_old]);
                 // Predictor: d_{n+1} = d_n (a constant-displacement start).
                 let mut converged = false;
                 for it in 0..self.cfg.newton.max_iterations {
@@ -424,9 +425,7 @@ impl Newmark {
                     // further correction would only be noise amplified by K_eff⁻¹ (on stiff
                     // models ‖Δd‖ then stalls far above any relative tolerance, and the step
                     // used to fail although the first iteration was exact).
-                    if it > 0
-                        && inf(&r) <= floor(&d, &v, &a, &dn, &vn, &an, &f_now, &f_next, &p_old, &g)
-                    {
+                    if it > 0 && inf(&r) <= floor(&d, &v, &a, &g, terms) {
                         converged = true;
                         break;
                     }
