@@ -3676,6 +3676,52 @@ mod hardening {
         )
     }
 
+    /// A full disk, as a file-size limit (`ulimit -f`, SIGXFSZ ignored so writes fail with
+    /// EFBIG the way they fail with ENOSPC): HDF5 results and exported matrices fail in one
+    /// line, exit 1, and leave neither the final name nor a temporary behind.
+    #[test]
+    fn a_full_disk_fails_in_one_line_and_leaves_no_file() {
+        let dir = scratch("full_disk");
+        let h5 = dir.join("big.h5");
+        let mtx = dir.join("export");
+        let k_mtx = mtx.join("K.mtx");
+        let cases: Vec<(Vec<&str>, &std::path::Path)> = vec![
+            (
+                vec![
+                    "simulate",
+                    "bumpstop_cantilever",
+                    "--duration",
+                    "20",
+                    "--rate",
+                    "8000",
+                    "-q",
+                    "--out",
+                    h5.to_str().unwrap(),
+                ],
+                &h5,
+            ),
+            (
+                vec!["export", "bracket:refinement=2", mtx.to_str().unwrap()],
+                &k_mtx,
+            ),
+        ];
+        for (args, target) in &cases {
+            let (rc, _, err) = sh("trap '' XFSZ; ulimit -f 64; exec", args, "");
+            assert_eq!(rc, 1, "{args:?}: {err}");
+            assert_eq!(err.trim().lines().count(), 1, "{args:?}: {err}");
+            assert!(err.contains("File too large"), "{args:?}: {err}");
+            assert!(!target.exists(), "{args:?}");
+            let parent = target.parent().unwrap();
+            let left: Vec<_> = std::fs::read_dir(parent)
+                .map(|d| d.filter_map(|e| e.ok()).map(|e| e.file_name()).collect())
+                .unwrap_or_default();
+            assert!(
+                left.iter().all(|n| !n.to_string_lossy().contains(".tmp-")),
+                "{args:?}: {left:?}"
+            );
+        }
+    }
+
     #[test]
     fn oversized_requests_are_refused_in_one_line_before_allocating() {
         let dir = scratch("hardening");
