@@ -1,7 +1,8 @@
 # nlsim: the two commands of the README.
 #   make demo   build and run the pipeline on the built-in ECL beam
 #   make test   formatting, lints and the whole test suite
-.PHONY: demo test bench deps
+#   (CI also runs `make bench-gate`: kernel/reference speed ratios against bench/gate.txt)
+.PHONY: demo test bench bench-gate deps
 
 demo:
 	@scripts/ensure-deps.sh
@@ -29,3 +30,10 @@ bench:
 	cargo bench -p nlsim-bench --bench hb -- --quick --noplot
 	cargo bench -p nlsim-bench --bench calib -- --quick --noplot
 	cargo bench -p nlsim-bench --bench plan -- --quick --noplot
+	cargo bench -p nlsim-bench --bench gate -- --quick --noplot
+
+# Fails when a kernel's time relative to its in-repo reference regressed more than 2x
+# (bench/benches/gate.rs; about 30 s after the build).
+bench-gate:
+	@scripts/ensure-deps.sh
+	cargo bench -p nlsim-bench --bench gate -- --quick --noplot

@@ -114,6 +114,104 @@ impl Law {
         }
     }
 
+    /// The law of type `kind` (the model-file names: `cubic`, `polynomial`, `clearance`,
+    /// `bump_stop`, `quadratic_damping`, `coulomb`, `jenkins`) from `name = value` pairs with
+    /// the model file's keys and defaults (`clearance`: `k2 = e2 = 0`, `r = s = 1`;
+    /// `coulomb`: `v_reg = 1e-3` m/s; `polynomial`: any `k<n>`, `c<n>` with `n ≥ 1`).
+    /// `element` names the element in errors. An unknown or repeated key, a missing required
+    /// one or an unknown type is an error that lists what is accepted; values are checked by
+    /// [`NonlinearElement::new`].
+    pub fn from_named(element: &str, kind: &str, pairs: &[(&str, f64)]) -> Result<Self> {
+        let keys: &[&str] = match kind {
+            "cubic" => &["k3"],
+            "quadratic_damping" => &["c2"],
+            "coulomb" => &["fc", "v_reg"],
+            "jenkins" => &["kt", "fs"],
+            "bump_stop" => &["k", "gap"],
+            "clearance" => &["k1", "k2", "e1", "e2", "r", "s"],
+            "polynomial" => &[],
+            other => {
+                return Err(Error::invalid(
+                    format!("element '{element}'"),
+                    format!(
+                        "unknown type '{other}'; use cubic, polynomial, clearance, bump_stop, \
+                         quadratic_damping, coulomb or jenkins"
+                    ),
+                ));
+            }
+        };
+        for (i, (k, _)) in pairs.iter().enumerate() {
+            if pairs[..i].iter().any(|(p, _)| p == k) {
+                return Err(Error::invalid(
+                    format!("element '{element}'"),
+                    format!("parameter '{k}' is given twice"),
+                ));
+            }
+            let poly = kind == "polynomial"
+                && (k.starts_with('k') || k.starts_with('c'))
+                && k[1..].parse::<u32>().is_ok_and(|n| n >= 1);
+            if !poly && !keys.contains(k) {
+                let accepted = if kind == "polynomial" {
+                    "k<n> and c<n> with an integer power n >= 1".to_string()
+                } else {
+                    keys.join(", ")
+                };
+                return Err(Error::invalid(
+                    format!("element '{element}'"),
+                    format!("a {kind} law has no parameter '{k}'; it takes {accepted}"),
+                ));
+            }
+        }
+        let get = |k: &str| pairs.iter().find(|(p, _)| *p == k).map(|&(_, v)| v);
+        let req = |k: &str| {
+            get(k).ok_or_else(|| {
+                Error::invalid(
+                    format!("element '{element}'"),
+                    format!("a {kind} law needs '{k}' (it takes {})", keys.join(", ")),
+                )
+            })
+        };
+        Ok(match kind {
+            "cubic" => Law::Cubic { k3: req("k3")? },
+            "quadratic_damping" => Law::QuadraticDamping { c2: req("c2")? },
+            "coulomb" => Law::Coulomb {
+                fc: req("fc")?,
+                v_reg: get("v_reg").unwrap_or(1e-3),
+            },
+            "jenkins" => Law::Jenkins {
+                kt: req("kt")?,
+                fs: req("fs")?,
+            },
+            "bump_stop" => Law::bump_stop(req("k")?, req("gap")?),
+            "clearance" => Law::Clearance {
+                k1: req("k1")?,
+                k2: get("k2").unwrap_or(0.0),
+                e1: req("e1")?,
+                e2: get("e2").unwrap_or(0.0),
+                r: get("r").unwrap_or(1.0),
+                s: get("s").unwrap_or(1.0),
+            },
+            _ => {
+                let term = |prefix: char| {
+                    let mut t: Vec<PolyTerm> = pairs
+                        .iter()
+                        .filter(|(k, _)| k.starts_with(prefix))
+                        .map(|&(k, coef)| PolyTerm {
+                            power: k[1..].parse().unwrap_or(1),
+                            coef,
+                        })
+                        .collect();
+                    t.sort_by_key(|p| p.power);
+                    t
+                };
+                Law::Polynomial {
+                    stiffness: term('k'),
+                    damping: term('c'),
+                }
+            }
+        })
+    }
+
     /// Number of named parameters.
     pub fn n_params(&self) -> usize {
         match self {

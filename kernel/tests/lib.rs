@@ -773,3 +773,47 @@ mod params {
         assert!(e.contains("reserved"), "{e}");
     }
 }
+
+/// `Law::from_named` takes the model file's keys and defaults, and names what is wrong.
+#[test]
+fn laws_from_named_pairs_follow_the_model_file() {
+    assert_eq!(
+        Law::from_named("s", "bump_stop", &[("gap", 1e-3), ("k", 1e6)]).unwrap(),
+        Law::bump_stop(1e6, 1e-3)
+    );
+    assert_eq!(
+        Law::from_named("c", "coulomb", &[("fc", 10.0)]).unwrap(),
+        Law::Coulomb {
+            fc: 10.0,
+            v_reg: 1e-3
+        }
+    );
+    assert_eq!(
+        Law::from_named("j", "jenkins", &[("kt", 1e5), ("fs", 20.0)]).unwrap(),
+        Law::Jenkins { kt: 1e5, fs: 20.0 }
+    );
+    let Law::Polynomial { stiffness, damping } =
+        Law::from_named("p", "polynomial", &[("k3", 2.0), ("k2", 1.0), ("c3", 0.1)]).unwrap()
+    else {
+        panic!("not a polynomial");
+    };
+    assert_eq!(
+        stiffness.iter().map(|t| t.power).collect::<Vec<_>>(),
+        [2, 3]
+    );
+    assert_eq!(damping[0].power, 3);
+    for (kind, pairs, why) in [
+        ("cubic", vec![], "needs 'k3'"),
+        ("cubic", vec![("k3", 1.0), ("k3", 2.0)], "given twice"),
+        (
+            "clearance",
+            vec![("k1", 1.0), ("gap", 1.0)],
+            "no parameter 'gap'",
+        ),
+        ("polynomial", vec![("kx", 1.0)], "no parameter 'kx'"),
+        ("spline", vec![], "unknown type 'spline'"),
+    ] {
+        let e = Law::from_named("e", kind, &pairs).unwrap_err().to_string();
+        assert!(e.contains(why) && e.contains("'e'"), "{kind}: {e}");
+    }
+}
