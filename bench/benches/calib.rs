@@ -11,46 +11,15 @@
 //! Run with `cargo bench -p nlsim-bench --bench calib -- --quick --noplot`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use nlsim_calib::{
-    CalibrationConfig, Form, FrfObjective, LeastSquares, Noise, ObjectiveConfig, ParamSpec,
-    SweepPlan, calibrate, synthesize,
-};
-use nlsim_hb::{HarmonicSet, HbConfig, HbSystem};
-use nlsim_kernel::Param;
-use nlsim_reduction::{ReductionConfig, reduce};
+use nlsim_calib::{CalibrationConfig, FrfObjective, LeastSquares, SweepPlan, calibrate};
 use std::hint::black_box;
-use std::sync::Arc;
 use std::time::Duration;
 
 fn objective() -> FrfObjective {
-    let fx = nlsim_fixtures::ecl_beam();
-    let red = reduce(&fx.model, &ReductionConfig::lowest(4)).unwrap();
-    let sys = HbSystem::from_model(
-        &fx.model,
-        &red,
-        HarmonicSet::new(3, 1).unwrap(),
-        HbConfig::default(),
-    )
-    .unwrap();
-    let driven = sys
-        .linear()
-        .dominant_mode(sys.sensors()[0].port, 0..2)
-        .unwrap();
-    let plans = vec![
+    nlsim_bench::ecl_calibration_objective(&[
         SweepPlan::linear("0.05 N", 22.0, 26.0, 17, 0.05),
         SweepPlan::linear("0.2 N", 22.0, 27.0, 21, 0.2),
-    ];
-    let data = synthesize(&sys, "shaker", &plans, 3, Noise::relative(0.03), 7).unwrap();
-    let specs = vec![
-        ParamSpec::new(Param::element("tip_spring", "k3"), 1e8, 1e11),
-        ParamSpec::new(Param::ModalDamping(driven), 0.002, 0.05),
-    ];
-    let cfg = ObjectiveConfig {
-        harmonics: vec![1, 3],
-        form: Form::Complex,
-        ..ObjectiveConfig::default()
-    };
-    FrfObjective::new(&sys, Arc::new(data), specs, cfg).unwrap()
+    ])
 }
 
 fn bench(c: &mut Criterion) {

@@ -21,11 +21,9 @@
 //! Run with `cargo bench -p nlsim-bench --bench gate -- --quick --noplot`.
 
 use criterion::Criterion;
-use nlsim_calib::{
-    Form, FrfObjective, LeastSquares, Noise, ObjectiveConfig, ParamSpec, SweepPlan, synthesize,
-};
+use nlsim_calib::{LeastSquares, SweepPlan};
 use nlsim_hb::{HarmonicSet, HbConfig, HbSystem, stepped_sine};
-use nlsim_kernel::{Model, Param};
+use nlsim_kernel::Model;
 use nlsim_reduction::{
     EigenConfig, EigenSolver, ModalSystem, ModeSelection, ReductionConfig, ShiftedPencil, reduce,
 };
@@ -199,27 +197,8 @@ fn eigen(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>
 }
 
 fn calibration(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>, log: &Log) {
-    let fx = nlsim_fixtures::ecl_beam();
-    let red = reduce(&fx.model, &ReductionConfig::lowest(4)).unwrap();
-    let sys = HbSystem::from_model(
-        &fx.model,
-        &red,
-        HarmonicSet::new(3, 1).unwrap(),
-        HbConfig::default(),
-    )
-    .unwrap();
-    let plans = vec![SweepPlan::linear("0.2 N", 22.0, 27.0, 11, 0.2)];
-    let data = synthesize(&sys, "shaker", &plans, 3, Noise::relative(0.03), 7).unwrap();
-    let specs = vec![
-        ParamSpec::new(Param::element("tip_spring", "k3"), 1e8, 1e11),
-        ParamSpec::new(Param::ModalDamping(0), 0.002, 0.05),
-    ];
-    let cfg = ObjectiveConfig {
-        harmonics: vec![1, 3],
-        form: Form::Complex,
-        ..ObjectiveConfig::default()
-    };
-    let obj = FrfObjective::new(&sys, std::sync::Arc::new(data), specs, cfg).unwrap();
+    let obj =
+        nlsim_bench::ecl_calibration_objective(&[SweepPlan::linear("0.2 N", 22.0, 27.0, 11, 0.2)]);
     let u = obj.to_internal(&[8e9, 0.012]);
     let mut o = obj.clone();
     timed(g, log, "lm_sensitivities", || {

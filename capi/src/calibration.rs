@@ -3,7 +3,7 @@
 
 use crate::{
     Done, Failure, NlsimCode, NlsimHb, NlsimStatus, NlsimTestData, Object, get_hb, get_testdata,
-    guard, insert, out, params_of, read, slice, slice_mut, text, texts, write,
+    guard, insert, out, out_opt, params_of, read, slice, slice_mut, text, texts, write,
 };
 use faer::c64;
 use nlsim::calib::{
@@ -250,11 +250,7 @@ pub unsafe extern "C" fn nlsim_calibrate(
         } else {
             *unsafe { out(settings.cast_mut(), "settings")? }
         };
-        let info = if info.is_null() {
-            None
-        } else {
-            Some(unsafe { out(info, "info")? })
-        };
+        let info = unsafe { out_opt(info, "info")? };
         if n_params == 0 {
             return Err(Failure::input(
                 "n_params is 0: name a parameter to calibrate",

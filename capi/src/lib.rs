@@ -450,6 +450,18 @@ pub(crate) unsafe fn out<'a, T>(p: *mut T, what: &str) -> Result<&'a mut T, Fail
     Ok(unsafe { &mut *p })
 }
 
+/// The optional output `*p`: `None` when `p` is null.
+///
+/// # Safety
+/// `p` is null or points to a writable `T`.
+pub(crate) unsafe fn out_opt<'a, T>(p: *mut T, what: &str) -> Result<Option<&'a mut T>, Failure> {
+    if p.is_null() {
+        return Ok(None);
+    }
+    // SAFETY: forwarded contract.
+    unsafe { out(p, what) }.map(Some)
+}
+
 /// Writes `n` C-string array entries as UTF-8 strings.
 ///
 /// # Safety
@@ -1253,12 +1265,8 @@ pub unsafe extern "C" fn nlsim_simulate(
         let forces = unsafe { slice(forces, forces_len, "forces")? };
         // SAFETY: the function's contract.
         let outputs = unsafe { slice_mut(outputs, outputs_len, "outputs")? };
-        let info = if info.is_null() {
-            None
-        } else {
-            // SAFETY: the function's contract.
-            Some(unsafe { out(info, "info")? })
-        };
+        // SAFETY: the function's contract.
+        let info = unsafe { out_opt(info, "info")? };
         let dt = positive(dt, "dt")?;
         let r = get_reduced(reduced)?;
         let model = &r.model;
@@ -1384,6 +1392,11 @@ pub unsafe extern "C" fn nlsim_hb_info(hb: NlsimHb, info: *mut NlsimHbInfo) -> N
     })
 }
 
+/// Doubles in one point's response: `[n_sensors][H + 1][2]`.
+fn per_point(sys: &HbSystem) -> usize {
+    2 * sys.sensors().len() * (sys.harmonics().h + 1)
+}
+
 /// Solves one periodic response, started from rest.
 fn solve_point(
     sys: &HbSystem,
@@ -1452,15 +1465,10 @@ pub unsafe extern "C" fn nlsim_hb_point(
     guard(|| {
         // SAFETY: the function's contract.
         let dst = unsafe { slice_mut(response, response_len, "response")? };
-        let info = if info.is_null() {
-            None
-        } else {
-            // SAFETY: the function's contract.
-            Some(unsafe { out(info, "info")? })
-        };
+        let info = unsafe { out_opt(info, "info")? };
         let h = get_hb(hb)?;
         let sys = read(&h);
-        let need = 2 * sys.sensors().len() * (sys.harmonics().h + 1);
+        let need = per_point(&sys);
         if dst.len() != need {
             return Err(Failure::size("response", need, dst.len()));
         }
@@ -1514,15 +1522,11 @@ pub unsafe extern "C" fn nlsim_hb_sensitivities(
         let names = unsafe { texts(names, n_params, "names")? };
         let resp = unsafe { slice_mut(response, response_len, "response")? };
         let dresp = unsafe { slice_mut(dresponse, dresponse_len, "dresponse")? };
-        let info = if info.is_null() {
-            None
-        } else {
-            Some(unsafe { out(info, "info")? })
-        };
+        let info = unsafe { out_opt(info, "info")? };
         let h = get_hb(hb)?;
         let sys = read(&h);
         let params = params_of(&sys, &names)?;
-        let per = 2 * sys.sensors().len() * (sys.harmonics().h + 1);
+        let per = per_point(&sys);
         if !resp.is_empty() && resp.len() != per {
             return Err(Failure::size("response", per, resp.len()));
         }
@@ -1674,7 +1678,7 @@ pub unsafe extern "C" fn nlsim_frf_response(
         let f = get_frf(frf)?;
         let sys = &f.system;
         let pts = &f.report.branch.points;
-        let per = 2 * sys.sensors().len() * (sys.harmonics().h + 1);
+        let per = per_point(sys);
         if dst.len() != per * pts.len() {
             return Err(Failure::size("response", per * pts.len(), dst.len()));
         }
@@ -1746,7 +1750,7 @@ pub unsafe extern "C" fn nlsim_frf_sensitivities(
         let sys = &f.system;
         let params = params_of(sys, &names)?;
         let pts = &f.report.branch.points;
-        let per = 2 * sys.sensors().len() * (sys.harmonics().h + 1);
+        let per = per_point(sys);
         let need = per * params.len() * pts.len();
         if dst.len() != need {
             return Err(Failure::size("dresponse", need, dst.len()));
