@@ -10,6 +10,23 @@ fn scratch(name: &str) -> PathBuf {
     d
 }
 
+/// Gives an HDF5 file this process wrote a new inode (a copy renamed over it), before a
+/// child `nlsim` reads it. HDF5 opens files without close-on-exec and locks them while
+/// open: a child that another test thread spawned while this process wrote the file
+/// inherits the descriptor, and its lock, for its whole run, and a reader of the same inode
+/// then fails with "unable to lock file". The copy is written by std (close-on-exec).
+fn fresh_inode(path: &Path) {
+    let copy = path.with_extension("copy");
+    std::fs::copy(path, &copy).unwrap();
+    std::fs::rename(&copy, path).unwrap();
+}
+
+/// Writes test data as HDF5 for a child `nlsim` to read ([`fresh_inode`]).
+fn write_test_h5(path: &Path, data: &nlsim::calib::TestData) {
+    nlsim::testdata::write_h5(path, data).unwrap();
+    fresh_inode(path);
+}
+
 fn nlsim(args: &[&str]) -> (i32, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_nlsim"))
         .args(args)
@@ -1882,7 +1899,7 @@ params = [{ set = "spring.k3", min = 5e14, max = 5e15, log = true }]
             5,
         )
         .unwrap();
-        nlsim::testdata::write_h5(&data, &d).unwrap();
+        write_test_h5(&data, &d);
         let mut estimates = Vec::new();
         for threads in ["1", "2"] {
             let out = dir.join(format!("calibration-{threads}.csv"));
@@ -2425,7 +2442,7 @@ mod test_data_hdf5 {
         let d = synthetic();
         let dir = scratch("testdata-h5");
         let p = dir.join("test.h5");
-        nlsim::testdata::write_h5(&p, &d).unwrap();
+        write_test_h5(&p, &d);
         let back = nlsim::testdata::read_h5(&p).unwrap();
         assert_eq!(back.input, d.input);
         assert_eq!(back.harmonics, 3);
@@ -4048,6 +4065,7 @@ mod hardening_hdf5 {
                 .create("indptr")
                 .unwrap();
         }
+        fresh_inode(&h5);
         for (object, want) in [
             ("dense", "larger than 16384 x 16384"),
             ("frac", "must hold integers"),
