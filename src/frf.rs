@@ -353,11 +353,16 @@ impl crate::plot::Figure for FrfPlot<'_> {
                 x0..x1.max(x0 * (1.0 + 1e-9) + 1e-9),
                 0.0..top * 1.08 + 1e-300,
             )?;
+        let (xs, ys) = (
+            crate::plot::tick_step(x0, x1, 20),
+            crate::plot::tick_step(0.0, top * 1.08, 20),
+        );
         chart
             .configure_mesh()
             .x_desc("frequency (Hz)")
             .y_desc(format!("|{}| ({})", sen.name, unit(sen.quantity)))
-            .y_label_formatter(&|v| format!("{v:.2e}"))
+            .x_label_formatter(&|v| crate::plot::tick_label(*v, xs, x1.abs()))
+            .y_label_formatter(&|v| crate::plot::tick_label(*v, ys, top * 1.08))
             .draw()?;
         let palette = [BLUE, GREEN, MAGENTA, CYAN, BLACK, RGBColor(150, 100, 0)];
         for (c, &k) in shown.iter().enumerate() {

@@ -98,6 +98,87 @@ fn ensure_font() -> Result<()> {
     r.as_ref().map(|_| ()).map_err(|m| Error::Usage(m.clone()))
 }
 
+/// An engineering tick label: `v` scaled by the SI prefix that brings the axis' largest
+/// magnitude `axis_max` into `[1, 1000)` (`50`; `0.5` → `500m` on an axis up to 0.8, `0.5`
+/// on one up to 1.2; `2e-3` → `2m`, `1.5e-6` → `1.5µ`, `3e9` → `3G`), with the decimals that the
+/// axis' tick spacing `step` (same unit as `v`; 0 if unknown) and the value itself need
+/// (up to 6), so that neighbouring labels differ, and no trailing zeros. Zero is `0`; values beyond the prefixes (below 1e-15 or from
+/// 1e12) keep an exponent.
+pub fn tick_label(v: f64, step: f64, axis_max: f64) -> String {
+    const PREFIXES: [(i32, &str); 9] = [
+        (-15, "f"),
+        (-12, "p"),
+        (-9, "n"),
+        (-6, "µ"),
+        (-3, "m"),
+        (0, ""),
+        (3, "k"),
+        (6, "M"),
+        (9, "G"),
+    ];
+    if !v.is_finite() {
+        return format!("{v}");
+    }
+    // A tick within rounding of zero on an axis through it is zero.
+    let step = step.abs();
+    if v == 0.0 || (step > 0.0 && v.abs() < 1e-9 * step) {
+        return "0".into();
+    }
+    // One prefix for the whole axis (from its largest magnitude), so that 0.999 and 1.001
+    // read alike; from the value when the axis is not given.
+    let reference = if axis_max.is_finite() && axis_max > 0.0 {
+        axis_max
+    } else {
+        v.abs()
+    };
+    let exp3 = 3 * (reference.log10().floor() as i32).div_euclid(3);
+    let Some(&(e, prefix)) = PREFIXES.iter().find(|(e, _)| *e == exp3) else {
+        return format!("{v:.3e}");
+    };
+    let scale = 10f64.powi(e);
+    let scaled = v / scale;
+    // The fewest decimals (at most 6) in which both the step at this scale and the value
+    // are whole (a step of 2.5 needs one; a tick at 0.25 two), so that neighbouring ticks
+    // differ whatever spacing plotters chose.
+    let whole = |x: f64| {
+        (0..=6)
+            .find(|&d| {
+                let y = x.abs() * 10f64.powi(d);
+                (y - y.round()).abs() <= 1e-6 * y.max(1.0)
+            })
+            .unwrap_or(6) as usize
+    };
+    let by_step = if step > 0.0 && step.is_finite() {
+        whole(step / scale)
+    } else {
+        0
+    };
+    let decimals = by_step.max(whole(scaled));
+    let mut text = format!("{scaled:.decimals$}");
+    if text.contains('.') {
+        text = text.trim_end_matches('0').trim_end_matches('.').to_string();
+    }
+    if text == "-0" {
+        text = "0".into();
+    }
+    format!("{text}{prefix}")
+}
+
+/// The tick spacing plotters will use on an axis spanning `lo..hi` with about `n` labels:
+/// the span over `n`, rounded down to 1, 2 or 5 times a power of ten.
+pub(crate) fn tick_step(lo: f64, hi: f64, n: usize) -> f64 {
+    let raw = (hi - lo).abs() / n.max(1) as f64;
+    if !(raw.is_finite() && raw > 0.0) {
+        return 0.0;
+    }
+    let p = 10f64.powf(raw.log10().floor());
+    [5.0, 2.0, 1.0]
+        .into_iter()
+        .map(|m| m * p)
+        .find(|&s| s <= raw)
+        .unwrap_or(p)
+}
+
 /// Checks that `path` names a plot format, before a long run.
 pub fn check_path(path: &Path) -> Result<()> {
     match path.extension().and_then(|e| e.to_str()) {
@@ -192,11 +273,15 @@ impl Figure for Lines {
             .x_label_area_size(44)
             .y_label_area_size(80)
             .build_cartesian_2d(x0..x1.max(x0 + 1e-12), (y0 - pad)..(y1 + pad))?;
+        // Engineering labels (50, 500m, 2µ) with the decimals the spacing needs; the
+        // spacing is estimated from the span as plotters' 10 labels would divide it.
+        let (xs, ys) = (tick_step(x0, x1, 20), tick_step(y0 - pad, y1 + pad, 20));
         chart
             .configure_mesh()
             .x_desc(&self.x_desc)
             .y_desc(&self.y_desc)
-            .y_label_formatter(&|v| format!("{v:.2e}"))
+            .x_label_formatter(&|v| tick_label(*v, xs, x0.abs().max(x1.abs())))
+            .y_label_formatter(&|v| tick_label(*v, ys, (y0 - pad).abs().max((y1 + pad).abs())))
             .draw()?;
         let palette = [BLUE, RED, GREEN, MAGENTA, BLACK];
         for (i, (label, p)) in self.series.iter().enumerate() {
@@ -291,6 +376,7 @@ impl Figure for Bars {
                 .x_label_area_size(36)
                 .y_label_area_size(70)
                 .build_cartesian_2d(0.5..m + 0.5, (y0 - pad)..(y1 + pad))?;
+            let ys = tick_step(y0 - pad, y1 + pad, 20);
             chart
                 .configure_mesh()
                 .disable_x_mesh()
@@ -304,13 +390,7 @@ impl Figure for Bars {
                 })
                 .x_desc(&self.bar_desc)
                 .y_desc(&self.y_desc)
-                .y_label_formatter(&|v| {
-                    if v.abs() < 100.0 {
-                        format!("{v:.4}")
-                    } else {
-                        format!("{v:.3e}")
-                    }
-                })
+                .y_label_formatter(&|v| tick_label(*v, ys, (y0 - pad).abs().max((y1 + pad).abs())))
                 .draw()?;
             if let Some((lo, hi, _)) = band {
                 chart
@@ -349,5 +429,63 @@ impl Figure for Bars {
                 .draw()?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{tick_label, tick_step};
+
+    #[test]
+    fn tick_labels_are_engineering_numbers_from_1e_minus_9_to_1e9() {
+        for (v, step, want) in [
+            (0.0, 1.0, "0"),
+            (50.0, 10.0, "50"),
+            (0.5, 0.1, "500m"),
+            (2e-3, 1e-3, "2m"),
+            (-2e-3, 1e-3, "-2m"),
+            (1.5e-6, 5e-7, "1.5µ"),
+            (1e-9, 1e-10, "1n"),
+            (2.5e-9, 5e-10, "2.5n"),
+            (1e9, 1e8, "1G"),
+            (3.25e9, 5e7, "3.25G"),
+            (12_500.0, 2_500.0, "12.5k"),
+            (999.0, 1.0, "999"),
+            (1000.0, 100.0, "1k"),
+            (31.0715, 0.0001, "31.0715"),
+            (-750.0, 250.0, "-750"),
+            (4.08e-5, 2e-7, "40.8µ"),
+            (0.25, 0.1, "250m"),
+            (1.25, 0.1, "1.25"),
+            (0.30000000000000004, 0.1, "300m"),
+            // A tick a rounding error from zero on an axis through it.
+            (1e-17, 0.1, "0"),
+            (2e-20, 0.0, "2.000e-20"),
+            (5e15, 1e15, "5.000e15"),
+        ] {
+            assert_eq!(tick_label(v, step, v.abs()), want, "{v} with step {step}");
+        }
+        // One prefix per axis: a ratio axis around 1, a millimetre axis.
+        assert_eq!(tick_label(0.999, 5e-4, 1.004), "0.999");
+        assert_eq!(tick_label(1.0, 5e-4, 1.004), "1");
+        assert_eq!(tick_label(5e-4, 5e-4, 2e-3), "0.5m");
+        assert_eq!(tick_label(-1.5e-3, 5e-4, 2e-3), "-1.5m");
+        assert_eq!(tick_label(0.0, 5e-4, 2e-3), "0");
+        // Neighbouring ticks of a narrow axis stay distinct.
+        let step = tick_step(1.0001, 1.0009, 8);
+        let labels: Vec<String> = (1..=8)
+            .map(|i| tick_label(1.0 + i as f64 * 1e-4, step, 1.001))
+            .collect();
+        let mut unique = labels.clone();
+        unique.dedup();
+        assert_eq!(unique.len(), 8, "{labels:?}");
+    }
+
+    #[test]
+    fn tick_steps_are_1_2_5_decades() {
+        assert_eq!(tick_step(0.0, 10.0, 10), 1.0);
+        assert_eq!(tick_step(0.0, 4.5e-3, 10), 2e-4);
+        assert_eq!(tick_step(0.0, 70.0, 10), 5.0);
+        assert_eq!(tick_step(1.0, 1.0, 10), 0.0);
     }
 }
