@@ -508,10 +508,11 @@ fn write_complex(dst: &mut [f64], z: impl IntoIterator<Item = faer::c64>) {
 // ---------------------------------------------------------------------------------------
 // Handles.
 
-/// A reduced model with the model it was reduced from (a snapshot).
+/// A reduced model with the model it was reduced from: a snapshot shared with the model
+/// handle until either changes (copy on write), so the matrices are not held twice.
 pub(crate) struct Reduced {
     pub(crate) reduced: ReducedModel,
-    pub(crate) model: Model,
+    pub(crate) model: Arc<Model>,
 }
 
 /// A frequency response with the system it was computed on (a snapshot).
@@ -521,7 +522,7 @@ pub(crate) struct Frf {
 }
 
 pub(crate) enum Object {
-    Model(Arc<RwLock<Model>>),
+    Model(Arc<RwLock<Arc<Model>>>),
     Reduced(Arc<Reduced>),
     Hb(Arc<RwLock<HbSystem>>),
     Frf(Arc<Frf>),
@@ -597,7 +598,7 @@ macro_rules! getter {
     };
 }
 
-getter!(get_model, Model, Arc<RwLock<Model>>, "a model");
+getter!(get_model, Model, Arc<RwLock<Arc<Model>>>, "a model");
 getter!(get_reduced, Reduced, Arc<Reduced>, "a reduced model");
 getter!(
     get_hb,
@@ -738,16 +739,6 @@ unsafe fn sparse(name: &str, n: usize, m: &NlsimSparse) -> Result<SparseSym, Fai
         }
     }
     Ok(if m.triangle == 1 {
-        // One triangle means one side: a pair given on both would be counted twice.
-        let below = triplets.iter().find(|t| t.0 > t.1);
-        let above = triplets.iter().find(|t| t.0 < t.1);
-        if let (Some(b), Some(a)) = (below, above) {
-            return Err(Failure::input(format!(
-                "{name}: triangle is 1 but entries lie on both sides of the diagonal, e.g. \
-                 ({}, {}) and ({}, {}) (0-based); give one triangle or set triangle = 0",
-                b.0, b.1, a.0, a.1
-            )));
-        }
         SparseSym::from_lower_triplets(name, n, &triplets)?
     } else {
         SparseSym::from_triplets(name, n, &triplets)?
@@ -798,7 +789,7 @@ pub unsafe extern "C" fn nlsim_model_new(
         let k = unsafe { sparse("stiffness", n, stiffness)? };
         let built = Model::new(name, dofs, m, k)?;
         built.validate(&ValidationConfig::default())?;
-        *model = insert(Object::Model(Arc::new(RwLock::new(built))));
+        *model = insert(Object::Model(Arc::new(RwLock::new(Arc::new(built)))));
         Ok(Done::Complete)
     })
 }
@@ -826,7 +817,7 @@ pub unsafe extern "C" fn nlsim_model_load(
 #[cfg(feature = "io")]
 fn load(arg: &str, model: &mut NlsimModel) -> Result<Done, Failure> {
     let loaded = nlsim::load_model(arg)?;
-    *model = insert(Object::Model(Arc::new(RwLock::new(loaded.model))));
+    *model = insert(Object::Model(Arc::new(RwLock::new(Arc::new(loaded.model)))));
     Ok(Done::Complete)
 }
 
@@ -843,7 +834,7 @@ fn load(arg: &str, _model: &mut NlsimModel) -> Result<Done, Failure> {
 pub extern "C" fn nlsim_model_set_rayleigh(model: NlsimModel, alpha: f64, beta: f64) -> NlsimCode {
     guard(|| {
         let m = get_model(model)?;
-        write(&m).set_damping(Damping::Rayleigh { alpha, beta })?;
+        Arc::make_mut(&mut write(&m)).set_damping(Damping::Rayleigh { alpha, beta })?;
         Ok(Done::Complete)
     })
 }
@@ -853,7 +844,7 @@ pub extern "C" fn nlsim_model_set_rayleigh(model: NlsimModel, alpha: f64, beta: 
 pub extern "C" fn nlsim_model_set_modal_damping(model: NlsimModel, zeta: f64) -> NlsimCode {
     guard(|| {
         let m = get_model(model)?;
-        write(&m).set_damping(Damping::Modal(
+        Arc::make_mut(&mut write(&m)).set_damping(Damping::Modal(
             nlsim::kernel::damping::ModalDamping::uniform(zeta),
         ))?;
         Ok(Done::Complete)
@@ -919,12 +910,13 @@ pub unsafe extern "C" fn nlsim_model_add_element(
             Some(unsafe { text(dof2, "dof2")? })
         };
         let m = get_model(model)?;
-        let mut m = write(&m);
-        let a = dof_index(&m, dof)?;
+        let mut guard = write(&m);
+        let m = Arc::make_mut(&mut guard);
+        let a = dof_index(m, dof)?;
         let coupling = match dof2 {
             None => Coupling::single(a),
             Some(l) => {
-                let b = dof_index(&m, l)?;
+                let b = dof_index(m, l)?;
                 if b == a {
                     return Err(Failure::input(format!(
                         "element '{name}': dof2 {l} is dof itself"
@@ -958,8 +950,9 @@ pub unsafe extern "C" fn nlsim_model_add_excitation(
         // SAFETY: the function's contract.
         let dof = unsafe { text(dof, "dof")? };
         let m = get_model(model)?;
-        let mut m = write(&m);
-        let dof = dof_index(&m, dof)?;
+        let mut guard = write(&m);
+        let m = Arc::make_mut(&mut guard);
+        let dof = dof_index(m, dof)?;
         m.add_excitation(Excitation {
             name: name.into(),
             dof,
@@ -988,8 +981,9 @@ pub unsafe extern "C" fn nlsim_model_add_sensor(
         let dof = unsafe { text(dof, "dof")? };
         let q = self::quantity(quantity, "quantity")?;
         let m = get_model(model)?;
-        let mut m = write(&m);
-        let dof = dof_index(&m, dof)?;
+        let mut guard = write(&m);
+        let m = Arc::make_mut(&mut guard);
+        let dof = dof_index(m, dof)?;
         m.add_sensor(Sensor {
             name: name.into(),
             dof,
@@ -1027,10 +1021,11 @@ pub unsafe extern "C" fn nlsim_model_info(
 // ---------------------------------------------------------------------------------------
 // Parameters, on models and harmonic-balance systems alike.
 
-/// An object with parameters. The registry's lock is released before the object's own lock
+/// An object with parameters (a model is held as an `Arc` that a change copies only while a
+/// reduced model shares it). The registry's lock is released before the object's own lock
 /// is taken, so a long solve on one object never holds up calls on others.
 enum WithParams {
-    Model(Arc<RwLock<Model>>),
+    Model(Arc<RwLock<Arc<Model>>>),
     Hb(Arc<RwLock<HbSystem>>),
 }
 
@@ -1139,7 +1134,8 @@ pub unsafe extern "C" fn nlsim_set_param(
         let name = unsafe { text(name, "name")? };
         match parameterized(handle)? {
             WithParams::Model(m) => {
-                let mut m = write(&m);
+                let mut guard = write(&m);
+                let m = Arc::make_mut(&mut guard);
                 let p = parse_known(name, &m.parameters())?;
                 m.set_param(&p, value)?;
             }
@@ -1946,7 +1942,7 @@ mod tests {
                 quantity: Quantity::Displacement,
             })
             .unwrap();
-        let mh = insert(Object::Model(Arc::new(RwLock::new(model))));
+        let mh = insert(Object::Model(Arc::new(RwLock::new(Arc::new(model)))));
         let mut red = 0;
         // SAFETY: `red` is writable.
         assert_eq!(unsafe { nlsim_reduce(mh, 2, 1, &mut red) }, NlsimCode::Ok);

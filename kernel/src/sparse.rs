@@ -53,12 +53,31 @@ impl SparseSym {
     /// Assembles from the entries of one triangle (either), mirroring off-diagonal entries.
     ///
     /// An off-diagonal pair given on both sides would be counted twice, so each
-    /// `(i, j)` with `i ≠ j` must appear on one side only.
+    /// `(i, j)` with `i ≠ j` must appear on one side only; a pair given on both is an error
+    /// naming it (repeats on one side are summed, as in FE assembly).
     pub fn from_lower_triplets(
         name: &str,
         n: usize,
         triplets: &[(usize, usize, f64)],
     ) -> Result<Self> {
+        // All on one side (the usual case) needs no further look.
+        let below = triplets.iter().any(|&(r, c, _)| r > c);
+        let above = triplets.iter().any(|&(r, c, _)| r < c);
+        if below && above {
+            let mut side = std::collections::HashMap::new();
+            for &(r, c, _) in triplets.iter().filter(|t| t.0 != t.1) {
+                let lower = r > c;
+                if *side.entry((r.max(c), r.min(c))).or_insert(lower) != lower {
+                    return Err(Error::invalid(
+                        format!("{name} (one triangle)"),
+                        format!(
+                            "entry ({r}, {c}) (0-based) is also given as ({c}, {r}); give each \
+                             off-diagonal pair on one side of the diagonal only"
+                        ),
+                    ));
+                }
+            }
+        }
         let mut full = Vec::with_capacity(2 * triplets.len());
         for &(r, c, v) in triplets {
             full.push((r, c, v));

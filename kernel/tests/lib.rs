@@ -817,3 +817,23 @@ fn laws_from_named_pairs_follow_the_model_file() {
         assert!(e.contains(why) && e.contains("'e'"), "{kind}: {e}");
     }
 }
+
+/// One triangle means one side per pair: a pair given on both sides is refused (it would be
+/// counted twice), repeats on one side are summed, and either triangle or a mix of sides
+/// for different pairs is taken.
+#[test]
+fn one_triangle_refuses_a_pair_given_on_both_sides() {
+    let e = SparseSym::from_lower_triplets("K", 3, &[(0, 0, 2.0), (1, 0, -1.0), (0, 1, -1.0)])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("(0, 1)") && e.contains("(1, 0)") && e.contains("K"),
+        "{e}"
+    );
+    let summed =
+        SparseSym::from_lower_triplets("K", 2, &[(1, 0, -1.0), (1, 0, -0.5), (0, 0, 1.0)]).unwrap();
+    assert_eq!(summed.get(0, 1), -1.5);
+    let mixed =
+        SparseSym::from_lower_triplets("K", 3, &[(1, 0, -1.0), (1, 2, -2.0), (2, 2, 1.0)]).unwrap();
+    assert_eq!((mixed.get(0, 1), mixed.get(2, 1)), (-1.0, -2.0));
+}
