@@ -42,8 +42,12 @@ pub fn central_difference(f: impl Fn(f64) -> f64, x: f64, step: f64, scale: f64)
 
 /// Checks an analytic derivative against a central difference of `f` at `x`:
 /// `|analytic − fd| ≤ rtol · max(|analytic|, |fd|) + atol`. The step is
-/// `h = 1e-6 · max(|x|, x_scale)`, so the truncation error is ~1e-12 relative and round-off
-/// ~1e-10 relative to `|f| / h`; `atol` must cover the latter.
+/// `h = 1e-6 · max(|x|, x_scale)`. `atol` covers the two errors of the difference itself:
+/// round-off, 1e-9 of `|f| / h`, and truncation, `c h²`, estimated by Richardson from the
+/// difference at `2h` (which is off by `4c h²`) and counted twice. The truncation term
+/// matters where the derivative vanishes (a cubic spring at rest: the difference is `k₃h²`
+/// against an exact 0) or `f` curves sharply within a few steps; `f` must be smooth on
+/// `[x − 2h, x + 2h]`.
 pub fn check_fd(
     what: &str,
     f: impl Fn(f64) -> f64,
@@ -54,13 +58,16 @@ pub fn check_fd(
 ) -> Result<(), String> {
     let h = 1e-6 * x.abs().max(x_scale);
     let fd = (f(x + h) - f(x - h)) / (2.0 * h);
-    let f0 = f(x).abs().max(f(x + h).abs());
-    let atol = 1e-9 * f0 / h;
+    let fd2 = (f(x + 2.0 * h) - f(x - 2.0 * h)) / (4.0 * h);
+    let f0 = f(x).abs().max(f(x + h).abs()).max(f(x + 2.0 * h).abs());
+    let roundoff = 1e-9 * f0 / h;
+    let truncation = 2.0 * (fd2 - fd).abs() / 3.0;
+    let atol = roundoff + truncation;
     if is_close(analytic, fd, rtol, atol) {
         Ok(())
     } else {
         Err(format!(
-            "{what}: analytic {analytic:e} vs finite difference {fd:e} at x = {x:e} (h = {h:e}, atol {atol:e})"
+            "{what}: analytic {analytic:e} vs finite difference {fd:e} at x = {x:e} (h = {h:e}, atol {atol:e}: round-off {roundoff:e}, truncation {truncation:e})"
         ))
     }
 }
