@@ -6,10 +6,10 @@ set -euo pipefail
 # Debian packages the build needs: a C compiler for mimalloc, the HDF5 library (with
 # pkg-config to find it) for the result files, and a TrueType font for the text of PNG plots.
 APT_PACKAGES=(gcc libc6-dev libhdf5-dev pkg-config fonts-dejavu-core)
-# `make test` also reads every result file with h5py and runs the batch tool on a real
-# single-node SLURM (scripts/slurm-e2e.sh).
+# `make test` also reads every result file with h5py, runs the batch tool on a real
+# single-node SLURM (scripts/slurm-e2e.sh) and opens the report page in headless chromium.
 if [ "${1:-}" = "--test" ]; then
-  APT_PACKAGES+=(python3-h5py slurm-wlm munge)
+  APT_PACKAGES+=(python3-h5py slurm-wlm munge chromium)
 fi
 
 say() { printf 'nlsim setup: %s\n' "$*" >&2; }

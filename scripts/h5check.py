@@ -5,9 +5,18 @@
                                       rules of docs/file-formats.md that hold for every file
     h5check.py same A B [--ignore N]  A and B hold the same tree, datasets equal bit for bit,
                                       attributes equal (except those named N, e.g. timings)
+    h5check.py report DIR             a report folder: report.h5 read as above, every figure
+                                      in it inline in index.html with its SVG and PNG files,
+                                      and curves redrawn from the data: the first curve of
+                                      the time-response figure against its SVG polyline
+                                      (pixels an affine map of the data, to 1 px), the FRF's
+                                      fundamental from /frf against the figure data (1e-12),
+                                      the modes table against /modes
 
 Exit status 0 when every check holds, 1 otherwise (with one line per problem).
 """
+import os
+import re
 import sys
 
 import h5py
@@ -79,6 +88,88 @@ def same(a, b, ignore):
     return problems
 
 
+def affine_residual(values, pixels):
+    """Largest distance (px) of `pixels` from the least-squares affine map of `values`,
+    and that map's slope."""
+    a = np.vstack([np.ones_like(values), values]).T
+    coef, *_ = np.linalg.lstsq(a, pixels, rcond=None)
+    return float(np.max(np.abs(a @ coef - pixels))), float(coef[1])
+
+
+def report(d):
+    problems = []
+    h5 = os.path.join(d, "report.h5")
+    page = open(os.path.join(d, "index.html"), encoding="utf-8").read()
+    pr, _ = read(h5)
+    problems += pr
+    with h5py.File(h5, "r") as f:
+        for key in ("command_line", "started_utc", "wall_seconds"):
+            if key not in f.attrs:
+                problems.append(f"{h5}: root attribute '{key}' is missing")
+        figures = f.get("figures", {})
+        if len(figures) == 0:
+            problems.append(f"{h5}: no figures")
+        for name, g in figures.items():
+            for ext in ("svg", "png"):
+                if not os.path.isfile(os.path.join(d, f"{name}.{ext}")):
+                    problems.append(f"{name}.{ext} is missing")
+            m = re.search(r'<figure id="fig-%s">(.*?)</figure>' % re.escape(name), page, re.S)
+            if not m or "<svg" not in m.group(1) or "</svg>" not in m.group(1):
+                problems.append(f"figure {name}: not inline in index.html")
+            for s in g.values():
+                if s["x"].shape != s["y"].shape or s["x"].size == 0:
+                    problems.append(f"figure {name}/{s.name}: x and y differ in size or are empty")
+        # 1. The time response's first curve against the pixels of its polyline.
+        if "time_response" in figures:
+            s = figures["time_response"]["series_00"]
+            x, y = s["x"][()], s["y"][()]
+            m = re.search(r'<figure id="fig-time_response">(.*?)</figure>', page, re.S)
+            lines = re.findall(r'<polyline[^>]*stroke="#0000FF"[^>]*points="([^"]*)"', m.group(1))
+            pts = max(lines, key=len).split() if lines else []
+            if len(pts) != len(x):
+                problems.append(f"time_response: {len(pts)} points drawn, {len(x)} stored")
+            else:
+                px = np.array([[float(v) for v in p.split(",")] for p in pts])
+                rx, bx = affine_residual(x, px[:, 0])
+                ry, by = affine_residual(y, px[:, 1])
+                if not (rx <= 1.0 and ry <= 1.0 and bx > 0 and by < 0):
+                    problems.append(
+                        f"time_response: drawn pixels are not the stored data "
+                        f"(off by {rx:.2f} px in x, {ry:.2f} px in y)")
+                else:
+                    print(f"h5check: time_response: {len(x)} points redrawn from report.h5 "
+                          f"within {max(rx, ry):.2f} px of the SVG")
+        # 2. The FRF's fundamental magnitude recomputed from the FRF data.
+        for name, g in figures.items():
+            if not name.startswith("frf_") or "frf/continuation" not in f:
+                continue
+            c = f["frf/continuation"]
+            nu = int(c.attrs["subharmonic_order"])
+            for s in g.values():
+                if s.attrs["label"] == "magnitude" and "(fundamental)" in s.attrs["panel"]:
+                    ylab = s.attrs["y_label"]
+                    sensor = ylab.split("|")[1]  # "|tip| (dB re 1 m/s^2)"
+                    resp = c["sensors"][sensor]["response"][()]
+                    amp = np.abs(resp[:, nu])
+                    want = 20 * np.log10(amp) if "dB" in ylab else amp
+                    got = s["y"][()]
+                    fx = c["frequency"][()]
+                    err = np.max(np.abs(got - want)) / np.max(np.abs(want))
+                    if got.shape != want.shape or err > 1e-12 or np.any(s["x"][()] != fx):
+                        problems.append(f"{name}: the fundamental differs from /frf/continuation")
+                    else:
+                        print(f"h5check: {name}: fundamental of {len(got)} points equals "
+                              f"/frf/continuation ({err:.1e})")
+        # 3. The modes table against the modes.
+        if "tables/modes" in f and "modes" in f:
+            t = f["tables/modes"]
+            col = [k for k in t if k.startswith("01_")][0]
+            hz = f["modes/frequency_hz"][()]
+            if np.max(np.abs(t[col][()] - hz) / hz) > 1e-6:
+                problems.append("tables/modes: frequencies differ from /modes/frequency_hz")
+    return problems
+
+
 def main(argv):
     if len(argv) >= 2 and argv[0] == "read":
         problems = []
@@ -100,6 +191,10 @@ def main(argv):
         problems = same(argv[1], argv[2], ignore)
         if not problems:
             print(f"h5check: {argv[1]} and {argv[2]} are the same")
+    elif len(argv) == 2 and argv[0] == "report":
+        problems = report(argv[1])
+        if not problems:
+            print(f"h5check: report {argv[1]}: every figure inline and its data consistent")
     else:
         print(__doc__, file=sys.stderr)
         return 2

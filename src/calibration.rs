@@ -813,7 +813,7 @@ pub(crate) fn convergence_table(specs: &[ParamSpec], runs: &[StartRun]) -> Strin
 /// The cost along each optimisation of `runs` as a plot `convergence` (SVG and PNG) in
 /// `dir`; nothing when no run has a positive cost. Returns the files written.
 pub(crate) fn convergence_plot(
-    dir: &Path,
+    report: &crate::report::Report,
     model_name: &str,
     runs: &[StartRun],
 ) -> Result<Vec<PathBuf>> {
@@ -836,8 +836,7 @@ pub(crate) fn convergence_plot(
     if history.is_empty() {
         return Ok(Vec::new());
     }
-    let files = crate::plot::write_both(
-        dir,
+    let files = report.figure(
         "convergence",
         &Lines {
             title: format!("{model_name}: Levenberg–Marquardt convergence"),
@@ -873,6 +872,28 @@ pub fn write_report(dir: &Path, run: &CalibrationRun) -> Result<Vec<PathBuf>> {
         path: dir.to_path_buf(),
         source,
     })?;
+    let report = crate::report::Report::create(
+        dir,
+        &format!("nlsim calibrate: {}", run.prepared.model_name),
+        &crate::report::command_line(),
+        &run.request.model,
+    )?;
+    report.seed("Latin hypercube and k-fold split", run.request.config.seed)?;
+    report.section("Summary");
+    for line in run.summary() {
+        report.say(&line);
+    }
+    report.table(
+        "estimates",
+        crate::report::Table::from_csv("Estimates and uncertainties", &run.estimates_csv()),
+    )?;
+    if run.calibration.kfold.is_some() {
+        report.table(
+            "kfold",
+            crate::report::Table::from_csv("k-fold cross validation", &run.kfold_csv()),
+        )?;
+    }
+    report.section("Test vs calibrated model");
     let mut written = Vec::new();
     let mut text = |name: &str, body: String| -> Result<()> {
         if !body.is_empty() {
@@ -951,15 +972,16 @@ pub fn write_report(dir: &Path, run: &CalibrationRun) -> Result<Vec<PathBuf>> {
                     }
                 })
                 .collect();
-            written.extend(crate::plot::write_both(
-                dir,
-                &format!("frf_{safe}_h{k}"),
-                &fig,
-            )?);
+            written.extend(report.figure(&format!("frf_{safe}_h{k}"), &fig)?);
             plots += 1;
         }
     }
-    written.extend(convergence_plot(dir, &run.prepared.model_name, &c.runs)?);
+    report.section("Optimisation and cross validation");
+    written.extend(convergence_plot(
+        &report,
+        &run.prepared.model_name,
+        &c.runs,
+    )?);
     if let Some(k) = &c.kfold {
         let groups = c
             .params
@@ -975,8 +997,7 @@ pub fn write_report(dir: &Path, run: &CalibrationRun) -> Result<Vec<PathBuf>> {
                 }
             })
             .collect();
-        written.extend(crate::plot::write_both(
-            dir,
+        written.extend(report.figure(
             "kfold",
             &Bars {
                 title: format!(
@@ -991,5 +1012,7 @@ pub fn write_report(dir: &Path, run: &CalibrationRun) -> Result<Vec<PathBuf>> {
             },
         )?);
     }
+    written.push(report.finish()?);
+    written.push(dir.join(crate::report::DATA));
     Ok(written)
 }

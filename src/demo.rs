@@ -1,7 +1,7 @@
 //! `nlsim demo` as a library call: the model-calibration pipeline of the thesis, stage by
 //! stage, on one model, with a readable summary and a report folder of plots.
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 use nlsim_kernel::ValidationConfig;
 use nlsim_reduction::{EigenConfig, ModeSelection};
 use std::path::Path;
@@ -13,12 +13,14 @@ fn demo_time_response(
     model: &nlsim_kernel::Model,
     reduced: &nlsim_reduction::ReducedModel,
     system: &nlsim_reduction::ModalSystem,
-    report_dir: &Path,
+    report: &crate::report::Report,
     say: &dyn Fn(&str),
 ) -> Result<()> {
     use nlsim_sim::{FohConfig, Harmonic, LoadCase, Plant, Rk45Config, Signal, Simulator};
+    report.section("3. Time response (FOH vs RK45)");
     if model.excitation().is_empty() {
         say("[3/8] time response: the model has no excitation point; skipped");
+        report.skip("the model has no excitation point");
         return Ok(());
     }
     let f1 = reduced.modes.frequencies_hz()[0];
@@ -54,6 +56,20 @@ fn demo_time_response(
             ..Default::default()
         },
     )?;
+    report.data(|root| {
+        let g = root.create_group("time_response")?;
+        let info = |method: &str| crate::simulate::RunInfo {
+            model_spec: model.name().to_string(),
+            method: method.to_string(),
+            excitation: vec![format!(
+                "multisine at {f1} Hz: harmonics 1, 2, 3 at 100/10/5 % of the nominal force"
+            )],
+            modes: reduced.n_modes(),
+            compress: true,
+        };
+        crate::simulate::write_group(&g.create_group("foh")?, &foh, &info("foh"))?;
+        crate::simulate::write_group(&g.create_group("rk45")?, &rk, &info("rk45"))
+    })?;
     say(&format!(
         "[3/8] time response: multi-sine at {f1:.3} Hz (harmonics 1, 2, 3 at 100/10/5 % of the \
          nominal force), {duration:.2} s from rest, FOH at {rate:.0} Hz ({n} steps)"
@@ -110,7 +126,7 @@ fn demo_time_response(
                 ("RK45, rtol 1e-9".into(), curve(&b.values)),
             ],
         };
-        let paths = plot_both(report_dir, "time_response", &fig)?;
+        let paths = plot_both(report, "time_response", &fig)?;
         say(&format!("  plots: {paths}"));
     }
     for (e, name) in foh.element_names.iter().enumerate() {
@@ -132,15 +148,17 @@ fn demo_time_response(
 fn demo_frf(
     model: &nlsim_kernel::Model,
     reduced: &nlsim_reduction::ReducedModel,
-    report_dir: &Path,
+    report: &crate::report::Report,
     say: &dyn Fn(&str),
 ) -> Result<()> {
     use nlsim_hb::{ContinuationConfig, HarmonicSet, HbConfig, HbSystem, PointKind};
     use std::f64::consts::PI;
+    report.section("4. Multi-harmonic FRFs (harmonic balance)");
     if model.elements().is_empty() || model.excitation().is_empty() || model.sensors().is_empty() {
         say(
             "[4/8] multi-harmonic FRFs: the model needs an element, an excitation and a sensor; skipped",
         );
+        report.skip("the model needs an element, an excitation and a sensor");
         return Ok(());
     }
     let sys = HbSystem::from_model(model, reduced, HarmonicSet::new(7, 1)?, HbConfig::default())?;
@@ -191,6 +209,29 @@ fn demo_frf(
         list(PointKind::Jump, &down)
     ));
     let y = crate::frf::responses(&sys, &cont);
+    report.data(|root| {
+        let g = root.create_group("frf")?;
+        for (name, b) in [
+            ("continuation", &cont),
+            ("step_up", &up),
+            ("step_down", &down),
+        ] {
+            let yb = crate::frf::responses(&sys, b);
+            crate::frf::write_group(&g.create_group(name)?, &sys, b, &yb)?;
+        }
+        Ok(())
+    })?;
+    for b in [
+        ("continuation", &cont),
+        ("stepped sine up", &up),
+        ("stepped sine down", &down),
+    ] {
+        report.table(
+            &format!("frf_events_{}", b.0),
+            crate::frf::events_table(&sys, b.1, b.0),
+        )?;
+    }
+    report.table("frf_peaks", crate::frf::peaks_table(&sys, &cont, &y))?;
     let title = format!("{}: harmonic balance, H = 7", model.name());
     let fig = crate::frf::FrfPlot {
         sys: &sys,
@@ -198,12 +239,10 @@ fn demo_frf(
         y: &y,
         sensor: 0,
         title: &title,
+        magnitude: crate::frf::Magnitude::Db,
+        phase: true,
     };
-    let mut plots = vec![plot_both(
-        report_dir,
-        &format!("frf_{}", model.name()),
-        &fig,
-    )?];
+    let mut plots = vec![plot_both(report, &format!("frf_{}", model.name()), &fig)?];
     // The stepped sines as a test would run them, over the continuation.
     let fund = |b: &nlsim_hb::Branch| -> Vec<(f64, f64)> {
         crate::frf::responses(&sys, b)
@@ -227,15 +266,19 @@ fn demo_frf(
             ("stepped sine down".into(), fund(&down)),
         ],
     };
-    plots.push(plot_both(report_dir, "stepped_sines", &fig)?);
+    plots.push(plot_both(report, "stepped_sines", &fig)?);
     say(&format!("  plots: {}", plots.join(", ")));
     Ok(())
 }
 
-/// Writes `fig` as `DIR/NAME.svg` and `DIR/NAME.png`; returns the two paths for the summary.
-/// Writes `fig` as `dir/name.svg` and `.png`; their paths as text.
-pub(crate) fn plot_both(dir: &Path, name: &str, fig: &impl crate::plot::Figure) -> Result<String> {
-    let paths = crate::plot::write_both(dir, name, fig)?;
+/// Adds `fig` to the report (files `NAME.svg` and `NAME.png`, inline on the page, its data in
+/// `report.h5`); returns the two files' paths as text for the summary.
+pub(crate) fn plot_both(
+    report: &crate::report::Report,
+    name: &str,
+    fig: &impl crate::plot::Figure,
+) -> Result<String> {
+    let paths = report.figure(name, fig)?;
     Ok(format!("{}, {}", paths[0].display(), paths[1].display()))
 }
 
@@ -247,7 +290,7 @@ fn demo_calibration(
     model: &nlsim_kernel::Model,
     reduced: &nlsim_reduction::ReducedModel,
     virtual_data: Option<nlsim_calib::TestData>,
-    report_dir: &Path,
+    report: &crate::report::Report,
     say: &dyn Fn(&str),
 ) -> Result<()> {
     use nlsim_calib::{
@@ -257,10 +300,14 @@ fn demo_calibration(
     use nlsim_hb::{HarmonicSet, HbConfig, HbSystem};
     use nlsim_kernel::Parameterized;
     use std::sync::Arc;
+    report.section("7. Calibration");
     let skip = |why: &str| {
         say(&format!(
             "[7/8] calibration: {why}; skipped\n[8/8] k-fold statistics: skipped"
-        ))
+        ));
+        report.skip(why);
+        report.section("8. k-fold statistics");
+        report.skip(why);
     };
     if model.elements().is_empty() || model.excitation().is_empty() || model.sensors().is_empty() {
         skip("the model needs an element, an excitation and a sensor");
@@ -285,8 +332,9 @@ fn demo_calibration(
             let plans = crate::planning::demo_sweeps(&sys, &params, force);
             let input = sys.inputs()[0].0.clone();
             let d = synthesize(&sys, &input, &plans, 3, Noise::relative(noise), 2016)?;
-            let csv = report_dir.join("synthetic_test.csv");
+            let csv = report.dir().join("synthetic_test.csv");
             crate::testdata::write_csv(&csv, &d)?;
+            report.wrote(&csv);
             (
                 Arc::new(d),
                 format!("a synthetic stepped-sine test ({})", csv.display()),
@@ -314,6 +362,7 @@ fn demo_calibration(
         folds: 10,
         ..Default::default()
     };
+    report.seed("Latin hypercube and k-fold split", config.seed)?;
     let mut fits = Vec::new();
     for (label, harmonics) in [
         ("fundamental only", vec![1]),
@@ -342,8 +391,20 @@ fn demo_calibration(
     say(
         "  parameter            true          start         metric             estimate      error     Cramér–Rao  10-fold (jackknife)",
     );
+    let mut rows = Vec::new();
     for (j, p) in params.iter().enumerate() {
         for (label, cal, _) in &fits {
+            let jack = cal.kfold.as_ref().map_or(f64::NAN, |k| k.jackknife_std[j]);
+            rows.push(vec![
+                p.to_string(),
+                format!("{:.5e}", truth[j]),
+                format!("{:.5e}", [truth[0] * 30.0, truth[1] * 2.5][j]),
+                label.to_string(),
+                format!("{:.5e}", cal.estimate[j]),
+                format!("{:+.3}", 100.0 * (cal.estimate[j] - truth[j]) / truth[j]),
+                format!("{:.3}", 100.0 * cal.cramer_rao.relative_std[j]),
+                format!("{:.3}", 100.0 * jack / cal.estimate[j]),
+            ]);
             say(&format!(
                 "  {:<18} {:>12.5e}  {:>12.5e}  {:<18} {:>12.5e}  {:>+8.3} %  ±{:>8.3} %  ±{:>8.3} %",
                 p.to_string(),
@@ -358,6 +419,25 @@ fn demo_calibration(
             ));
         }
     }
+    report.table(
+        "calibration_estimates",
+        crate::report::Table {
+            caption: "Estimates and their uncertainties (std as % of the estimate)".into(),
+            header: [
+                "parameter",
+                "true",
+                "start",
+                "metric",
+                "estimate",
+                "error (%)",
+                "Cramér–Rao std (%)",
+                "10-fold jackknife std (%)",
+            ]
+            .map(String::from)
+            .to_vec(),
+            rows,
+        },
+    )?;
     for (label, cal, _) in &fits {
         say(&format!(
             "  {label}: {} in {} LM iterations, reduced chi2 {:.3}, collinearity index {:.2}{}",
@@ -412,7 +492,7 @@ fn demo_calibration(
     };
     say(&format!(
         "  plots: {}",
-        plot_both(report_dir, "calibration_frf", &fig)?
+        plot_both(report, "calibration_frf", &fig)?
     ));
     say(&format!(
         "  try `nlsim calibrate {} REPORT/virtual_test.csv --param {}={:e}:{:e} --compare 1,3`",
@@ -423,6 +503,7 @@ fn demo_calibration(
     ));
     say("");
     let kf = cal.kfold.as_ref().expect("folds = 10");
+    report.section("8. k-fold statistics");
     say(&format!(
         "[8/8] k-fold statistics: {} folds (seed {}), each trained on the other folds from the estimate",
         kf.k, config.seed
@@ -457,36 +538,47 @@ fn demo_calibration(
         band_desc: "Cramér–Rao ±1σ".into(),
         groups,
     };
-    say(&format!(
-        "  plots: {}",
-        plot_both(report_dir, "kfold", &fig)?
-    ));
+    say(&format!("  plots: {}", plot_both(report, "kfold", &fig)?));
     Ok(())
 }
 
 /// Runs the thesis pipeline stage by stage on `model` (a built-in model or a model file):
 /// model summary, modes and residual flexibility, an FOH time response checked against RK45,
-/// the nonlinear FRF with stability, then calibration on a synthetic stepped-sine test with
-/// k-fold statistics; stages not built yet say so. Every line goes to `show` and to
-/// `REPORT/summary.txt`; plots go to `report_dir` as SVG and PNG.
-pub fn run_demo(model: &str, report_dir: &Path, show: &dyn Fn(&str)) -> Result<()> {
-    std::fs::create_dir_all(report_dir).map_err(|source| Error::Io {
-        path: report_dir.to_path_buf(),
-        source,
-    })?;
-    // Everything said also goes to REPORT/summary.txt.
+/// the nonlinear FRF with stability, pre-test planning, a virtual test through a shaker, then
+/// calibration with k-fold statistics. Every line goes to `show`, to `REPORT/summary.txt` and
+/// to the report page `REPORT/index.html` ([`crate::report`]), with every table and figure
+/// (also as SVG and PNG files) and the data behind them in `REPORT/report.h5`.
+/// `command_line` is recorded in the provenance.
+pub fn run_demo(
+    model: &str,
+    report_dir: &Path,
+    command_line: &str,
+    show: &dyn Fn(&str),
+) -> Result<()> {
+    let report = crate::report::Report::create(
+        report_dir,
+        &format!("nlsim demo: the model-calibration pipeline on {model}"),
+        command_line,
+        model,
+    )?;
+    // Everything said also goes to REPORT/summary.txt and the page.
     let text = std::cell::RefCell::new(String::new());
     let say = |s: &str| {
         show(s);
+        report.say(s);
         let mut t = text.borrow_mut();
         t.push_str(s);
         t.push('\n');
     };
-    say("nlsim demo: the model-calibration pipeline of Chen (2016) on a built-in model");
-    say("");
+    // The heading line is the page's title.
+    let heading = "nlsim demo: the model-calibration pipeline of Chen (2016) on a built-in model";
+    show(heading);
+    show("");
+    text.borrow_mut().push_str(&format!("{heading}\n\n"));
     let t0 = Instant::now();
+    report.section("1. Model");
     let loaded = crate::load_model(model)?;
-    let report = loaded.model.validate(&ValidationConfig::default())?;
+    let validation = loaded.model.validate(&ValidationConfig::default())?;
     say(&format!(
         "[1/8] model: loaded and validated in {:.1} ms",
         t0.elapsed().as_secs_f64() * 1e3
@@ -494,7 +586,7 @@ pub fn run_demo(model: &str, report_dir: &Path, show: &dyn Fn(&str)) -> Result<(
     say(&crate::summary::model_summary(
         &loaded.model,
         &loaded.source,
-        Some(&report),
+        Some(&validation),
     ));
     if let Some(d) = &loaded.description {
         say(&format!("  about        {d}"));
@@ -507,8 +599,31 @@ pub fn run_demo(model: &str, report_dir: &Path, show: &dyn Fn(&str)) -> Result<(
                 r.quantity, r.value, r.unit, r.rtol, r.source
             ));
         }
+        report.table(
+            "model_references",
+            crate::report::Table {
+                caption: "Reference values the tests hold this model to".into(),
+                header: ["quantity", "value", "unit", "rtol", "source"]
+                    .map(String::from)
+                    .to_vec(),
+                rows: loaded
+                    .references
+                    .iter()
+                    .map(|r| {
+                        vec![
+                            r.quantity.to_string(),
+                            format!("{:.6}", r.value),
+                            r.unit.to_string(),
+                            format!("{:.0e}", r.rtol),
+                            r.source.to_string(),
+                        ]
+                    })
+                    .collect(),
+            },
+        )?;
     }
     say("");
+    report.section("2. Modes and reduction");
     let t = Instant::now();
     let n_modes = loaded.model.n_dofs().min(12);
     let cfg = nlsim_reduction::ReductionConfig {
@@ -527,8 +642,10 @@ pub fn run_demo(model: &str, report_dir: &Path, show: &dyn Fn(&str)) -> Result<(
         system.n_states(),
         system.ports.len()
     ));
-    let report = crate::modes::ModeReport::new(&loaded.model, reduced.modes.clone(), cfg.eigen);
-    say(&crate::modes::format_table(&report));
+    let modes = crate::modes::ModeReport::new(&loaded.model, reduced.modes.clone(), cfg.eigen);
+    say(&crate::modes::format_table(&modes));
+    report.table("modes", crate::modes::table(&modes))?;
+    report.data(|root| crate::modes::write_group(root, &loaded.model, &modes))?;
     // How much of the static flexibility at each port the truncated modes carry (for a
     // supported structure; rigid-body modes have no static flexibility).
     let supported = reduced.modes.eigenvalues.iter().all(|&l| l > 0.0);
@@ -547,22 +664,25 @@ pub fn run_demo(model: &str, report_dir: &Path, show: &dyn Fn(&str)) -> Result<(
         ));
     }
     say("");
-    demo_time_response(&loaded.model, &reduced, &system, report_dir, &say)?;
+    demo_time_response(&loaded.model, &reduced, &system, &report, &say)?;
     say("");
-    demo_frf(&loaded.model, &reduced, report_dir, &say)?;
+    demo_frf(&loaded.model, &reduced, &report, &say)?;
     say("");
-    crate::planning::demo_planning(&loaded.model, &reduced, report_dir, &say)?;
+    crate::planning::demo_planning(&loaded.model, &reduced, &report, &say)?;
     say("");
-    let virtual_data =
-        crate::planning::demo_virtual_test(&loaded.model, &reduced, report_dir, &say)?;
+    let virtual_data = crate::planning::demo_virtual_test(&loaded.model, &reduced, &report, &say)?;
     say("");
-    demo_calibration(&loaded.model, &reduced, virtual_data, report_dir, &say)?;
+    demo_calibration(&loaded.model, &reduced, virtual_data, &report, &say)?;
     say("");
     let summary = report_dir.join("summary.txt");
     say(&format!(
-        "done in {:.2} s; report in {} (summary.txt, plots as SVG and PNG)",
+        "done in {:.2} s; report in {} (index.html with every table and plot, report.h5 with \
+         their data, summary.txt, plots as SVG and PNG)",
         t0.elapsed().as_secs_f64(),
         report_dir.display()
     ));
-    crate::output::write_text_atomically(&summary, &text.borrow())
+    crate::output::write_text_atomically(&summary, &text.borrow())?;
+    report.wrote(&summary);
+    report.finish()?;
+    Ok(())
 }

@@ -270,10 +270,48 @@ pub(crate) fn write_group(
     Ok(())
 }
 
-/// Plots `|Y|` of sensor `sensor` (responses `y` from [`responses`]) at every harmonic
-/// carrying response (the fundamental thick) against frequency, as SVG or PNG by the
-/// extension of `path`: stable parts solid, unstable parts red, folds and jumps marked.
-/// Written atomically.
+/// How an FRF plot's magnitude axis reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Magnitude {
+    /// `|Y|` in the sensor's unit on a linear axis.
+    #[default]
+    Linear,
+    /// `|Y|` on a logarithmic axis.
+    Log,
+    /// `20 log₁₀(|Y| / 1 unit)`, dB re 1 m (or m/s, m/s²).
+    Db,
+}
+
+impl Magnitude {
+    /// The name used on the command line: `linear`, `log` or `db`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Magnitude::Linear => "linear",
+            Magnitude::Log => "log",
+            Magnitude::Db => "db",
+        }
+    }
+}
+
+impl std::str::FromStr for Magnitude {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "linear" => Ok(Magnitude::Linear),
+            "log" => Ok(Magnitude::Log),
+            "db" | "dB" => Ok(Magnitude::Db),
+            _ => Err(Error::Usage(format!(
+                "magnitude axis '{s}': use linear, log or db"
+            ))),
+        }
+    }
+}
+
+/// Plots the FRF of sensor `sensor` (responses `y` from [`responses`]) as SVG or PNG by the
+/// extension of `path`: one panel per harmonic carrying response, each on its own scale,
+/// magnitude read as `magnitude`, with a phase panel beside each when `phase`; stable parts
+/// in the harmonic's colour, unstable parts red, folds and jumps marked. Written atomically.
+#[allow(clippy::too_many_arguments)]
 pub fn plot_frf(
     path: &Path,
     sys: &HbSystem,
@@ -281,6 +319,8 @@ pub fn plot_frf(
     y: &[Mat<c64>],
     sensor: usize,
     title: &str,
+    magnitude: Magnitude,
+    phase: bool,
 ) -> Result<()> {
     crate::plot::write(
         path,
@@ -290,6 +330,8 @@ pub fn plot_frf(
             y,
             sensor,
             title,
+            magnitude,
+            phase,
         },
     )
 }
@@ -306,9 +348,144 @@ pub struct FrfPlot<'a> {
     pub sensor: usize,
     /// Title above the plot.
     pub title: &'a str,
+    /// How the magnitude axes read.
+    pub magnitude: Magnitude,
+    /// Whether a phase panel goes beside each magnitude panel.
+    pub phase: bool,
+}
+
+/// At most this many harmonic panels: the fundamental and the largest others.
+const MAX_PANELS: usize = 5;
+
+impl FrfPlot<'_> {
+    fn hz(&self) -> Vec<f64> {
+        self.branch
+            .points
+            .iter()
+            .map(|p| p.omega / (2.0 * std::f64::consts::PI))
+            .collect()
+    }
+
+    fn amp(&self, i: usize, k: usize) -> f64 {
+        self.y[i][(self.sensor, k)].norm()
+    }
+
+    /// The harmonics drawn, in increasing order: the fundamental (`k = ν`) and those whose
+    /// largest amplitude reaches 1e-9 of the largest harmonic's, the largest first when more
+    /// than [`MAX_PANELS`] qualify. Each has its own scale, so side harmonics 1e-4 of the
+    /// fundamental are read as easily.
+    fn shown(&self) -> Vec<usize> {
+        let nk = self.sys.harmonics().h + 1;
+        let nu = self.sys.harmonics().nu;
+        let peak: Vec<f64> = (0..nk)
+            .map(|k| (0..self.y.len()).fold(0.0f64, |m, i| m.max(self.amp(i, k))))
+            .collect();
+        let top = peak.iter().fold(0.0f64, |m, v| m.max(*v));
+        let mut cands: Vec<usize> = (0..nk)
+            .filter(|&k| k != nu && peak[k] > 1e-9 * top && peak[k] > 0.0)
+            .collect();
+        cands.sort_by(|&a, &b| peak[b].total_cmp(&peak[a]));
+        cands.truncate(MAX_PANELS - 1);
+        if nu < nk {
+            cands.push(nu);
+        }
+        cands.sort_unstable();
+        cands
+    }
+
+    /// The plotted magnitude of a response amplitude `a` (dB values for [`Magnitude::Db`]).
+    fn mag(&self, a: f64, floor: f64) -> f64 {
+        match self.magnitude {
+            Magnitude::Linear => a,
+            Magnitude::Log => a.max(floor),
+            Magnitude::Db => 20.0 * a.max(floor).log10(),
+        }
+    }
+
+    fn mag_label(&self) -> String {
+        let sen = &self.sys.sensors()[self.sensor];
+        let u = unit(sen.quantity);
+        match self.magnitude {
+            Magnitude::Linear | Magnitude::Log => format!("|{}| ({u})", sen.name),
+            Magnitude::Db => format!("|{}| (dB re 1 {u})", sen.name),
+        }
+    }
+
+    fn panel_name(&self, k: usize) -> String {
+        let nu = self.sys.harmonics().nu;
+        format!(
+            "harmonic {}{}",
+            harmonic_label(k, nu),
+            if k == nu { " (fundamental)" } else { "" }
+        )
+    }
+
+    /// Phase of harmonic `k` at point `i` in degrees, `(−180, 180]`, in the convention
+    /// `q(t) = Re(Σ Q_k e^{i k Ω t / ν})`.
+    fn phase_deg(&self, i: usize, k: usize) -> f64 {
+        self.y[i][(self.sensor, k)].arg().to_degrees()
+    }
 }
 
 impl crate::plot::Figure for FrfPlot<'_> {
+    fn size(&self) -> (u32, u32) {
+        let rows = self.shown().len().max(1) as u32;
+        (if self.phase { 1280 } else { 960 }, 60 + 260 * rows)
+    }
+
+    fn title(&self) -> String {
+        self.title.to_string()
+    }
+
+    fn data(&self) -> Vec<crate::plot::SeriesData> {
+        let hz = self.hz();
+        let floor = self.floor();
+        let mut out = Vec::new();
+        let x_label = "frequency (Hz)".to_string();
+        for k in self.shown() {
+            let panel = self.panel_name(k);
+            out.push(crate::plot::SeriesData {
+                panel: panel.clone(),
+                label: "magnitude".into(),
+                x_label: x_label.clone(),
+                y_label: self.mag_label(),
+                x: hz.clone(),
+                y: (0..hz.len())
+                    .map(|i| self.mag(self.amp(i, k), floor))
+                    .collect(),
+            });
+            if self.phase {
+                out.push(crate::plot::SeriesData {
+                    panel: panel.clone(),
+                    label: "phase".into(),
+                    x_label: x_label.clone(),
+                    y_label: "phase (deg)".into(),
+                    x: hz.clone(),
+                    y: (0..hz.len()).map(|i| self.phase_deg(i, k)).collect(),
+                });
+            }
+            for (kind, label) in [(PointKind::Fold, "fold"), (PointKind::Jump, "jump")] {
+                let idx: Vec<usize> = (0..hz.len())
+                    .filter(|&i| self.branch.points[i].kind == kind)
+                    .collect();
+                if !idx.is_empty() {
+                    out.push(crate::plot::SeriesData {
+                        panel: panel.clone(),
+                        label: label.into(),
+                        x_label: x_label.clone(),
+                        y_label: self.mag_label(),
+                        x: idx.iter().map(|&i| hz[i]).collect(),
+                        y: idx
+                            .iter()
+                            .map(|&i| self.mag(self.amp(i, k), floor))
+                            .collect(),
+                    });
+                }
+            }
+        }
+        out
+    }
+
     fn draw<DB: plotters::prelude::DrawingBackend>(
         &self,
         root: &plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
@@ -316,121 +493,368 @@ impl crate::plot::Figure for FrfPlot<'_> {
     where
         DB::ErrorType: 'static,
     {
-        let FrfPlot {
-            sys,
-            branch,
-            y,
-            sensor,
-            title,
-        } = *self;
         use plotters::prelude::*;
-        let hz: Vec<f64> = branch
-            .points
+        root.fill(&WHITE)?;
+        let root = root.titled(self.title, ("sans-serif", 20))?;
+        let shown = self.shown();
+        let cols = if self.phase { 2 } else { 1 };
+        let areas = root.split_evenly((shown.len().max(1), cols));
+        let palette = [BLUE, GREEN, MAGENTA, CYAN, BLACK, RGBColor(150, 100, 0)];
+        for (row, &k) in shown.iter().enumerate() {
+            let colour = if k == self.sys.harmonics().nu {
+                BLUE
+            } else {
+                palette[1 + row % (palette.len() - 1)]
+            };
+            let legend = row == 0;
+            self.draw_panel(&areas[row * cols], k, colour, false, legend)?;
+            if self.phase {
+                self.draw_panel(&areas[row * cols + 1], k, colour, true, false)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+impl FrfPlot<'_> {
+    /// The smallest magnitude drawn on a log or dB axis: 1e-12 of the largest.
+    fn floor(&self) -> f64 {
+        let top = self
+            .y
             .iter()
-            .map(|p| p.omega / (2.0 * std::f64::consts::PI))
-            .collect();
-        let nk = sys.harmonics().h + 1;
-        let amp = |i: usize, k: usize| y[i][(sensor, k)].norm();
-        let peak_k: Vec<f64> = (0..nk)
-            .map(|k| (0..y.len()).fold(0.0f64, |m, i| m.max(amp(i, k))))
-            .collect();
-        let top = peak_k.iter().fold(0.0f64, |m, v| m.max(*v));
-        // Harmonics above 1 % of the largest are drawn.
-        let shown: Vec<usize> = (0..nk).filter(|&k| peak_k[k] > 0.01 * top).collect();
+            .flat_map(|m| (0..m.ncols()).map(move |k| m[(self.sensor, k)].norm()))
+            .fold(0.0f64, f64::max);
+        (1e-12 * top).max(f64::MIN_POSITIVE)
+    }
+
+    /// One panel: the magnitude (or phase) of harmonic `k`, stable stretches in `colour`,
+    /// unstable red, folds and jumps marked and named in the legend.
+    fn draw_panel<DB: plotters::prelude::DrawingBackend>(
+        &self,
+        area: &plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
+        k: usize,
+        colour: plotters::style::RGBColor,
+        phase: bool,
+        legend: bool,
+    ) -> crate::plot::DrawResult
+    where
+        DB::ErrorType: 'static,
+    {
+        use crate::plot::{tick_label, tick_step};
+        use plotters::prelude::*;
+        let hz = self.hz();
+        let n = hz.len();
+        let floor = self.floor();
+        let value = |i: usize| {
+            if phase {
+                self.phase_deg(i, k)
+            } else {
+                self.mag(self.amp(i, k), floor)
+            }
+        };
+        let vals: Vec<f64> = (0..n).map(value).collect();
         let (x0, x1) = hz
             .iter()
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
                 (a.min(*v), b.max(*v))
             });
-        let sen = &sys.sensors()[sensor];
-        root.fill(&WHITE)?;
-        let mut chart = ChartBuilder::on(root)
-            .caption(title, ("sans-serif", 20))
-            .margin(12)
-            .x_label_area_size(44)
-            .y_label_area_size(80)
-            .build_cartesian_2d(
-                x0..x1.max(x0 * (1.0 + 1e-9) + 1e-9),
-                0.0..top * 1.08 + 1e-300,
-            )?;
-        let (xs, ys) = (
-            crate::plot::tick_step(x0, x1, 20),
-            crate::plot::tick_step(0.0, top * 1.08, 20),
-        );
-        chart
-            .configure_mesh()
-            .x_desc("frequency (Hz)")
-            .y_desc(format!("|{}| ({})", sen.name, unit(sen.quantity)))
-            .x_label_formatter(&|v| crate::plot::tick_label(*v, xs, x1.abs()))
-            .y_label_formatter(&|v| crate::plot::tick_label(*v, ys, top * 1.08))
-            .draw()?;
-        let palette = [BLUE, GREEN, MAGENTA, CYAN, BLACK, RGBColor(150, 100, 0)];
-        for (c, &k) in shown.iter().enumerate() {
-            let colour = palette[c % palette.len()];
-            let width = if k == sys.harmonics().nu { 3 } else { 1 };
-            // Consecutive points of equal stability form one segment.
-            let mut start = 0;
-            let mut labelled = false;
-            while start + 1 < y.len() {
-                let stable = branch.points[start].stable() != Some(false);
-                let mut end = start + 1;
-                while end + 1 < y.len() && (branch.points[end].stable() != Some(false)) == stable {
-                    end += 1;
-                }
-                let style = if stable {
-                    colour.stroke_width(width)
-                } else {
-                    RED.stroke_width(width)
-                };
-                let jump = branch.points[end].kind == PointKind::Jump;
-                let series: Vec<(f64, f64)> = (start..=if jump { end - 1 } else { end })
-                    .map(|i| (hz[i], amp(i, k)))
-                    .collect();
-                let s = chart.draw_series(LineSeries::new(series, style))?;
-                if stable && !labelled {
-                    labelled = true;
-                    s.label(format!(
-                        "harmonic {} ({})",
-                        harmonic_label(k, sys.harmonics().nu),
-                        if k == sys.harmonics().nu {
-                            "fundamental"
-                        } else {
-                            "stable"
-                        }
-                    ))
-                    .legend(move |(x, y)| {
-                        PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(width))
-                    });
-                }
-                start = end;
-            }
-        }
-        if branch.points.iter().any(|p| p.stable() == Some(false)) {
-            chart
-                .draw_series(std::iter::empty::<PathElement<(f64, f64)>>())?
-                .label("unstable")
-                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
-        }
-        let k = sys.harmonics().nu;
-        let marks: Vec<(f64, f64)> = branch
-            .points
+        let x1 = x1.max(x0 * (1.0 + 1e-9) + 1e-9);
+        let (v0, v1) = vals
             .iter()
-            .enumerate()
-            .filter(|(_, p)| matches!(p.kind, PointKind::Fold | PointKind::Jump))
-            .map(|(i, _)| (hz[i], amp(i, k)))
-            .collect();
-        if !marks.is_empty() {
-            chart
-                .draw_series(marks.iter().map(|&p| Circle::new(p, 5, BLACK.filled())))?
-                .label("fold / jump")
-                .legend(|(x, y)| Circle::new((x + 10, y), 4, BLACK.filled()));
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(*v), b.max(*v))
+            });
+        let caption = format!(
+            "{}{}",
+            self.panel_name(k),
+            if phase { ": phase" } else { "" }
+        );
+        let y_desc = if phase {
+            "phase (deg)".to_string()
+        } else {
+            self.mag_label()
+        };
+        let mut builder = ChartBuilder::on(area);
+        builder
+            .caption(caption, ("sans-serif", 15))
+            .margin(8)
+            .x_label_area_size(40)
+            .y_label_area_size(76);
+        let xs = tick_step(x0, x1, 20);
+        let x_fmt = |v: &f64| tick_label(*v, xs, x1.abs());
+        // Segments of equal stability; a jump starts a new curve, and so does a phase wrap.
+        let segments = || {
+            let mut out: Vec<(bool, Vec<(f64, f64)>)> = Vec::new();
+            for i in 0..n {
+                let stable = self.branch.points[i].stable() != Some(false);
+                let jump = self.branch.points[i].kind == PointKind::Jump;
+                let wrap = phase && i > 0 && (vals[i] - vals[i - 1]).abs() > 180.0;
+                match out.last_mut() {
+                    Some((s, pts)) if !jump && !wrap => {
+                        pts.push((hz[i], vals[i]));
+                        if *s != stable {
+                            // The shared point ends one stretch and starts the next.
+                            out.push((stable, vec![(hz[i], vals[i])]));
+                        }
+                    }
+                    _ => out.push((stable, vec![(hz[i], vals[i])])),
+                }
+            }
+            out
+        };
+        let marks = |kind: PointKind| -> Vec<(f64, f64)> {
+            (0..n)
+                .filter(|&i| self.branch.points[i].kind == kind)
+                .map(|i| (hz[i], vals[i]))
+                .collect()
+        };
+        let any_unstable = self.branch.points.iter().any(|p| p.stable() == Some(false));
+        let width = if k == self.sys.harmonics().nu { 2 } else { 1 };
+        // The drawing is the same on a linear and a log axis; a macro keeps one copy.
+        macro_rules! finish {
+            ($chart:expr) => {{
+                let mut chart = $chart;
+                let mut labelled = false;
+                for (stable, pts) in segments() {
+                    let style = if stable {
+                        colour.stroke_width(width)
+                    } else {
+                        RED.stroke_width(width)
+                    };
+                    let s = chart.draw_series(LineSeries::new(pts, style))?;
+                    if legend && stable && !labelled {
+                        labelled = true;
+                        s.label("stable").legend(move |(x, y)| {
+                            PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
+                        });
+                    }
+                }
+                if legend && any_unstable {
+                    chart
+                        .draw_series(std::iter::empty::<PathElement<(f64, f64)>>())?
+                        .label("unstable")
+                        .legend(|(x, y)| {
+                            PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2))
+                        });
+                }
+                let folds = marks(PointKind::Fold);
+                if !folds.is_empty() {
+                    let s = chart
+                        .draw_series(folds.iter().map(|&p| Circle::new(p, 5, BLACK.filled())))?;
+                    if legend {
+                        s.label("fold")
+                            .legend(|(x, y)| Circle::new((x + 10, y), 4, BLACK.filled()));
+                    }
+                }
+                let jumps = marks(PointKind::Jump);
+                if !jumps.is_empty() {
+                    let s = chart.draw_series(
+                        jumps
+                            .iter()
+                            .map(|&p| TriangleMarker::new(p, 6, BLACK.filled())),
+                    )?;
+                    if legend {
+                        s.label("jump (stepped sine)")
+                            .legend(|(x, y)| TriangleMarker::new((x + 10, y), 5, BLACK.filled()));
+                    }
+                }
+                if legend {
+                    chart
+                        .configure_series_labels()
+                        .background_style(WHITE.mix(0.8))
+                        .border_style(BLACK)
+                        .position(SeriesLabelPosition::UpperRight)
+                        .draw()?;
+                }
+            }};
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()?;
+        if phase {
+            let chart = builder.build_cartesian_2d(x0..x1, -180.0..180.0)?;
+            let mut chart = chart;
+            chart
+                .configure_mesh()
+                .x_desc("frequency (Hz)")
+                .y_desc(&y_desc)
+                .x_label_formatter(&x_fmt)
+                .y_labels(9)
+                .y_label_formatter(&|v| format!("{v:.0}"))
+                .draw()?;
+            finish!(chart);
+        } else if self.magnitude == Magnitude::Log {
+            let lo = v0.max(floor) / 1.2;
+            // The legend's panel keeps a band above the curves for it.
+            let hi = v1.max(floor) * if legend { 6.0 } else { 1.2 };
+            let mut chart = builder.build_cartesian_2d(x0..x1, (lo..hi).log_scale())?;
+            chart
+                .configure_mesh()
+                .x_desc("frequency (Hz)")
+                .y_desc(&y_desc)
+                .x_label_formatter(&x_fmt)
+                .y_label_formatter(&|v| tick_label(*v, 0.0, hi))
+                .draw()?;
+            finish!(chart);
+        } else {
+            let head = if legend { 0.35 } else { 0.05 };
+            let (lo, hi) = if self.magnitude == Magnitude::Db {
+                let span = (v1 - v0).max(1.0);
+                (v0 - 0.05 * span, v1 + head * span)
+            } else {
+                (0.0, v1 * (1.03 + head) + 1e-300)
+            };
+            let ys = tick_step(lo, hi, 20);
+            let mut chart = builder.build_cartesian_2d(x0..x1, lo..hi)?;
+            chart
+                .configure_mesh()
+                .x_desc("frequency (Hz)")
+                .y_desc(&y_desc)
+                .x_label_formatter(&x_fmt)
+                .y_label_formatter(&|v| tick_label(*v, ys, lo.abs().max(hi.abs())))
+                .draw()?;
+            finish!(chart);
+        }
         Ok(())
     }
+}
+
+/// The folds and jumps of `branch` as a report table (`what` names the branch): kind,
+/// frequency, level and `|Y|` of every sensor at the fundamental.
+pub fn events_table(sys: &HbSystem, branch: &Branch, what: &str) -> crate::report::Table {
+    let nu = sys.harmonics().nu;
+    let mut header: Vec<String> = ["event", "frequency (Hz)", "level", "stable"]
+        .map(String::from)
+        .to_vec();
+    for sen in sys.sensors() {
+        header.push(format!("|{}| h1 ({})", sen.name, unit(sen.quantity)));
+    }
+    let rows = branch
+        .points
+        .iter()
+        .filter(|p| matches!(p.kind, PointKind::Fold | PointKind::Jump))
+        .map(|p| {
+            let y = sys.sensor_response(&p.x, p.omega, p.scale);
+            let mut row = vec![
+                match p.kind {
+                    PointKind::Fold => "fold".to_string(),
+                    _ => "jump".to_string(),
+                },
+                format!("{:.6}", p.omega / (2.0 * std::f64::consts::PI)),
+                format!("{:.4}", p.scale),
+                match p.stable() {
+                    Some(true) => "yes".into(),
+                    Some(false) => "no".into(),
+                    None => "not computed".into(),
+                },
+            ];
+            for s in 0..y.nrows() {
+                row.push(format!("{:.6e}", y[(s, nu.min(y.ncols() - 1))].norm()));
+            }
+            row
+        })
+        .collect();
+    crate::report::Table {
+        caption: format!("Folds and jumps of the {what}"),
+        header,
+        rows,
+    }
+}
+
+/// The largest computed `|Y|` of every sensor and harmonic carrying response along `branch`
+/// (`y` from [`responses`]) and where it is: a report table. These are computed points, not
+/// peaks located between them.
+pub fn peaks_table(sys: &HbSystem, branch: &Branch, y: &[Mat<c64>]) -> crate::report::Table {
+    let nu = sys.harmonics().nu;
+    let mut rows = Vec::new();
+    for (s, sen) in sys.sensors().iter().enumerate() {
+        let nk = sys.harmonics().h + 1;
+        let peak = |k: usize| {
+            y.iter()
+                .enumerate()
+                .map(|(i, m)| (i, m[(s, k)].norm()))
+                .fold((0, 0.0f64), |a, b| if b.1 > a.1 { b } else { a })
+        };
+        let top = (0..nk).map(|k| peak(k).1).fold(0.0f64, f64::max);
+        for k in 0..nk {
+            let (i, v) = peak(k);
+            if v > 1e-9 * top && v > 0.0 {
+                rows.push(vec![
+                    sen.name.clone(),
+                    harmonic_label(k, nu),
+                    format!(
+                        "{:.6}",
+                        branch.points[i].omega / (2.0 * std::f64::consts::PI)
+                    ),
+                    format!("{v:.6e}"),
+                    unit(sen.quantity).to_string(),
+                ]);
+            }
+        }
+    }
+    crate::report::Table {
+        caption: "Largest computed response per sensor and harmonic (continuation)".into(),
+        header: ["sensor", "harmonic", "frequency (Hz)", "|Y|", "unit"]
+            .map(String::from)
+            .to_vec(),
+        rows,
+    }
+}
+
+/// The report of `nlsim frf`: its summary, the folds/jumps and peaks tables, one plot per
+/// sensor (magnitude axes and phase panels as given), the FRF data in `report.h5`
+/// (`/frf/<mode>`, the layout of FRF files); `summary` is [`crate::run::FrfRun::summary`] and
+/// `command_line` goes into the provenance. Returns the page's path.
+#[allow(clippy::too_many_arguments)]
+pub fn write_report(
+    dir: &std::path::Path,
+    spec: &str,
+    model: &nlsim_kernel::Model,
+    req: &crate::run::FrfRequest,
+    run: &crate::run::FrfRun,
+    summary: &[String],
+    (magnitude, phase): (Magnitude, bool),
+    command_line: &str,
+) -> Result<std::path::PathBuf> {
+    let report = crate::report::Report::create(
+        dir,
+        &format!(
+            "nlsim frf: {} from {} to {} Hz",
+            model.name(),
+            req.from_hz,
+            req.to_hz
+        ),
+        command_line,
+        spec,
+    )?;
+    let (sys, branch, y) = (&run.system, &run.branch, &run.responses);
+    report.section(&format!("FRF by harmonic balance ({})", req.mode.as_str()));
+    for line in summary {
+        report.say(line);
+    }
+    report.table("events", events_table(sys, branch, req.mode.as_str()))?;
+    report.table("peaks", peaks_table(sys, branch, y))?;
+    for (s, sen) in sys.sensors().iter().enumerate() {
+        let title = format!(
+            "{}: {} at {}, H = {}",
+            model.name(),
+            req.mode.as_str(),
+            sen.name,
+            sys.harmonics().h
+        );
+        report.figure(
+            &format!("frf_{}", sen.name),
+            &FrfPlot {
+                sys,
+                branch,
+                y,
+                sensor: s,
+                title: &title,
+                magnitude,
+                phase,
+            },
+        )?;
+    }
+    report.data(|root| {
+        let g = root.create_group("frf")?;
+        write_group(&g.create_group(req.mode.as_str())?, sys, branch, y)
+    })?;
+    report.finish()
 }

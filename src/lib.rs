@@ -64,6 +64,8 @@ pub mod prelude;
 #[cfg(feature = "io")]
 pub mod pretest;
 #[cfg(feature = "io")]
+pub mod report;
+#[cfg(feature = "io")]
 pub mod run;
 #[cfg(feature = "io")]
 pub mod simulate;

@@ -215,6 +215,28 @@ pub fn write_modal_report(dir: &Path, run: &ModalRun) -> Result<Vec<PathBuf>> {
         crate::output::write_text_atomically(&p, &text)?;
         written.push(p);
     }
-    written.extend(convergence_plot(dir, &run.model_name, &c.runs)?);
+    let report = crate::report::Report::create(
+        dir,
+        &format!("nlsim calibrate (modal): {}", run.model_name),
+        &crate::report::command_line(),
+        &run.request.model,
+    )?;
+    report.seed("Latin hypercube", run.request.config.seed)?;
+    report.section("Summary");
+    for line in run.summary() {
+        report.say(&line);
+    }
+    report.table(
+        "estimates",
+        crate::report::Table::from_csv("Estimates and uncertainties", &run.estimates_csv()),
+    )?;
+    report.table(
+        "modes",
+        crate::report::Table::from_csv("Measured and computed modes", &run.modes_csv()),
+    )?;
+    report.section("Optimisation");
+    written.extend(convergence_plot(&report, &run.model_name, &c.runs)?);
+    written.push(report.finish()?);
+    written.push(dir.join(crate::report::DATA));
     Ok(written)
 }

@@ -159,22 +159,21 @@ fn write_csv(path: &Path, r: &ModeReport) -> Result<()> {
 fn write_hdf5(path: &Path, model_spec: &str, model: &Model, r: &ModeReport) -> Result<()> {
     let err = crate::output::h5err(path);
     let file = hdf5::File::create(path).map_err(&err)?;
-    crate::output::provenance(
-        &file.as_group().map_err(&err)?,
-        "modes",
-        model_spec,
-        model.name(),
-        None,
-    )
-    .map_err(&err)?;
-    let g = file.create_group("modes").map_err(&err)?;
-    let put = |name: &str, data: &[f64], unit: &str| -> Result<hdf5::Dataset> {
-        let d = g
-            .new_dataset_builder()
-            .with_data(data)
-            .create(name)
-            .map_err(&err)?;
-        crate::output::str_attr(&d, "unit", unit).map_err(&err)?;
+    let root = file.as_group().map_err(&err)?;
+    crate::output::provenance(&root, "modes", model_spec, model.name(), None).map_err(&err)?;
+    write_group(&root, model, r).map_err(&err)?;
+    file.flush().map_err(&err)?;
+    Ok(())
+}
+
+/// Writes group `modes` and dataset `dofs/labels` into `root` (the layout of `nlsim modes`
+/// files, also used by reports).
+pub(crate) fn write_group(root: &hdf5::Group, model: &Model, r: &ModeReport) -> hdf5::Result<()> {
+    use crate::output::{f64_attr, str_attr};
+    let g = root.create_group("modes")?;
+    let put = |name: &str, data: &[f64], unit: &str| -> hdf5::Result<hdf5::Dataset> {
+        let d = g.new_dataset_builder().with_data(data).create(name)?;
+        str_attr(&d, "unit", unit)?;
         Ok(d)
     };
     put("frequency_hz", &r.modes.frequencies_hz(), "Hz")?;
@@ -188,9 +187,8 @@ fn write_hdf5(path: &Path, model_spec: &str, model: &Model, r: &ModeReport) -> R
             "kg",
         )?;
         d.new_attr::<f64>()
-            .create("total_kg")
-            .and_then(|a| a.write_scalar(&e.total))
-            .map_err(&err)?;
+            .create("total_kg")?
+            .write_scalar(&e.total)?;
     }
     let (n, m) = (r.modes.vectors.nrows(), r.modes.vectors.ncols());
     // Row-major modes × DOFs: mode r is the contiguous column r of the column-major matrix.
@@ -204,44 +202,26 @@ fn write_hdf5(path: &Path, model_spec: &str, model: &Model, r: &ModeReport) -> R
         .chunk((1, n.clamp(1, 1 << 16)))
         .shuffle()
         .deflate(4)
-        .create("shapes")
-        .map_err(&err)?;
-    shapes.write_raw(&raw).map_err(&err)?;
-    crate::output::str_attr(&shapes, "unit", "1/sqrt(kg) (mass-normalised)").map_err(&err)?;
+        .create("shapes")?;
+    shapes.write_raw(&raw)?;
+    str_attr(&shapes, "unit", "1/sqrt(kg) (mass-normalised)")?;
     let st = &r.modes.stats;
-    let attr_str = |name: &str, v: &str| -> Result<()> {
-        let s: hdf5::types::VarLenUnicode = v.parse().map_err(|e| Error::Hdf5 {
-            path: path.to_path_buf(),
-            message: format!("attribute {name}: {e}"),
-        })?;
-        g.new_attr::<hdf5::types::VarLenUnicode>()
-            .create(name)
-            .and_then(|a| a.write_scalar(&s))
-            .map_err(&err)
-    };
-    attr_str("model", model.name())?;
-    attr_str(
+    str_attr(&g, "model", model.name())?;
+    str_attr(
+        &g,
         "method",
         match st.method {
             EigenMethod::Dense => "dense",
             EigenMethod::Lanczos => "shift-invert block Lanczos",
         },
     )?;
-    for (name, v) in [
-        ("shift_rad2_s2", st.shift),
-        ("tolerance", r.config.tol),
-        ("max_residual", st.max_residual),
-    ] {
-        g.new_attr::<f64>()
-            .create(name)
-            .and_then(|a| a.write_scalar(&v))
-            .map_err(&err)?;
-    }
+    f64_attr(&g, "shift_rad2_s2", st.shift)?;
+    f64_attr(&g, "tolerance", r.config.tol)?;
+    f64_attr(&g, "max_residual", st.max_residual)?;
     if let Some((count, _)) = st.sturm {
         g.new_attr::<u64>()
-            .create("sturm_count")
-            .and_then(|a| a.write_scalar(&(count as u64)))
-            .map_err(&err)?;
+            .create("sturm_count")?
+            .write_scalar(&(count as u64))?;
     }
     let labels: Vec<hdf5::types::VarLenUnicode> = (0..model.n_dofs())
         .map(|i| {
@@ -252,9 +232,47 @@ fn write_hdf5(path: &Path, model_spec: &str, model: &Model, r: &ModeReport) -> R
                 .expect("DOF labels are plain ASCII")
         })
         .collect();
-    file.create_group("dofs")
-        .and_then(|d| d.new_dataset_builder().with_data(&labels).create("labels"))
-        .map_err(&err)?;
-    file.flush().map_err(&err)?;
+    root.create_group("dofs")?
+        .new_dataset_builder()
+        .with_data(&labels)
+        .create("labels")?;
     Ok(())
+}
+
+/// The mode table for a report: mode, frequency, damping ratio, effective mass per direction
+/// (% of the total), residual.
+pub fn table(r: &ModeReport) -> crate::report::Table {
+    let mut header: Vec<String> = ["mode", "frequency (Hz)", "damping ratio"]
+        .map(String::from)
+        .to_vec();
+    for e in &r.effective {
+        header.push(format!(
+            "eff. mass {} (% of {:.4} kg)",
+            e.component, e.total
+        ));
+    }
+    header.push("backward error".into());
+    let f = r.modes.frequencies_hz();
+    let rows = (0..r.modes.len())
+        .map(|i| {
+            let mut row = vec![
+                format!("{}", i + 1),
+                format!("{:.6}", f[i]),
+                format!("{:.5}", r.damping[i]),
+            ];
+            for e in &r.effective {
+                row.push(format!("{:.2}", 100.0 * e.per_mode[i] / e.total));
+            }
+            row.push(format!("{:.2e}", r.modes.residuals[i]));
+            row
+        })
+        .collect();
+    crate::report::Table {
+        caption: format!(
+            "{} modes: frequencies, damping and effective masses",
+            r.modes.len()
+        ),
+        header,
+        rows,
+    }
 }

@@ -12,7 +12,6 @@ use nlsim_calib::{
 use nlsim_hb::{HarmonicSet, HbConfig, HbSystem};
 use nlsim_kernel::{Model, Param, Parameterized};
 use nlsim_reduction::ReducedModel;
-use std::path::Path;
 use std::time::Instant;
 
 /// The parameters the demo plans for and calibrates: the first element parameter with a
@@ -59,19 +58,22 @@ pub fn demo_sweeps(sys: &HbSystem, params: &[Param], force: f64) -> Vec<SweepPla
 pub fn demo_planning(
     model: &Model,
     reduced: &ReducedModel,
-    report_dir: &Path,
+    report: &crate::report::Report,
     say: &dyn Fn(&str),
 ) -> Result<()> {
+    report.section("5. Pre-test planning (Fisher information)");
     if model.elements().is_empty() || model.excitation().is_empty() || model.sensors().is_empty() {
         say(
             "[5/8] pre-test planning: the model needs an element, an excitation and a sensor; skipped",
         );
+        report.skip("the model needs an element, an excitation and a sensor");
         return Ok(());
     }
     let t = Instant::now();
     let sys = HbSystem::from_model(model, reduced, HarmonicSet::new(3, 1)?, HbConfig::default())?;
     let Some(params) = demo_parameters(&sys) else {
         say("[5/8] pre-test planning: no element parameter with a positive value; skipped");
+        report.skip("no element parameter with a positive value");
         return Ok(());
     };
     let planner = Planner::new(&sys, &params)?;
@@ -160,6 +162,51 @@ pub fn demo_planning(
             say("  ...");
         }
     }
+    report.table(
+        "planning_ranking",
+        crate::report::Table {
+            caption: format!(
+                "Candidate tests ranked by D-optimality (Cramér–Rao std of {} and {} in % of the value)",
+                params[0], params[1]
+            ),
+            header: [
+                "rank",
+                "level (N)",
+                "band",
+                "sensors",
+                "harmonics",
+                "ln det F",
+                "std 1 (%)",
+                "std 2 (%)",
+                "collinearity",
+            ]
+            .map(String::from)
+            .to_vec(),
+            rows: ranked
+                .iter()
+                .enumerate()
+                .map(|(i, r)| {
+                    let sw = &sweeps[r.design.sweep];
+                    let hk: Vec<String> = sw
+                        .harmonic_numbers(&r.design)
+                        .iter()
+                        .map(usize::to_string)
+                        .collect();
+                    vec![
+                        format!("{}", i + 1),
+                        format!("{:.3}", sw.exciter.level),
+                        sw.band.label.clone(),
+                        sw.channel_names(&r.design).join("+"),
+                        hk.join(" "),
+                        format!("{:.3}", r.summary.log_det),
+                        format!("{:.3}", 100.0 * r.summary.std[0]),
+                        format!("{:.3}", 100.0 * r.summary.std[1]),
+                        format!("{:.2}", r.summary.collinearity),
+                    ]
+                })
+                .collect(),
+        },
+    )?;
     let best = &ranked[0].summary;
     let worst = &ranked[n - 1].summary;
     say(&format!(
@@ -183,7 +230,7 @@ pub fn demo_planning(
     };
     say(&format!(
         "  plots: {}",
-        plot_both(report_dir, "planning_ranking", &fig)?
+        plot_both(report, "planning_ranking", &fig)?
     ));
     Ok(())
 }
@@ -195,17 +242,20 @@ pub fn demo_planning(
 pub fn demo_virtual_test(
     model: &Model,
     reduced: &ReducedModel,
-    report_dir: &Path,
+    report: &crate::report::Report,
     say: &dyn Fn(&str),
 ) -> Result<Option<TestData>> {
+    report.section("6. Virtual test through a shaker");
     if model.elements().is_empty() || model.excitation().is_empty() || model.sensors().is_empty() {
         say("[6/8] virtual test: the model needs an element, an excitation and a sensor; skipped");
+        report.skip("the model needs an element, an excitation and a sensor");
         return Ok(None);
     }
     let t = Instant::now();
     let sys = HbSystem::from_model(model, reduced, HarmonicSet::new(3, 1)?, HbConfig::default())?;
     let Some(params) = demo_parameters(&sys) else {
         say("[6/8] virtual test: no element parameter with a positive value; skipped");
+        report.skip("no element parameter with a positive value");
         return Ok(None);
     };
     let force = model.excitation()[0].amplitude;
@@ -266,8 +316,10 @@ pub fn demo_virtual_test(
             cs.steps
         ));
     }
-    let csv = report_dir.join("virtual_test.csv");
+    let csv = report.dir().join("virtual_test.csv");
     crate::testdata::write_csv(&csv, &ctl.data)?;
+    report.wrote(&csv);
+    report.seed("virtual test noise", 2016)?;
     // Thesis Fig. 11: the force at the drive point and the response, open loop vs control.
     let last = plans.len() - 1;
     let series = |t: &nlsim_calib::VirtualTest, k: usize| -> Vec<(f64, f64)> {
@@ -322,8 +374,8 @@ pub fn demo_virtual_test(
     };
     say(&format!(
         "  plots: {}, {}",
-        plot_both(report_dir, "virtual_test_force", &fig)?,
-        plot_both(report_dir, "virtual_test_response", &fig2)?
+        plot_both(report, "virtual_test_force", &fig)?,
+        plot_both(report, "virtual_test_response", &fig2)?
     ));
     say(&format!(
         "  test data: {} (the force-controlled test; stage 7 calibrates on it)",

@@ -11,17 +11,59 @@ use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-/// What plots are drawn on: implemented once, rendered to any backend.
+/// What plots are drawn on: implemented once, rendered to any backend, and given as data so
+/// that a report can store what every figure shows beside it.
 pub trait Figure {
     /// Width and height in pixels.
     fn size(&self) -> (u32, u32) {
         (960, 600)
     }
 
+    /// The title drawn above the figure.
+    fn title(&self) -> String;
+
     /// Draws the figure on `root`.
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult
     where
         DB::ErrorType: 'static;
+
+    /// Every curve, bar set or marker set drawn, in the plotted units (dB values for a dB
+    /// axis), in drawing order.
+    fn data(&self) -> Vec<SeriesData>;
+}
+
+/// One curve (or bar set, or set of markers) of a [`Figure`] as numbers: what a reader needs
+/// to redraw it (`docs/file-formats.md`, report layout).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SeriesData {
+    /// The panel it is drawn in (empty for a one-panel figure).
+    pub panel: String,
+    /// Its legend label.
+    pub label: String,
+    /// x-axis label with unit.
+    pub x_label: String,
+    /// y-axis label with unit.
+    pub y_label: String,
+    /// x values (for bars: the bar's position, 1, 2, …).
+    pub x: Vec<f64>,
+    /// y values, as plotted.
+    pub y: Vec<f64>,
+}
+
+/// Renders `fig` as an SVG document in memory (for pages that inline their figures).
+pub fn svg_string(fig: &impl Figure) -> Result<String> {
+    ensure_font()?;
+    let mut out = String::new();
+    {
+        let root = SVGBackend::with_string(&mut out, fig.size()).into_drawing_area();
+        let drawn = fig
+            .draw(&root)
+            .and_then(|()| root.present().map_err(Into::into));
+        if let Err(e) = drawn {
+            return Err(Error::Usage(format!("drawing '{}': {e}", fig.title())));
+        }
+    }
+    Ok(out)
 }
 
 /// The error type of [`Figure::draw`].
@@ -238,7 +280,7 @@ pub fn write_both(dir: &Path, name: &str, fig: &impl Figure) -> Result<[PathBuf;
     Ok(paths)
 }
 
-/// Line plots sharing axes: `(label, points, dashed)` each.
+/// Line plots sharing axes: `(label, points)` each.
 pub struct Lines {
     /// Title above the plot.
     pub title: String,
@@ -251,6 +293,24 @@ pub struct Lines {
 }
 
 impl Figure for Lines {
+    fn title(&self) -> String {
+        self.title.clone()
+    }
+
+    fn data(&self) -> Vec<SeriesData> {
+        self.series
+            .iter()
+            .map(|(label, p)| SeriesData {
+                panel: String::new(),
+                label: label.clone(),
+                x_label: self.x_desc.clone(),
+                y_label: self.y_desc.clone(),
+                x: p.iter().map(|q| q.0).collect(),
+                y: p.iter().map(|q| q.1).collect(),
+            })
+            .collect()
+    }
+
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult
     where
         DB::ErrorType: 'static,
@@ -332,6 +392,35 @@ pub struct Bars {
 }
 
 impl Figure for Bars {
+    fn title(&self) -> String {
+        self.title.clone()
+    }
+
+    fn data(&self) -> Vec<SeriesData> {
+        let mut out = Vec::new();
+        for g in &self.groups {
+            out.push(SeriesData {
+                panel: g.label.clone(),
+                label: self.bar_desc.clone(),
+                x_label: self.bar_desc.clone(),
+                y_label: self.y_desc.clone(),
+                x: (1..=g.values.len()).map(|i| i as f64).collect(),
+                y: g.values.clone(),
+            });
+            if let Some((lo, hi)) = g.band {
+                out.push(SeriesData {
+                    panel: g.label.clone(),
+                    label: self.band_desc.clone(),
+                    x_label: self.bar_desc.clone(),
+                    y_label: self.y_desc.clone(),
+                    x: vec![0.5, 0.5],
+                    y: vec![lo, hi],
+                });
+            }
+        }
+        out
+    }
+
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult
     where
         DB::ErrorType: 'static,

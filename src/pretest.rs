@@ -1222,19 +1222,35 @@ pub fn write_plan_report(dir: &Path, run: &PlanRun) -> Result<Vec<PathBuf>> {
         written.push(p);
         Ok(())
     };
+    let report = crate::report::Report::create(
+        dir,
+        &format!("nlsim plan: {}", run.candidates.model_name),
+        &crate::report::command_line(),
+        &run.request.model,
+    )?;
+    report.section("Summary");
+    for line in run.summary() {
+        report.say(&line);
+    }
+    report.table(
+        "ranking",
+        crate::report::Table::from_csv("Candidate tests, best first", &run.ranking_csv()),
+    )?;
+    report.section("Figures");
     let mut summary = run.summary().join("\n");
     summary.push('\n');
     text("summary.txt", summary)?;
     text("ranking.csv", run.ranking_csv())?;
     let params = &run.params;
     let Some(best) = run.ranked.first() else {
+        written.push(report.finish()?);
+        written.push(dir.join(crate::report::DATA));
         return Ok(written);
     };
     text("fim_best.csv", fim_csv(params, &run.fim(best)))?;
     text("best_test.toml", run.test_file(best))?;
     let crit = run.request.criterion;
-    written.extend(crate::plot::write_both(
-        dir,
+    written.extend(report.figure(
         "ranking",
         &Lines {
             title: format!(
@@ -1275,8 +1291,7 @@ pub fn write_plan_report(dir: &Path, run: &PlanRun) -> Result<Vec<PathBuf>> {
             band: None,
         })
         .collect();
-    written.extend(crate::plot::write_both(
-        dir,
+    written.extend(report.figure(
         "crb",
         &Bars {
             title: format!(
@@ -1317,8 +1332,7 @@ pub fn write_plan_report(dir: &Path, run: &PlanRun) -> Result<Vec<PathBuf>> {
     }
     series.retain(|(_, p): &(String, Vec<(f64, f64)>)| !p.is_empty());
     if !series.is_empty() {
-        written.extend(crate::plot::write_both(
-            dir,
+        written.extend(report.figure(
             "best_prediction",
             &Lines {
                 title: format!(
@@ -1332,6 +1346,8 @@ pub fn write_plan_report(dir: &Path, run: &PlanRun) -> Result<Vec<PathBuf>> {
             },
         )?);
     }
+    written.push(report.finish()?);
+    written.push(dir.join(crate::report::DATA));
     Ok(written)
 }
 

@@ -700,6 +700,18 @@ pub fn write_test_report(dir: &Path, run: &TestRun) -> Result<Vec<PathBuf>> {
         path: dir.to_path_buf(),
         source,
     })?;
+    let report = crate::report::Report::create(
+        dir,
+        &format!("nlsim test: {}", run.model_name),
+        &crate::report::command_line(),
+        &run.request.model,
+    )?;
+    report.seed("measurement noise", run.request.seed)?;
+    report.section("Summary");
+    for line in run.summary() {
+        report.say(&line);
+    }
+    report.section("Force and response");
     let mut written = Vec::new();
     for (name, body) in [
         ("summary.txt", run.summary().join("\n") + "\n"),
@@ -742,8 +754,7 @@ pub fn write_test_report(dir: &Path, run: &TestRun) -> Result<Vec<PathBuf>> {
         }
     }
     force.retain(|(_, p)| !p.is_empty());
-    written.extend(crate::plot::write_both(
-        dir,
+    written.extend(report.figure(
         "force",
         &Lines {
             title: format!(
@@ -770,8 +781,7 @@ pub fn write_test_report(dir: &Path, run: &TestRun) -> Result<Vec<PathBuf>> {
         }
     }
     resp.retain(|(_, p)| !p.is_empty());
-    written.extend(crate::plot::write_both(
-        dir,
+    written.extend(report.figure(
         "response",
         &Lines {
             title: format!("{}: response at '{}', harmonic 1", run.model_name, ch.name),
@@ -785,6 +795,8 @@ pub fn write_test_report(dir: &Path, run: &TestRun) -> Result<Vec<PathBuf>> {
             series: resp,
         },
     )?);
+    written.push(report.finish()?);
+    written.push(dir.join(crate::report::DATA));
     Ok(written)
 }
 

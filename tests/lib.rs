@@ -39,6 +39,200 @@ fn nlsim(args: &[&str]) -> (i32, String, String) {
     )
 }
 
+/// A Python interpreter with h5py (scripts/find-h5py.sh), for the reader checks.
+fn python_h5py() -> String {
+    let out = Command::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/find-h5py.sh"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).trim().to_string()
+}
+
+/// Opening report pages in a real browser: Debian's chromium, headless.
+mod browser {
+    use super::*;
+    use std::time::{Duration, Instant};
+
+    /// The headless browser, or a panic with the command that installs it.
+    fn chromium() -> PathBuf {
+        for name in ["chromium", "chromium-browser", "google-chrome"] {
+            for dir in ["/usr/bin", "/usr/local/bin", "/snap/bin"] {
+                let p = Path::new(dir).join(name);
+                if p.is_file() {
+                    return p;
+                }
+            }
+        }
+        panic!(
+            "no headless browser for the report test: run sudo apt-get install -y chromium \
+             (scripts/ensure-deps.sh --test does)"
+        );
+    }
+
+    /// Runs chromium headless on `url` with `extra` flags; its stdout. Killed after 180 s.
+    fn run(url: &str, extra: &[String]) -> String {
+        let profile = scratch(&format!(
+            "chromium-profile-{}",
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .unwrap()
+                .as_nanos()
+        ));
+        let mut child = Command::new(chromium())
+            .args([
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--disable-dev-shm-usage",
+                "--disable-background-networking",
+                "--disable-extensions",
+                "--no-first-run",
+                "--hide-scrollbars",
+            ])
+            .arg(format!("--user-data-dir={}", profile.display()))
+            .args(extra)
+            .arg(url)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .expect("chromium starts");
+        let mut stdout = child.stdout.take().unwrap();
+        let reader = std::thread::spawn(move || {
+            let mut s = String::new();
+            std::io::Read::read_to_string(&mut stdout, &mut s).unwrap();
+            s
+        });
+        let t = Instant::now();
+        let status = loop {
+            if let Some(st) = child.try_wait().unwrap() {
+                break st;
+            }
+            if t.elapsed() > Duration::from_secs(180) {
+                let _ = child.kill();
+                panic!("chromium did not finish {url} in 180 s");
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        };
+        let out = reader.join().unwrap();
+        let _ = std::fs::remove_dir_all(&profile);
+        assert!(status.success(), "chromium {extra:?} {url}: {status}");
+        out
+    }
+
+    /// Opens `dir/index.html` in headless chromium and checks that it rendered: every figure
+    /// in `figures` is an inline SVG laid out at a readable size with its drawing in it, the
+    /// page has no broken image, and a screenshot of the whole page (kept as
+    /// `target/tmp/NAME-screenshot.png`) is as tall as the page, far from blank and shows
+    /// the plots' colours.
+    pub fn check_report_page(dir: &Path, figures: &[&str], name: &str) {
+        let page = std::fs::read_to_string(dir.join("index.html")).unwrap();
+        // Layout as the browser computes it, read by a probe on a copy of the page (the
+        // report itself has no script).
+        let probe = r#"<script>
+(function () {
+  var out = [];
+  document.querySelectorAll('svg').forEach(function (s) {
+    var f = s.closest('figure'), b = s.getBoundingClientRect();
+    out.push(['svg', f ? f.id : '-', Math.round(b.width), Math.round(b.height),
+              s.querySelectorAll('polyline,rect,circle,path,text,line').length].join(' '));
+  });
+  Array.prototype.forEach.call(document.images, function (i) {
+    out.push(['img', i.getAttribute('src'), i.naturalWidth].join(' '));
+  });
+  out.push('height ' + document.documentElement.scrollHeight);
+  var pre = document.createElement('pre');
+  pre.id = 'probe';
+  pre.textContent = out.join('\n');
+  document.body.appendChild(pre);
+})();
+</script>
+</body>"#;
+        let probed = dir.join("index_probe.html");
+        std::fs::write(&probed, page.replace("</body>", probe)).unwrap();
+        let dom = run(
+            &format!("file://{}", probed.display()),
+            &["--dump-dom".into()],
+        );
+        std::fs::remove_file(&probed).unwrap();
+        let start = dom.find("<pre id=\"probe\">").expect("the probe ran") + 16;
+        let text = &dom[start..start + dom[start..].find("</pre>").unwrap()];
+        let mut height = 0u32;
+        let mut seen = Vec::new();
+        for line in text.lines() {
+            let w: Vec<&str> = line.split(' ').collect();
+            match w[0] {
+                "svg" => {
+                    let (wd, ht, n): (u32, u32, u32) = (
+                        w[2].parse().unwrap(),
+                        w[3].parse().unwrap(),
+                        w[4].parse().unwrap(),
+                    );
+                    assert!(
+                        wd >= 600 && ht >= 250 && n >= 20,
+                        "{}: laid out {wd}x{ht} px with {n} drawn elements",
+                        w[1]
+                    );
+                    seen.push(w[1].trim_start_matches("fig-").to_string());
+                }
+                "img" => assert!(w[2] != "0", "broken image {}", w[1]),
+                "height" => height = w[1].parse().unwrap(),
+                _ => panic!("probe line {line}"),
+            }
+        }
+        let want: Vec<String> = figures.iter().map(|s| s.to_string()).collect();
+        assert_eq!(seen, want, "figures on the page");
+        assert!(height > 1000, "page height {height}");
+        // The whole page as a user sees it (capped at 16 000 px, chromium's limit).
+        let shot =
+            PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("{name}-screenshot.png"));
+        let h = height.min(16_000);
+        run(
+            &format!("file://{}", dir.join("index.html").display()),
+            &[
+                format!("--window-size=1280,{h}"),
+                format!("--screenshot={}", shot.display()),
+            ],
+        );
+        let decoder =
+            png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&shot).unwrap()));
+        let mut reader = decoder.read_info().unwrap();
+        let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+        let info = reader.next_frame(&mut buf).unwrap();
+        assert_eq!((info.width, info.height), (1280, h), "screenshot size");
+        let channels = info.color_type.samples();
+        let px: Vec<&[u8]> = buf[..info.buffer_size()].chunks(channels).collect();
+        let inked = px
+            .iter()
+            .filter(|p| p[..3].iter().any(|&c| c < 235))
+            .count();
+        let blue = px
+            .iter()
+            .filter(|p| p[2] > 200 && p[0] < 60 && p[1] < 60)
+            .count();
+        let red = px
+            .iter()
+            .filter(|p| p[0] > 200 && p[1] < 60 && p[2] < 60)
+            .count();
+        let frac = inked as f64 / px.len() as f64;
+        assert!(
+            frac > 0.02 && blue > 2_000 && red > 200,
+            "screenshot {} looks blank: {:.1} % inked, {blue} blue and {red} red pixels",
+            shot.display(),
+            100.0 * frac
+        );
+        eprintln!(
+            "report page rendered: {} figures, {height} px tall, {:.1} % inked; screenshot {}",
+            seen.len(),
+            100.0 * frac,
+            shot.display()
+        );
+    }
+}
+
 /// The ECL beam reduced to its lowest `modes` modes, as a harmonic balance system with
 /// H = 3: the model the calibration tests make synthetic tests of.
 fn ecl_hb(modes: usize) -> nlsim::hb::HbSystem {
@@ -640,16 +834,56 @@ mod cli {
         // The report folder: the summary as printed, and every plot as SVG and PNG.
         let summary = std::fs::read_to_string(report.join("summary.txt")).unwrap();
         assert!(summary.contains("[4/8] multi-harmonic FRFs") && out.starts_with(&summary[..200]));
-        for name in [
+        let figures = [
             "time_response",
             "frf_ecl_beam",
             "stepped_sines",
-            "calibration_frf",
-            "kfold",
             "planning_ranking",
             "virtual_test_force",
             "virtual_test_response",
+            "calibration_frf",
+            "kfold",
+        ];
+        // The page: every figure inline and laid out, in a real browser; the data beside it
+        // read by h5py and redrawn against the figures.
+        browser::check_report_page(&report, &figures, "demo-report");
+        let check = Command::new(python_h5py())
+            .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/h5check.py"))
+            .args(["report", report.to_str().unwrap()])
+            .output()
+            .unwrap();
+        let said = String::from_utf8_lossy(&check.stdout);
+        assert!(
+            check.status.success()
+                && said.contains("4001 points redrawn")
+                && said.contains("frf_ecl_beam: fundamental of"),
+            "h5check report: {said}{}",
+            String::from_utf8_lossy(&check.stderr)
+        );
+        let html = std::fs::read_to_string(report.join("index.html")).unwrap();
+        for s in [
+            "Modes and reduction",
+            "eff. mass",
+            "Folds and jumps of the continuation",
+            "Largest computed response",
+            "Candidate tests ranked by D-optimality",
+            "Estimates and their uncertainties",
+            "command line",
+            "seeds",
         ] {
+            assert!(html.contains(s), "index.html lacks '{s}'");
+        }
+        // Self-contained: no script, nothing fetched (the SVG namespace URI is a name).
+        for bad in [
+            "<script",
+            "src=\"http",
+            "href=\"http",
+            "url(http",
+            "@import",
+        ] {
+            assert!(!html.contains(bad), "index.html holds {bad}");
+        }
+        for name in figures {
             let svg = std::fs::read_to_string(report.join(format!("{name}.svg"))).unwrap();
             assert!(svg.contains("<svg") && svg.contains("</svg>"), "{name}.svg");
             let png = std::fs::read(report.join(format!("{name}.png"))).unwrap();
@@ -1260,6 +1494,78 @@ mod frf_cli {
     use faer::c64;
     use hdf5_metno as hdf5;
 
+    /// `nlsim frf --report`: the page renders in a browser with the FRF plot in dB with phase
+    /// panels and the folds table; report.h5 holds the FRF in the layout of FRF files, and
+    /// the plotted fundamental equals 20 log10 |Y1| of that data. A bad magnitude name is a
+    /// usage error naming the choices.
+    #[test]
+    fn report_page_with_db_and_phase_panels() {
+        let d = scratch("frf-report");
+        let report = d.join("report");
+        let (code, out, err) = nlsim(&[
+            "frf",
+            "duffing_fig3",
+            "--from",
+            "27",
+            "--to",
+            "36",
+            "--harmonics",
+            "5",
+            "--magnitude",
+            "db",
+            "--phase",
+            "--report",
+            report.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{err}");
+        assert!(
+            out.contains("report ") && out.contains("index.html"),
+            "{out}"
+        );
+        browser::check_report_page(&report, &["frf_mass"], "frf-report");
+        let check = Command::new(python_h5py())
+            .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/h5check.py"))
+            .args(["report", report.to_str().unwrap()])
+            .output()
+            .unwrap();
+        let said = String::from_utf8_lossy(&check.stdout);
+        assert!(
+            check.status.success() && said.contains("frf_mass: fundamental of"),
+            "{said}{}",
+            String::from_utf8_lossy(&check.stderr)
+        );
+        let html = std::fs::read_to_string(report.join("index.html")).unwrap();
+        assert!(html.contains("Folds and jumps of the continuation"));
+        assert_eq!(
+            html.matches("<td>fold</td>").count(),
+            2,
+            "two folds in the table"
+        );
+        // Harmonic 3 on its own panel, each with a phase panel beside it.
+        let svg = std::fs::read_to_string(report.join("frf_mass.svg")).unwrap();
+        for t in [
+            "harmonic 1 (fundamental)",
+            "harmonic 3",
+            "harmonic 3: phase",
+            "dB re 1 m",
+        ] {
+            assert!(svg.contains(t), "{t}");
+        }
+        let (code, _, err) = nlsim(&[
+            "frf",
+            "duffing_fig3",
+            "--from",
+            "27",
+            "--to",
+            "36",
+            "--magnitude",
+            "loud",
+        ]);
+        assert_eq!(code, 2, "{err}");
+        assert!(err.contains("linear, log or db"), "{err}");
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
     #[test]
     fn continuation_to_hdf5_matches_the_closed_form_and_plots() {
         let d = scratch("frf");
@@ -1421,17 +1727,8 @@ mod frf_cli {
 mod batch {
     use super::*;
 
-    /// A Python interpreter with h5py (scripts/find-h5py.sh), for the reader checks.
     fn python() -> String {
-        let out = Command::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/find-h5py.sh"))
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        String::from_utf8_lossy(&out.stdout).trim().to_string()
+        python_h5py()
     }
 
     /// Runs scripts/h5check.py with `args`; panics with its report when a check fails.
@@ -2612,10 +2909,31 @@ seed = 9
         let (rc, out, err) = nlsim(&["calibrate", "--config", cfg.to_str().unwrap()]);
         assert_eq!(rc, 0, "{out}{err}");
         assert!(
-            out.contains("converged in") && out.contains("report: 18 files"),
+            out.contains("converged in") && out.contains("report: 20 files"),
             "{out}"
         );
         let report = dir.join("report");
+        // The page and its data: every figure inline, the tables and curves in report.h5.
+        let check = Command::new(python_h5py())
+            .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/h5check.py"))
+            .args(["report", report.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(
+            check.status.success(),
+            "{}{}",
+            String::from_utf8_lossy(&check.stdout),
+            String::from_utf8_lossy(&check.stderr)
+        );
+        let html = std::fs::read_to_string(report.join("index.html")).unwrap();
+        for s in [
+            "fig-frf_tip_h1",
+            "fig-kfold",
+            "fig-convergence",
+            "Estimates and uncertainties",
+        ] {
+            assert!(html.contains(s), "index.html lacks {s}");
+        }
         let est = csv_rows(&dir.join("estimates.csv"));
         assert_eq!(
             std::fs::read(dir.join("estimates.csv")).unwrap(),
@@ -3286,6 +3604,8 @@ steps = 9
             "fim_best.csv",
             "ranking.svg",
             "crb.png",
+            "index.html",
+            "report.h5",
         ] {
             assert!(report.join(f).is_file(), "{f} missing");
         }

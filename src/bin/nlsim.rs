@@ -215,10 +215,20 @@ enum Command {
         /// Output file: .h5 (HDF5) or .csv.
         #[arg(long)]
         out: Option<std::path::PathBuf>,
-        /// Plot of the amplitude against frequency, FILE.svg or FILE.png (default: beside
-        /// --out, .svg).
+        /// Plot of the first sensor against frequency, one panel per harmonic, FILE.svg or
+        /// FILE.png (default: beside --out, .svg).
         #[arg(long)]
         plot: Option<std::path::PathBuf>,
+        /// Magnitude axes of the plot: linear, log or db (dB re 1 unit).
+        #[arg(long, default_value = "linear")]
+        magnitude: nlsim::frf::Magnitude,
+        /// Add a phase panel beside each magnitude panel of the plot.
+        #[arg(long)]
+        phase: bool,
+        /// Report folder: index.html (summary, folds/jumps/peaks tables, the plot of every
+        /// sensor), report.h5 with the data, plots as SVG and PNG.
+        #[arg(long)]
+        report: Option<std::path::PathBuf>,
         /// Element parameter overrides, e.g. `--set spring.k3=2e15` (repeatable).
         #[arg(long)]
         set: Vec<String>,
@@ -670,6 +680,9 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             no_stability,
             out,
             plot,
+            magnitude,
+            phase,
+            report,
             set,
         } => {
             let req = nlsim::run::FrfRequest {
@@ -685,7 +698,14 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 stability: !no_stability,
                 par: par(cli),
             };
-            frf(model, &req, set, out.as_deref(), plot.as_deref(), cli)
+            let outputs = FrfOutputs {
+                out: out.as_deref(),
+                plot: plot.as_deref(),
+                magnitude: *magnitude,
+                phase: *phase,
+                report: report.as_deref(),
+            };
+            frf(model, &req, set, &outputs, cli)
         }
         Command::Demo { model, report } => demo(model, report, cli.quiet),
         Command::Plan {
@@ -1057,7 +1077,8 @@ fn test_cmd(req: &nlsim::vtest::TestRequest, cli: &Cli) -> nlsim::Result<()> {
 
 /// `nlsim demo`: the pipeline in [`nlsim::demo`], printed unless `--quiet`.
 fn demo(model: &str, report_dir: &std::path::Path, quiet: bool) -> nlsim::Result<()> {
-    nlsim::demo::run_demo(model, report_dir, &|s: &str| {
+    let command_line = nlsim::report::command_line();
+    nlsim::demo::run_demo(model, report_dir, &command_line, &|s: &str| {
         if !quiet {
             out!("{s}");
         }
@@ -1083,15 +1104,30 @@ fn progress_line(quiet: bool, what: &'static str) -> impl FnMut(usize, usize) {
     }
 }
 
+/// Where `nlsim frf` writes and how it plots.
+struct FrfOutputs<'a> {
+    out: Option<&'a std::path::Path>,
+    plot: Option<&'a std::path::Path>,
+    magnitude: nlsim::frf::Magnitude,
+    phase: bool,
+    report: Option<&'a std::path::Path>,
+}
+
 fn frf(
     spec: &str,
     req: &nlsim::run::FrfRequest,
     sets: &[String],
-    out: Option<&std::path::Path>,
-    plot: Option<&std::path::Path>,
+    outputs: &FrfOutputs<'_>,
     cli: &Cli,
 ) -> nlsim::Result<()> {
     use std::f64::consts::PI;
+    let FrfOutputs {
+        out,
+        plot,
+        magnitude,
+        phase,
+        report,
+    } = *outputs;
     let quiet = cli.quiet;
     // Refuse bad options and output names before the (possibly long) solve.
     let set = req.check()?;
@@ -1127,10 +1163,24 @@ fn frf(
     if show {
         eprintln!();
     }
-    for line in run.summary(&model, req, cli.verbose) {
-        say(line);
+    let summary = run.summary(&model, req, cli.verbose);
+    for line in &summary {
+        say(line.clone());
     }
     let (sys, branch, y) = (&run.system, &run.branch, &run.responses);
+    if let Some(dir) = report {
+        let page = nlsim::frf::write_report(
+            dir,
+            spec,
+            &model,
+            req,
+            &run,
+            &summary,
+            (magnitude, phase),
+            &nlsim::report::command_line(),
+        )?;
+        say(format!("  report {}", page.display()));
+    }
     if let Some(path) = out {
         let info = nlsim::frf::FrfInfo {
             model_spec: spec.to_string(),
@@ -1145,7 +1195,7 @@ fn frf(
     }
     if let Some(p) = plot_path {
         let title = format!("{} — {}, H = {}", model.name(), req.mode.as_str(), set.h);
-        nlsim::frf::plot_frf(&p, sys, branch, y, 0, &title)?;
+        nlsim::frf::plot_frf(&p, sys, branch, y, 0, &title, magnitude, phase)?;
         say(format!("  plot {}", p.display()));
     }
     if run.status.is_converged() || run.status == nlsim::kernel::Status::IterationLimit {
