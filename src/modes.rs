@@ -276,3 +276,66 @@ pub fn table(r: &ModeReport) -> crate::report::Table {
         rows,
     }
 }
+
+/// The report of `nlsim modes --report DIR`: the table and the solver's account as text, the
+/// mode table, the frequencies and effective masses as figures, and the modes (shapes
+/// included) in `report.h5` in the layout of mode files. `command_line` goes into the
+/// provenance. Returns the page's path.
+pub fn write_report(
+    dir: &Path,
+    model_spec: &str,
+    model: &Model,
+    r: &ModeReport,
+    command_line: &str,
+) -> Result<std::path::PathBuf> {
+    let report = crate::report::Report::create(
+        dir,
+        &format!("nlsim modes: {}", model.name()),
+        command_line,
+        model_spec,
+    )?;
+    report.section("Modes");
+    for line in format_table(r).lines() {
+        report.say(line);
+    }
+    report.table("modes", table(r))?;
+    let f = r.modes.frequencies_hz();
+    report.figure(
+        "frequencies",
+        &crate::plot::Lines {
+            title: format!("{}: natural frequencies", model.name()),
+            x_desc: "mode".into(),
+            y_desc: "frequency (Hz)".into(),
+            series: vec![(
+                "natural frequency".into(),
+                f.iter()
+                    .enumerate()
+                    .map(|(i, &v)| ((i + 1) as f64, v))
+                    .collect(),
+            )],
+        },
+    )?;
+    if !r.effective.is_empty() && !r.modes.is_empty() {
+        report.figure(
+            "effective_mass",
+            &crate::plot::Bars {
+                title: format!("{}: effective mass per mode", model.name()),
+                bar_desc: "mode".into(),
+                y_desc: "effective mass (% of the total)".into(),
+                baseline: 0.0,
+                band_desc: String::new(),
+                groups: r
+                    .effective
+                    .iter()
+                    .map(|e| crate::plot::BarGroup {
+                        label: format!("direction {}", e.component),
+                        values: e.per_mode.iter().map(|m| 100.0 * m / e.total).collect(),
+                        band: None,
+                    })
+                    .collect(),
+            },
+        )?;
+    }
+    report.data(|root| write_group(root, model, r))?;
+    report.finish()
+}

@@ -384,10 +384,90 @@ pub(crate) fn write_group(g: &hdf5::Group, h: &TimeHistory, info: &RunInfo) -> h
     let t: Vec<f64> = h.stats.events.iter().map(|e| e.time).collect();
     let el: Vec<u32> = h.stats.events.iter().map(|e| e.element as u32).collect();
     let cl: Vec<u8> = h.stats.events.iter().map(|e| u8::from(e.closing)).collect();
-    gev.new_dataset_builder().with_data(&t).create("time")?;
+    let d = gev.new_dataset_builder().with_data(&t).create("time")?;
+    str_attr(&d, "unit", "s")?;
     gev.new_dataset_builder().with_data(&el).create("element")?;
     gev.new_dataset_builder().with_data(&cl).create("closing")?;
     Ok(())
+}
+
+/// The report of `nlsim simulate --report DIR`: the run's summary (`summary`, from
+/// [`crate::run::SimRun::summary`]), one figure per output and one of the element forces
+/// against their displacements (at most 4 000 points per curve, evenly picked), and the whole
+/// history in `report.h5` (`/time_history`, the layout of `nlsim simulate` files).
+/// `command_line` goes into the provenance. Returns the page's path.
+pub fn write_report(
+    dir: &Path,
+    model: &Model,
+    h: &TimeHistory,
+    info: &RunInfo,
+    summary: &[String],
+    command_line: &str,
+) -> Result<std::path::PathBuf> {
+    let report = crate::report::Report::create(
+        dir,
+        &format!("nlsim simulate: {} ({})", model.name(), info.method),
+        command_line,
+        &info.model_spec,
+    )?;
+    report.section("Time response");
+    for line in summary {
+        report.say(line);
+    }
+    let n = h.n_samples();
+    let every = (n / 4000).max(1);
+    for o in &h.outputs {
+        report.figure(
+            &format!("output_{}", o.name),
+            &crate::plot::Lines {
+                title: format!("{}: {} at {}", model.name(), o.quantity.as_str(), o.name),
+                x_desc: "time (s)".into(),
+                y_desc: format!(
+                    "{} {} ({})",
+                    o.name,
+                    o.quantity.as_str(),
+                    crate::output::unit(o.quantity)
+                ),
+                series: vec![(
+                    info.method.clone(),
+                    o.values
+                        .iter()
+                        .enumerate()
+                        .step_by(every)
+                        .map(|(k, &v)| (k as f64 * h.dt, v))
+                        .collect(),
+                )],
+            },
+        )?;
+    }
+    if !h.element_names.is_empty() {
+        report.figure(
+            "element_forces",
+            &crate::plot::Lines {
+                title: format!("{}: element force against displacement", model.name()),
+                x_desc: "element displacement (m)".into(),
+                y_desc: "element force (N)".into(),
+                series: h
+                    .element_names
+                    .iter()
+                    .enumerate()
+                    .map(|(e, name)| {
+                        (
+                            name.clone(),
+                            h.element_displacements[e]
+                                .iter()
+                                .zip(&h.element_forces[e])
+                                .step_by(every)
+                                .map(|(&u, &g)| (u, g))
+                                .collect(),
+                        )
+                    })
+                    .collect(),
+            },
+        )?;
+    }
+    report.data(|root| write_group(&root.create_group("time_history")?, h, info))?;
+    report.finish()
 }
 
 #[cfg(test)]

@@ -1131,6 +1131,94 @@ mod simulate {
     use super::*;
     use hdf5_metno as hdf5;
 
+    /// `nlsim simulate --report` and `nlsim modes --report`: the pages hold their figures
+    /// (one per output and the element force–displacement loop; frequencies and effective
+    /// masses) and tables, and report.h5 the whole history and the modes: the plotted first
+    /// output is every k-th sample of the stored series, the table the stored frequencies.
+    #[test]
+    fn simulate_and_modes_reports() {
+        let d = scratch("sim-report");
+        let rep = d.join("sim");
+        let (code, out, err) = nlsim(&[
+            "simulate",
+            "bumpstop_cantilever",
+            "--duration",
+            "0.5",
+            "--rate",
+            "20000",
+            "--modes",
+            "8",
+            "--report",
+            rep.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{err}");
+        assert!(out.contains("report "), "{out}");
+        let check = Command::new(python_h5py())
+            .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/h5check.py"))
+            .args(["report", rep.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(
+            check.status.success(),
+            "{}",
+            String::from_utf8_lossy(&check.stderr)
+        );
+        let f = hdf5::File::open(rep.join("report.h5")).unwrap();
+        let names: Vec<String> = f.group("figures").unwrap().member_names().unwrap();
+        assert!(names.contains(&"element_forces".to_string()), "{names:?}");
+        let first = names.iter().find(|n| n.starts_with("output_")).unwrap();
+        let plotted: Vec<f64> = f
+            .dataset(&format!("figures/{first}/series_00/y"))
+            .unwrap()
+            .read_raw()
+            .unwrap();
+        let out0 = first.trim_start_matches("output_");
+        let stored: Vec<f64> = f
+            .dataset(&format!("time_history/outputs/{out0}"))
+            .unwrap()
+            .read_raw()
+            .unwrap();
+        // 10 001 samples drawn as every 2nd: 5 001 points, each a stored sample.
+        assert_eq!(plotted.len(), stored.len().div_ceil(2));
+        assert!(
+            plotted
+                .iter()
+                .zip(stored.iter().step_by(2))
+                .all(|(a, b)| a == b)
+        );
+        drop(f);
+        let rep = d.join("modes");
+        let (code, _, err) = nlsim(&[
+            "modes",
+            "ecl_beam",
+            "--count",
+            "6",
+            "--report",
+            rep.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{err}");
+        let check = Command::new(python_h5py())
+            .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/h5check.py"))
+            .args(["report", rep.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(
+            check.status.success(),
+            "{}",
+            String::from_utf8_lossy(&check.stderr)
+        );
+        let html = std::fs::read_to_string(rep.join("index.html")).unwrap();
+        for s in [
+            "fig-frequencies",
+            "fig-effective_mass",
+            "eff. mass",
+            "23.661478",
+        ] {
+            assert!(html.contains(s), "{s}");
+        }
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
     /// `nlsim simulate` on the bump-stop beam: FOH to HDF5 and RK45 to CSV agree, the file
     /// layout is as documented, contact events are recorded.
     #[test]

@@ -116,6 +116,10 @@ enum Command {
         /// Skip the Sturm sequence check (saves one factorisation; `--fmax` always counts).
         #[arg(long)]
         no_sturm_check: bool,
+        /// Report folder: index.html (table, frequency and effective-mass plots), report.h5
+        /// with the modes, plots as SVG and PNG.
+        #[arg(long)]
+        report: Option<std::path::PathBuf>,
     },
     /// Time response of a model: the exponential-hold integrator on the reduced model (FOH,
     /// or ZOH/LSOH for bias studies) or a reference (RK45, RK4, Newmark/HHT on the unreduced
@@ -170,6 +174,10 @@ enum Command {
         /// HHT alpha in [-1/3, 0] (hht).
         #[arg(long, default_value_t = -0.05)]
         hht_alpha: f64,
+        /// Report folder: index.html (summary, a plot per output, element force against
+        /// displacement), report.h5 with the whole history, plots as SVG and PNG.
+        #[arg(long)]
+        report: Option<std::path::PathBuf>,
         /// Set an element parameter for this run: `element.param=value` (repeatable).
         #[arg(long)]
         set: Vec<String>,
@@ -559,6 +567,7 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             basis,
             restarts,
             no_sturm_check,
+            report: report_dir,
         } => {
             if let Some(path) = out {
                 // Refuse an unknown format before the (possibly long) solve.
@@ -598,6 +607,18 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 nlsim::modes::write_modes(path, model, &loaded.model, &report)?;
                 if !cli.quiet {
                     out!("  written to {}", path.display());
+                }
+            }
+            if let Some(dir) = report_dir {
+                let page = nlsim::modes::write_report(
+                    dir,
+                    model,
+                    &loaded.model,
+                    &report,
+                    &nlsim::report::command_line(),
+                )?;
+                if !cli.quiet {
+                    out!("  report {}", page.display());
                 }
             }
             Ok(())
@@ -645,6 +666,7 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             atol,
             substeps,
             hht_alpha,
+            report,
             set,
         } => {
             let req = nlsim::run::SimRequest {
@@ -664,7 +686,14 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 hht_alpha: *hht_alpha,
                 par: par(cli),
             };
-            simulate(model, &req, set, out.as_deref(), *compress, cli)
+            simulate(
+                model,
+                &req,
+                set,
+                (out.as_deref(), report.as_deref()),
+                *compress,
+                cli,
+            )
         }
         Command::Frf {
             model,
@@ -1215,7 +1244,7 @@ fn simulate(
     spec: &str,
     req: &nlsim::run::SimRequest,
     sets: &[String],
-    out: Option<&std::path::Path>,
+    (out, report): (Option<&std::path::Path>, Option<&std::path::Path>),
     compress: bool,
     cli: &Cli,
 ) -> nlsim::Result<()> {
@@ -1232,20 +1261,32 @@ fn simulate(
     };
     let model = nlsim::run::load_for_run(spec, sets)?;
     let run = nlsim::run::run_simulation(&model, req, &mut progress_line(quiet, "simulate"))?;
-    for line in run.summary(&model, req, cli.verbose) {
-        say(line);
+    let summary = run.summary(&model, req, cli.verbose);
+    for line in &summary {
+        say(line.clone());
     }
     let history = &run.history;
+    let info = nlsim::simulate::RunInfo {
+        model_spec: spec.to_string(),
+        method: req.method.as_str().to_string(),
+        excitation: run.excitation.clone(),
+        modes: run.modes,
+        compress,
+    };
     if let Some(path) = out {
-        let info = nlsim::simulate::RunInfo {
-            model_spec: spec.to_string(),
-            method: req.method.as_str().to_string(),
-            excitation: run.excitation.clone(),
-            modes: run.modes,
-            compress,
-        };
         nlsim::simulate::write_history(path, &model, history, &info)?;
         say(format!("  written to {}", path.display()));
+    }
+    if let Some(dir) = report {
+        let page = nlsim::simulate::write_report(
+            dir,
+            &model,
+            history,
+            &info,
+            &summary,
+            &nlsim::report::command_line(),
+        )?;
+        say(format!("  report {}", page.display()));
     }
     // Stopped short: the samples computed are kept (and written), and the run fails.
     match run.stopped_short(req.check()?) {
