@@ -83,6 +83,21 @@ pub enum Error {
         listed: String,
     },
 
+    /// The mass matrix has DOFs with negative diagonal mass: what they are and how they sit
+    /// in the pencil (e.g. an acoustic fluid block written with the opposite sign).
+    #[error(
+        "mass matrix is not positive definite: {count} DOF(s) have negative mass diagonals \
+         ({listed}); {detail}"
+    )]
+    NegativeMassDofs {
+        /// How many DOFs have a negative diagonal mass.
+        count: usize,
+        /// Up to ten of their labels, comma separated.
+        listed: String,
+        /// What was found about them and what to do.
+        detail: String,
+    },
+
     /// A matrix that must be positive (semi-)definite is not.
     #[error("{matrix} is not {required}: {detail}")]
     NotDefinite {

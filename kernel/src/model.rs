@@ -506,6 +506,9 @@ impl Model {
         }
 
         // Massless DOFs are reported by name, whatever the definiteness setting.
+        if let Some(e) = mass_sign_error(&self.stiffness, &self.mass, |i| self.dofs.describe(i)) {
+            return Err(e);
+        }
         let md = self.mass.diag();
         let massless: Vec<usize> = (0..md.len()).filter(|&i| md[i] <= 0.0).collect();
         if !massless.is_empty() {
@@ -874,4 +877,60 @@ impl ModelBuilder {
         }
         Ok(model)
     }
+}
+
+/// Negative mass diagonals, described: how many DOFs, which (`describe` names DOF `i`),
+/// whether their stiffness diagonals are negative too, and whether the block they form is
+/// coupled to the other DOFs in `K` or `M`. An uncoupled block with negative mass and
+/// stiffness diagonals (an acoustic fluid in pressure form written with the opposite sign, as
+/// some matrix collections store it) has the spectrum of the block negated, and the message
+/// says to negate it; anything else is an indefinite mass matrix. `None` when no mass
+/// diagonal is negative.
+pub fn mass_sign_error(
+    k: &SparseSym,
+    m: &SparseSym,
+    describe: impl Fn(usize) -> String,
+) -> Option<Error> {
+    let md = m.diag();
+    let negative: Vec<usize> = (0..md.len()).filter(|&i| md[i] < 0.0).collect();
+    if negative.is_empty() {
+        return None;
+    }
+    let kd = k.diag();
+    let mut inside = vec![false; md.len()];
+    for &i in &negative {
+        inside[i] = true;
+    }
+    let k_negative = negative.iter().filter(|&&i| kd[i] < 0.0).count();
+    let coupled = [k, m].iter().any(|a| {
+        a.entries()
+            .any(|(i, j, v)| v != 0.0 && inside[i] != inside[j])
+    });
+    let listed: Vec<String> = negative.iter().take(10).map(|&i| describe(i)).collect();
+    let more = if negative.len() > 10 {
+        format!(", … {} more", negative.len() - 10)
+    } else {
+        String::new()
+    };
+    let detail = if k_negative == negative.len() && !coupled {
+        format!(
+            "their stiffness diagonals are negative too and they form a block not coupled to \
+             the other {} DOFs: a block written with the opposite sign (an acoustic fluid in \
+             pressure form, say). Its eigenvalues are those of the block negated; negate its \
+             rows and columns of K and M (nlsim does not change signs silently)",
+            md.len() - negative.len()
+        )
+    } else {
+        format!(
+            "{k_negative} of them have negative stiffness diagonals, and the block they form is \
+             {}coupled to the other DOFs: the pencil is not a structural one (a mass matrix must \
+             be positive definite); check the matrix signs and units",
+            if coupled { "" } else { "not " }
+        )
+    };
+    Some(Error::NegativeMassDofs {
+        count: negative.len(),
+        listed: listed.join(", ") + &more,
+        detail,
+    })
 }

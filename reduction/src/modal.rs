@@ -361,6 +361,23 @@ fn name_dofs(e: Error, model: &Model) -> Error {
                 .join(", ");
             Error::MasslessDofs { count, listed }
         }
+        Error::NegativeMassDofs {
+            count,
+            listed,
+            detail,
+        } => Error::NegativeMassDofs {
+            count,
+            listed: listed
+                .split(", ")
+                .map(|s| {
+                    s.strip_prefix("DOF index ")
+                        .and_then(|i| i.parse::<usize>().ok())
+                        .map_or(s.to_string(), |i| model.dofs().describe(i))
+                })
+                .collect::<Vec<_>>()
+                .join(", "),
+            detail,
+        },
         other => other,
     }
 }
