@@ -879,10 +879,7 @@ pub fn write_report(dir: &Path, run: &CalibrationRun) -> Result<Vec<PathBuf>> {
         &run.request.model,
     )?;
     report.seed("Latin hypercube and k-fold split", run.request.config.seed)?;
-    report.section("Summary");
-    for line in run.summary() {
-        report.say(&line);
-    }
+    report.section_with("Summary", &run.summary());
     report.table(
         "estimates",
         crate::report::Table::from_csv("Estimates and uncertainties", &run.estimates_csv()),

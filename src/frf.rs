@@ -825,10 +825,10 @@ pub fn write_report(
         spec,
     )?;
     let (sys, branch, y) = (&run.system, &run.branch, &run.responses);
-    report.section(&format!("FRF by harmonic balance ({})", req.mode.as_str()));
-    for line in summary {
-        report.say(line);
-    }
+    report.section_with(
+        &format!("FRF by harmonic balance ({})", req.mode.as_str()),
+        summary,
+    );
     report.table("events", events_table(sys, branch, req.mode.as_str()))?;
     report.table("peaks", peaks_table(sys, branch, y))?;
     for (s, sen) in sys.sensors().iter().enumerate() {

@@ -222,10 +222,7 @@ pub fn write_modal_report(dir: &Path, run: &ModalRun) -> Result<Vec<PathBuf>> {
         &run.request.model,
     )?;
     report.seed("Latin hypercube", run.request.config.seed)?;
-    report.section("Summary");
-    for line in run.summary() {
-        report.say(&line);
-    }
+    report.section_with("Summary", &run.summary());
     report.table(
         "estimates",
         crate::report::Table::from_csv("Estimates and uncertainties", &run.estimates_csv()),

@@ -1228,10 +1228,7 @@ pub fn write_plan_report(dir: &Path, run: &PlanRun) -> Result<Vec<PathBuf>> {
         &crate::report::command_line(),
         &run.request.model,
     )?;
-    report.section("Summary");
-    for line in run.summary() {
-        report.say(&line);
-    }
+    report.section_with("Summary", &run.summary());
     report.table(
         "ranking",
         crate::report::Table::from_csv("Candidate tests, best first", &run.ranking_csv()),

@@ -149,6 +149,14 @@ impl Report {
         });
     }
 
+    /// Starts a section titled `title` holding `lines` (a summary) as its first block.
+    pub fn section_with(&self, title: &str, lines: &[String]) {
+        self.section(title);
+        for l in lines {
+            self.say(l);
+        }
+    }
+
     /// Marks the current section as not built, saying why.
     pub fn skip(&self, why: &str) {
         self.with_section(|s| s.skipped = Some(why.to_string()));

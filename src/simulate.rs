@@ -410,10 +410,7 @@ pub fn write_report(
         command_line,
         &info.model_spec,
     )?;
-    report.section("Time response");
-    for line in summary {
-        report.say(line);
-    }
+    report.section_with("Time response", summary);
     let n = h.n_samples();
     let every = (n / 4000).max(1);
     for o in &h.outputs {

@@ -707,10 +707,7 @@ pub fn write_test_report(dir: &Path, run: &TestRun) -> Result<Vec<PathBuf>> {
         &run.request.model,
     )?;
     report.seed("measurement noise", run.request.seed)?;
-    report.section("Summary");
-    for line in run.summary() {
-        report.say(&line);
-    }
+    report.section_with("Summary", &run.summary());
     report.section("Force and response");
     let mut written = Vec::new();
     for (name, body) in [

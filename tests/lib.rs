@@ -52,6 +52,24 @@ fn python_h5py() -> String {
     String::from_utf8_lossy(&out.stdout).trim().to_string()
 }
 
+/// Runs `scripts/h5check.py report DIR` (h5py): panics with its report when a check fails;
+/// what it printed otherwise.
+fn h5check_report(dir: &Path) -> String {
+    let check = Command::new(python_h5py())
+        .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/h5check.py"))
+        .args(["report", dir.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&check.stdout).into_owned();
+    assert!(
+        check.status.success(),
+        "h5check report {}: {said}{}",
+        dir.display(),
+        String::from_utf8_lossy(&check.stderr)
+    );
+    said
+}
+
 /// Opening report pages in a real browser: Debian's chromium, headless.
 mod browser {
     use super::*;
@@ -847,18 +865,10 @@ mod cli {
         // The page: every figure inline and laid out, in a real browser; the data beside it
         // read by h5py and redrawn against the figures.
         browser::check_report_page(&report, &figures, "demo-report");
-        let check = Command::new(python_h5py())
-            .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/h5check.py"))
-            .args(["report", report.to_str().unwrap()])
-            .output()
-            .unwrap();
-        let said = String::from_utf8_lossy(&check.stdout);
+        let said = h5check_report(&report);
         assert!(
-            check.status.success()
-                && said.contains("4001 points redrawn")
-                && said.contains("frf_ecl_beam: fundamental of"),
-            "h5check report: {said}{}",
-            String::from_utf8_lossy(&check.stderr)
+            said.contains("4001 points redrawn") && said.contains("frf_ecl_beam: fundamental of"),
+            "{said}"
         );
         let html = std::fs::read_to_string(report.join("index.html")).unwrap();
         for s in [
@@ -1153,16 +1163,7 @@ mod simulate {
         ]);
         assert_eq!(code, 0, "{err}");
         assert!(out.contains("report "), "{out}");
-        let check = Command::new(python_h5py())
-            .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/h5check.py"))
-            .args(["report", rep.to_str().unwrap()])
-            .output()
-            .unwrap();
-        assert!(
-            check.status.success(),
-            "{}",
-            String::from_utf8_lossy(&check.stderr)
-        );
+        h5check_report(&rep);
         let f = hdf5::File::open(rep.join("report.h5")).unwrap();
         let names: Vec<String> = f.group("figures").unwrap().member_names().unwrap();
         assert!(names.contains(&"element_forces".to_string()), "{names:?}");
@@ -1197,16 +1198,7 @@ mod simulate {
             rep.to_str().unwrap(),
         ]);
         assert_eq!(code, 0, "{err}");
-        let check = Command::new(python_h5py())
-            .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/h5check.py"))
-            .args(["report", rep.to_str().unwrap()])
-            .output()
-            .unwrap();
-        assert!(
-            check.status.success(),
-            "{}",
-            String::from_utf8_lossy(&check.stderr)
-        );
+        h5check_report(&rep);
         let html = std::fs::read_to_string(rep.join("index.html")).unwrap();
         for s in [
             "fig-frequencies",
@@ -1611,17 +1603,8 @@ mod frf_cli {
             "{out}"
         );
         browser::check_report_page(&report, &["frf_mass"], "frf-report");
-        let check = Command::new(python_h5py())
-            .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/h5check.py"))
-            .args(["report", report.to_str().unwrap()])
-            .output()
-            .unwrap();
-        let said = String::from_utf8_lossy(&check.stdout);
-        assert!(
-            check.status.success() && said.contains("frf_mass: fundamental of"),
-            "{said}{}",
-            String::from_utf8_lossy(&check.stderr)
-        );
+        let said = h5check_report(&report);
+        assert!(said.contains("frf_mass: fundamental of"), "{said}");
         let html = std::fs::read_to_string(report.join("index.html")).unwrap();
         assert!(html.contains("Folds and jumps of the continuation"));
         assert_eq!(
@@ -3002,17 +2985,7 @@ seed = 9
         );
         let report = dir.join("report");
         // The page and its data: every figure inline, the tables and curves in report.h5.
-        let check = Command::new(python_h5py())
-            .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/h5check.py"))
-            .args(["report", report.to_str().unwrap()])
-            .output()
-            .unwrap();
-        assert!(
-            check.status.success(),
-            "{}{}",
-            String::from_utf8_lossy(&check.stdout),
-            String::from_utf8_lossy(&check.stderr)
-        );
+        h5check_report(&report);
         let html = std::fs::read_to_string(report.join("index.html")).unwrap();
         for s in [
             "fig-frf_tip_h1",

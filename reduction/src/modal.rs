@@ -348,34 +348,29 @@ pub fn reduce_with(
 
 /// Replaces `DOF index i` in an error message of the eigen solver by the DOF label.
 fn name_dofs(e: Error, model: &Model) -> Error {
+    let label = |listed: String| -> String {
+        listed
+            .split(", ")
+            .map(|s| {
+                s.strip_prefix("DOF index ")
+                    .and_then(|i| i.parse::<usize>().ok())
+                    .map_or(s.to_string(), |i| model.dofs().describe(i))
+            })
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
     match e {
-        Error::MasslessDofs { count, listed } => {
-            let listed = listed
-                .split(", ")
-                .map(|s| {
-                    s.strip_prefix("DOF index ")
-                        .and_then(|i| i.parse::<usize>().ok())
-                        .map_or(s.to_string(), |i| model.dofs().describe(i))
-                })
-                .collect::<Vec<_>>()
-                .join(", ");
-            Error::MasslessDofs { count, listed }
-        }
+        Error::MasslessDofs { count, listed } => Error::MasslessDofs {
+            count,
+            listed: label(listed),
+        },
         Error::NegativeMassDofs {
             count,
             listed,
             detail,
         } => Error::NegativeMassDofs {
             count,
-            listed: listed
-                .split(", ")
-                .map(|s| {
-                    s.strip_prefix("DOF index ")
-                        .and_then(|i| i.parse::<usize>().ok())
-                        .map_or(s.to_string(), |i| model.dofs().describe(i))
-                })
-                .collect::<Vec<_>>()
-                .join(", "),
+            listed: label(listed),
             detail,
         },
         other => other,
