@@ -208,35 +208,33 @@ fn demo_frf(
         list(PointKind::Jump, &up),
         list(PointKind::Jump, &down)
     ));
-    let y = crate::frf::responses(&sys, &cont);
+    // The sensor responses of each branch, once: for the data, the tables and the plots.
+    let branches = [
+        ("continuation", "continuation", &cont),
+        ("step_up", "stepped sine up", &up),
+        ("step_down", "stepped sine down", &down),
+    ]
+    .map(|(name, what, b)| (name, what, b, crate::frf::responses(&sys, b)));
     report.data(|root| {
         let g = root.create_group("frf")?;
-        for (name, b) in [
-            ("continuation", &cont),
-            ("step_up", &up),
-            ("step_down", &down),
-        ] {
-            let yb = crate::frf::responses(&sys, b);
-            crate::frf::write_group(&g.create_group(name)?, &sys, b, &yb)?;
+        for (name, _, b, yb) in &branches {
+            crate::frf::write_group(&g.create_group(name)?, &sys, b, yb)?;
         }
         Ok(())
     })?;
-    for b in [
-        ("continuation", &cont),
-        ("stepped sine up", &up),
-        ("stepped sine down", &down),
-    ] {
+    for (_, what, b, yb) in &branches {
         report.table(
-            &format!("frf_events_{}", b.0),
-            crate::frf::events_table(&sys, b.1, b.0),
+            &format!("frf_events_{what}"),
+            crate::frf::events_table(&sys, b, yb, what),
         )?;
     }
-    report.table("frf_peaks", crate::frf::peaks_table(&sys, &cont, &y))?;
+    let y = &branches[0].3;
+    report.table("frf_peaks", crate::frf::peaks_table(&sys, &cont, y))?;
     let title = format!("{}: harmonic balance, H = 7", model.name());
     let fig = crate::frf::FrfPlot {
         sys: &sys,
         branch: &cont,
-        y: &y,
+        y,
         sensor: 0,
         title: &title,
         magnitude: crate::frf::Magnitude::Db,
@@ -244,9 +242,9 @@ fn demo_frf(
     };
     let mut plots = vec![plot_both(report, &format!("frf_{}", model.name()), &fig)?];
     // The stepped sines as a test would run them, over the continuation.
-    let fund = |b: &nlsim_hb::Branch| -> Vec<(f64, f64)> {
-        crate::frf::responses(&sys, b)
-            .iter()
+    let fund = |i: usize| -> Vec<(f64, f64)> {
+        let (_, _, b, yb) = &branches[i];
+        yb.iter()
             .zip(&b.points)
             .map(|(r, p)| (hz(p), r[(0, 1)].norm()))
             .collect()
@@ -261,9 +259,9 @@ fn demo_frf(
             crate::output::unit(sen.quantity)
         ),
         series: vec![
-            ("continuation (every branch)".into(), fund(&cont)),
-            ("stepped sine up".into(), fund(&up)),
-            ("stepped sine down".into(), fund(&down)),
+            ("continuation (every branch)".into(), fund(0)),
+            ("stepped sine up".into(), fund(1)),
+            ("stepped sine down".into(), fund(2)),
         ],
     };
     plots.push(plot_both(report, "stepped_sines", &fig)?);

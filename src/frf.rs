@@ -659,12 +659,7 @@ impl FrfPlot<'_> {
                     }
                 }
                 if legend {
-                    chart
-                        .configure_series_labels()
-                        .background_style(WHITE.mix(0.8))
-                        .border_style(BLACK)
-                        .position(SeriesLabelPosition::UpperRight)
-                        .draw()?;
+                    crate::plot::draw_legend(&mut chart, SeriesLabelPosition::UpperRight)?;
                 }
             }};
         }
@@ -716,9 +711,15 @@ impl FrfPlot<'_> {
     }
 }
 
-/// The folds and jumps of `branch` as a report table (`what` names the branch): kind,
-/// frequency, level and `|Y|` of every sensor at the fundamental.
-pub fn events_table(sys: &HbSystem, branch: &Branch, what: &str) -> crate::report::Table {
+/// The folds and jumps of `branch` (sensor responses `y` from [`responses`]) as a report table
+/// (`what` names the branch): kind, frequency, level and `|Y|` of every sensor at the
+/// fundamental.
+pub fn events_table(
+    sys: &HbSystem,
+    branch: &Branch,
+    y: &[Mat<c64>],
+    what: &str,
+) -> crate::report::Table {
     let nu = sys.harmonics().nu;
     let mut header: Vec<String> = ["event", "frequency (Hz)", "level", "stable"]
         .map(String::from)
@@ -729,9 +730,9 @@ pub fn events_table(sys: &HbSystem, branch: &Branch, what: &str) -> crate::repor
     let rows = branch
         .points
         .iter()
-        .filter(|p| matches!(p.kind, PointKind::Fold | PointKind::Jump))
-        .map(|p| {
-            let y = sys.sensor_response(&p.x, p.omega, p.scale);
+        .zip(y)
+        .filter(|(p, _)| matches!(p.kind, PointKind::Fold | PointKind::Jump))
+        .map(|(p, y)| {
             let mut row = vec![
                 match p.kind {
                     PointKind::Fold => "fold".to_string(),
@@ -829,7 +830,7 @@ pub fn write_report(
         &format!("FRF by harmonic balance ({})", req.mode.as_str()),
         summary,
     );
-    report.table("events", events_table(sys, branch, req.mode.as_str()))?;
+    report.table("events", events_table(sys, branch, y, req.mode.as_str()))?;
     report.table("peaks", peaks_table(sys, branch, y))?;
     for (s, sen) in sys.sensors().iter().enumerate() {
         let title = format!(

@@ -280,6 +280,23 @@ pub fn write_both(dir: &Path, name: &str, fig: &impl Figure) -> Result<[PathBuf;
     Ok(paths)
 }
 
+/// The legend of every nlsim plot: a framed, slightly transparent box at `position`.
+pub(crate) fn draw_legend<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .position(position)
+        .draw()?;
+    Ok(())
+}
+
 /// Line plots sharing axes: `(label, points)` each.
 pub struct Lines {
     /// Title above the plot.
@@ -354,13 +371,7 @@ impl Figure for Lines {
                     PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(w))
                 });
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()?;
-        Ok(())
+        draw_legend(&mut chart, SeriesLabelPosition::UpperRight)
     }
 }
 
@@ -510,12 +521,7 @@ impl Figure for Bars {
                 ))?
                 .label(format!("{b}"))
                 .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .position(SeriesLabelPosition::LowerRight)
-                .draw()?;
+            draw_legend(&mut chart, SeriesLabelPosition::LowerRight)?;
         }
         Ok(())
     }

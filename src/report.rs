@@ -236,8 +236,14 @@ impl Report {
     /// `x_label`, `y_label`. Returns the two files.
     pub fn figure(&self, name: &str, fig: &impl Figure) -> Result<[PathBuf; 2]> {
         let name = self.unique("figure", name);
-        let files = crate::plot::write_both(&self.dir, &name, fig)?;
+        // Rendered once as SVG: the page's copy and the file are the same text.
         let svg = crate::plot::svg_string(fig)?;
+        let files = [
+            self.dir.join(format!("{name}.svg")),
+            self.dir.join(format!("{name}.png")),
+        ];
+        crate::output::write_text_atomically(&files[0], &svg)?;
+        crate::plot::write(&files[1], fig)?;
         let series = fig.data();
         let title = fig.title();
         self.data(|root| {
