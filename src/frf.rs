@@ -27,6 +27,62 @@ pub struct FrfInfo {
     pub residual: bool,
     /// Wall time of the solve (s).
     pub seconds: f64,
+    /// Located response maxima ([`crate::run::FrfRun::peaks`]).
+    pub peaks: Vec<nlsim_hb::Peak>,
+    /// The run's notes ([`crate::run::FrfRun::notes`]).
+    pub notes: Vec<String>,
+}
+
+/// Writes the located maxima `peaks` as the group `peaks` of `g`: per maximum its sensor
+/// (index into the `sensors` attribute), harmonic index `k` and ratio `k/ν`, frequency (Hz),
+/// level, `|Y_k|` in the sensor's unit and whether it was located between points.
+pub(crate) fn write_peaks(
+    g: &hdf5::Group,
+    sys: &HbSystem,
+    peaks: &[nlsim_hb::Peak],
+) -> hdf5::Result<()> {
+    if peaks.is_empty() {
+        return Ok(());
+    }
+    let gp = g.create_group("peaks")?;
+    let names: Vec<&str> = sys.sensors().iter().map(|s| s.name.as_str()).collect();
+    str_attr(&gp, "sensors", &names.join(","))?;
+    str_attr(
+        &gp,
+        "note",
+        "the largest |Y_k| of each sensor and harmonic along the branch; located = 1 when found \
+         between computed points by maximising along the branch, 0 when it is an end point",
+    )?;
+    let sensor: Vec<u32> = peaks.iter().map(|p| p.sensor as u32).collect();
+    gp.new_dataset_builder()
+        .with_data(&sensor)
+        .create("sensor")?;
+    let k: Vec<u32> = peaks.iter().map(|p| p.harmonic as u32).collect();
+    gp.new_dataset_builder().with_data(&k).create("harmonic")?;
+    let nu = sys.harmonics().nu as f64;
+    let ratio: Vec<f64> = peaks.iter().map(|p| p.harmonic as f64 / nu).collect();
+    gp.new_dataset_builder()
+        .with_data(&ratio)
+        .create("harmonic_ratio")?;
+    let hz: Vec<f64> = peaks
+        .iter()
+        .map(|p| p.omega / (2.0 * std::f64::consts::PI))
+        .collect();
+    let d = gp
+        .new_dataset_builder()
+        .with_data(&hz)
+        .create("frequency")?;
+    str_attr(&d, "unit", "Hz")?;
+    let level: Vec<f64> = peaks.iter().map(|p| p.scale).collect();
+    gp.new_dataset_builder().with_data(&level).create("level")?;
+    let v: Vec<f64> = peaks.iter().map(|p| p.value).collect();
+    let d = gp.new_dataset_builder().with_data(&v).create("magnitude")?;
+    str_attr(&d, "unit", "the sensor's (m, m/s or m/s^2)")?;
+    let located: Vec<u8> = peaks.iter().map(|p| u8::from(p.located)).collect();
+    gp.new_dataset_builder()
+        .with_data(&located)
+        .create("located")?;
+    Ok(())
 }
 
 /// Sensor responses (sensors × harmonics) of every point.
@@ -107,6 +163,21 @@ fn write_csv(
         "# stable: 1 stable, 0 unstable, -1 not computed; kind: 0 regular, 1 fold, 2 end, 3 jump; \
          <sensor>_h<r>_re/_im: complex amplitude of harmonic r x Omega (q = Re(Q e^(i r Omega t)))"
     );
+    let nu = sys.harmonics().nu;
+    for p in &info.peaks {
+        let _ = writeln!(
+            s,
+            "# peak {} harmonic {}: |Y| = {:.10e} at {:.10e} Hz ({})",
+            sys.sensors()[p.sensor].name,
+            harmonic_label(p.harmonic, nu),
+            p.value,
+            p.omega / (2.0 * std::f64::consts::PI),
+            if p.located { "located" } else { "end point" }
+        );
+    }
+    for note in &info.notes {
+        let _ = writeln!(s, "# note: {note}");
+    }
     s.push_str("frequency_hz,level,stable,kind,max_floquet_real_per_s");
     for sen in sys.sensors() {
         for k in 0..=sys.harmonics().h {
@@ -166,7 +237,11 @@ fn write_hdf5(
     )
     .map_err(&err)?;
     f64_attr(&root, "wall_seconds", info.seconds).map_err(&err)?;
+    if !info.notes.is_empty() {
+        str_attr(&root, "notes", &info.notes.join("\n")).map_err(&err)?;
+    }
     write_group(&root, sys, branch, y).map_err(&err)?;
+    write_peaks(&root, sys, &info.peaks).map_err(&err)?;
     file.flush().map_err(&err)?;
     Ok(())
 }
@@ -799,6 +874,37 @@ pub fn peaks_table(sys: &HbSystem, branch: &Branch, y: &[Mat<c64>]) -> crate::re
     }
 }
 
+/// The located maxima `peaks` of a continuation ([`nlsim_hb::locate_peaks`]): a report table.
+pub fn located_peaks_table(sys: &HbSystem, peaks: &[nlsim_hb::Peak]) -> crate::report::Table {
+    let nu = sys.harmonics().nu;
+    let rows = peaks
+        .iter()
+        .map(|p| {
+            let sen = &sys.sensors()[p.sensor];
+            vec![
+                sen.name.clone(),
+                harmonic_label(p.harmonic, nu),
+                format!("{:.7}", p.omega / (2.0 * std::f64::consts::PI)),
+                format!("{:.8e}", p.value),
+                unit(sen.quantity).to_string(),
+                if p.located {
+                    "located between points"
+                } else {
+                    "end of the range"
+                }
+                .to_string(),
+            ]
+        })
+        .collect();
+    crate::report::Table {
+        caption: "Largest response per sensor and harmonic, located along the branch".into(),
+        header: ["sensor", "harmonic", "frequency (Hz)", "|Y|", "unit", "how"]
+            .map(String::from)
+            .to_vec(),
+        rows,
+    }
+}
+
 /// The report of `nlsim frf`: its summary, the folds/jumps and peaks tables, one plot per
 /// sensor (magnitude axes and phase panels as given), the FRF data in `report.h5`
 /// (`/frf/<mode>`, the layout of FRF files); `summary` is [`crate::run::FrfRun::summary`] and
@@ -831,7 +937,14 @@ pub fn write_report(
         summary,
     );
     report.table("events", events_table(sys, branch, y, req.mode.as_str()))?;
-    report.table("peaks", peaks_table(sys, branch, y))?;
+    report.table(
+        "peaks",
+        if run.peaks.is_empty() {
+            peaks_table(sys, branch, y)
+        } else {
+            located_peaks_table(sys, &run.peaks)
+        },
+    )?;
     for (s, sen) in sys.sensors().iter().enumerate() {
         let title = format!(
             "{}: {} at {}, H = {}",
@@ -855,7 +968,9 @@ pub fn write_report(
     }
     report.data(|root| {
         let g = root.create_group("frf")?;
-        write_group(&g.create_group(req.mode.as_str())?, sys, branch, y)
+        let g = g.create_group(req.mode.as_str())?;
+        write_group(&g, sys, branch, y)?;
+        write_peaks(&g, sys, &run.peaks)
     })?;
     report.finish()
 }

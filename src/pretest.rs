@@ -654,6 +654,7 @@ fn add_points(model: &mut Model, req: &PlanRequest) -> Result<()> {
             name: a.name.clone(),
             dof: d,
             amplitude: 0.0,
+            harmonics: Vec::new(),
         })?;
     }
     add_sensors(model, &req.sensors, "plan sensor")

@@ -195,6 +195,82 @@ pub const MAX_FRF_POINTS: usize = 1_000_000;
 /// Most harmonics `H` of one FRF.
 pub const MAX_FRF_HARMONICS: usize = 256;
 
+/// Parses a force harmonic `K=AMP[@DEG]` or `1/K=AMP[@DEG]` (`--force-harmonic`): `AMP cos(K
+/// Ω t + DEG)`, the cosine convention of `docs/model-files.md`.
+pub fn parse_force_harmonic(text: &str) -> Result<nlsim_kernel::ForceHarmonic> {
+    let usage = |m: String| Error::Usage(format!("force harmonic '{text}': {m}"));
+    let (order, value) = text
+        .split_once('=')
+        .ok_or_else(|| usage("expected K=AMP[@DEG], e.g. 2=1.5 or 3=2@90".into()))?;
+    let (numerator, denominator) =
+        nlsim_kernel::ForceHarmonic::parse_ratio(order).map_err(usage)?;
+    let (amp, deg) = match value.split_once('@') {
+        Some((a, d)) => (a, Some(d)),
+        None => (value, None),
+    };
+    let num = |what: &str, v: &str| -> Result<f64> {
+        v.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| usage(format!("{what} '{v}' is not a finite number")))
+    };
+    let amplitude = num("amplitude", amp)?;
+    let phase = deg.map(|d| num("phase", d)).transpose()?.unwrap_or(0.0);
+    if numerator == denominator {
+        return Err(usage(
+            "order 1 is the fundamental: set it with --force (the phase reference)".into(),
+        ));
+    }
+    Ok(nlsim_kernel::ForceHarmonic {
+        numerator,
+        denominator,
+        amplitude,
+        phase: phase.to_radians(),
+    })
+}
+
+/// Frequencies of a stepped sine when the request gives no point count.
+pub const DEFAULT_STEPS: usize = 400;
+
+/// Frequencies searched for a sub-harmonic start (evenly over the range).
+pub const SUBHARMONIC_SEARCH: usize = 41;
+
+/// How an FRF continuation starts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FrfStart {
+    /// From rest at the start frequency, or, with a sub-harmonic order `ν ≥ 2`, from a
+    /// sub-harmonic solution searched over the range (the primary branch from rest when
+    /// none is found, with a note).
+    #[default]
+    Auto,
+    /// From rest at the start frequency (the primary branch).
+    Rest,
+    /// From a sub-harmonic solution searched over the range; an error when none is found.
+    Subharmonic,
+}
+
+impl FrfStart {
+    /// Parses `auto`, `rest` or `subharmonic`.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "auto" => Some(Self::Auto),
+            "rest" => Some(Self::Rest),
+            "subharmonic" => Some(Self::Subharmonic),
+            _ => None,
+        }
+    }
+
+    /// The name of [`FrfStart::parse`].
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::Rest => "rest",
+            Self::Subharmonic => "subharmonic",
+        }
+    }
+}
+
 /// A multi-harmonic FRF to compute (the options of `nlsim frf`).
 #[derive(Debug, Clone)]
 pub struct FrfRequest {
@@ -209,10 +285,19 @@ pub struct FrfRequest {
     /// Force amplitude (N) at the fundamental on every excitation point; `None`: the model's
     /// nominal amplitudes.
     pub force: Option<f64>,
+    /// Further force harmonics on every excitation point, replacing the model's
+    /// `[[excitation.harmonic]]` when not empty (cosine convention, `docs/model-files.md`).
+    pub force_harmonics: Vec<nlsim_kernel::ForceHarmonic>,
     /// Continuation or stepped sine.
     pub mode: SweepMode,
-    /// Frequencies of a stepped sine.
-    pub points: usize,
+    /// Frequencies of a stepped sine (default [`DEFAULT_STEPS`]); for a continuation, the
+    /// fewest points over the range: the step in frequency is at most the range over
+    /// `points − 1` (default: the continuation's own step control).
+    pub points: Option<usize>,
+    /// Largest continuation step in frequency (Hz); `None`: 2 % of the range.
+    pub max_step_hz: Option<f64>,
+    /// How a continuation starts.
+    pub start: FrfStart,
     /// Retained modes.
     pub modes: usize,
     /// Residual flexibility of the truncated modes.
@@ -231,8 +316,11 @@ impl Default for FrfRequest {
             harmonics: 7,
             subharmonic: 1,
             force: None,
+            force_harmonics: Vec::new(),
             mode: SweepMode::Continuation,
-            points: 400,
+            points: None,
+            max_step_hz: None,
+            start: FrfStart::Auto,
             modes: 20,
             residual: true,
             stability: true,
@@ -274,11 +362,33 @@ impl FrfRequest {
             }
             _ => {}
         }
-        if !(2..=MAX_FRF_POINTS).contains(&self.points) {
+        if let Some(p) = self.points
+            && !(2..=MAX_FRF_POINTS).contains(&p)
+        {
             return Err(usage(format!(
-                "points {} must be from 2 to {MAX_FRF_POINTS} (each point keeps its solution)",
-                self.points
+                "points {p} must be from 2 to {MAX_FRF_POINTS} (each point keeps its solution)"
             )));
+        }
+        if let Some(h) = self.max_step_hz
+            && !(h > 0.0 && h.is_finite())
+        {
+            return Err(usage(format!(
+                "max_step_hz {h} must be a positive frequency step in Hz"
+            )));
+        }
+        if self.mode != SweepMode::Continuation
+            && (self.max_step_hz.is_some() || self.start != FrfStart::Auto)
+        {
+            return Err(usage(format!(
+                "max_step_hz and start apply to a continuation, not to a {} sweep (its \
+                 frequencies are the points)",
+                self.mode.as_str()
+            )));
+        }
+        if self.start == FrfStart::Subharmonic && self.subharmonic < 2 {
+            return Err(usage(
+                "a sub-harmonic start needs a sub-harmonic order of at least 2".into(),
+            ));
         }
         if self.harmonics > MAX_FRF_HARMONICS {
             return Err(usage(format!(
@@ -312,6 +422,12 @@ pub struct FrfRun {
     pub status: Status,
     /// Where and why the run stopped short (one line); empty when it converged.
     pub detail: String,
+    /// Response maxima per sensor and harmonic, located between the computed points
+    /// ([`nlsim_hb::locate_peaks`]; continuation only, empty for a stepped sine).
+    pub peaks: Vec<nlsim_hb::Peak>,
+    /// What the run found worth saying: how a sub-harmonic branch was started, or that it
+    /// was not found.
+    pub notes: Vec<String>,
     /// Sensor responses (sensors × harmonics) per point, from [`crate::frf::responses`].
     pub responses: Vec<faer::Mat<faer::c64>>,
     /// Retained modes.
@@ -331,7 +447,7 @@ impl FrfRun {
         let mut out = Vec::new();
         let set = *self.system.harmonics();
         let run = self;
-        let (sys, branch, y) = (&run.system, &run.branch, &run.responses);
+        let (sys, branch) = (&run.system, &run.branch);
         out.push(format!(
             "frf {}: {} {:.4}–{:.4} Hz, H = {} harmonics of Ω/{}, {} modes{} (reduced in {:.2} s), \
              {} unknowns, AFT samples {:?}",
@@ -412,19 +528,63 @@ impl FrfRun {
                 bp.omega / (2.0 * PI)
             ));
         }
+        let shown: Vec<usize> = if set.nu >= 2 {
+            vec![set.nu, 1]
+        } else {
+            vec![1]
+        };
         for (s, sen) in sys.sensors().iter().enumerate() {
-            let (i, a) = (0..n)
-                .map(|i| (i, y[i][(s, set.nu)].norm()))
-                .fold((0, 0.0f64), |m, v| if v.1 > m.1 { v } else { m });
-            out.push(format!(
-                "  {:<12} peak |{}| at the fundamental {a:.5e} {} at {:.5} Hz",
-                sen.name,
-                sen.quantity.as_str(),
-                crate::output::unit(sen.quantity),
-                branch.points[i].omega / (2.0 * PI)
-            ));
+            for &k in &shown {
+                out.push(self.peak_line(s, k, &sen.name, sen.quantity));
+            }
+        }
+        for note in &self.notes {
+            out.push(format!("  note: {note}"));
         }
         out
+    }
+
+    /// The summary line of the largest `|Y_k|` of sensor `s` (located when it could be).
+    fn peak_line(
+        &self,
+        s: usize,
+        k: usize,
+        name: &str,
+        quantity: nlsim_kernel::Quantity,
+    ) -> String {
+        let set = *self.system.harmonics();
+        let (branch, y) = (&self.branch, &self.responses);
+        let n = branch.points.len();
+        {
+            let located = self.peaks.iter().find(|p| p.sensor == s && p.harmonic == k);
+            let (hz, a, how) = match located {
+                Some(p) => (
+                    p.omega / (2.0 * PI),
+                    p.value,
+                    if p.located {
+                        "located"
+                    } else {
+                        "at the end of the range"
+                    },
+                ),
+                None => {
+                    let (i, a) = (0..n)
+                        .map(|i| (i, y[i][(s, k)].norm()))
+                        .fold((0, 0.0f64), |m, v| if v.1 > m.1 { v } else { m });
+                    (branch.points[i].omega / (2.0 * PI), a, "largest computed")
+                }
+            };
+            let which = if k == set.nu {
+                "the fundamental".to_string()
+            } else {
+                format!("Ω/{}", set.nu)
+            };
+            format!(
+                "  {name:<12} peak |{}| at {which} {a:.7e} {} at {hz:.6} Hz ({how})",
+                quantity.as_str(),
+                crate::output::unit(quantity),
+            )
+        }
     }
 }
 
@@ -467,20 +627,96 @@ pub fn run_frf_shared(
     let reduced = reductions.get(model, modes, req.residual, req.par)?;
     let modes = reduced.modes.len();
     let reduce_seconds = t0.elapsed().as_secs_f64();
-    let mut system = HbSystem::from_model(model, &reduced, set, HbConfig::default())?;
-    if let Some(f) = req.force {
-        let mut forcing = system.forcing().clone();
-        for t in &mut forcing.terms {
-            t.amplitude = faer::c64::new(f, 0.0);
+    let system = if req.force.is_some() || !req.force_harmonics.is_empty() {
+        // The overrides apply to every excitation point before the forcing is built, so a
+        // model harmonic the overrides replace cannot fail the build.
+        let mut forced = model.clone();
+        forced.clear_excitation();
+        for x in model.excitation() {
+            let mut x = x.clone();
+            if let Some(f) = req.force {
+                x.amplitude = f;
+            }
+            if !req.force_harmonics.is_empty() {
+                x.harmonics = req.force_harmonics.clone();
+            }
+            forced.add_excitation(x)?;
         }
-        system.set_forcing(forcing)?;
-    }
+        HbSystem::from_model(&forced, &reduced, set, HbConfig::default())?
+    } else {
+        HbSystem::from_model(model, &reduced, set, HbConfig::default())?
+    };
+    let mut notes = Vec::new();
+    let mut cfg = None;
     let t1 = Instant::now();
     let report = match req.mode {
         SweepMode::Continuation => {
-            let mut cfg = ContinuationConfig::frequency(req.from_hz, req.to_hz);
-            cfg.stability = req.stability;
-            nlsim_hb::continuation_with_progress(&system, &cfg, None, progress)?
+            let mut c = ContinuationConfig::frequency(req.from_hz, req.to_hz);
+            c.stability = req.stability;
+            let span = (req.to_hz - req.from_hz).abs();
+            if let Some(n) = req.points {
+                c.ds_max = c.ds_max.min(1.0 / (n - 1) as f64);
+                c.max_points = c.max_points.max(4 * n);
+            }
+            if let Some(h) = req.max_step_hz {
+                c.ds_max = c.ds_max.min(h / span);
+                c.max_points = c.max_points.max((4.0 * span / h).ceil().min(1e6) as usize);
+            }
+            c.max_points = c.max_points.min(MAX_FRF_POINTS);
+            c.ds = c.ds.min(c.ds_max);
+            c.ds_min = c.ds_min.min(c.ds);
+            let search = set.nu >= 2 && req.start != FrfStart::Rest;
+            let found = if search {
+                let omegas: Vec<f64> = (0..SUBHARMONIC_SEARCH)
+                    .map(|i| {
+                        2.0 * PI
+                            * (req.from_hz
+                                + (req.to_hz - req.from_hz) * i as f64
+                                    / (SUBHARMONIC_SEARCH - 1) as f64)
+                    })
+                    .collect();
+                nlsim_hb::find_subharmonic(&system, &omegas, 1.0)?
+            } else {
+                None
+            };
+            let report = match found {
+                Some(st) => {
+                    notes.push(format!(
+                        "sub-harmonic start: a 1/{} solution at {:.5} Hz ({:.0} % of the \
+                         response at Ω/{}) from the backbone of mode {} ({} Newton starts); \
+                         the branch through it is followed to both ends of the range",
+                        set.nu,
+                        st.omega / (2.0 * PI),
+                        100.0 * st.content,
+                        set.nu,
+                        st.mode + 1,
+                        st.attempts
+                    ));
+                    nlsim_hb::continuation_through(&system, &c, st.omega, &st.x, progress)?
+                }
+                None => {
+                    if req.start == FrfStart::Subharmonic {
+                        return Err(Error::Failed(format!(
+                            "no 1/{} sub-harmonic solution found: Newton from the backbones of \
+                             the 3 modes nearest Ω/{} at {SUBHARMONIC_SEARCH} frequencies from \
+                             {} to {} Hz converged to none (a larger force, another range or \
+                             more harmonics may reach one)",
+                            set.nu, set.nu, req.from_hz, req.to_hz
+                        )));
+                    }
+                    if search {
+                        notes.push(format!(
+                            "no 1/{} sub-harmonic solution found (Newton from the backbones of \
+                             the 3 modes nearest Ω/{} at {SUBHARMONIC_SEARCH} frequencies): \
+                             the branch from rest follows",
+                            set.nu, set.nu
+                        ));
+                    }
+                    nlsim_hb::continuation_with_progress(&system, &c, None, progress)?
+                }
+            };
+            cfg = Some(c);
+            report
         }
         SweepMode::StepUp | SweepMode::StepDown => {
             let (lo, hi) = (req.from_hz.min(req.to_hz), req.from_hz.max(req.to_hz));
@@ -489,8 +725,9 @@ pub fn run_frf_shared(
             } else {
                 (hi, lo)
             };
-            let omegas: Vec<f64> = (0..req.points)
-                .map(|i| 2.0 * PI * (a + (b - a) * i as f64 / (req.points - 1) as f64))
+            let steps = req.points.unwrap_or(DEFAULT_STEPS);
+            let omegas: Vec<f64> = (0..steps)
+                .map(|i| 2.0 * PI * (a + (b - a) * i as f64 / (steps - 1) as f64))
                 .collect();
             nlsim_hb::stepped_sine_with_progress(&system, &omegas, 1.0, req.stability, progress)?
         }
@@ -506,12 +743,32 @@ pub fn run_frf_shared(
         });
     }
     let branch = report.branch;
+    if set.nu >= 2 {
+        let share = branch
+            .points
+            .iter()
+            .map(|p| nlsim_hb::subharmonic_content(&system, &p.x))
+            .fold(0.0f64, f64::max);
+        if share < nlsim_hb::start::SUBHARMONIC_SHARE {
+            notes.push(format!(
+                "the computed branch carries no Ω/{} content (largest share {share:.1e} of the \
+                 response): it is the primary response, not a 1/{} sub-harmonic one",
+                set.nu, set.nu
+            ));
+        }
+    }
+    let peaks = match &cfg {
+        Some(c) => nlsim_hb::locate_peaks(&system, c, &branch),
+        None => Vec::new(),
+    };
     let responses = crate::frf::responses(&system, &branch);
     Ok(FrfRun {
         system,
         branch,
         status,
         detail,
+        peaks,
+        notes,
         responses,
         modes,
         reduce_seconds,
@@ -957,6 +1214,23 @@ pub fn auto_atol(plant: &Plant, forces: &[Signal], dt: f64, n_steps: usize, rtol
     (1e-3 * rtol * z_ref).max(1e-15)
 }
 
+/// The periodic force of excitation point `x` at fundamental `fundamental_hz`: its amplitude
+/// as a cosine and its further harmonics, in the convention of `docs/model-files.md`.
+pub fn point_multisine(x: &nlsim_kernel::Excitation, fundamental_hz: f64) -> Signal {
+    let mut harmonics = vec![nlsim_sim::Harmonic {
+        ratio: 1.0,
+        amplitude: faer::c64::new(x.amplitude, 0.0),
+    }];
+    harmonics.extend(x.harmonics.iter().map(|h| nlsim_sim::Harmonic {
+        ratio: h.ratio(),
+        amplitude: h.complex(),
+    }));
+    Signal::MultiSine {
+        fundamental_hz,
+        harmonics,
+    }
+}
+
 /// One signal and label per excitation point: a sine at `f1` (Hz, to 1 µHz) of the point's
 /// nominal amplitude everywhere, then `drives` in order.
 fn point_signals(model: &Model, drives: &[Drive], f1: f64) -> Result<(Vec<Signal>, Vec<String>)> {
@@ -988,7 +1262,13 @@ fn point_signals(model: &Model, drives: &[Drive], f1: f64) -> Result<(Vec<Signal
         };
         for i in targets {
             signals[i] = if drive.nominal {
-                drive.signal.scaled(points[i].amplitude)
+                match &drive.signal {
+                    // A multisine that names no harmonic: the point's own forcing.
+                    Signal::MultiSine { fundamental_hz, .. } => {
+                        point_multisine(&points[i], *fundamental_hz)
+                    }
+                    s => s.scaled(points[i].amplitude),
+                }
             } else {
                 drive.signal.clone()
             };

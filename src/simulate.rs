@@ -15,7 +15,10 @@ use std::path::Path;
 /// - `none`
 /// - `sine:freq=HZ[,amp=N][,phase=DEG]`
 /// - `multisine:freq=HZ,h1=N[@DEG],h2=…,h1/3=…` — harmonic `hK` at `K·freq`, `h1/K` at
-///   `freq/K` (thesis eq. 12), amplitude in N and optional phase in degrees
+///   `freq/K` (thesis eq. 12), amplitude in N and optional phase in degrees: `hK=A@φ` is
+///   `A cos(2π K freq t + φ)`, the cosine convention of `frf` and model files (see
+///   `docs/model-files.md`); without harmonics, each point's own (fundamental and
+///   `[[excitation.harmonic]]`)
 /// - `sweep:f0=HZ,f1=HZ[,amp=N][,duration=S][,log=true]`
 /// - `file:PATH[,rate=HZ]` — one force per line (N); `#` comments; default rate: the run's
 ///
@@ -99,16 +102,16 @@ pub(crate) fn parse_signal(
                     Some((m, p)) => (num(k, m)?, num(k, p)?.to_radians()),
                     None => (num(k, v)?, 0.0),
                 };
-                // Phase 0 is a sine, as for `sine`: F = −i·mag·e^{iφ}.
+                // Phase 0 is a cosine, as in `frf` and model files: F = mag·e^{iφ}.
                 harmonics.push(Harmonic {
                     ratio,
-                    amplitude: c64::new(0.0, -mag) * c64::new(phase.cos(), phase.sin()),
+                    amplitude: c64::new(mag * phase.cos(), mag * phase.sin()),
                 });
             }
             if harmonics.is_empty() {
                 harmonics.push(Harmonic {
                     ratio: 1.0,
-                    amplitude: c64::new(0.0, -default_amp),
+                    amplitude: c64::new(default_amp, 0.0),
                 });
             }
             Signal::MultiSine {
@@ -176,8 +179,8 @@ pub fn describe_signal(signal: &Signal) -> String {
         } => {
             let mut t = format!("multisine:freq={fundamental_hz}");
             for h in harmonics {
-                // F = −i·mag·e^{iφ} for a sine of phase φ.
-                let z = h.amplitude * c64::new(0.0, 1.0);
+                // F = mag·e^{iφ} for a cosine of phase φ.
+                let z = h.amplitude;
                 let key = if h.ratio >= 1.0 {
                     format!("h{}", h.ratio.round())
                 } else {
@@ -491,6 +494,10 @@ mod tests {
         };
         assert_eq!(harmonics.len(), 3);
         assert!((harmonics[2].ratio - 1.0 / 3.0).abs() < 1e-15);
+        // Cosines, as in `frf` and model files: h1=2 is 2 cos Ωt, h3=0.1@90 is
+        // 0.1 cos(3Ωt + 90°) = Re{0.1 i e^{3iΩt}}.
+        assert_eq!(harmonics[0].amplitude, c64::new(2.0, 0.0));
+        assert!((harmonics[1].amplitude - c64::new(0.0, 0.1)).norm() < 1e-16);
         let s = parse_excitation("sweep:f0=5,f1=50,log=true", 1.0, 2.0, 1e3).unwrap();
         assert!(matches!(s, Signal::Sweep { duration, logarithmic: true, .. } if duration == 2.0));
         for bad in [

@@ -350,12 +350,18 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
             "the DOF the force acts on",
         )?;
         let amplitude = x.req_f64("amplitude", "the force amplitude in N")?;
-        x.finish("an excitation takes name, dof, amplitude")?;
+        let mut harmonics = Vec::new();
+        for mut h in x.array_of_tables("harmonic")? {
+            harmonics.push(read_force_harmonic(&mut h)?);
+            h.finish("an excitation harmonic takes order, amplitude, phase")?;
+        }
+        x.finish("an excitation takes name, dof, amplitude, [[excitation.harmonic]]")?;
         model
             .add_excitation(Excitation {
                 name,
                 dof,
                 amplitude,
+                harmonics,
             })
             .map_err(|err| x.at_table(err))?;
     }
@@ -620,6 +626,31 @@ fn read_damping(t: &mut Tab<'_, '_>, base: &Path, n: usize) -> Result<Damping> {
                 format!("unknown damping type '{other}'; use none, rayleigh, modal or matrix"),
             ));
         }
+    })
+}
+
+/// One `[[excitation.harmonic]]`: `order` (an integer `K` for `KΩ`, or `"1/K"` for `Ω/K`),
+/// `amplitude` (N), `phase` (degrees, default 0; the fundamental's cosine is the reference).
+fn read_force_harmonic(h: &mut Tab<'_, '_>) -> Result<nlsim_kernel::ForceHarmonic> {
+    let what = "the harmonic's order: an integer K (the force at KΩ) or \"1/K\" (at Ω/K)";
+    let (numerator, denominator) = match h.get("order") {
+        None => return Err(h.missing("order", what)),
+        Some(v) => {
+            let text = match v.get_ref() {
+                DeValue::String(s) => s.to_string(),
+                DeValue::Integer(i) => i.as_str().to_string(),
+                _ => return Err(h.err(v, "order", format!("expected {what}"))),
+            };
+            nlsim_kernel::ForceHarmonic::parse_ratio(&text).map_err(|m| h.err(v, "order", m))?
+        }
+    };
+    let amplitude = h.req_f64("amplitude", "the harmonic's force amplitude in N")?;
+    let phase = h.f64("phase")?.unwrap_or(0.0).to_radians();
+    Ok(nlsim_kernel::ForceHarmonic {
+        numerator,
+        denominator,
+        amplitude,
+        phase,
     })
 }
 

@@ -394,6 +394,7 @@ pub fn run_test(req: &TestRequest, progress: &mut dyn FnMut(usize, usize)) -> Re
                 name: "shaker".into(),
                 dof: d,
                 amplitude: 0.0,
+                harmonics: Vec::new(),
             })?;
             "shaker".to_string()
         }

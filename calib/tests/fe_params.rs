@@ -23,6 +23,7 @@ fn chain(damping: Damping) -> Model {
         name: "shaker".into(),
         dof: 59,
         amplitude: 1.0,
+        harmonics: Vec::new(),
     })
     .unwrap();
     for (name, dof, quantity) in [

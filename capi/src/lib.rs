@@ -957,6 +957,7 @@ pub unsafe extern "C" fn nlsim_model_add_excitation(
             name: name.into(),
             dof,
             amplitude: finite(amplitude, "amplitude")?,
+            harmonics: Vec::new(),
         })?;
         Ok(Done::Complete)
     })
@@ -1933,6 +1934,7 @@ mod tests {
                 name: "f".into(),
                 dof: 1,
                 amplitude: 1.0,
+                harmonics: Vec::new(),
             })
             .unwrap();
         model

@@ -839,3 +839,344 @@ pub fn stepped_sine_with_progress(
         detail: String::new(),
     })
 }
+
+/// A response maximum of one sensor and harmonic along a branch, located between the
+/// computed points.
+#[derive(Debug, Clone)]
+pub struct Peak {
+    /// Sensor index (into [`HbSystem::sensors`]).
+    pub sensor: usize,
+    /// Harmonic index `k` of the base `Ω/ν`.
+    pub harmonic: usize,
+    /// Index of the largest computed point.
+    pub near: usize,
+    /// Fundamental frequency `Ω` at the maximum (rad/s).
+    pub omega: f64,
+    /// Force level `λ` at the maximum.
+    pub scale: f64,
+    /// `|Y_k|` at the maximum (the sensor's unit).
+    pub value: f64,
+    /// Condensed unknowns at the maximum.
+    pub x: Vec<f64>,
+    /// `true` when located between the neighbours of the largest computed point; `false`
+    /// when that point is an end of the branch (the maximum may lie outside the range) or
+    /// the location failed — then the values are the computed point's.
+    pub located: bool,
+}
+
+/// Locates, for every sensor and harmonic of `sys` carrying response along `branch` (its
+/// largest `|Y_k|` above `1e-9` of the sensor's largest harmonic), the maximum of `|Y_k|`
+/// along the branch: between the neighbours `i ± 1` of the largest computed point `i`, the
+/// branch is parametrised by the hyperplanes normal to the chord `y_{i+1} − y_{i−1}` (in the
+/// scaled variables of `cfg`, which must be the configuration the branch was computed
+/// with), each point solved by the continuation's corrector, and `|Y_k|` is maximised along
+/// it by Brent's method (parabolic steps with golden-section safeguards) to `1e-9` of the
+/// chord. Since `|Y_k|` is quadratic at its maximum, the located value is as accurate as the
+/// solution of `R = 0` (tolerance [`crate::HbConfig::rtol`]).
+pub fn locate_peaks(sys: &HbSystem, cfg: &ContinuationConfig, branch: &Branch) -> Vec<Peak> {
+    let n_pts = branch.points.len();
+    if n_pts == 0 {
+        return Vec::new();
+    }
+    let nk = sys.harmonics().h + 1;
+    let y: Vec<Mat<faer::c64>> = branch
+        .points
+        .iter()
+        .map(|p| sys.sensor_response(&p.x, p.omega, p.scale))
+        .collect();
+    let xs = branch
+        .points
+        .iter()
+        .map(|p| norm_inf(&p.x))
+        .fold(0.0f64, f64::max)
+        .max(1e-300);
+    let tr = Tracker {
+        sys,
+        cfg,
+        xs,
+        ps: cfg.to - cfg.from,
+    };
+    let param = |p: &SolutionPoint| match cfg.parameter {
+        Parameter::Frequency => p.omega,
+        Parameter::ForceLevel => p.scale,
+    };
+    let scaled = |p: &SolutionPoint| -> Vec<f64> {
+        let mut v: Vec<f64> = p.x.iter().map(|x| x / xs).collect();
+        v.push((param(p) - cfg.from) / tr.ps);
+        v
+    };
+    let mut out = Vec::new();
+    for s in 0..sys.sensors().len() {
+        let top = (0..nk)
+            .flat_map(|k| y.iter().map(move |m| m[(s, k)].norm()))
+            .fold(0.0f64, f64::max);
+        for k in 0..nk {
+            let (i, v) = y
+                .iter()
+                .enumerate()
+                .map(|(i, m)| (i, m[(s, k)].norm()))
+                .fold((0, 0.0f64), |a, b| if b.1 > a.1 { b } else { a });
+            if !(v > 0.0 && v > 1e-9 * top) {
+                continue;
+            }
+            let p = &branch.points[i];
+            let mut peak = Peak {
+                sensor: s,
+                harmonic: k,
+                near: i,
+                omega: p.omega,
+                scale: p.scale,
+                value: v,
+                x: p.x.clone(),
+                located: false,
+            };
+            if i > 0 && i + 1 < n_pts {
+                let (a, c) = (scaled(&branch.points[i - 1]), scaled(&branch.points[i + 1]));
+                let b = scaled(p);
+                let chord: Vec<f64> = c.iter().zip(&a).map(|(c, a)| c - a).collect();
+                let len = chord.iter().map(|v| v * v).sum::<f64>().sqrt();
+                if len > 0.0 {
+                    let d: Vec<f64> = chord.iter().map(|v| v / len).collect();
+                    let at = |t: f64| -> Option<(f64, Vec<f64>, f64, f64)> {
+                        let pred: Vec<f64> =
+                            a.iter().zip(&d).map(|(a, d)| a + t * len * d).collect();
+                        let (yy, _, _) = tr.correct(&pred, &d)?;
+                        let (x, par) = tr.unscale(&yy);
+                        let (om, sc) = tr.omega_scale(par);
+                        let val = sys.sensor_response(&x, om, sc)[(s, k)].norm();
+                        val.is_finite().then_some((val, x, om, sc))
+                    };
+                    let tb = (0..b.len()).map(|j| (b[j] - a[j]) * d[j]).sum::<f64>() / len;
+                    let mut best: Option<(f64, Vec<f64>, f64, f64)> = None;
+                    let mut failed = false;
+                    let mut f = |t: f64| -> f64 {
+                        match at(t) {
+                            Some(r) => {
+                                let val = r.0;
+                                if best.as_ref().is_none_or(|b| val > b.0) {
+                                    best = Some(r);
+                                }
+                                -val
+                            }
+                            None => {
+                                failed = true;
+                                0.0
+                            }
+                        }
+                    };
+                    brent_min(&mut f, 0.0, tb.clamp(1e-3, 1.0 - 1e-3), 1.0, 1e-9);
+                    if let Some((val, x, om, sc)) = best
+                        && !failed
+                        && val >= v
+                    {
+                        peak.value = val;
+                        peak.x = x;
+                        peak.omega = om;
+                        peak.scale = sc;
+                        peak.located = true;
+                    }
+                }
+            }
+            out.push(peak);
+        }
+    }
+    out
+}
+
+/// Brent's minimisation of `f` on `[a, b]` from the interior point `x0`, to an absolute
+/// tolerance `tol` on the abscissa (parabolic interpolation, golden-section safeguard).
+fn brent_min(f: &mut dyn FnMut(f64) -> f64, a: f64, x0: f64, b: f64, tol: f64) -> f64 {
+    const GOLD: f64 = 0.381_966_011_250_105_1;
+    let (mut a, mut b) = (a, b);
+    let (mut x, mut w, mut v) = (x0, x0, x0);
+    let fx0 = f(x0);
+    let (mut fx, mut fw, mut fv) = (fx0, fx0, fx0);
+    let (mut d, mut e) = (0.0f64, 0.0f64);
+    for _ in 0..100 {
+        let m = 0.5 * (a + b);
+        let tol1 = tol + 1e-12 * x.abs();
+        let tol2 = 2.0 * tol1;
+        if (x - m).abs() <= tol2 - 0.5 * (b - a) {
+            break;
+        }
+        let mut golden = true;
+        if e.abs() > tol1 {
+            let r = (x - w) * (fx - fv);
+            let q = (x - v) * (fx - fw);
+            let mut p = (x - v) * q - (x - w) * r;
+            let mut q = 2.0 * (q - r);
+            if q > 0.0 {
+                p = -p;
+            }
+            q = q.abs();
+            if p.abs() < (0.5 * q * e).abs() && p > q * (a - x) && p < q * (b - x) {
+                e = d;
+                d = p / q;
+                let u = x + d;
+                if u - a < tol2 || b - u < tol2 {
+                    d = if x < m { tol1 } else { -tol1 };
+                }
+                golden = false;
+            }
+        }
+        if golden {
+            e = if x < m { b - x } else { a - x };
+            d = GOLD * e;
+        }
+        let u = if d.abs() >= tol1 {
+            x + d
+        } else {
+            x + tol1.copysign(d)
+        };
+        let fu = f(u);
+        if fu <= fx {
+            if u < x {
+                b = x;
+            } else {
+                a = x;
+            }
+            (v, fv, w, fw, x, fx) = (w, fw, x, fx, u, fu);
+        } else {
+            if u < x {
+                a = u;
+            } else {
+                b = u;
+            }
+            if fu <= fw || w == x {
+                (v, fv, w, fw) = (w, fw, u, fu);
+            } else if fu <= fv || v == x || v == w {
+                (v, fv) = (u, fu);
+            }
+        }
+    }
+    x
+}
+
+/// Follows the branch through the converged solution `x` at parameter `p0` (rad/s or level,
+/// inside the range of `cfg`) to both ends of the range: one leg from `p0` towards `cfg.to`
+/// and one towards `cfg.from`, each continued from its last point towards the other end when
+/// the branch turns back inside the range (the fold of an isolated sub-harmonic branch).
+/// The points come in order along the branch, from the `cfg.to` side (steps scaled so that
+/// each leg keeps `cfg`'s steps in the parameter). The status is the first leg's that
+/// stopped short (its detail kept), else converged.
+pub fn continuation_through(
+    sys: &HbSystem,
+    cfg: &ContinuationConfig,
+    p0: f64,
+    x: &[f64],
+    progress: &mut dyn FnMut(&SolutionPoint),
+) -> Result<ContinuationReport> {
+    if !(p0 - cfg.from).is_finite() || (p0 - cfg.from) * (cfg.to - p0) < 0.0 {
+        return Err(Error::invalid(
+            "continuation start",
+            format!(
+                "the start parameter {p0} is outside the range {} to {}",
+                cfg.from, cfg.to
+            ),
+        ));
+    }
+    let span = (cfg.to - cfg.from).abs();
+    let param = |p: &SolutionPoint| match cfg.parameter {
+        Parameter::Frequency => p.omega,
+        Parameter::ForceLevel => p.scale,
+    };
+    // A leg from `a` (with its start `xa`) towards `b`; `None` when `a` is `b`.
+    let mut leg = |a: f64, b: f64, xa: &[f64]| -> Result<Option<ContinuationReport>> {
+        let width = (b - a).abs();
+        if width <= 1e-9 * span {
+            return Ok(None);
+        }
+        let f = (span / width).min(1e6);
+        let mut c = cfg.clone();
+        c.from = a;
+        c.to = b;
+        c.ds = (cfg.ds * f).min(0.5);
+        c.ds_max = (cfg.ds_max * f).min(0.5).max(c.ds);
+        c.ds_min = (cfg.ds_min * f).min(c.ds);
+        continuation_with_progress(sys, &c, Some(xa), progress).map(Some)
+    };
+    let turned = |r: &ContinuationReport| {
+        r.status.is_converged()
+            && r.branch
+                .points
+                .last()
+                .is_some_and(|p| p.kind != PointKind::End)
+    };
+    let mut legs: Vec<(ContinuationReport, bool)> = Vec::new(); // (leg, reversed)
+    let up = leg(p0, cfg.to, x)?;
+    let mut up_more = None;
+    if let Some(r) = &up
+        && turned(r)
+        && let Some(last) = r.branch.points.last()
+    {
+        up_more = leg(param(last), cfg.from, &last.x.clone())?;
+    }
+    let down = leg(p0, cfg.from, x)?;
+    let mut down_more = None;
+    if let Some(r) = &down
+        && turned(r)
+        && let Some(last) = r.branch.points.last()
+    {
+        down_more = leg(param(last), cfg.to, &last.x.clone())?;
+    }
+    if let Some(r) = up_more {
+        legs.push((r, true));
+    }
+    if let Some(r) = up {
+        legs.push((r, true));
+    }
+    if let Some(r) = down {
+        legs.push((r, false));
+    }
+    if let Some(r) = down_more {
+        legs.push((r, false));
+    }
+    let mut branch = Branch {
+        parameter: cfg.parameter,
+        points: Vec::new(),
+        branch_points: Vec::new(),
+    };
+    let mut stats = ContinuationStats::default();
+    let mut status = Status::Converged;
+    let mut detail = String::new();
+    for (r, reversed) in legs {
+        stats.n_rejected += r.stats.n_rejected;
+        if status.is_converged() && !r.status.is_converged() {
+            status = r.status;
+            detail = r.detail.clone();
+        }
+        let n = r.branch.points.len();
+        let skip = usize::from(!branch.points.is_empty());
+        let offset = branch.points.len();
+        // Every leg after the first starts where the assembled branch ends: skip that point.
+        let order: Vec<usize> = if reversed {
+            (0..n).rev().skip(skip).collect()
+        } else {
+            (skip..n).collect()
+        };
+        for &i in &order {
+            let p = r.branch.points[i].clone();
+            stats.n_points += 1;
+            stats.n_newton += p.iterations;
+            branch.points.push(p);
+        }
+        for bp in &r.branch.branch_points {
+            let (i, j) = bp.between;
+            let map = |k: usize| -> Option<usize> {
+                order.iter().position(|&o| o == k).map(|pos| offset + pos)
+            };
+            if let (Some(a), Some(b)) = (map(i), map(j)) {
+                branch.branch_points.push(BranchPoint {
+                    between: (a.min(b), a.max(b)),
+                    ..*bp
+                });
+            }
+        }
+    }
+    Ok(ContinuationReport {
+        status,
+        branch,
+        stats,
+        detail,
+    })
+}

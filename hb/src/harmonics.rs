@@ -108,6 +108,57 @@ impl Forcing {
         }
     }
 
+    /// The forcing of a model's excitation points (inputs in their order): each point's
+    /// fundamental `amplitude · cos Ωt` and its further harmonics `a cos(rΩt + φ)` (thesis
+    /// eq. 12). A ratio `r = p/q` is harmonic `k = p ν / q` of the base `Ω/ν`; an error names
+    /// the point and order when `k` is not a whole number (a sub-harmonic force `Ω/q` needs
+    /// a sub-harmonic order `ν` that `q` divides) or is above `H`.
+    pub fn from_excitation(
+        set: &HarmonicSet,
+        excitation: &[nlsim_kernel::Excitation],
+    ) -> Result<Self> {
+        let mut terms = Vec::new();
+        for (i, x) in excitation.iter().enumerate() {
+            terms.push(ForceTerm {
+                input: i,
+                harmonic: set.nu,
+                amplitude: c64::new(x.amplitude, 0.0),
+            });
+            for h in &x.harmonics {
+                let (p, q) = (h.numerator as usize, h.denominator as usize);
+                let at = || format!("excitation '{}', harmonic {}", x.name, h.ratio_text());
+                if !(p * set.nu).is_multiple_of(q) {
+                    return Err(Error::invalid(
+                        at(),
+                        format!(
+                            "a force at {}Ω is not a harmonic of the base Ω/{}: the \
+                             sub-harmonic order must be a multiple of {q}",
+                            h.ratio_text(),
+                            set.nu
+                        ),
+                    ));
+                }
+                let k = p * set.nu / q;
+                if k > set.h {
+                    return Err(Error::invalid(
+                        at(),
+                        format!(
+                            "it is harmonic {k} of the base Ω/{}, above the H = {} kept: \
+                             raise the harmonics to at least {k}",
+                            set.nu, set.h
+                        ),
+                    ));
+                }
+                terms.push(ForceTerm {
+                    input: i,
+                    harmonic: k,
+                    amplitude: h.complex(),
+                });
+            }
+        }
+        Ok(Self { terms })
+    }
+
     /// Checks inputs, harmonics and amplitudes against `set` and `n_inputs`.
     pub fn validate(&self, set: &HarmonicSet, n_inputs: usize) -> Result<()> {
         if self.terms.is_empty() {

@@ -17,7 +17,9 @@
 //! - [`stability`]: Hill's method with the Floquet exponents sorted by the weight of their
 //!   eigenvectors in the central harmonic.
 //! - [`mod@continuation`]: pseudo-arclength continuation through folds with fold and
-//!   branch-point detection, stepped-sine sweeps up or down, force-level sweeps.
+//!   branch-point detection, stepped-sine sweeps up or down, force-level sweeps, branches
+//!   followed from an inner point to both ends, peaks located between points.
+//! - [`start`]: starts for isolated (sub-harmonic) branches from a single-mode backbone.
 //!
 //! Units: SI (s, rad/s, N, m); frequencies given to users in Hz are named `_hz`.
 //! Nothing here prints, reads files or exits.
@@ -28,16 +30,18 @@ mod dense;
 pub mod harmonics;
 pub mod linear;
 pub mod stability;
+pub mod start;
 pub mod system;
 
 pub use continuation::{
     Branch, BranchPoint, ContinuationConfig, ContinuationReport, ContinuationStats, Parameter,
-    PointKind, SolutionPoint, continuation, continuation_with_progress, stepped_sine,
-    stepped_sine_with_progress,
+    Peak, PointKind, SolutionPoint, continuation, continuation_through, continuation_with_progress,
+    locate_peaks, stepped_sine, stepped_sine_with_progress,
 };
 pub use harmonics::{ForceTerm, Forcing, HarmonicSet};
 pub use linear::{LinearPart, LinearVariation};
 pub use stability::Stability;
+pub use start::{SubharmonicStart, find_subharmonic, subharmonic_content};
 pub use system::{
     HbConfig, HbSystem, HbSystemBuilder, HbWorkspace, NewtonReport, Sensitivity, SensorSpec,
 };

@@ -394,7 +394,8 @@ pub(crate) fn expand(set: &HarmonicSet, h: &[Mat<c64>]) -> Mat<f64> {
 impl HbSystem {
     /// The system of `model` reduced to `reduced`: the model's elements (matched to their
     /// ports by name), its excitation points as inputs forced at the fundamental with their
-    /// nominal amplitudes, and its sensors.
+    /// nominal amplitudes and at their further harmonics ([`Forcing::from_excitation`]), and
+    /// its sensors.
     pub fn from_model(
         model: &Model,
         reduced: &ReducedModel,
@@ -411,18 +412,7 @@ impl HbSystem {
                 quantity,
             })
             .collect();
-        let forcing = Forcing {
-            terms: model
-                .excitation()
-                .iter()
-                .enumerate()
-                .map(|(i, x)| crate::ForceTerm {
-                    input: i,
-                    harmonic: set.nu,
-                    amplitude: c64::new(x.amplitude, 0.0),
-                })
-                .collect(),
-        };
+        let forcing = Forcing::from_excitation(&set, model.excitation())?;
         HbSystemBuilder {
             set,
             linear: LinearPart::from_reduced(reduced)?,

@@ -337,6 +337,7 @@ fn impacting_chain() -> Model {
             name: "shaker".into(),
             dof: 1,
             amplitude: 5.0,
+            harmonics: Vec::new(),
         })
         .unwrap();
     model

@@ -36,8 +36,8 @@ pub use dof::{Component, DofLabel, DofMap};
 pub use element::{Coupling, Law, LawEval, NonlinearElement, PolyTerm};
 pub use error::{Error, Result};
 pub use model::{
-    ElementGroup, Excitation, MatrixDerivative, Model, ModelBuilder, Quantity, Sensor,
-    ValidationConfig, ValidationReport,
+    ElementGroup, Excitation, ForceHarmonic, MatrixDerivative, Model, ModelBuilder, Quantity,
+    Sensor, ValidationConfig, ValidationReport,
 };
 pub use param::{Param, Parameterized, Status};
 pub use sparse::SparseSym;

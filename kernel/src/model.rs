@@ -45,15 +45,88 @@ impl Quantity {
     }
 }
 
-/// A force input point: the nominal amplitude of the fundamental force harmonic there.
-#[derive(Debug, Clone, PartialEq)]
+/// A force input point: the nominal amplitude of the fundamental force harmonic there, and
+/// optionally further harmonics (thesis eq. 12).
+///
+/// One convention for every periodic force of the project (harmonic balance, multisine time
+/// signals, model files): the force at the point is
+/// `f(t) = amplitude · cos Ωt + Σ_j a_j cos(r_j Ω t + φ_j)` with `r_j = p_j/q_j` from
+/// [`Excitation::harmonics`]; the fundamental is the phase reference.
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct Excitation {
     /// Name (identifier).
     pub name: String,
     /// DOF index the force acts on.
     pub dof: usize,
-    /// Nominal force amplitude (N, or N m on a rotation).
+    /// Nominal force amplitude at the fundamental `Ω` (N, or N m on a rotation), a cosine.
     pub amplitude: f64,
+    /// Further harmonics of the same point (super- `kΩ` or sub-harmonics `Ω/k`), each with
+    /// its own amplitude and phase; empty for a single sine.
+    pub harmonics: Vec<ForceHarmonic>,
+}
+
+/// One further force harmonic of an [`Excitation`]: `amplitude · cos(r Ω t + phase)` with
+/// `r = numerator/denominator` (thesis eq. 12: `ν Ω` or `Ω/ν`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ForceHarmonic {
+    /// Numerator `p` of the frequency ratio `r = p/q` (≥ 1).
+    pub numerator: u32,
+    /// Denominator `q` of the frequency ratio (≥ 1; `p = 1, q = 3` is `Ω/3`).
+    pub denominator: u32,
+    /// Amplitude (N, or N m on a rotation).
+    pub amplitude: f64,
+    /// Phase `φ` (rad) relative to the fundamental's cosine.
+    pub phase: f64,
+}
+
+impl ForceHarmonic {
+    /// The frequency ratio `r = p/q` to the fundamental.
+    pub fn ratio(&self) -> f64 {
+        f64::from(self.numerator) / f64::from(self.denominator)
+    }
+
+    /// The ratio as written in files and messages: `3` or `1/3`.
+    pub fn ratio_text(&self) -> String {
+        if self.denominator == 1 {
+            self.numerator.to_string()
+        } else {
+            format!("{}/{}", self.numerator, self.denominator)
+        }
+    }
+
+    /// The complex amplitude `a e^{iφ}` (N): the force is `Re{a e^{iφ} e^{i r Ω t}}`.
+    pub fn complex(&self) -> faer::c64 {
+        faer::c64::new(
+            self.amplitude * self.phase.cos(),
+            self.amplitude * self.phase.sin(),
+        )
+    }
+
+    /// Parses `K` or `1/K` (or `P/Q`) as a frequency ratio in lowest terms; errors name what
+    /// is accepted.
+    pub fn parse_ratio(text: &str) -> std::result::Result<(u32, u32), String> {
+        let bad = || {
+            format!(
+                "harmonic order '{text}' is not a positive integer K (the harmonic KΩ) or a \
+                 fraction 1/K (the sub-harmonic Ω/K)"
+            )
+        };
+        let (p, q) = match text.trim().split_once('/') {
+            Some((p, q)) => (
+                p.trim().parse::<u32>().map_err(|_| bad())?,
+                q.trim().parse::<u32>().map_err(|_| bad())?,
+            ),
+            None => (text.trim().parse::<u32>().map_err(|_| bad())?, 1),
+        };
+        if p == 0 || q == 0 {
+            return Err(bad());
+        }
+        let (mut a, mut b) = (p, q);
+        while b != 0 {
+            (a, b) = (b, a % b);
+        }
+        Ok((p / a, q / a))
+    }
 }
 
 /// A response output point.
@@ -345,6 +418,39 @@ impl Model {
                 location: format!("excitation '{}'", ex.name),
                 value: ex.amplitude,
             });
+        }
+        for (j, h) in ex.harmonics.iter().enumerate() {
+            let location = format!(
+                "excitation '{}', harmonic {} (order {})",
+                ex.name,
+                j + 1,
+                h.ratio_text()
+            );
+            for (what, v) in [("amplitude", h.amplitude), ("phase", h.phase)] {
+                if !v.is_finite() {
+                    return Err(Error::NonFinite {
+                        what: format!("excitation harmonic {what}"),
+                        location,
+                        value: v,
+                    });
+                }
+            }
+            if h.numerator == 0 || h.denominator == 0 {
+                return Err(Error::invalid(location, "the order must be K ≥ 1 or 1/K"));
+            }
+            if h.numerator == h.denominator {
+                return Err(Error::invalid(
+                    location,
+                    "order 1 is the fundamental: give it as the excitation's amplitude (the \
+                     phase reference)",
+                ));
+            }
+            if ex.harmonics[..j]
+                .iter()
+                .any(|o| o.numerator * h.denominator == h.numerator * o.denominator)
+            {
+                return Err(Error::invalid(location, "this order is given twice"));
+            }
         }
         if self.excitation.iter().any(|e| e.name == ex.name) {
             return Err(Error::DuplicateName {
@@ -833,6 +939,7 @@ impl ModelBuilder {
                 name: name.into(),
                 dof,
                 amplitude,
+                harmonics: Vec::new(),
             })
         })
     }

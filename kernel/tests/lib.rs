@@ -583,6 +583,7 @@ mod model {
                 name: "f".into(),
                 dof: 0,
                 amplitude: f64::INFINITY,
+                harmonics: Vec::new(),
             })
             .unwrap_err();
         assert!(e.to_string().contains("excitation 'f'"));

@@ -241,6 +241,7 @@ fn chain_with_ports() -> Model {
         name: "shaker".into(),
         dof: 59,
         amplitude: 1.0,
+        harmonics: Vec::new(),
     })
     .unwrap();
     m.add_sensor(Sensor {

@@ -1,7 +1,7 @@
 //! The jobs file: its TOML tables, parsed and checked into a [`Batch`].
 
 use crate::error::{Error, Result};
-use crate::run::{Drive, FrfRequest, Method, SimRequest, SweepMode};
+use crate::run::{Drive, FrfRequest, FrfStart, Method, SimRequest, SweepMode};
 use nlsim_kernel::Parameterized;
 use nlsim_kernel::param::parse_known;
 use serde::Deserialize;
@@ -25,6 +25,8 @@ struct FrfTable {
     force: Option<f64>,
     mode: Option<String>,
     points: Option<usize>,
+    max_step: Option<f64>,
+    start: Option<String>,
     modes: Option<usize>,
     residual: Option<bool>,
     stability: Option<bool>,
@@ -174,14 +176,27 @@ impl Batch {
                         )
                     })?,
                 };
+                let start = match &t.start {
+                    None => d.start,
+                    Some(m) => FrfStart::parse(m).ok_or_else(|| {
+                        err(
+                            at("start"),
+                            "frf.start",
+                            format!("'{m}': use auto, rest or subharmonic"),
+                        )
+                    })?,
+                };
                 let req = FrfRequest {
                     from_hz: t.from,
                     to_hz: t.to,
                     harmonics: t.harmonics.unwrap_or(d.harmonics),
                     subharmonic: t.subharmonic.unwrap_or(d.subharmonic),
                     force: t.force,
+                    force_harmonics: Vec::new(),
                     mode,
-                    points: t.points.unwrap_or(d.points),
+                    points: t.points,
+                    max_step_hz: t.max_step,
+                    start,
                     modes: t.modes.unwrap_or(d.modes),
                     residual: t.residual.unwrap_or(d.residual),
                     stability: t.stability.unwrap_or(d.stability),

@@ -215,6 +215,7 @@ fn write_job(
             match r {
                 JobResult::Frf(run) => {
                     crate::frf::write_group(&g, &run.system, &run.branch, &run.responses)?;
+                    crate::frf::write_peaks(&g, &run.system, &run.peaks)?;
                     // A branch that stopped short is kept, and says so.
                     str_attr(&g, "status", run.status.as_str())?;
                     if !run.detail.is_empty() {

@@ -139,7 +139,8 @@ enum Command {
         method: Method,
         /// Force at the excitation points: SPEC for all of them or NAME=SPEC for one. SPEC is
         /// `none`, `sine:freq=HZ[,amp=N][,phase=DEG]`,
-        /// `multisine:freq=HZ,h1=N[@DEG],h2=..,h1/3=..`,
+        /// `multisine:freq=HZ,h1=N[@DEG],h2=..,h1/3=..` (cosines: `hK=A@DEG` is
+        /// A cos(K Ω t + DEG), as in `frf`; without harmonics each point's own from the model),
         /// `sweep:f0=HZ,f1=HZ[,amp=N][,duration=S][,log=true]` or `file:PATH[,rate=HZ]`
         /// (one force per line). `amp` defaults to the point's nominal amplitude. Default: a
         /// sine at the first natural frequency.
@@ -202,15 +203,30 @@ enum Command {
         #[arg(long, default_value_t = 1)]
         subharmonic: usize,
         /// Force amplitude (N) at the fundamental on every excitation point (default: the
-        /// model's nominal amplitudes).
+        /// model's nominal amplitudes), a cosine: the phase reference.
         #[arg(long)]
         force: Option<f64>,
+        /// A further force harmonic on every excitation point, `K=AMP[@DEG]` (AMP cos(KΩt +
+        /// DEG)) or `1/K=AMP[@DEG]` at Ω/K (repeatable; replaces the model's
+        /// [[excitation.harmonic]]), e.g. `--force-harmonic 2=1 --force-harmonic 3=2@90`.
+        #[arg(long = "force-harmonic", value_name = "K=AMP[@DEG]")]
+        force_harmonic: Vec<String>,
         /// Continuation (through folds, unstable parts included) or a stepped sine.
         #[arg(long, value_enum, default_value = "continuation")]
         mode: FrfMode,
-        /// Frequencies of a stepped sine (evenly spaced).
-        #[arg(long, default_value_t = 400)]
-        points: usize,
+        /// Stepped sine: its frequencies, evenly spaced (default 400). Continuation: the
+        /// fewest points over the range (the step in frequency is at most the range over
+        /// POINTS − 1).
+        #[arg(long)]
+        points: Option<usize>,
+        /// Continuation: the largest step in frequency (Hz; default 2 % of the range).
+        #[arg(long, value_name = "HZ")]
+        max_step: Option<f64>,
+        /// Continuation start: `auto` (from rest, or with --subharmonic ≥ 2 from a
+        /// sub-harmonic solution searched over the range), `rest` (the primary branch),
+        /// `subharmonic` (fail when none is found).
+        #[arg(long, default_value = "auto", value_parser = ["auto", "rest", "subharmonic"])]
+        start: String,
         /// Retained modes of the reduced model.
         #[arg(long, default_value_t = 20)]
         modes: usize,
@@ -702,8 +718,11 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             harmonics,
             subharmonic,
             force,
+            force_harmonic,
             mode,
             points,
+            max_step,
+            start,
             modes,
             no_residual,
             no_stability,
@@ -720,8 +739,14 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 harmonics: *harmonics,
                 subharmonic: *subharmonic,
                 force: *force,
+                force_harmonics: force_harmonic
+                    .iter()
+                    .map(|t| nlsim::run::parse_force_harmonic(t))
+                    .collect::<nlsim::Result<_>>()?,
                 mode: *mode,
                 points: *points,
+                max_step_hz: *max_step,
+                start: nlsim::run::FrfStart::parse(start).expect("clap checked the value"),
                 modes: *modes,
                 residual: !no_residual,
                 stability: !no_stability,
@@ -1218,6 +1243,8 @@ fn frf(
             modes: run.modes,
             residual: req.residual,
             seconds: run.seconds,
+            peaks: run.peaks.clone(),
+            notes: run.notes.clone(),
         };
         nlsim::frf::write_frf(path, sys, branch, y, &info)?;
         say(format!("  written to {}", path.display()));
