@@ -61,9 +61,11 @@ pub(crate) fn write_peaks(
     gp.new_dataset_builder().with_data(&k).create("harmonic")?;
     let nu = sys.harmonics().nu as f64;
     let ratio: Vec<f64> = peaks.iter().map(|p| p.harmonic as f64 / nu).collect();
-    gp.new_dataset_builder()
+    let d = gp
+        .new_dataset_builder()
         .with_data(&ratio)
         .create("harmonic_ratio")?;
+    str_attr(&d, "unit", "1")?;
     let hz: Vec<f64> = peaks
         .iter()
         .map(|p| p.omega / (2.0 * std::f64::consts::PI))
@@ -74,7 +76,8 @@ pub(crate) fn write_peaks(
         .create("frequency")?;
     str_attr(&d, "unit", "Hz")?;
     let level: Vec<f64> = peaks.iter().map(|p| p.scale).collect();
-    gp.new_dataset_builder().with_data(&level).create("level")?;
+    let d = gp.new_dataset_builder().with_data(&level).create("level")?;
+    str_attr(&d, "unit", "1")?;
     let v: Vec<f64> = peaks.iter().map(|p| p.value).collect();
     let d = gp.new_dataset_builder().with_data(&v).create("magnitude")?;
     str_attr(&d, "unit", "the sensor's (m, m/s or m/s^2)")?;
