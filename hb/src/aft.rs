@@ -131,6 +131,19 @@ impl AftPlan {
         }
     }
 
+    /// The Galerkin matrix `P diag(f) E` ((2H+1) × (2H+1)) of the multiplication by the
+    /// sampled function `f`: the coefficients of `f(θ) u(θ)` from those of `u`, truncated.
+    pub(crate) fn galerkin(&self, f: &[f64]) -> Mat<f64> {
+        let nh = self.set.len();
+        let mut fe = Mat::<f64>::zeros(self.n, nh);
+        for i in 0..self.n {
+            for j in 0..nh {
+                fe[(i, j)] = f[i] * self.e[(i, j)];
+            }
+        }
+        &self.p * &fe
+    }
+
     /// Harmonic coefficients of samples `g`.
     pub fn to_freq(&self, g: &[f64]) -> Vec<f64> {
         let mut out = vec![0.0; self.set.len()];
