@@ -733,6 +733,16 @@ pub fn run_frf_shared(
         }
     };
     let seconds = t1.elapsed().as_secs_f64();
+    if report.stats.n_wiggles > 0 {
+        notes.push(format!(
+            "{} pair(s) of turning points closer than {} of the range with the response \
+             within {} % between them were ripples of the non-smooth branch, not folds \
+             (kept as regular points)",
+            report.stats.n_wiggles,
+            nlsim_hb::continuation::WIGGLE_PARAMETER,
+            100.0 * nlsim_hb::continuation::WIGGLE_RESPONSE
+        ));
+    }
     let status = report.status;
     let detail = report.detail.replace('\n', ": ");
     if report.branch.points.is_empty() {

@@ -4,7 +4,8 @@
 //!   `λ`, in scaled variables (`x` by the largest amplitude met so far, the parameter by the
 //!   span of the sweep). Predictor along the tangent of `[R_x R_p]`, corrector by Newton on
 //!   `R = 0` plus the arclength condition, steps grown after easy corrections and halved after
-//!   hard or failed ones or a sharp turn. Folds are where the tangent's parameter component
+//!   hard or failed ones or a sharp turn (ripple pairs of turning points on non-smooth
+//!   branches are dismissed, [`WIGGLE_PARAMETER`]). Folds are where the tangent's parameter component
 //!   changes sign (located by the Illinois method along the arc); simple branch points are
 //!   where `det [R_x R_p; tᵀ]` changes sign.
 //! - [`stepped_sine`]: what a test does: frequency after frequency, each solved from the last
@@ -100,6 +101,97 @@ pub struct ContinuationStats {
     pub n_rejected: usize,
     /// Newton iterations over all accepted points.
     pub n_newton: usize,
+    /// Pairs of turning points dismissed as ripples of a non-smooth branch
+    /// ([`WIGGLE_PARAMETER`]).
+    pub n_wiggles: usize,
+}
+
+/// Two successive turning points closer than this share of the parameter range, between
+/// which the response changes by less than [`WIGGLE_RESPONSE`], are a ripple of the branch,
+/// not a pair of folds: near a contact grazing, the truncated harmonics of a non-smooth force
+/// make the branch wiggle over a few 1e-3 of the range (NLvib's example 3 at H = 21 shows
+/// four such pairs at its frequency maximum). Both points are then reported as regular ones.
+pub const WIGGLE_PARAMETER: f64 = 2e-3;
+
+/// Largest relative change of `‖x‖∞` between the two turning points of a ripple.
+pub const WIGGLE_RESPONSE: f64 = 0.1;
+
+/// Dismisses ripples among the folds of `branch`: successive turning points within
+/// [`WIGGLE_PARAMETER`]` · span` of each other with the response within [`WIGGLE_RESPONSE`]
+/// form a cluster; a cluster across which the branch turns (an odd number of turning
+/// points) keeps one fold, at its extreme parameter in the direction the branch entered it,
+/// and one across which it does not turn keeps none. Returns the number of turning points
+/// dismissed, over 2 (the ripple pairs).
+fn dismiss_wiggles(branch: &mut Branch, span: f64) -> usize {
+    let param = |p: &SolutionPoint| match branch.parameter {
+        Parameter::Frequency => p.omega,
+        Parameter::ForceLevel => p.scale,
+    };
+    let folds = branch.folds();
+    let mut dismissed = 0;
+    let mut c = 0;
+    while c < folds.len() {
+        let mut e = c;
+        while e + 1 < folds.len() {
+            let (a, b) = (&branch.points[folds[e]], &branch.points[folds[e + 1]]);
+            let (na, nb) = (norm_inf(&a.x), norm_inf(&b.x));
+            let close = (param(a) - param(b)).abs() <= WIGGLE_PARAMETER * span
+                && (na - nb).abs() <= WIGGLE_RESPONSE * na.max(nb).max(1e-300);
+            if !close {
+                break;
+            }
+            e += 1;
+        }
+        if e > c {
+            let first = folds[c];
+            // Each turning point flips the direction: an odd cluster turns the branch.
+            let before =
+                param(&branch.points[first]) - param(&branch.points[first.saturating_sub(1)]);
+            let turns = (e - c).is_multiple_of(2);
+            // The fold kept is the point of the cluster's stretch of branch with the extreme
+            // parameter (a regular point between ripples may pass the located ones).
+            // The stretch runs on past the last turning point while the branch stays within
+            // the ripple band of the cluster's extreme (a turn back that fell between two
+            // steps was not detected).
+            let n = branch.points.len();
+            let sign = if before > 0.0 { 1.0 } else { -1.0 };
+            let mut extreme = folds[c..=e]
+                .iter()
+                .map(|&i| sign * param(&branch.points[i]))
+                .fold(f64::NEG_INFINITY, f64::max);
+            let mut end = folds[e];
+            while end + 1 < n {
+                let v = sign * param(&branch.points[end + 1]);
+                if v < extreme - WIGGLE_PARAMETER * span {
+                    break;
+                }
+                extreme = extreme.max(v);
+                end += 1;
+            }
+            let stretch = first..=end;
+            let by = |i: &usize, j: &usize| {
+                param(&branch.points[*i]).total_cmp(&param(&branch.points[*j]))
+            };
+            let keep = if !turns {
+                None
+            } else if before > 0.0 {
+                stretch.max_by(by)
+            } else {
+                stretch.min_by(by)
+            };
+            for &i in &folds[c..=e] {
+                branch.points[i].kind = PointKind::Regular;
+            }
+            dismissed += e - c + 1 - usize::from(keep.is_some());
+            if let Some(k) = keep
+                && branch.points[k].kind != PointKind::End
+            {
+                branch.points[k].kind = PointKind::Fold;
+            }
+        }
+        c = e + 1;
+    }
+    dismissed / 2
 }
 
 /// The outcome of [`continuation`] or [`stepped_sine`]: the branch computed so far, how the
@@ -381,6 +473,17 @@ pub fn continuation(
 
 /// [`continuation`] with `progress` called on every accepted point.
 pub fn continuation_with_progress(
+    sys: &HbSystem,
+    cfg: &ContinuationConfig,
+    start: Option<&[f64]>,
+    progress: &mut dyn FnMut(&SolutionPoint),
+) -> Result<ContinuationReport> {
+    let mut report = follow(sys, cfg, start, progress)?;
+    report.stats.n_wiggles = dismiss_wiggles(&mut report.branch, (cfg.to - cfg.from).abs());
+    Ok(report)
+}
+
+fn follow(
     sys: &HbSystem,
     cfg: &ContinuationConfig,
     start: Option<&[f64]>,
@@ -1141,6 +1244,7 @@ pub fn continuation_through(
     let mut detail = String::new();
     for (r, reversed) in legs {
         stats.n_rejected += r.stats.n_rejected;
+        stats.n_wiggles += r.stats.n_wiggles;
         if status.is_converged() && !r.status.is_converged() {
             status = r.status;
             detail = r.detail.clone();
