@@ -178,6 +178,15 @@ fn write_csv(
             if p.located { "located" } else { "end point" }
         );
     }
+    for b in &branch.bifurcations {
+        let _ = writeln!(
+            s,
+            "# bifurcation {} at {:.10e} Hz ({})",
+            b.kind.as_str(),
+            b.omega / (2.0 * std::f64::consts::PI),
+            if b.located { "located" } else { "interpolated" }
+        );
+    }
     for note in &info.notes {
         let _ = writeln!(s, "# note: {note}");
     }
@@ -327,6 +336,41 @@ pub(crate) fn write_group(
             str_attr(&d, "unit", &format!("{}/N", unit(sen.quantity)))?;
             str_attr(&d, "note", "NaN where the harmonic carries no force")?;
         }
+    }
+    if !branch.bifurcations.is_empty() {
+        let gb = g.create_group("bifurcations")?;
+        let kind: Vec<u8> = branch
+            .bifurcations
+            .iter()
+            .map(|b| match b.kind {
+                nlsim_hb::BifurcationKind::Fold => 0,
+                nlsim_hb::BifurcationKind::BranchPoint => 1,
+                nlsim_hb::BifurcationKind::PeriodDoubling => 2,
+                nlsim_hb::BifurcationKind::NeimarkSacker => 3,
+            })
+            .collect();
+        let d = gb.new_dataset_builder().with_data(&kind).create("kind")?;
+        str_attr(
+            &d,
+            "legend",
+            "0 fold, 1 branch point, 2 period doubling, 3 Neimark-Sacker",
+        )?;
+        let hz: Vec<f64> = branch
+            .bifurcations
+            .iter()
+            .map(|b| b.omega / (2.0 * std::f64::consts::PI))
+            .collect();
+        real(&gb, "frequency", &hz, "Hz")?;
+        let level: Vec<f64> = branch.bifurcations.iter().map(|b| b.scale).collect();
+        real(&gb, "level", &level, "1")?;
+        let located: Vec<u8> = branch
+            .bifurcations
+            .iter()
+            .map(|b| u8::from(b.located))
+            .collect();
+        gb.new_dataset_builder()
+            .with_data(&located)
+            .create("located")?;
     }
     let gel = g.create_group("elements")?;
     let nh = sys.harmonics().len();

@@ -522,6 +522,22 @@ impl FrfRun {
                 p.omega / (2.0 * PI)
             ));
         }
+        for bi in branch
+            .bifurcations
+            .iter()
+            .filter(|b| b.kind != nlsim_hb::BifurcationKind::Fold)
+        {
+            out.push(format!(
+                "  {} at {:.6} Hz{}",
+                bi.kind.as_str(),
+                bi.omega / (2.0 * PI),
+                if bi.located {
+                    " (located)"
+                } else {
+                    " (interpolated between points)"
+                }
+            ));
+        }
         for bp in &branch.branch_points {
             out.push(format!(
                 "  branch point near {:.5} Hz",

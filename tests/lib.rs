@@ -5093,3 +5093,218 @@ fn frf_continuation_honours_points_and_max_step() {
         assert!(err.contains(says), "{bad:?}: {err}");
     }
 }
+
+/// Issue 18: NLvib's example 2 (a primary mass with a grounded cubic spring and a light
+/// nonlinear energy sink on a cubic coupling; `m = [1, 0.05]`, `k = [1, 0.0453, 0]`, `d =
+/// [0.002, 0.013, 0]`, cubic 1.0 on DOF 1 and 0.0042 between the DOFs, force 0.11 on DOF 1),
+/// H = 7 from 0.8 to 1.4 rad/s: the two Neimark–Sacker points `nlsim frf` labels from the
+/// Floquet exponents against shooting (RK4 with the variational equations), where the
+/// monodromy matrix of the orbit on the same branch has a complex pair of modulus 1.
+#[test]
+fn nlvib_example2_neimark_sacker_points_match_shooting() {
+    use faer::c64;
+    use faer::linalg::solvers::Solve;
+    use std::f64::consts::PI;
+    let d = scratch("nlvib-ex2");
+    let model = d.join("ex2.toml");
+    std::fs::write(
+        &model,
+        r#"name = "nlvib_ex2"
+[matrices]
+dofs = ["1:u", "2:u"]
+mass = [[1.0, 0.0], [0.0, 0.05]]
+stiffness = [[1.0453, -0.0453], [-0.0453, 0.0453]]
+[damping]
+type = "matrix"
+matrix = [[0.015, -0.013], [-0.013, 0.013]]
+[[element]]
+name = "ground"
+type = "cubic"
+dof = "1:u"
+k3 = 1.0
+[[element]]
+name = "nes"
+type = "cubic"
+dof = "1:u"
+dof2 = "2:u"
+k3 = 0.0042
+[[excitation]]
+name = "f"
+dof = "1:u"
+amplitude = 0.11
+[[sensor]]
+name = "q1"
+dof = "1:u"
+quantity = "displacement"
+[[sensor]]
+name = "q2"
+dof = "2:u"
+quantity = "displacement"
+"#,
+    )
+    .unwrap();
+    let csv = d.join("ex2.csv");
+    let h = 7;
+    let (code, out, err) = nlsim(&[
+        "frf",
+        model.to_str().unwrap(),
+        "--from",
+        &(0.8 / (2.0 * PI)).to_string(),
+        "--to",
+        &(1.4 / (2.0 * PI)).to_string(),
+        "--harmonics",
+        "7",
+        "--out",
+        csv.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let ns: Vec<f64> = text
+        .lines()
+        .filter(|l| l.starts_with("# bifurcation Neimark–Sacker at "))
+        .map(|l| l.split_whitespace().nth(4).unwrap().parse::<f64>().unwrap())
+        .collect();
+    assert_eq!(ns.len(), 2, "{out}");
+    assert!(text.contains("Neimark–Sacker at") && out.contains("Neimark–Sacker at"));
+    // Rows: frequency, then per sensor the harmonics 0..=H.
+    let rows: Vec<(f64, Vec<c64>, Vec<c64>)> = text
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.starts_with("frequency"))
+        .map(|l| {
+            let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
+            let q = |s: usize| -> Vec<c64> {
+                (0..=h)
+                    .map(|k| c64::new(v[5 + 2 * (s * (h + 1) + k)], v[6 + 2 * (s * (h + 1) + k)]))
+                    .collect()
+            };
+            (v[0], q(0), q(1))
+        })
+        .collect();
+    // m ẍ + c ẋ + k x + g(x) = f cos Ωt on the two DOFs, with the flow's derivative.
+    let (m, kk, cc) = (
+        [1.0, 0.05],
+        [[1.0453, -0.0453], [-0.0453, 0.0453]],
+        [[0.015, -0.013], [-0.013, 0.013]],
+    );
+    let rhs = |t: f64, om: f64, z: &[f64; 20]| -> [f64; 20] {
+        let (x, v) = ([z[0], z[1]], [z[2], z[3]]);
+        let r = x[0] - x[1];
+        let g = [x[0].powi(3) + 0.0042 * r.powi(3), -0.0042 * r.powi(3)];
+        let f = [0.11 * (om * t).cos(), 0.0];
+        let mut d = [0.0; 20];
+        for i in 0..2 {
+            d[i] = v[i];
+            d[2 + i] = (f[i]
+                - g[i]
+                - (0..2)
+                    .map(|j| kk[i][j] * x[j] + cc[i][j] * v[j])
+                    .sum::<f64>())
+                / m[i];
+        }
+        // Tangent stiffness of g.
+        let kr = 3.0 * 0.0042 * r * r;
+        let kt = [
+            [kk[0][0] + 3.0 * x[0] * x[0] + kr, kk[0][1] - kr],
+            [kk[1][0] - kr, kk[1][1] + kr],
+        ];
+        for col in 0..4 {
+            let w = &z[4 + 4 * col..8 + 4 * col];
+            for i in 0..2 {
+                d[4 + 4 * col + i] = w[2 + i];
+                d[4 + 4 * col + 2 + i] = -(0..2)
+                    .map(|j| kt[i][j] * w[j] + cc[i][j] * w[2 + j])
+                    .sum::<f64>()
+                    / m[i];
+            }
+        }
+        d
+    };
+    let n = 8000;
+    let flow = |z0: [f64; 4], om: f64| -> ([f64; 4], faer::Mat<f64>) {
+        let hstep = 2.0 * PI / om / n as f64;
+        let mut z = [0.0; 20];
+        z[..4].copy_from_slice(&z0);
+        for c in 0..4 {
+            z[4 + 4 * c + c] = 1.0;
+        }
+        for i in 0..n {
+            let t = i as f64 * hstep;
+            let add = |a: &[f64; 20], b: &[f64; 20], s: f64| -> [f64; 20] {
+                std::array::from_fn(|j| a[j] + s * b[j])
+            };
+            let k1 = rhs(t, om, &z);
+            let k2 = rhs(t + 0.5 * hstep, om, &add(&z, &k1, 0.5 * hstep));
+            let k3 = rhs(t + 0.5 * hstep, om, &add(&z, &k2, 0.5 * hstep));
+            let k4 = rhs(t + hstep, om, &add(&z, &k3, hstep));
+            z = std::array::from_fn(|j| {
+                z[j] + hstep / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
+            });
+        }
+        (
+            [z[0], z[1], z[2], z[3]],
+            faer::Mat::from_fn(4, 4, |i, j| z[4 + 4 * j + i]),
+        )
+    };
+    // Largest Floquet multiplier modulus of the periodic orbit near z0 at Ω, and the orbit.
+    let mu = |z0: [f64; 4], om: f64| -> (f64, [f64; 4]) {
+        let mut z = z0;
+        for _ in 0..20 {
+            let (e, mono) = flow(z, om);
+            let a = faer::Mat::from_fn(4, 4, |i, j| mono[(i, j)] - f64::from(u8::from(i == j)));
+            let r = faer::Mat::from_fn(4, 1, |i, _| z[i] - e[i]);
+            let dz = a.partial_piv_lu().solve(&r);
+            let step: f64 = (0..4).map(|i| dz[(i, 0)].abs()).fold(0.0, f64::max);
+            for i in 0..4 {
+                z[i] += dz[(i, 0)];
+            }
+            if step < 1e-14 {
+                break;
+            }
+        }
+        let (_, mono) = flow(z, om);
+        let ev = mono.eigenvalues().unwrap();
+        (ev.iter().map(|v| v.norm()).fold(0.0, f64::max), z)
+    };
+    let state = |q1: &[c64], q2: &[c64], om: f64| -> [f64; 4] {
+        let x = |q: &[c64]| q.iter().map(|z| z.re).sum::<f64>();
+        let v = |q: &[c64]| {
+            q.iter()
+                .enumerate()
+                .map(|(k, z)| (c64::new(0.0, k as f64 * om) * z).re)
+                .sum::<f64>()
+        };
+        [x(q1), x(q2), v(q1), v(q2)]
+    };
+    for hz in ns {
+        // Secant on |μ|max − 1 from the two branch points around the HB location.
+        let i = (1..rows.len())
+            .find(|&i| (rows[i - 1].0 - hz) * (rows[i].0 - hz) <= 0.0)
+            .unwrap();
+        let near = if (rows[i].0 - hz).abs() < (rows[i - 1].0 - hz).abs() {
+            i
+        } else {
+            i - 1
+        };
+        let om0 = 2.0 * PI * rows[near].0;
+        let mut z = state(&rows[near].1, &rows[near].2, om0);
+        let (mut a, mut b) = (2.0 * PI * hz * (1.0 - 1e-4), 2.0 * PI * hz * (1.0 + 1e-4));
+        let (fa, za) = mu(z, a);
+        z = za;
+        let mut fa = fa - 1.0;
+        let (fb, zb) = mu(z, b);
+        z = zb;
+        let mut fb = fb - 1.0;
+        for _ in 0..30 {
+            let c = b - fb * (b - a) / (fb - fa);
+            let (fc, zc) = mu(z, c);
+            z = zc;
+            (a, fa, b, fb) = (b, fb, c, fc - 1.0);
+            if (b - a).abs() < 1e-13 * b {
+                break;
+            }
+        }
+        let exact = b / (2.0 * PI);
+        eprintln!("Neimark–Sacker: nlsim {hz:.10} Hz, shooting {exact:.10} Hz");
+        assert!((hz - exact).abs() < 1e-8 * exact, "{hz} vs {exact}");
+    }
+}

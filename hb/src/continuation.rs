@@ -90,6 +90,55 @@ pub struct Branch {
     pub points: Vec<SolutionPoint>,
     /// Simple branch points detected.
     pub branch_points: Vec<BranchPoint>,
+    /// Bifurcations read from the Floquet exponents (continuation with stability).
+    pub bifurcations: Vec<Bifurcation>,
+}
+
+/// What a change of stability between two points is (thesis §3.2: Floquet multipliers
+/// `μ = e^{sT}` leaving the unit circle).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BifurcationKind {
+    /// A real multiplier through +1 where the branch turns: a fold.
+    Fold,
+    /// A real multiplier through +1 where the branch does not turn: a branch point.
+    BranchPoint,
+    /// A real multiplier through −1 (an exponent with imaginary part `ω0/2`): period
+    /// doubling.
+    PeriodDoubling,
+    /// A complex pair through the unit circle: Neimark–Sacker (a quasi-periodic branch
+    /// starts).
+    NeimarkSacker,
+}
+
+impl BifurcationKind {
+    /// `fold`, `branch point`, `period doubling` or `Neimark–Sacker`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Fold => "fold",
+            Self::BranchPoint => "branch point",
+            Self::PeriodDoubling => "period doubling",
+            Self::NeimarkSacker => "Neimark–Sacker",
+        }
+    }
+}
+
+/// A bifurcation between two solution points, located where the largest real part of its
+/// class of Floquet exponents crosses zero.
+#[derive(Debug, Clone)]
+pub struct Bifurcation {
+    /// Its kind.
+    pub kind: BifurcationKind,
+    /// Indices of the points around it.
+    pub between: (usize, usize),
+    /// Fundamental frequency (rad/s).
+    pub omega: f64,
+    /// Force level.
+    pub scale: f64,
+    /// Condensed unknowns there.
+    pub x: Vec<f64>,
+    /// `true` when located by the corrector (Illinois on the exponents along the chord),
+    /// `false` when interpolated linearly between the two points.
+    pub located: bool,
 }
 
 /// Counters of a continuation or stepped sine.
@@ -480,6 +529,9 @@ pub fn continuation_with_progress(
 ) -> Result<ContinuationReport> {
     let mut report = follow(sys, cfg, start, progress)?;
     report.stats.n_wiggles = dismiss_wiggles(&mut report.branch, (cfg.to - cfg.from).abs());
+    if cfg.stability {
+        report.branch.bifurcations = label_bifurcations(sys, cfg, &report.branch)?;
+    }
     Ok(report)
 }
 
@@ -526,6 +578,7 @@ fn follow(
         parameter: cfg.parameter,
         points: Vec::new(),
         branch_points: Vec::new(),
+        bifurcations: Vec::new(),
     };
     if !rep.converged() {
         let e = sys.not_converged(om0, sc0, &rep);
@@ -890,6 +943,7 @@ pub fn stepped_sine_with_progress(
                 parameter: Parameter::Frequency,
                 points,
                 branch_points: Vec::new(),
+                bifurcations: Vec::new(),
             };
             return Ok(ContinuationReport::stopped(
                 Status::StepTooSmall,
@@ -937,6 +991,7 @@ pub fn stepped_sine_with_progress(
             parameter: Parameter::Frequency,
             points,
             branch_points: Vec::new(),
+            bifurcations: Vec::new(),
         },
         stats,
         detail: String::new(),
@@ -1238,6 +1293,7 @@ pub fn continuation_through(
         parameter: cfg.parameter,
         points: Vec::new(),
         branch_points: Vec::new(),
+        bifurcations: Vec::new(),
     };
     let mut stats = ContinuationStats::default();
     let mut status = Status::Converged;
@@ -1277,10 +1333,177 @@ pub fn continuation_through(
             }
         }
     }
+    if cfg.stability {
+        branch.bifurcations = label_bifurcations(sys, cfg, &branch)?;
+    }
     Ok(ContinuationReport {
         status,
         branch,
         stats,
         detail,
     })
+}
+
+/// Classes of Floquet exponents by their imaginary part (band `|Im s| ≤ ω0/2`): real
+/// (multiplier real positive), on the band edge (real negative), complex. Per class, the
+/// number with a real part above the stability threshold `1e-6 ω0` and the largest real
+/// part (`−∞` for an empty class), whose zero is the bifurcation.
+fn exponent_classes(st: &Stability, w0: f64) -> [(usize, f64); 3] {
+    let tol = 1e-6 * w0;
+    let mut out = [(0usize, f64::NEG_INFINITY); 3];
+    for s in &st.exponents {
+        let im = s.im.abs();
+        let c = if im <= 1e-6 * w0 {
+            0
+        } else if (im - 0.5 * w0).abs() <= 1e-6 * w0 {
+            1
+        } else {
+            2
+        };
+        out[c].0 += usize::from(s.re > tol);
+        out[c].1 = out[c].1.max(s.re);
+    }
+    out
+}
+
+/// Labels the bifurcations of `branch` (computed with stability under `cfg`): every fold
+/// point, and between successive points every change in the number of unstable exponents
+/// of a class — real ones away from a fold (a branch point), ones on the band edge `ω0/2`
+/// (period doubling), complex ones (Neimark–Sacker) — located where the largest real part
+/// of that class crosses zero, by the Illinois method along the chord
+/// between the two points (each point solved by the corrector, its exponents by Hill's
+/// method); linearly interpolated when the corrector fails or the class changes on the way.
+pub fn label_bifurcations(
+    sys: &HbSystem,
+    cfg: &ContinuationConfig,
+    branch: &Branch,
+) -> Result<Vec<Bifurcation>> {
+    let pts = &branch.points;
+    let mut out = Vec::new();
+    let xs = pts
+        .iter()
+        .map(|p| norm_inf(&p.x))
+        .fold(0.0f64, f64::max)
+        .max(1e-300);
+    let tr = Tracker {
+        sys,
+        cfg,
+        xs,
+        ps: cfg.to - cfg.from,
+    };
+    let param = |p: &SolutionPoint| match cfg.parameter {
+        Parameter::Frequency => p.omega,
+        Parameter::ForceLevel => p.scale,
+    };
+    let scaled = |p: &SolutionPoint| -> Vec<f64> {
+        let mut v: Vec<f64> = p.x.iter().map(|x| x / xs).collect();
+        v.push((param(p) - cfg.from) / tr.ps);
+        v
+    };
+    for (i, p) in pts.iter().enumerate() {
+        if p.kind == PointKind::Fold {
+            out.push(Bifurcation {
+                kind: BifurcationKind::Fold,
+                between: (i.saturating_sub(1), (i + 1).min(pts.len() - 1)),
+                omega: p.omega,
+                scale: p.scale,
+                x: p.x.clone(),
+                located: true,
+            });
+        }
+    }
+    for i in 0..pts.len().saturating_sub(1) {
+        let (a, b) = (&pts[i], &pts[i + 1]);
+        let (Some(sa), Some(sb)) = (&a.stability, &b.stability) else {
+            continue;
+        };
+        let (wa, wb) = (sys.set.base(a.omega), sys.set.base(b.omega));
+        let (ca, cb) = (exponent_classes(sa, wa), exponent_classes(sb, wb));
+        let near_fold = [a.kind, b.kind].contains(&PointKind::Fold);
+        for (class, kind) in [
+            (0, BifurcationKind::BranchPoint),
+            (1, BifurcationKind::PeriodDoubling),
+            (2, BifurcationKind::NeimarkSacker),
+        ] {
+            if ca[class].0 == cb[class].0 || (class == 0 && near_fold) {
+                continue;
+            }
+            let (ya, yb) = (scaled(a), scaled(b));
+            let chord: Vec<f64> = yb.iter().zip(&ya).map(|(b, a)| b - a).collect();
+            let len = chord.iter().map(|v| v * v).sum::<f64>().sqrt();
+            let lin = |t: f64| -> Bifurcation {
+                Bifurcation {
+                    kind,
+                    between: (i, i + 1),
+                    omega: a.omega + t * (b.omega - a.omega),
+                    scale: a.scale + t * (b.scale - a.scale),
+                    x: a.x.iter().zip(&b.x).map(|(u, v)| u + t * (v - u)).collect(),
+                    located: false,
+                }
+            };
+            let (fa, fb) = (ca[class].1, cb[class].1);
+            let t_lin = if fa.is_finite() && fb.is_finite() && fa != fb {
+                (fa / (fa - fb)).clamp(0.0, 1.0)
+            } else {
+                0.5
+            };
+            if !(len > 0.0 && fa.is_finite() && fb.is_finite() && fa * fb < 0.0) {
+                out.push(lin(t_lin));
+                continue;
+            }
+            let d: Vec<f64> = chord.iter().map(|v| v / len).collect();
+            let at = |t: f64| -> Option<(f64, Vec<f64>, f64, f64)> {
+                let pred: Vec<f64> = ya.iter().zip(&d).map(|(a, d)| a + t * len * d).collect();
+                let (yy, _, _) = tr.correct(&pred, &d)?;
+                let (x, par) = tr.unscale(&yy);
+                let (om, sc) = tr.omega_scale(par);
+                let st = sys.stability(&x, om).ok()?;
+                let f = exponent_classes(&st, sys.set.base(om))[class].1;
+                f.is_finite().then_some((f, x, om, sc))
+            };
+            let (mut lo, mut flo, mut hi, mut fhi) = (0.0, fa, 1.0, fb);
+            let mut best = None;
+            let mut side = 0;
+            for _ in 0..60 {
+                if hi - lo <= 1e-10 {
+                    break;
+                }
+                let t = (lo * fhi - hi * flo) / (fhi - flo);
+                let Some((f, x, om, sc)) = at(t) else {
+                    best = None;
+                    break;
+                };
+                best = Some((x, om, sc));
+                if f == 0.0 {
+                    break;
+                }
+                if f.signum() == fhi.signum() {
+                    (hi, fhi) = (t, f);
+                    if side == -1 {
+                        flo *= 0.5;
+                    }
+                    side = -1;
+                } else {
+                    (lo, flo) = (t, f);
+                    if side == 1 {
+                        fhi *= 0.5;
+                    }
+                    side = 1;
+                }
+            }
+            out.push(match best {
+                Some((x, omega, scale)) => Bifurcation {
+                    kind,
+                    between: (i, i + 1),
+                    omega,
+                    scale,
+                    x,
+                    located: true,
+                },
+                None => lin(t_lin),
+            });
+        }
+    }
+    out.sort_by_key(|b| b.between);
+    Ok(out)
 }

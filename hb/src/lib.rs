@@ -34,9 +34,10 @@ pub mod start;
 pub mod system;
 
 pub use continuation::{
-    Branch, BranchPoint, ContinuationConfig, ContinuationReport, ContinuationStats, Parameter,
-    Peak, PointKind, SolutionPoint, continuation, continuation_through, continuation_with_progress,
-    locate_peaks, stepped_sine, stepped_sine_with_progress,
+    Bifurcation, BifurcationKind, Branch, BranchPoint, ContinuationConfig, ContinuationReport,
+    ContinuationStats, Parameter, Peak, PointKind, SolutionPoint, continuation,
+    continuation_through, continuation_with_progress, label_bifurcations, locate_peaks,
+    stepped_sine, stepped_sine_with_progress,
 };
 pub use harmonics::{ForceTerm, Forcing, HarmonicSet};
 pub use linear::{LinearPart, LinearVariation};
