@@ -54,7 +54,7 @@ pub fn subharmonic_content(sys: &HbSystem, x: &[f64]) -> f64 {
 pub const SUBHARMONIC_SHARE: f64 = 1e-2;
 
 /// Phases of the base harmonic tried per backbone amplitude.
-const PHASES: usize = 8;
+pub const PHASES: usize = 8;
 
 /// Searches the frequencies `omegas` (rad/s, in the order given) for a sub-harmonic
 /// solution at force level `scale`: at each, for the (at most three) modes whose linear
