@@ -55,6 +55,8 @@ pub mod modes;
 #[cfg(feature = "io")]
 pub mod mtx;
 #[cfg(feature = "io")]
+pub mod nnm;
+#[cfg(feature = "io")]
 pub mod output;
 #[cfg(feature = "io")]
 pub mod planning;

@@ -20,6 +20,8 @@
 //!   branch-point detection, stepped-sine sweeps up or down, force-level sweeps, branches
 //!   followed from an inner point to both ends, peaks located between points.
 //! - [`start`]: starts for isolated (sub-harmonic) branches from a single-mode backbone.
+//! - [`nnm`]: nonlinear modes (backbones, amplitude-dependent frequency and damping) by the
+//!   extended periodic motion concept.
 //!
 //! Units: SI (s, rad/s, N, m); frequencies given to users in Hz are named `_hz`.
 //! Nothing here prints, reads files or exits.
@@ -29,6 +31,7 @@ pub mod continuation;
 mod dense;
 pub mod harmonics;
 pub mod linear;
+pub mod nnm;
 pub mod stability;
 pub mod start;
 pub mod system;

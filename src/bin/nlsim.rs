@@ -377,6 +377,43 @@ enum Command {
         #[arg(long)]
         report: Option<std::path::PathBuf>,
     },
+    /// A nonlinear mode by the extended periodic motion concept: the free periodic motions
+    /// of mode N followed in amplitude, with the frequency (backbone) and the modal damping
+    /// ratio that the model's damping and dissipative elements give at each amplitude.
+    #[command(allow_negative_numbers = true)]
+    Nnm {
+        /// Model file (.toml) or built-in model, e.g. `ecl_beam`.
+        model: String,
+        /// The linear mode it grows from (1 = the lowest).
+        #[arg(long, default_value_t = 1)]
+        mode: usize,
+        /// Smallest modal amplitude (m √kg: the fundamental's cosine coefficient of the
+        /// mass-normalised modal coordinate).
+        #[arg(long)]
+        from: f64,
+        /// Largest modal amplitude (m √kg).
+        #[arg(long)]
+        to: f64,
+        /// Amplitudes, evenly spaced in their logarithm.
+        #[arg(long, default_value_t = 50)]
+        points: usize,
+        /// Harmonics H of the frequency.
+        #[arg(long, default_value_t = 7)]
+        harmonics: usize,
+        /// Retained modes of the reduced model.
+        #[arg(long, default_value_t = 10)]
+        modes: usize,
+        /// Output file: .h5 (HDF5) or .csv.
+        #[arg(long)]
+        out: Option<std::path::PathBuf>,
+        /// Plot of frequency and damping ratio against amplitude, FILE.svg (default: beside
+        /// --out; the damping ratio in FILE-damping.svg).
+        #[arg(long)]
+        plot: Option<std::path::PathBuf>,
+        /// Element parameter overrides, e.g. `--set tip.k3=6e9` (repeatable).
+        #[arg(long)]
+        set: Vec<String>,
+    },
     /// Run the pipeline on a built-in model, print a readable summary and write a report
     /// folder with plots.
     Demo {
@@ -760,6 +797,29 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 report: report.as_deref(),
             };
             frf(model, &req, set, &outputs, cli)
+        }
+        Command::Nnm {
+            model,
+            mode,
+            from,
+            to,
+            points,
+            harmonics,
+            modes,
+            out,
+            plot,
+            set,
+        } => {
+            let req = nlsim::nnm::NnmRequest {
+                mode: *mode,
+                from: *from,
+                to: *to,
+                points: *points,
+                harmonics: *harmonics,
+                modes: *modes,
+                par: par(cli),
+            };
+            nnm(model, &req, set, (out.as_deref(), plot.as_deref()), cli)
         }
         Command::Demo { model, report } => demo(model, report, cli.quiet),
         Command::Plan {
@@ -1265,6 +1325,73 @@ fn frf(
         out.map_or(String::new(), |p| format!(", written to {}", p.display())),
         run.detail
     )))
+}
+
+fn nnm(
+    spec: &str,
+    req: &nlsim::nnm::NnmRequest,
+    sets: &[String],
+    (out, plot): (Option<&std::path::Path>, Option<&std::path::Path>),
+    cli: &Cli,
+) -> nlsim::Result<()> {
+    req.check()?;
+    if let Some(path) = out {
+        nlsim::output::Format::of(path, nlsim::nnm::HINT)?;
+    }
+    let plot_path = plot
+        .map(|p| p.to_path_buf())
+        .or_else(|| out.map(|p| p.with_extension("svg")));
+    if let Some(p) = &plot_path {
+        nlsim::plot::check_path(p)?;
+    }
+    let model = nlsim::run::load_for_run(spec, sets)?;
+    let show = !cli.quiet && std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let mut count = 0usize;
+    let mut progress = |p: &nlsim::hb::nnm::NnmPoint| {
+        count += 1;
+        if show {
+            eprint!("\r  {count} points, amplitude {:.3e} ", p.amplitude);
+        }
+    };
+    let run = nlsim::nnm::run_nnm(&model, req, &mut progress)?;
+    if show {
+        eprintln!();
+    }
+    let say = |s: String| {
+        if !cli.quiet {
+            out!("{s}");
+        }
+    };
+    for line in run.summary(&model, req) {
+        say(line);
+    }
+    if let Some(path) = out {
+        nlsim::nnm::write_nnm(path, &run, spec, req)?;
+        say(format!("  written to {}", path.display()));
+    }
+    if let Some(p) = plot_path {
+        let [freq, damping] = nlsim::nnm::plots(&run, &model, req);
+        nlsim::plot::write(&p, &freq)?;
+        let stem = p
+            .file_stem()
+            .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+        let ext = p
+            .extension()
+            .map_or_else(|| "svg".into(), |e| e.to_string_lossy().into_owned());
+        let dp = p.with_file_name(format!("{stem}-damping.{ext}"));
+        nlsim::plot::write(&dp, &damping)?;
+        say(format!("  plots {} and {}", p.display(), dp.display()));
+    }
+    if run.report.status.is_converged() {
+        Ok(())
+    } else {
+        Err(nlsim::Error::Failed(format!(
+            "nnm stopped short after {} points{}: {}",
+            run.report.points.len(),
+            out.map_or(String::new(), |p| format!(", written to {}", p.display())),
+            run.report.detail
+        )))
+    }
 }
 
 fn simulate(
