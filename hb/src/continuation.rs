@@ -378,7 +378,35 @@ struct Tracker<'a> {
     ps: f64,
 }
 
-impl Tracker<'_> {
+impl<'a> Tracker<'a> {
+    /// A tracker in the scaled variables of `cfg` with `x` scaled by the largest `‖x‖∞`
+    /// along `branch`: for work between the points of a computed branch.
+    fn for_branch(sys: &'a HbSystem, cfg: &'a ContinuationConfig, branch: &Branch) -> Self {
+        let xs = branch
+            .points
+            .iter()
+            .map(|p| norm_inf(&p.x))
+            .fold(0.0f64, f64::max)
+            .max(1e-300);
+        Self {
+            sys,
+            cfg,
+            xs,
+            ps: cfg.to - cfg.from,
+        }
+    }
+
+    /// Point `p` in the scaled variables `(x / xs, (p − from) / ps)`.
+    fn scaled(&self, p: &SolutionPoint) -> Vec<f64> {
+        let par = match self.cfg.parameter {
+            Parameter::Frequency => p.omega,
+            Parameter::ForceLevel => p.scale,
+        };
+        let mut v: Vec<f64> = p.x.iter().map(|x| x / self.xs).collect();
+        v.push((par - self.cfg.from) / self.ps);
+        v
+    }
+
     fn omega_scale(&self, p: f64) -> (f64, f64) {
         match self.cfg.parameter {
             Parameter::Frequency => (p, self.cfg.fixed),
@@ -1042,27 +1070,8 @@ pub fn locate_peaks(sys: &HbSystem, cfg: &ContinuationConfig, branch: &Branch) -
         .iter()
         .map(|p| sys.sensor_response(&p.x, p.omega, p.scale))
         .collect();
-    let xs = branch
-        .points
-        .iter()
-        .map(|p| norm_inf(&p.x))
-        .fold(0.0f64, f64::max)
-        .max(1e-300);
-    let tr = Tracker {
-        sys,
-        cfg,
-        xs,
-        ps: cfg.to - cfg.from,
-    };
-    let param = |p: &SolutionPoint| match cfg.parameter {
-        Parameter::Frequency => p.omega,
-        Parameter::ForceLevel => p.scale,
-    };
-    let scaled = |p: &SolutionPoint| -> Vec<f64> {
-        let mut v: Vec<f64> = p.x.iter().map(|x| x / xs).collect();
-        v.push((param(p) - cfg.from) / tr.ps);
-        v
-    };
+    let tr = Tracker::for_branch(sys, cfg, branch);
+    let scaled = |p: &SolutionPoint| tr.scaled(p);
     let mut out = Vec::new();
     for s in 0..sys.sensors().len() {
         let top = (0..nk)
@@ -1380,26 +1389,8 @@ pub fn label_bifurcations(
 ) -> Result<Vec<Bifurcation>> {
     let pts = &branch.points;
     let mut out = Vec::new();
-    let xs = pts
-        .iter()
-        .map(|p| norm_inf(&p.x))
-        .fold(0.0f64, f64::max)
-        .max(1e-300);
-    let tr = Tracker {
-        sys,
-        cfg,
-        xs,
-        ps: cfg.to - cfg.from,
-    };
-    let param = |p: &SolutionPoint| match cfg.parameter {
-        Parameter::Frequency => p.omega,
-        Parameter::ForceLevel => p.scale,
-    };
-    let scaled = |p: &SolutionPoint| -> Vec<f64> {
-        let mut v: Vec<f64> = p.x.iter().map(|x| x / xs).collect();
-        v.push((param(p) - cfg.from) / tr.ps);
-        v
-    };
+    let tr = Tracker::for_branch(sys, cfg, branch);
+    let scaled = |p: &SolutionPoint| tr.scaled(p);
     for (i, p) in pts.iter().enumerate() {
         if p.kind == PointKind::Fold {
             out.push(Bifurcation {

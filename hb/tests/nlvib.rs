@@ -10,6 +10,18 @@ use nlsim_reduction::modal::{ReductionConfig, reduce};
 use nlsim_reduction::{EigenConfig, ModeSelection};
 use std::f64::consts::PI;
 
+/// Both modes of a 2-DOF example.
+fn both_modes(model: &Model) -> nlsim_reduction::modal::ReducedModel {
+    let cfg = ReductionConfig {
+        eigen: EigenConfig {
+            selection: ModeSelection::Lowest(2),
+            ..EigenConfig::default()
+        },
+        ..ReductionConfig::default()
+    };
+    reduce(model, &cfg).unwrap()
+}
+
 /// Example 3: the chain `m = [1, 1]`, `k = [0, 1, 1]` (grounded-left, coupling,
 /// grounded-right), `d = 0.03 k`, a unilateral spring of stiffness 100 beyond a gap of 1 on
 /// DOF 1, a force of 0.1 on DOF 2.
@@ -58,14 +70,7 @@ fn example3() -> Model {
 #[test]
 fn example3_has_two_folds_and_no_ripple_folds() {
     let model = example3();
-    let cfg = ReductionConfig {
-        eigen: EigenConfig {
-            selection: ModeSelection::Lowest(2),
-            ..EigenConfig::default()
-        },
-        ..ReductionConfig::default()
-    };
-    let red = reduce(&model, &cfg).unwrap();
+    let red = both_modes(&model);
     let sys = HbSystem::from_model(
         &model,
         &red,
@@ -148,14 +153,7 @@ fn example4_backbone_matches_shooting() {
             })
             .unwrap();
     }
-    let cfg = ReductionConfig {
-        eigen: EigenConfig {
-            selection: ModeSelection::Lowest(2),
-            ..EigenConfig::default()
-        },
-        ..ReductionConfig::default()
-    };
-    let red = reduce(&model, &cfg).unwrap();
+    let red = both_modes(&model);
     let sys = HbSystem::from_model(
         &model,
         &red,
