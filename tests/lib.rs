@@ -39,6 +39,29 @@ fn nlsim(args: &[&str]) -> (i32, String, String) {
     )
 }
 
+/// One classical Runge–Kutta step of `ż = f(t, z)` from `(t, z)` over `h`: the integrator of
+/// the shooting references (global error `(hω)⁴`).
+fn rk4_step<const N: usize>(
+    f: &dyn Fn(f64, &[f64; N]) -> [f64; N],
+    t: f64,
+    z: &[f64; N],
+    h: f64,
+) -> [f64; N] {
+    let add = |d: &[f64; N], s: f64| -> [f64; N] { std::array::from_fn(|j| z[j] + s * d[j]) };
+    let k1 = f(t, z);
+    let k2 = f(t + 0.5 * h, &add(&k1, 0.5 * h));
+    let k3 = f(t + 0.5 * h, &add(&k2, 0.5 * h));
+    let k4 = f(t + h, &add(&k3, h));
+    std::array::from_fn(|j| z[j] + h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]))
+}
+
+/// Runs `nlsim ARGS`, expecting a usage error (exit 2) whose message holds `says`.
+fn usage_error(args: &[&str], says: &str) {
+    let (code, _, err) = nlsim(args);
+    assert_eq!(code, 2, "{args:?}: {err}");
+    assert!(err.contains(says), "{args:?}: expected '{says}' in: {err}");
+}
+
 /// A Python interpreter with h5py (scripts/find-h5py.sh), for the reader checks.
 fn python_h5py() -> String {
     let out = Command::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/find-h5py.sh"))
@@ -4571,17 +4594,7 @@ mod hb_vs_shooting {
             let mut xs = Vec::with_capacity(n);
             for i in 0..n {
                 xs.push(z[0]);
-                let t = i as f64 * h;
-                let add = |z: &[f64; 6], d: &[f64; 6], s: f64| -> [f64; 6] {
-                    std::array::from_fn(|j| z[j] + s * d[j])
-                };
-                let k1 = self.rhs(t, omega, &z);
-                let k2 = self.rhs(t + 0.5 * h, omega, &add(&z, &k1, 0.5 * h));
-                let k3 = self.rhs(t + 0.5 * h, omega, &add(&z, &k2, 0.5 * h));
-                let k4 = self.rhs(t + h, omega, &add(&z, &k3, h));
-                z = std::array::from_fn(|j| {
-                    z[j] + h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
-                });
+                z = rk4_step(&|t, z| self.rhs(t, omega, z), i as f64 * h, &z, h);
             }
             ([z[0], z[1]], [[z[2], z[4]], [z[3], z[5]]], xs)
         }
@@ -5088,9 +5101,7 @@ fn frf_continuation_honours_points_and_max_step() {
     ] {
         let mut args = vec!["frf", "duffing_fig3", "--from", "27", "--to", "36"];
         args.extend_from_slice(&bad);
-        let (code, _, err) = nlsim(&args);
-        assert_eq!(code, 2, "{bad:?}: {err}");
-        assert!(err.contains(says), "{bad:?}: {err}");
+        usage_error(&args, says);
     }
 }
 
@@ -5228,17 +5239,7 @@ quantity = "displacement"
             z[4 + 4 * c + c] = 1.0;
         }
         for i in 0..n {
-            let t = i as f64 * hstep;
-            let add = |a: &[f64; 20], b: &[f64; 20], s: f64| -> [f64; 20] {
-                std::array::from_fn(|j| a[j] + s * b[j])
-            };
-            let k1 = rhs(t, om, &z);
-            let k2 = rhs(t + 0.5 * hstep, om, &add(&z, &k1, 0.5 * hstep));
-            let k3 = rhs(t + 0.5 * hstep, om, &add(&z, &k2, 0.5 * hstep));
-            let k4 = rhs(t + hstep, om, &add(&z, &k3, hstep));
-            z = std::array::from_fn(|j| {
-                z[j] + hstep / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
-            });
+            z = rk4_step(&|t, z| rhs(t, om, z), i as f64 * hstep, &z, hstep);
         }
         (
             [z[0], z[1], z[2], z[3]],
@@ -5375,9 +5376,7 @@ fn nnm_follows_the_ecl_beams_first_bending_mode() {
         if !args.contains(&"--to") {
             args.extend_from_slice(&["--to", "1e-3"]);
         }
-        let (code, _, err) = nlsim(&args);
-        assert_eq!(code, 2, "{bad:?}: {err}");
-        assert!(err.contains(says), "{bad:?}: {err}");
+        usage_error(&args, says);
     }
     let linear = d.join("linear.toml");
     std::fs::write(
@@ -5385,14 +5384,15 @@ fn nnm_follows_the_ecl_beams_first_bending_mode() {
         "[matrices]\ndofs = [\"1:u\"]\nmass = [[1.0]]\nstiffness = [[4.0]]\n",
     )
     .unwrap();
-    let (code, _, err) = nlsim(&[
-        "nnm",
-        linear.to_str().unwrap(),
-        "--from",
-        "1e-5",
-        "--to",
-        "1e-3",
-    ]);
-    assert_eq!(code, 2, "{err}");
-    assert!(err.contains("no nonlinear element"), "{err}");
+    usage_error(
+        &[
+            "nnm",
+            linear.to_str().unwrap(),
+            "--from",
+            "1e-5",
+            "--to",
+            "1e-3",
+        ],
+        "no nonlinear element",
+    );
 }
