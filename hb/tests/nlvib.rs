@@ -253,3 +253,82 @@ fn example4_backbone_matches_shooting() {
     // The backbone hardens: ω grows with the amplitude.
     assert!(rep.points.windows(2).all(|w| w[1].omega > w[0].omega));
 }
+
+/// Example 5: `m = [0.02, 1]`, `k = [0, 40, 600]`, no viscous damping, regularised dry
+/// friction `5 tanh(u̇/0.05)` on DOF 1. Its first nonlinear mode goes from the stuck joint
+/// (DOF 1 held: `ω² = 640`, 4.0263 Hz) to full slip (the free structure's first mode,
+/// `ω² = 583.5`, 3.8446 Hz) with a damping peak between (microslip), and the damping falls
+/// back as the friction force becomes small against the elastic forces: checked against
+/// those closed-form limits.
+#[test]
+fn example5_friction_mode_runs_from_stuck_to_slipping() {
+    let k = vec![vec![40.0, -40.0], vec![-40.0, 640.0]];
+    let mut model = Model::new(
+        "nlvib_ex5",
+        DofMap::scalar(2),
+        SparseSym::diagonal("M", &[0.02, 1.0]).unwrap(),
+        SparseSym::from_dense_rows("K", &k).unwrap(),
+    )
+    .unwrap();
+    model
+        .add_element(
+            NonlinearElement::new(
+                "friction",
+                Law::Coulomb {
+                    fc: 5.0,
+                    v_reg: 0.05,
+                },
+                Coupling::single(0),
+            )
+            .unwrap(),
+        )
+        .unwrap();
+    model
+        .add_excitation(Excitation {
+            name: "f".into(),
+            dof: 1,
+            amplitude: 0.0,
+            harmonics: Vec::new(),
+        })
+        .unwrap();
+    let red = both_modes(&model);
+    let sys = HbSystem::from_model(
+        &model,
+        &red,
+        HarmonicSet::new(7, 1).unwrap(),
+        HbConfig::default(),
+    )
+    .unwrap();
+    let amps: Vec<f64> = (0..=40)
+        .map(|i| 10f64.powf(-3.0 + 4.0 * i as f64 / 40.0))
+        .collect();
+    let rep = nlsim_hb::nnm::nonlinear_mode(&sys, 0, &amps, &mut |_| {}).unwrap();
+    assert!(rep.status.is_converged(), "{}", rep.detail);
+    let hz = |p: &nlsim_hb::nnm::NnmPoint| p.omega / (2.0 * PI);
+    let (first, last) = (&rep.points[0], rep.points.last().unwrap());
+    let stuck = 640f64.sqrt() / (2.0 * PI);
+    // Free structure: det(K − ω² M) = 0, the lower root.
+    let (a, b, c): (f64, f64, f64) = (0.02, -(40.0 + 0.02 * 640.0), 40.0 * 640.0 - 1600.0);
+    let slip = ((-b - (b * b - 4.0 * a * c).sqrt()) / (2.0 * a)).sqrt() / (2.0 * PI);
+    assert!(
+        (hz(first) - stuck).abs() < 1e-4 * stuck,
+        "{} vs {stuck}",
+        hz(first)
+    );
+    assert!(
+        (hz(last) - slip).abs() < 1e-4 * slip,
+        "{} vs {slip}",
+        hz(last)
+    );
+    let peak = rep
+        .points
+        .iter()
+        .map(|p| p.damping_ratio())
+        .fold(0.0f64, f64::max);
+    assert!(peak > 0.02, "microslip damping {peak}");
+    assert!(first.damping_ratio() < 0.1 * peak && last.damping_ratio() < 0.1 * peak);
+    assert!(
+        rep.points.iter().all(|p| p.xi > 0.0),
+        "friction only dissipates"
+    );
+}
