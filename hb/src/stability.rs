@@ -47,6 +47,11 @@ pub struct Stability {
 impl HbSystem {
     /// Hill's method at solution `x` at fundamental `omega` (rad/s).
     pub fn stability(&self, x: &[f64], omega: f64) -> Result<Stability> {
+        self.stability_with(x, omega, Self::hill_real)
+    }
+
+    /// [`HbSystem::stability`] with the Hill eigenvalues `σ = s/ω0` from `hill`.
+    fn stability_with(&self, x: &[f64], omega: f64, hill: HillEigenvalues) -> Result<Stability> {
         let set = self.set;
         let nh = set.len();
         let w0 = set.base(omega);
@@ -126,12 +131,7 @@ impl HbSystem {
             ne,
             w0,
         };
-        let s = if COMPLEX_HILL.with(std::cell::Cell::get) {
-            self.hill_complex(&tangents, &dynamic)
-        } else {
-            self.hill_real(&tangents, &dynamic)
-        }
-        .map_err(|e| Error::Numerical {
+        let s = hill(self, &tangents, &dynamic).map_err(|e| Error::Numerical {
             what: format!("Hill eigenproblem at {:.6} Hz", omega / (2.0 * PI)),
             detail: e,
         })?;
@@ -148,11 +148,10 @@ impl HbSystem {
     }
 }
 
-thread_local! {
-    /// Tests switch to the complex-basis assembly of the Hill matrix (the oracle of the real
-    /// one).
-    static COMPLEX_HILL: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
-}
+/// A Hill eigenvalue solver: [`HbSystem::hill_real`] (or, in tests, the complex-basis
+/// oracle).
+type HillEigenvalues =
+    fn(&HbSystem, &HillTangents<'_>, &[usize]) -> std::result::Result<Vec<c64>, String>;
 
 /// The element tangents of one solution, sampled on the Hill plan's grid.
 struct HillTangents<'a> {
@@ -231,8 +230,14 @@ impl HbSystem {
                 let c = lin.damping[(dynamic[r], dynamic[q])] / w0;
                 for j in 0..nb {
                     for l in 0..nb {
-                        // (Γ∇)_jl = Σ_i Γ_ji ∇_il: ∇ has one entry per column.
-                        let gn: f64 = (0..nb).map(|i| gm[(j, i)] * nabla(i, l)).sum();
+                        // (Γ∇)_jl = Γ_j,i ∇_il for the one row i of column l that ∇ fills:
+                        // s_k (i = l + 1, −k) under a c_k column, c_k (i = l − 1, +k) under
+                        // an s_k one.
+                        let gn = match l {
+                            0 => 0.0,
+                            _ if l % 2 == 1 => -gm[(j, l + 1)] * l.div_ceil(2) as f64,
+                            _ => gm[(j, l - 1)] * (l / 2) as f64,
+                        };
                         let mut v0 = tm[(j, l)] + gn + c * nabla(j, l);
                         let mut v1 = gm[(j, l)];
                         if j == l {
@@ -258,6 +263,7 @@ impl HbSystem {
         a.eigenvalues().map_err(|e| format!("{e:?}"))
     }
 
+    #[cfg(test)]
     /// The Hill problem in the complex-exponential basis `e^{ikω0t}`, `k = −H..H` (the
     /// formulation of the module documentation): the oracle of [`HbSystem::hill_real`].
     fn hill_complex(
@@ -344,18 +350,10 @@ mod tests {
     use super::*;
     use crate::{ContinuationConfig, HarmonicSet, HbConfig, continuation};
     use nlsim_reduction::modal::{ReductionConfig, reduce};
-    use nlsim_reduction::{EigenConfig, ModeSelection};
 
     fn system(name: &str, modes: usize, h: usize) -> HbSystem {
         let model = nlsim_fixtures::build(name, &[]).unwrap().model;
-        let cfg = ReductionConfig {
-            eigen: EigenConfig {
-                selection: ModeSelection::Lowest(modes),
-                ..EigenConfig::default()
-            },
-            ..ReductionConfig::default()
-        };
-        let red = reduce(&model, &cfg).unwrap();
+        let red = reduce(&model, &ReductionConfig::lowest(modes)).unwrap();
         HbSystem::from_model(
             &model,
             &red,
@@ -388,10 +386,9 @@ mod tests {
             let mut unstable = 0;
             for p in branch.points.iter().step_by(3) {
                 let real = sys.stability(&p.x, p.omega).unwrap();
-                COMPLEX_HILL.with(|c| c.set(true));
-                let complex = sys.stability(&p.x, p.omega);
-                COMPLEX_HILL.with(|c| c.set(false));
-                let complex = complex.unwrap();
+                let complex = sys
+                    .stability_with(&p.x, p.omega, HbSystem::hill_complex)
+                    .unwrap();
                 assert_eq!(real.stable, complex.stable, "{name} at {}", p.omega);
                 unstable += usize::from(!real.stable);
                 // Each exponent against its nearest counterpart (the order of a pair with

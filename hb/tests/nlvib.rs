@@ -7,19 +7,11 @@ use nlsim_kernel::{
     SparseSym,
 };
 use nlsim_reduction::modal::{ReductionConfig, reduce};
-use nlsim_reduction::{EigenConfig, ModeSelection};
 use std::f64::consts::PI;
 
 /// Both modes of a 2-DOF example.
 fn both_modes(model: &Model) -> nlsim_reduction::modal::ReducedModel {
-    let cfg = ReductionConfig {
-        eigen: EigenConfig {
-            selection: ModeSelection::Lowest(2),
-            ..EigenConfig::default()
-        },
-        ..ReductionConfig::default()
-    };
-    reduce(model, &cfg).unwrap()
+    reduce(model, &ReductionConfig::lowest(2)).unwrap()
 }
 
 /// Example 3: the chain `m = [1, 1]`, `k = [0, 1, 1]` (grounded-left, coupling,
