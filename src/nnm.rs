@@ -199,14 +199,14 @@ pub fn run_nnm(
     }
     let t0 = Instant::now();
     let reduced = crate::run::Reductions::default().get(&free, modes, false, req.par)?;
-    let system = HbSystem::from_model(&free, &reduced, set, HbConfig::default())?;
     // Within a cluster of equal frequencies (the two bending directions of a symmetric
     // section) any basis is a basis of modes; the free motion needs the one where the
     // cluster's members beyond the rank of its participation at the elements do not move
     // them: those are then linear modes the EPMC leaves at rest instead of a singular
     // direction of its Newton matrix.
     let mut aligned = (*reduced).clone();
-    align_clusters(&mut aligned, system.element_ports());
+    let element_ports = nlsim_reduction::model_port_map(&free, &reduced.ports)?.elements;
+    align_clusters(&mut aligned, &element_ports);
     let system = HbSystem::from_model(&free, &aligned, set, HbConfig::default())?;
     let report = nlsim_hb::nnm::nonlinear_mode(&system, req.mode - 1, &req.amplitudes(), progress)?;
     if report.points.is_empty() {

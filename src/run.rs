@@ -783,11 +783,11 @@ pub fn run_frf_shared(
             ));
         }
     }
+    let responses = crate::frf::responses(&system, &branch);
     let peaks = match &cfg {
-        Some(c) => nlsim_hb::locate_peaks(&system, c, &branch),
+        Some(c) => nlsim_hb::locate_peaks(&system, c, &branch, &responses),
         None => Vec::new(),
     };
-    let responses = crate::frf::responses(&system, &branch);
     Ok(FrfRun {
         system,
         branch,

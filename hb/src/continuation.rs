@@ -555,11 +555,22 @@ pub fn continuation_with_progress(
     start: Option<&[f64]>,
     progress: &mut dyn FnMut(&SolutionPoint),
 ) -> Result<ContinuationReport> {
-    let mut report = follow(sys, cfg, start, progress)?;
-    report.stats.n_wiggles = dismiss_wiggles(&mut report.branch, (cfg.to - cfg.from).abs());
+    let mut report = follow_smoothed(sys, cfg, start, progress)?;
     if cfg.stability {
         report.branch.bifurcations = label_bifurcations(sys, cfg, &report.branch)?;
     }
+    Ok(report)
+}
+
+/// The branch with its ripple folds dismissed, not yet labelled.
+fn follow_smoothed(
+    sys: &HbSystem,
+    cfg: &ContinuationConfig,
+    start: Option<&[f64]>,
+    progress: &mut dyn FnMut(&SolutionPoint),
+) -> Result<ContinuationReport> {
+    let mut report = follow(sys, cfg, start, progress)?;
+    report.stats.n_wiggles = dismiss_wiggles(&mut report.branch, (cfg.to - cfg.from).abs());
     Ok(report)
 }
 
@@ -1058,18 +1069,19 @@ pub struct Peak {
 /// with), each point solved by the continuation's corrector, and `|Y_k|` is maximised along
 /// it by Brent's method (parabolic steps with golden-section safeguards) to `1e-9` of the
 /// chord. Since `|Y_k|` is quadratic at its maximum, the located value is as accurate as the
-/// solution of `R = 0` (tolerance [`crate::HbConfig::rtol`]).
-pub fn locate_peaks(sys: &HbSystem, cfg: &ContinuationConfig, branch: &Branch) -> Vec<Peak> {
-    let n_pts = branch.points.len();
+/// solution of `R = 0` (tolerance [`crate::HbConfig::rtol`]). `y` holds the sensor
+/// responses of the points ([`HbSystem::sensor_response`]), computed once by the caller.
+pub fn locate_peaks(
+    sys: &HbSystem,
+    cfg: &ContinuationConfig,
+    branch: &Branch,
+    y: &[Mat<faer::c64>],
+) -> Vec<Peak> {
+    let n_pts = branch.points.len().min(y.len());
     if n_pts == 0 {
         return Vec::new();
     }
     let nk = sys.harmonics().h + 1;
-    let y: Vec<Mat<faer::c64>> = branch
-        .points
-        .iter()
-        .map(|p| sys.sensor_response(&p.x, p.omega, p.scale))
-        .collect();
     let tr = Tracker::for_branch(sys, cfg, branch);
     let scaled = |p: &SolutionPoint| tr.scaled(p);
     let mut out = Vec::new();
@@ -1260,7 +1272,8 @@ pub fn continuation_through(
         c.ds = (cfg.ds * f).min(0.5);
         c.ds_max = (cfg.ds_max * f).min(0.5).max(c.ds);
         c.ds_min = (cfg.ds_min * f).min(c.ds);
-        continuation_with_progress(sys, &c, Some(xa), progress).map(Some)
+        // Labelled once, on the assembled branch.
+        follow_smoothed(sys, &c, Some(xa), progress).map(Some)
     };
     let turned = |r: &ContinuationReport| {
         r.status.is_converged()
