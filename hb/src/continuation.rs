@@ -407,6 +407,16 @@ impl<'a> Tracker<'a> {
         v
     }
 
+    /// The branch point on the hyperplane normal to the unit chord direction `d` at distance
+    /// `s` from the scaled point `a`, solved by the corrector: `(x, Ω, λ)`.
+    fn on_chord(&self, a: &[f64], d: &[f64], s: f64) -> Option<(Vec<f64>, f64, f64)> {
+        let pred: Vec<f64> = a.iter().zip(d).map(|(a, d)| a + s * d).collect();
+        let (y, _, _) = self.correct(&pred, d)?;
+        let (x, par) = self.unscale(&y);
+        let (om, sc) = self.omega_scale(par);
+        Some((x, om, sc))
+    }
+
     fn omega_scale(&self, p: f64) -> (f64, f64) {
         match self.cfg.parameter {
             Parameter::Frequency => (p, self.cfg.fixed),
@@ -1117,11 +1127,7 @@ pub fn locate_peaks(
                 if len > 0.0 {
                     let d: Vec<f64> = chord.iter().map(|v| v / len).collect();
                     let at = |t: f64| -> Option<(f64, Vec<f64>, f64, f64)> {
-                        let pred: Vec<f64> =
-                            a.iter().zip(&d).map(|(a, d)| a + t * len * d).collect();
-                        let (yy, _, _) = tr.correct(&pred, &d)?;
-                        let (x, par) = tr.unscale(&yy);
-                        let (om, sc) = tr.omega_scale(par);
+                        let (x, om, sc) = tr.on_chord(&a, &d, t * len)?;
                         let val = sys.sensor_response(&x, om, sc)[(s, k)].norm();
                         val.is_finite().then_some((val, x, om, sc))
                     };
@@ -1457,10 +1463,7 @@ pub fn label_bifurcations(
             }
             let d: Vec<f64> = chord.iter().map(|v| v / len).collect();
             let at = |t: f64| -> Option<(f64, Vec<f64>, f64, f64)> {
-                let pred: Vec<f64> = ya.iter().zip(&d).map(|(a, d)| a + t * len * d).collect();
-                let (yy, _, _) = tr.correct(&pred, &d)?;
-                let (x, par) = tr.unscale(&yy);
-                let (om, sc) = tr.omega_scale(par);
+                let (x, om, sc) = tr.on_chord(&ya, &d, t * len)?;
                 let st = sys.stability(&x, om).ok()?;
                 let f = exponent_classes(&st, sys.set.base(om))[class].1;
                 f.is_finite().then_some((f, x, om, sc))
