@@ -937,7 +937,7 @@ pub fn located_peaks_table(sys: &HbSystem, peaks: &[nlsim_hb::Peak]) -> crate::r
                 if p.located {
                     "located between points"
                 } else {
-                    "end of the range"
+                    "an end of the computed branch"
                 }
                 .to_string(),
             ]

@@ -19,6 +19,24 @@ pub const HINT: &str = ".h5 (HDF5, complex harmonics) or .csv (one row per ampli
 /// Most amplitudes of one nonlinear mode.
 pub const MAX_NNM_POINTS: usize = 100_000;
 
+/// Most unknowns `modes · (2H + 1)` of the modal harmonic balance behind a nonlinear mode:
+/// its Newton matrix is dense, and a handful of them are alive at once (4 000 unknowns:
+/// 128 MB each, a 2·10¹⁰-flop factorisation per iteration).
+pub const MAX_NNM_UNKNOWNS: usize = 4_000;
+
+fn check_unknowns(modes: usize, harmonics: usize) -> Result<()> {
+    let n = modes.saturating_mul(2 * harmonics + 1);
+    if n > MAX_NNM_UNKNOWNS {
+        return Err(Error::Usage(format!(
+            "nonlinear mode request: {modes} modes × {} harmonic coefficients = {n} unknowns, \
+             more than {MAX_NNM_UNKNOWNS} (the Newton matrix is dense): retain fewer modes \
+             (--modes) or harmonics",
+            2 * harmonics + 1
+        )));
+    }
+    Ok(())
+}
+
 /// A nonlinear mode to compute (the options of `nlsim nnm`).
 #[derive(Debug, Clone)]
 pub struct NnmRequest {
@@ -71,6 +89,7 @@ impl NnmRequest {
                 crate::run::MAX_FRF_HARMONICS
             )));
         }
+        check_unknowns(self.modes, self.harmonics)?;
         HarmonicSet::new(self.harmonics, 1).map_err(|e| usage(e.to_string()))
     }
 
@@ -204,6 +223,8 @@ pub fn run_nnm(
     // cluster's members beyond the rank of its participation at the elements do not move
     // them: those are then linear modes the EPMC leaves at rest instead of a singular
     // direction of its Newton matrix.
+    // A cluster kept whole may add modes beyond the request.
+    check_unknowns(reduced.n_modes(), req.harmonics)?;
     let mut aligned = (*reduced).clone();
     let element_ports = nlsim_reduction::model_port_map(&free, &reduced.ports)?.elements;
     align_clusters(&mut aligned, &element_ports);

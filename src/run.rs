@@ -369,12 +369,20 @@ impl FrfRequest {
                 "points {p} must be from 2 to {MAX_FRF_POINTS} (each point keeps its solution)"
             )));
         }
-        if let Some(h) = self.max_step_hz
-            && !(h > 0.0 && h.is_finite())
-        {
-            return Err(usage(format!(
-                "max_step_hz {h} must be a positive frequency step in Hz"
-            )));
+        if let Some(h) = self.max_step_hz {
+            if !(h > 0.0 && h.is_finite()) {
+                return Err(usage(format!(
+                    "max_step_hz {h} must be a positive frequency step in Hz"
+                )));
+            }
+            let needed = (self.to_hz - self.from_hz).abs() / h;
+            if needed > MAX_FRF_POINTS as f64 {
+                return Err(usage(format!(
+                    "max_step_hz {h} over {} Hz needs {needed:.3e} points, more than \
+                     {MAX_FRF_POINTS}",
+                    (self.to_hz - self.from_hz).abs()
+                )));
+            }
         }
         if self.mode != SweepMode::Continuation
             && (self.max_step_hz.is_some() || self.start != FrfStart::Auto)
@@ -580,7 +588,7 @@ impl FrfRun {
                     if p.located {
                         "located"
                     } else {
-                        "at the end of the range"
+                        "at an end of the computed branch"
                     },
                 ),
                 None => {

@@ -445,10 +445,10 @@ impl Model {
                      phase reference)",
                 ));
             }
-            if ex.harmonics[..j]
-                .iter()
-                .any(|o| o.numerator * h.denominator == h.numerator * o.denominator)
-            {
+            if ex.harmonics[..j].iter().any(|o| {
+                u64::from(o.numerator) * u64::from(h.denominator)
+                    == u64::from(h.numerator) * u64::from(o.denominator)
+            }) {
                 return Err(Error::invalid(location, "this order is given twice"));
             }
         }
