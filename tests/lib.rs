@@ -5092,6 +5092,7 @@ fn frf_continuation_honours_points_and_max_step() {
     assert!(step0 > 0.002, "{step0}");
     for (bad, says) in [
         (vec!["--max-step", "0"], "max_step_hz 0"),
+        (vec!["--max-step", "1e-9"], "needs 9.000e9 points"),
         (vec!["--points", "1"], "points 1"),
         (
             vec!["--mode", "step-up", "--max-step", "0.1"],
@@ -5370,6 +5371,10 @@ fn nnm_follows_the_ecl_beams_first_bending_mode() {
         (vec!["--mode", "0"], "mode counts from 1"),
         (vec!["--to", "-1"], "positive modal amplitude"),
         (vec!["--points", "1"], "points 1"),
+        (
+            vec!["--modes", "1000", "--harmonics", "256"],
+            "513000 unknowns, more than 4000",
+        ),
     ] {
         let mut args = vec!["nnm", "ecl_beam", "--from", "1e-5"];
         args.extend_from_slice(&bad);
