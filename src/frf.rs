@@ -375,18 +375,23 @@ pub(crate) fn write_group(
     let gel = g.create_group("elements")?;
     let nh = sys.harmonics().len();
     for (e, el) in sys.elements().iter().enumerate() {
+        let c = sys.coordinates(e);
         let data: Vec<f64> = branch
             .points
             .iter()
-            .flat_map(|p| p.x[e * nh..(e + 1) * nh].iter().copied())
+            .flat_map(|p| p.x[c.start * nh..c.end * nh].iter().copied())
             .collect();
-        let d = gel.new_dataset::<f64>().shape((n, nh)).create(el.name())?;
+        // A coupled law's coordinates side by side: (points, coordinates · (2H+1)).
+        let d = gel
+            .new_dataset::<f64>()
+            .shape((n, c.len() * nh))
+            .create(el.name())?;
         d.write_raw(&data)?;
         str_attr(&d, "unit", "m")?;
         str_attr(
             &d,
             "layout",
-            "per point: c0, c1, s1, ..., cH, sH with u(t) = c0 + sum c_k cos(k w0 t) + s_k sin(k w0 t)",
+            "per point: c0, c1, s1, ..., cH, sH with u(t) = c0 + sum c_k cos(k w0 t) + s_k sin(k w0 t); one such block per coordinate of a coupled law",
         )?;
     }
     Ok(())

@@ -226,7 +226,11 @@ pub fn run_nnm(
     // A cluster kept whole may add modes beyond the request.
     check_unknowns(reduced.n_modes(), req.harmonics)?;
     let mut aligned = (*reduced).clone();
-    let element_ports = nlsim_reduction::model_port_map(&free, &reduced.ports)?.elements;
+    let element_ports: Vec<usize> = nlsim_reduction::model_port_map(&free, &reduced.ports)?
+        .element_coordinates
+        .into_iter()
+        .flatten()
+        .collect();
     align_clusters(&mut aligned, &element_ports);
     let system = HbSystem::from_model(&free, &aligned, set, HbConfig::default())?;
     let report = nlsim_hb::nnm::nonlinear_mode(&system, req.mode - 1, &req.amplitudes(), progress)?;

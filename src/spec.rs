@@ -340,7 +340,12 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
     }
     for mut e in elements {
         let el = read_element(&mut e, model.dofs())?;
-        e.finish("an element takes name, type, dof, dof2 and the parameters of its type")?;
+        e.finish(if el.is_coupled() {
+            "a coupled_polynomial element takes name, type, dofs and coefficients \
+             k<i>_<p1>_..._<pm> (one power per coordinate)"
+        } else {
+            "an element takes name, type, dof, dof2 and the parameters of its type"
+        })?;
         model.add_element(el).map_err(|err| e.at_table(err))?;
     }
     for (i, mut x) in excitation.into_iter().enumerate() {
@@ -664,6 +669,77 @@ fn read_dof(t: &mut Tab<'_, '_>, key: &str, dofs: &DofMap) -> Result<Option<usiz
     }
 }
 
+/// A `coupled_polynomial` element: `dofs = ["1:ux", "2:ux"]` (its coordinates `u1, u2, …`, one
+/// DOF each) and coefficients `k<i>_<p1>_…_<pm>` (of `u1^p1 … um^pm` in the force on `ui`).
+fn read_coupled_element(
+    t: &mut Tab<'_, '_>,
+    name: &str,
+    dofs: &DofMap,
+) -> Result<NonlinearElement> {
+    let v = t.get("dofs").ok_or_else(|| {
+        t.missing(
+            "dofs",
+            "the DOFs of the coordinates u1, u2, ..., e.g. dofs = [\"1:ux\", \"2:ux\"]",
+        )
+    })?;
+    let DeValue::Array(list) = v.get_ref() else {
+        return Err(t.err(
+            v,
+            "dofs",
+            "expected a list of DOF labels, e.g. [\"1:ux\", \"2:ux\"]",
+        ));
+    };
+    let mut couplings = Vec::with_capacity(list.len());
+    for l in list.iter() {
+        let DeValue::String(label) = l.get_ref() else {
+            return Err(t.err(l, "dofs", "expected DOF labels such as \"12:uz\""));
+        };
+        let d = dofs
+            .find(label)
+            .map_err(|e| t.err(l, "dofs", e.to_string()))?;
+        couplings.push(Coupling::single(d));
+    }
+    let mut pairs: Vec<(String, f64)> = Vec::new();
+    for (k, v) in t.t.iter() {
+        let key = k.get_ref().as_ref();
+        if matches!(key, "name" | "type" | "dofs") {
+            continue;
+        }
+        let Some((_, powers)) = nlsim_kernel::MonomialTerm::parse_name(key) else {
+            continue;
+        };
+        if powers.len() != couplings.len() {
+            return Err(t.err(
+                v,
+                key,
+                format!(
+                    "has {} powers but the element has {} coordinates (dofs): one power per \
+                     coordinate, e.g. k1_2_1 for u1^2 u2",
+                    powers.len(),
+                    couplings.len()
+                ),
+            ));
+        }
+        let coef = number(v).ok_or_else(|| t.err(v, key, "expected a finite number"))?;
+        pairs.push((key.to_string(), coef));
+        t.used.push(key.to_string());
+    }
+    let named: Vec<(&str, f64)> = pairs.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+    let located = |t: &Tab<'_, '_>, e: nlsim_kernel::Error| {
+        if let nlsim_kernel::Error::InvalidParameter { name, .. } = &e
+            && let Some((_, p)) = name.rsplit_once('.')
+            && let Some((k, v)) = t.t.iter().find(|(k, _)| k.get_ref().as_ref() == p)
+        {
+            return t
+                .doc
+                .err(k.span().start..v.span().end, &t.key(p), e.to_string());
+        }
+        t.doc.err(t.span.clone(), &t.path, e.to_string())
+    };
+    let law = Law::from_named(name, "coupled_polynomial", &named).map_err(|e| located(t, e))?;
+    NonlinearElement::coupled(name, law, couplings).map_err(|e| located(t, e))
+}
+
 fn read_element(t: &mut Tab<'_, '_>, dofs: &DofMap) -> Result<NonlinearElement> {
     let (name, _) = t
         .str("name")?
@@ -671,9 +747,13 @@ fn read_element(t: &mut Tab<'_, '_>, dofs: &DofMap) -> Result<NonlinearElement> 
     let (kind, kspan) = t.str("type")?.ok_or_else(|| {
         t.missing(
             "type",
-            "cubic, polynomial, clearance, bump_stop, quadratic_damping, coulomb or jenkins",
+            "cubic, polynomial, clearance, bump_stop, quadratic_damping, coulomb, jenkins or \
+             coupled_polynomial",
         )
     })?;
+    if kind == "coupled_polynomial" {
+        return read_coupled_element(t, &name, dofs);
+    }
     let a = read_dof(t, "dof", dofs)?
         .ok_or_else(|| t.missing("dof", "the DOF the element acts on, e.g. dof = \"21:uz\""))?;
     let coupling = match read_dof(t, "dof2", dofs)? {
@@ -736,7 +816,7 @@ fn read_element(t: &mut Tab<'_, '_>, dofs: &DofMap) -> Result<NonlinearElement> 
             return Err(t.doc.err(
                 kspan,
                 &t.key("type"),
-                format!("unknown element type '{other}'; use cubic, polynomial, clearance, bump_stop, quadratic_damping, coulomb or jenkins"),
+                format!("unknown element type '{other}'; use cubic, polynomial, clearance, bump_stop, quadratic_damping, coulomb, jenkins or coupled_polynomial"),
             ));
         }
     };

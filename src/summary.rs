@@ -61,21 +61,33 @@ pub fn model_summary(model: &Model, source: &str, validation: Option<&Validation
         let _ = writeln!(s, "  elements     none (a linear model)");
     }
     for (i, e) in model.elements().iter().enumerate() {
-        let at: Vec<String> = e
-            .coupling()
-            .dofs()
-            .iter()
-            .zip(e.coupling().weights())
-            .map(|(&d, &w)| {
-                if w == 1.0 {
-                    dofs.describe(d)
-                } else if w == -1.0 {
-                    format!("-{}", dofs.describe(d))
-                } else {
-                    format!("{w}*{}", dofs.describe(d))
-                }
-            })
-            .collect();
+        let coordinate = |c: &nlsim_kernel::Coupling| -> String {
+            c.dofs()
+                .iter()
+                .zip(c.weights())
+                .map(|(&d, &w)| {
+                    if w == 1.0 {
+                        dofs.describe(d)
+                    } else if w == -1.0 {
+                        format!("-{}", dofs.describe(d))
+                    } else {
+                        format!("{w}*{}", dofs.describe(d))
+                    }
+                })
+                .collect::<Vec<_>>()
+                .join(" + ")
+        };
+        let at = if e.is_coupled() {
+            let c: Vec<String> = e
+                .couplings()
+                .iter()
+                .enumerate()
+                .map(|(j, c)| format!("u{} = {}", j + 1, coordinate(c)))
+                .collect();
+            c.join(", ")
+        } else {
+            coordinate(e.coupling())
+        };
         let params: Vec<String> = (0..e.law().n_params())
             .map(|p| {
                 format!(
@@ -96,7 +108,7 @@ pub fn model_summary(model: &Model, source: &str, validation: Option<&Validation
             "{head}{} ({}) on {}: {}",
             e.name(),
             e.law().kind(),
-            at.join(" + "),
+            at,
             params.join(", ")
         );
     }

@@ -1383,7 +1383,7 @@ fn exponent_classes(st: &Stability, w0: f64) -> [(usize, f64); 3] {
         let im = s.im.abs();
         let c = if im <= 1e-6 * w0 {
             0
-        } else if (im - 0.5 * w0).abs() <= 1e-6 * w0 {
+        } else if (im - 0.5 * w0).abs() <= crate::stability::EDGE * w0 {
             1
         } else {
             2
@@ -1392,6 +1392,21 @@ fn exponent_classes(st: &Stability, w0: f64) -> [(usize, f64); 3] {
         out[c].1 = out[c].1.max(s.re);
     }
     out
+}
+
+/// The function whose zero locates a change of class `class` ([`exponent_classes`]): the
+/// class's largest real part, except for the band edge, where the window `|Im s| ≥ 0.45 ω0`
+/// is used: a complex pair near `−1` that collides on the negative real axis and leaves the
+/// unit circle through `−1` between two points has no edge exponent at one of them, and
+/// the largest real part over the window is continuous through the collision.
+fn class_locator(st: &Stability, w0: f64, class: usize) -> f64 {
+    if class != 1 {
+        return exponent_classes(st, w0)[class].1;
+    }
+    st.exponents
+        .iter()
+        .filter(|s| s.im.abs() >= 0.45 * w0)
+        .fold(f64::NEG_INFINITY, |m, s| m.max(s.re))
 }
 
 /// Labels the bifurcations of `branch` (computed with stability under `cfg`): every fold
@@ -1451,7 +1466,7 @@ pub fn label_bifurcations(
                     located: false,
                 }
             };
-            let (fa, fb) = (ca[class].1, cb[class].1);
+            let (fa, fb) = (class_locator(sa, wa, class), class_locator(sb, wb, class));
             let t_lin = if fa.is_finite() && fb.is_finite() && fa != fb {
                 (fa / (fa - fb)).clamp(0.0, 1.0)
             } else {
@@ -1465,7 +1480,7 @@ pub fn label_bifurcations(
             let at = |t: f64| -> Option<(f64, Vec<f64>, f64, f64)> {
                 let (x, om, sc) = tr.on_chord(&ya, &d, t * len)?;
                 let st = sys.stability(&x, om).ok()?;
-                let f = exponent_classes(&st, sys.set.base(om))[class].1;
+                let f = class_locator(&st, sys.set.base(om), class);
                 f.is_finite().then_some((f, x, om, sc))
             };
             let (mut lo, mut flo, mut hi, mut fhi) = (0.0, fa, 1.0, fb);

@@ -53,12 +53,12 @@ impl HbSystem {
     /// [`HbSystem::stability`] with the Hill eigenvalues `σ = s/ω0` from `hill`.
     fn stability_with(&self, x: &[f64], omega: f64, hill: HillEigenvalues) -> Result<Stability> {
         let set = self.set;
-        let nh = set.len();
         let w0 = set.base(omega);
         let lin = &self.linear;
         let nm = lin.n_modes();
         let cutoff = ((set.h + 1) as f64 * w0).powi(2);
-        let ne = self.elements.len();
+        // Element coordinates (a coupled law has several).
+        let ne = self.n_coordinates();
         // Modes that no element moves keep their linear (stable) poles: with proportional
         // damping they decouple and are left out.
         let reach: Vec<f64> = (0..nm)
@@ -95,30 +95,40 @@ impl HbSystem {
         // Element tangents on one common grid.
         let plan = self.hill_plan();
         let n = plan.n;
-        let mut kt = vec![vec![0.0; n]; ne];
+        // K_t(t) (coordinates × coordinates × samples): diagonal but for the blocks of
+        // coupled laws; ∂g/∂u̇ per coordinate.
+        let mut kt = vec![vec![vec![0.0; n]; ne]; ne];
         let mut ct = vec![vec![0.0; n]; ne];
-        for e in 0..ne {
-            let r = plan.evaluate(self.elements[e].law(), &x[e * nh..(e + 1) * nh], w0, false);
-            kt[e] = r.stiffness;
-            ct[e] = r.damping;
+        for (e, el) in self.elements.iter().enumerate() {
+            let c = self.coordinates(e);
+            let r = plan.evaluate_element(el.law(), &x[self.unknowns(e)], w0, false);
+            let m = c.len();
+            if m == 1 {
+                kt[c.start][c.start] = r.stiffness;
+                ct[c.start] = r.damping;
+            } else {
+                for a in 0..m {
+                    for b in 0..m {
+                        kt[c.start + a][c.start + b]
+                            .copy_from_slice(&r.stiffness[(a * m + b) * n..(a * m + b + 1) * n]);
+                    }
+                }
+            }
         }
-        // K_eff(t) per sample (elements × elements), then its harmonics 0..2H.
-        let mut keff = vec![vec![vec![0.0; n]; ne]; ne];
-        for i in 0..n {
-            if quasi_static {
+        // K_eff(t) per sample (coordinates × coordinates), then its harmonics 0..2H.
+        let mut keff = kt.clone();
+        if quasi_static {
+            for i in 0..n {
                 let a = Mat::from_fn(ne, ne, |r, c| {
-                    f64::from(u8::from(r == c)) + kt[r][i] * d[(r, c)]
+                    f64::from(u8::from(r == c))
+                        + (0..ne).map(|l| kt[r][l][i] * d[(l, c)]).sum::<f64>()
                 });
-                let k = Mat::from_fn(ne, ne, |r, c| if r == c { kt[r][i] } else { 0.0 });
+                let k = Mat::from_fn(ne, ne, |r, c| kt[r][c][i]);
                 let sol = a.partial_piv_lu().solve(&k);
                 for r in 0..ne {
                     for c in 0..ne {
                         keff[r][c][i] = sol[(r, c)];
                     }
-                }
-            } else {
-                for r in 0..ne {
-                    keff[r][r][i] = kt[r][i];
                 }
             }
         }
@@ -137,7 +147,7 @@ impl HbSystem {
         })?;
         let mut all: Vec<c64> = s.iter().map(|v| v * w0).collect();
         all.sort_by(|a, b| a.im.abs().total_cmp(&b.im.abs()));
-        let exponents: Vec<c64> = all.into_iter().take(2 * m).collect();
+        let exponents = representatives(&all, m, w0);
         let max_real = exponents.iter().fold(f64::NEG_INFINITY, |a, s| a.max(s.re));
         Ok(Stability {
             stable: max_real < 1e-6 * w0,
@@ -145,6 +155,41 @@ impl HbSystem {
             exponents,
             modes: dynamic,
         })
+    }
+}
+
+/// Half the width of the band edge `|Im s| = ω0/2` in units of `ω0`: exponents this close to
+/// it are taken to sit on it (a real negative multiplier, whose Hill eigenvalues the
+/// truncation moves off the edge by about the truncation error).
+pub(crate) const EDGE: f64 = 1e-3;
+
+/// The `2m` Floquet exponents among Hill's eigenvalues `all` (sorted by `|Im|`): one
+/// representative per multiplier. Inside the band `|Im s| < ω0/2` these are the central
+/// copies. On its edge a real negative multiplier `−e^{σT}` shows as the pair `σ ± iω0/2`
+/// (each the other's copy shifted by `ω0`): only the member with `Im > 0` is kept. Picking
+/// the `2m` smallest `|Im|` instead would, once two multipliers sit on the negative real axis
+/// (between two period doublings), fill the last slots with both members of one pair and
+/// drop the other multiplier, and stability would flicker with rounding. Falls back to the
+/// `2m` smallest `|Im|` when the count does not come out.
+fn representatives(all: &[c64], m: usize, w0: f64) -> Vec<c64> {
+    let half = 0.5 * w0;
+    let picked: Vec<c64> = all
+        .iter()
+        .copied()
+        .filter(|s| {
+            let d = s.im.abs() - half;
+            if d.abs() <= EDGE * w0 {
+                s.im > 0.0
+            } else {
+                d < 0.0
+            }
+        })
+        .take(2 * m)
+        .collect();
+    if picked.len() == 2 * m {
+        picked
+    } else {
+        all.iter().copied().take(2 * m).collect()
     }
 }
 

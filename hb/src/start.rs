@@ -99,18 +99,25 @@ pub fn find_subharmonic(
             if top == 0.0 {
                 continue;
             }
-            // ω²(q) − ω0², q the modal amplitude, with the element coordinates φ_e q.
+            // ω²(q) − ω0², q the modal amplitude, with the element coordinates φ_e q: the
+            // first harmonic of the modal force Σ_e φ_e G_e,1 / q.
             let gap = |q: f64| -> f64 {
                 let mut k = w2[r];
                 for (e, el) in sys.elements().iter().enumerate() {
-                    let a = amp[e] * q;
-                    if a == 0.0 {
+                    let c = sys.coordinates(e);
+                    if c.clone().all(|j| amp[j] == 0.0) || q == 0.0 {
                         continue;
                     }
-                    let mut xe = vec![0.0; nh];
-                    xe[1] = a;
-                    let g = plans[e].evaluate(el.law(), &xe, w0, false).force;
-                    k += amp[e] * amp[e] * g[1] / a;
+                    let mut xe = vec![0.0; c.len() * nh];
+                    for (a, j) in c.clone().enumerate() {
+                        xe[a * nh + 1] = amp[j] * q;
+                    }
+                    let g = plans[e].evaluate_element(el.law(), &xe, w0, false).force;
+                    k += c
+                        .enumerate()
+                        .map(|(a, j)| amp[j] * g[a * nh + 1])
+                        .sum::<f64>()
+                        / q;
                 }
                 k - w0 * w0
             };

@@ -1,6 +1,7 @@
 //! The harmonic balance system condensed on the nonlinear DOFs (thesis §3.2, paper I).
 //!
-//! Unknowns: the coefficients `x` of every element coordinate (`n_NL × (2H+1)` reals). Per
+//! Unknowns: the coefficients `x` of every element coordinate (`n_NL × (2H+1)` reals; a law
+//! on several coordinates has one block of `2H+1` per coordinate, consecutive). Per
 //! harmonic `k` the reduced model's receptances give
 //!
 //! `R(x) = x + H_NL,NL(kω0) G(x) − λ H_NL,ext(kω0) F = 0`
@@ -107,7 +108,7 @@ pub(crate) struct Receptances {
 pub(crate) struct Evaluation {
     pub r: Vec<f64>,
     pub g: Vec<f64>,
-    /// Per element `∂G_e/∂x_e`.
+    /// Per element `∂G_e/∂x_e` (a block per pair of its coordinates).
     pub dg: Vec<Mat<f64>>,
     /// Per element `∂g/∂u̇` samples (for `∂G/∂ω0`).
     pub damping: Vec<Vec<f64>>,
@@ -148,14 +149,24 @@ impl Default for EvalBuffers {
 }
 
 impl EvalBuffers {
-    /// Sizes the buffers for `ne` elements of `nh` coefficients (allocates only when they
-    /// change).
-    fn size(&mut self, ne: usize, nh: usize) {
-        let n = ne * nh;
+    /// Sizes the buffers for elements with coordinates `offsets` ([`HbSystem::coordinates`])
+    /// of `nh` coefficients (allocates only when they change).
+    fn size(&mut self, offsets: &[usize], nh: usize) {
+        let ne = offsets.len() - 1;
+        let n = offsets[ne] * nh;
         self.g.resize(n, 0.0);
         self.r.resize(n, 0.0);
-        if self.dg.len() != ne || self.dg.first().is_some_and(|d| d.nrows() != nh) {
-            self.dg = (0..ne).map(|_| Mat::zeros(nh, nh)).collect();
+        let fits = self.dg.len() == ne
+            && self
+                .dg
+                .iter()
+                .zip(offsets.windows(2))
+                .all(|(d, o)| d.nrows() == (o[1] - o[0]) * nh);
+        if !fits {
+            self.dg = offsets
+                .windows(2)
+                .map(|o| Mat::zeros((o[1] - o[0]) * nh, (o[1] - o[0]) * nh))
+                .collect();
         }
         self.damping.resize_with(ne, Vec::new);
         if self.jac.nrows() != n {
@@ -290,7 +301,10 @@ pub struct HbSystem {
     pub(crate) set: HarmonicSet,
     pub(crate) linear: LinearPart,
     pub(crate) elements: Vec<NonlinearElement>,
+    /// Port of every element coordinate (one per element, several for a coupled law).
     pub(crate) element_ports: Vec<usize>,
+    /// First coordinate of each element, and the total (`elements + 1` entries).
+    pub(crate) offsets: Vec<usize>,
     pub(crate) inputs: Vec<(String, usize)>,
     pub(crate) sensors: Vec<SensorSpec>,
     pub(crate) forcing: Forcing,
@@ -310,7 +324,7 @@ pub struct HbSystemBuilder {
     set: HarmonicSet,
     linear: LinearPart,
     elements: Vec<NonlinearElement>,
-    element_ports: Vec<usize>,
+    element_ports: Vec<Vec<usize>>,
     inputs: Vec<(String, usize)>,
     sensors: Vec<SensorSpec>,
     forcing: Option<Forcing>,
@@ -321,7 +335,15 @@ impl HbSystemBuilder {
     /// A nonlinear element acting on port `port` (its coupling already folded into the port).
     pub fn element(mut self, element: NonlinearElement, port: usize) -> Self {
         self.elements.push(element);
-        self.element_ports.push(port);
+        self.element_ports.push(vec![port]);
+        self
+    }
+
+    /// A nonlinear element whose law acts on several coordinates, at ports `ports` (one per
+    /// coordinate, in the law's order).
+    pub fn coupled_element(mut self, element: NonlinearElement, ports: &[usize]) -> Self {
+        self.elements.push(element);
+        self.element_ports.push(ports.to_vec());
         self
     }
 
@@ -417,7 +439,7 @@ impl HbSystem {
             set,
             linear: LinearPart::from_reduced(reduced)?,
             elements: model.elements().to_vec(),
-            element_ports: map.elements,
+            element_ports: map.element_coordinates,
             inputs: map.inputs,
             sensors,
             forcing: Some(forcing),
@@ -462,12 +484,30 @@ impl HbSystem {
         let bad = |what: String, p: usize| {
             Error::invalid(what, format!("port {p} is out of range ({np} ports)"))
         };
-        for (e, &p) in elements.iter().zip(&element_ports) {
-            if p >= np {
-                return Err(bad(format!("element '{}'", e.name()), p));
+        for (e, ports) in elements.iter().zip(&element_ports) {
+            if ports.len() != e.law().arity() {
+                return Err(Error::invalid(
+                    format!("element '{}'", e.name()),
+                    format!(
+                        "its {} law acts on {} coordinate(s) but {} port(s) are given",
+                        e.law().kind(),
+                        e.law().arity(),
+                        ports.len()
+                    ),
+                ));
+            }
+            for &p in ports {
+                if p >= np {
+                    return Err(bad(format!("element '{}'", e.name()), p));
+                }
             }
             e.law().validate(e.name())?;
         }
+        let mut offsets = vec![0];
+        for ports in &element_ports {
+            offsets.push(offsets.last().copied().unwrap_or(0) + ports.len());
+        }
+        let element_ports: Vec<usize> = element_ports.into_iter().flatten().collect();
         for (n, p) in &inputs {
             if *p >= np {
                 return Err(bad(format!("input '{n}'"), *p));
@@ -495,6 +535,7 @@ impl HbSystem {
             linear,
             elements,
             element_ports,
+            offsets,
             inputs,
             sensors,
             forcing,
@@ -505,9 +546,26 @@ impl HbSystem {
         })
     }
 
-    /// Number of condensed unknowns, `n_NL (2H + 1)`.
+    /// Number of condensed unknowns, `n_NL (2H + 1)` with `n_NL` the element coordinates.
     pub fn n_unknowns(&self) -> usize {
-        self.elements.len() * self.set.len()
+        self.element_ports.len() * self.set.len()
+    }
+
+    /// Number of element coordinates `n_NL` (one per element, [`nlsim_kernel::Law::arity`]
+    /// for a coupled law).
+    pub fn n_coordinates(&self) -> usize {
+        self.element_ports.len()
+    }
+
+    /// The coordinates of element `e` (indices into [`HbSystem::element_ports`]).
+    pub fn coordinates(&self, e: usize) -> std::ops::Range<usize> {
+        self.offsets[e]..self.offsets[e + 1]
+    }
+
+    /// The unknowns of element `e` in `x`: its coordinates' coefficients.
+    pub(crate) fn unknowns(&self, e: usize) -> std::ops::Range<usize> {
+        let nh = self.set.len();
+        self.offsets[e] * nh..self.offsets[e + 1] * nh
     }
 
     /// AFT samples per period of each element.
@@ -547,7 +605,8 @@ impl HbSystem {
         &self.elements
     }
 
-    /// Port index of each element.
+    /// Port index of each element coordinate (one per element; a coupled element's
+    /// coordinates are consecutive, see [`HbSystem::coordinates`]).
     pub fn element_ports(&self) -> &[usize] {
         &self.element_ports
     }
@@ -719,21 +778,21 @@ impl HbSystem {
     ) {
         let nh = self.set.len();
         let n = self.n_unknowns();
-        let ne = self.elements.len();
         let w0 = self.set.base(omega);
-        s.size(ne, nh);
+        s.size(&self.offsets, nh);
         for (e, el) in self.elements.iter().enumerate() {
             let jac = if jacobian {
                 Some(s.dg[e].as_mut())
             } else {
                 None
             };
-            self.plans[e].evaluate_into(
+            let r = self.unknowns(e);
+            self.plans[e].evaluate_element_into(
                 el.law(),
-                &x[e * nh..(e + 1) * nh],
+                &x[r.clone()],
                 w0,
                 &mut s.aft,
-                &mut s.g[e * nh..(e + 1) * nh],
+                &mut s.g[r],
                 jac,
             );
             s.damping[e].clear();
@@ -753,13 +812,27 @@ impl HbSystem {
             }
             for i in 0..n {
                 for (e, d) in s.dg.iter().enumerate() {
-                    for c in 0..nh {
-                        let v: f64 = (0..nh).map(|l| a[(i, e * nh + l)] * d[(l, c)]).sum();
-                        j[(i, e * nh + c)] += v;
+                    let o = self.offsets[e] * nh;
+                    for c in 0..d.ncols() {
+                        let v: f64 = (0..d.nrows()).map(|l| a[(i, o + l)] * d[(l, c)]).sum();
+                        j[(i, o + c)] += v;
                     }
                 }
             }
         }
+    }
+
+    /// `blockdiag(∂G_e/∂x_e) dx`: the change of the element forces along `dx`.
+    fn apply_dg(&self, dg: &[Mat<f64>], dx: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; dx.len()];
+        for (e, d) in dg.iter().enumerate() {
+            let r = self.unknowns(e);
+            let (o, xe) = (&mut out[r.clone()], &dx[r]);
+            for (l, v) in o.iter_mut().enumerate() {
+                *v = (0..d.ncols()).map(|c| d[(l, c)] * xe[c]).sum();
+            }
+        }
+        out
     }
 
     /// `∂R/∂Ω` at a solution (m s/rad).
@@ -771,24 +844,25 @@ impl HbSystem {
         ev: &Evaluation,
         rec: &Receptances,
     ) -> Vec<f64> {
-        let nh = self.set.len();
         let n = self.n_unknowns();
         let d = self.receptances(omega, true);
         // ∂G/∂Ω through the velocity u̇ = ω0 E' x: P diag(∂g/∂u̇) E' x / ν.
         let w0 = self.set.base(omega);
         let mut dg = vec![0.0; n];
         for (e, plan) in self.plans.iter().enumerate() {
+            // A coupled law has no velocity dependence (and no damping samples).
             let c = &ev.damping[e];
             if c.iter().all(|&v| v == 0.0) {
                 continue;
             }
-            let (_, v) = plan.to_time(&x[e * nh..(e + 1) * nh], w0);
+            let r = self.unknowns(e);
+            let (_, v) = plan.to_time(&x[r.clone()], w0);
             let s: Vec<f64> = v
                 .iter()
                 .zip(c)
                 .map(|(v, c)| c * v / w0 / self.set.nu as f64)
                 .collect();
-            dg[e * nh..(e + 1) * nh].copy_from_slice(&plan.to_freq(&s));
+            dg[r].copy_from_slice(&plan.to_freq(&s));
         }
         (0..n)
             .map(|i| {
@@ -1145,11 +1219,11 @@ impl HbSystem {
                     .element_param(p)
                     .ok_or_else(|| unknown_param(p, &self.parameters()))?;
                 let el = &self.elements[element];
-                let d =
-                    self.plans[element].dparams(el.law(), &x[element * nh..(element + 1) * nh], w0);
+                let r = self.unknowns(element);
+                let d = self.plans[element].dparams_element(el.law(), &x[r.clone()], w0);
                 let mut gp = vec![0.0; n];
-                for l in 0..nh {
-                    gp[element * nh + l] = d[(l, param)];
+                for (l, i) in r.enumerate() {
+                    gp[i] = d[(l, param)];
                 }
                 let rp: Vec<f64> = (0..n)
                     .map(|i| (0..n).map(|j| rec.a[(i, j)] * gp[j]).sum())
@@ -1189,12 +1263,7 @@ impl HbSystem {
             let neg: Vec<f64> = rp.iter().map(|v| -v).collect();
             let dx = lu.solve(&neg);
             // Implicit part: −H_s,NL ∂G/∂x dx.
-            let mut gdx = vec![0.0; n];
-            for (e, dg) in ev.dg.iter().enumerate() {
-                for l in 0..nh {
-                    gdx[e * nh + l] = (0..nh).map(|c| dg[(l, c)] * dx[e * nh + c]).sum();
-                }
-            }
+            let gdx = self.apply_dg(&ev.dg, &dx);
             for (i, v) in dy.iter_mut().enumerate() {
                 *v -= (0..n).map(|j| hs[(i, j)] * gdx[j]).sum::<f64>();
             }
@@ -1261,12 +1330,7 @@ impl HbSystem {
                 // dx/dF_c = λ J⁻¹ H_NL,in e_c; then −H_in,NL ∂G/∂x dx.
                 let rhs: Vec<f64> = (0..n).map(|i| scale * h_nl_in[(i, c)]).collect();
                 let dx = lu.solve(&rhs);
-                let mut gdx = vec![0.0; n];
-                for (e, dg) in ev.dg.iter().enumerate() {
-                    for l in 0..nh {
-                        gdx[e * nh + l] = (0..nh).map(|q| dg[(l, q)] * dx[e * nh + q]).sum();
-                    }
-                }
+                let gdx = self.apply_dg(&ev.dg, &dx);
                 for i in 0..jac.nrows() {
                     jac[(i, c)] -= (0..n).map(|j| h_in_nl[(i, j)] * gdx[j]).sum::<f64>();
                 }
@@ -1308,12 +1372,7 @@ impl HbSystem {
                     found: s.dx.len(),
                 });
             }
-            let mut dgp = vec![0.0; n];
-            for (e, dg) in ev.dg.iter().enumerate() {
-                for l in 0..nh {
-                    dgp[e * nh + l] = (0..nh).map(|q| dg[(l, q)] * s.dx[e * nh + q]).sum();
-                }
-            }
+            let mut dgp = self.apply_dg(&ev.dg, &s.dx);
             // ∂Z/∂p of a diagonal entry (per unit of the parameter, at frequency w).
             let mut dz: Option<Box<dyn Fn(usize, f64) -> c64>> = None;
             match &s.param {
@@ -1321,13 +1380,14 @@ impl HbSystem {
                     let (element, param) = self
                         .element_param(&s.param)
                         .ok_or_else(|| unknown_param(&s.param, &self.parameters()))?;
-                    let d = self.plans[element].dparams(
+                    let r = self.unknowns(element);
+                    let d = self.plans[element].dparams_element(
                         self.elements[element].law(),
-                        &x[element * nh..(element + 1) * nh],
+                        &x[r.clone()],
                         w0,
                     );
-                    for l in 0..nh {
-                        dgp[element * nh + l] += d[(l, param)];
+                    for (l, i) in r.enumerate() {
+                        dgp[i] += d[(l, param)];
                     }
                 }
                 Param::ModalFrequency(r) | Param::ModalDamping(r) if *r < m => {
@@ -1360,7 +1420,7 @@ impl HbSystem {
             let mut d = Mat::<c64>::zeros(m, self.set.h + 1);
             for k in 0..=self.set.h {
                 let w = k as f64 * w0;
-                let mut u: Vec<c64> = (0..self.elements.len())
+                let mut u: Vec<c64> = (0..self.n_coordinates())
                     .map(|e| -self.set.complex(&dgp[e * nh..(e + 1) * nh], k))
                     .collect();
                 if let Some(dz) = &dz {
@@ -1401,7 +1461,8 @@ impl HbSystem {
                 .map(|i| self.forcing.amplitude(i, k) * scale)
                 .collect();
             u.extend(
-                (0..self.elements.len()).map(|e| -self.set.complex(&ev.g[e * nh..(e + 1) * nh], k)),
+                (0..self.n_coordinates())
+                    .map(|e| -self.set.complex(&ev.g[e * nh..(e + 1) * nh], k)),
             );
             let col = self.linear.modal_response(k as f64 * w0, &ports, &u);
             for (r, z) in col.into_iter().enumerate() {
@@ -1439,18 +1500,27 @@ impl HbSystem {
             }
         }
         for e in 0..ne {
-            let pe = self.element_ports[e];
-            let xe: Vec<f64> = (0..nh)
-                .map(|l| (0..m).map(|r| phi(pe, r) * eta[r * nh + l]).sum())
+            let ports = &self.element_ports[self.coordinates(e)];
+            // The coordinates' coefficients, coordinate after coordinate.
+            let xe: Vec<f64> = ports
+                .iter()
+                .flat_map(|&pe| {
+                    (0..nh).map(move |l| (0..m).map(|r| phi(pe, r) * eta[r * nh + l]).sum())
+                })
                 .collect();
-            let ev = self.plans[e].evaluate(self.elements[e].law(), &xe, w0, true);
+            let ev = self.plans[e].evaluate_element(self.elements[e].law(), &xe, w0, true);
             let dg = ev.jacobian.expect("asked for");
-            for r in 0..m {
-                for l in 0..nh {
-                    res[r * nh + l] += phi(pe, r) * ev.force[l];
-                    for s in 0..m {
-                        for c in 0..nh {
-                            jac[(r * nh + l, s * nh + c)] += phi(pe, r) * dg[(l, c)] * phi(pe, s);
+            for (a, &pa) in ports.iter().enumerate() {
+                for r in 0..m {
+                    for l in 0..nh {
+                        res[r * nh + l] += phi(pa, r) * ev.force[a * nh + l];
+                        for (b, &pb) in ports.iter().enumerate() {
+                            for s in 0..m {
+                                for c in 0..nh {
+                                    jac[(r * nh + l, s * nh + c)] +=
+                                        phi(pa, r) * dg[(a * nh + l, b * nh + c)] * phi(pb, s);
+                                }
+                            }
                         }
                     }
                 }

@@ -8,6 +8,12 @@
 //!
 //! Each law gives its force, the derivatives `∂g/∂u`, `∂g/∂u̇` (for Newton) and `∂g/∂p` for
 //! each named parameter `p` (for calibration). Units: `u` in m, `u̇` in m/s, `g` in N.
+//!
+//! One law couples several coordinates: [`Law::CoupledPolynomial`] acts on `m` coordinates
+//! `u_j = c_j(q)` at once and applies `g_i(u_1, …, u_m)` along each (`f_NL = Σ_i c_iᵀ g_i`),
+//! the geometric nonlinearity of a structure in a few modal or physical coordinates (terms such
+//! as `u_1² u_2`). Its element has `m` couplings ([`NonlinearElement::coupled`]); it is
+//! evaluated with [`Law::eval_coupled`], not [`Law::eval`].
 
 use crate::error::{Error, Result};
 
@@ -29,6 +35,59 @@ pub struct PolyTerm {
     pub power: u32,
     /// Coefficient (N/m^power for stiffness, N (s/m)^power for damping).
     pub coef: f64,
+}
+
+/// One term `coef · Π_j u_j^{powers[j]}` of the force `g_{output}` of a
+/// [`Law::CoupledPolynomial`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct MonomialTerm {
+    /// The force the term adds to (0-based coordinate index).
+    pub output: usize,
+    /// Power of each coordinate (one per coordinate; total degree 1 to 15).
+    pub powers: Vec<u32>,
+    /// Coefficient (N/m^d, `d` the total degree).
+    pub coef: f64,
+}
+
+impl MonomialTerm {
+    /// Total degree `Σ_j powers[j]`.
+    pub fn degree(&self) -> u32 {
+        self.powers.iter().sum()
+    }
+
+    /// The parameter name `k<i>_<p_1>_…_<p_m>` (output `i` 1-based): `k1_2_1` is the
+    /// coefficient of `u_1² u_2` in `g_1`.
+    pub fn name(&self) -> String {
+        let mut s = format!("k{}", self.output + 1);
+        for p in &self.powers {
+            s.push('_');
+            s.push_str(&p.to_string());
+        }
+        s
+    }
+
+    /// Parses a parameter name `k<i>_<p_1>_…_<p_m>` into `(output, powers)`; `None` when the
+    /// name is not of that form.
+    pub fn parse_name(name: &str) -> Option<(usize, Vec<u32>)> {
+        let mut parts = name.strip_prefix('k')?.split('_');
+        let output: usize = parts.next()?.parse().ok()?;
+        let powers = parts
+            .map(|p| p.parse::<u32>().ok())
+            .collect::<Option<Vec<_>>>()?;
+        if output == 0 || powers.is_empty() {
+            return None;
+        }
+        Some((output - 1, powers))
+    }
+
+    /// `Π_j u_j^{powers[j]}`.
+    #[inline]
+    pub fn monomial(&self, u: &[f64]) -> f64 {
+        self.powers
+            .iter()
+            .zip(u)
+            .fold(1.0, |a, (&p, &x)| a * x.powi(p as i32))
+    }
 }
 
 /// A force law `g(u, u̇; p)` with named parameters `p`.
@@ -87,6 +146,17 @@ pub enum Law {
         /// Slip force (N).
         fs: f64,
     },
+    /// A polynomial stiffness coupling `inputs` coordinates: `g_i(u) = Σ_k a_k Π_j u_j^{p_kj}`
+    /// over the terms of output `i` (NLvib's polynomial stiffness nonlinearity: `f_NL = Eᵀ z`,
+    /// `z_k = Π_j q_j^{p_kj}`). Parameters are the coefficients, named `k<i>_<p_1>_…_<p_m>`
+    /// ([`MonomialTerm::name`]). Conservative when `g` is a gradient, as in a geometric
+    /// nonlinearity; any polynomial is accepted.
+    CoupledPolynomial {
+        /// Number of coordinates `m` (at least 2).
+        inputs: usize,
+        /// The terms, in the order given.
+        terms: Vec<MonomialTerm>,
+    },
 }
 
 impl Law {
@@ -99,6 +169,16 @@ impl Law {
             Law::QuadraticDamping { .. } => "quadratic_damping",
             Law::Coulomb { .. } => "coulomb",
             Law::Jenkins { .. } => "jenkins",
+            Law::CoupledPolynomial { .. } => "coupled_polynomial",
+        }
+    }
+
+    /// Number of coordinates the law acts on: `inputs` for [`Law::CoupledPolynomial`], 1 for
+    /// every other law.
+    pub fn arity(&self) -> usize {
+        match self {
+            Law::CoupledPolynomial { inputs, .. } => *inputs,
+            _ => 1,
         }
     }
 
@@ -130,12 +210,13 @@ impl Law {
             "bump_stop" => &["k", "gap"],
             "clearance" => &["k1", "k2", "e1", "e2", "r", "s"],
             "polynomial" => &[],
+            "coupled_polynomial" => return Self::coupled_from_named(element, pairs),
             other => {
                 return Err(Error::invalid(
                     format!("element '{element}'"),
                     format!(
                         "unknown type '{other}'; use cubic, polynomial, clearance, bump_stop, \
-                         quadratic_damping, coulomb or jenkins"
+                         quadratic_damping, coulomb, jenkins or coupled_polynomial"
                     ),
                 ));
             }
@@ -212,6 +293,44 @@ impl Law {
         })
     }
 
+    /// A [`Law::CoupledPolynomial`] from coefficients named `k<i>_<p_1>_…_<p_m>`; the number of
+    /// powers in the names sets `m` (all names must agree).
+    fn coupled_from_named(element: &str, pairs: &[(&str, f64)]) -> Result<Self> {
+        let err = |m: String| Error::invalid(format!("element '{element}'"), m);
+        if pairs.is_empty() {
+            return Err(err(
+                "a coupled_polynomial law needs at least one coefficient k<i>_<p1>_..._<pm> \
+                 (e.g. k1_2_1 for u1^2 u2 in force 1)"
+                    .into(),
+            ));
+        }
+        let mut terms: Vec<MonomialTerm> = Vec::with_capacity(pairs.len());
+        for (k, v) in pairs {
+            let (output, powers) = MonomialTerm::parse_name(k).ok_or_else(|| {
+                err(format!(
+                    "a coupled_polynomial law has no parameter '{k}'; its coefficients are named \
+                     k<i>_<p1>_..._<pm> (e.g. k1_2_1 for u1^2 u2 in force 1)"
+                ))
+            })?;
+            terms.push(MonomialTerm {
+                output,
+                powers,
+                coef: *v,
+            });
+        }
+        let inputs = terms.first().map_or(0, |t| t.powers.len());
+        if let Some(t) = terms.iter().find(|t| t.powers.len() != inputs) {
+            return Err(err(format!(
+                "'{}' has {} powers where '{}' has {inputs}: every term needs one power per \
+                 coordinate",
+                t.name(),
+                t.powers.len(),
+                terms[0].name()
+            )));
+        }
+        Ok(Law::CoupledPolynomial { inputs, terms })
+    }
+
     /// Number of named parameters.
     pub fn n_params(&self) -> usize {
         match self {
@@ -219,6 +338,7 @@ impl Law {
             Law::Polynomial { stiffness, damping } => stiffness.len() + damping.len(),
             Law::Clearance { .. } => 6,
             Law::Coulomb { .. } | Law::Jenkins { .. } => 2,
+            Law::CoupledPolynomial { terms, .. } => terms.len(),
         }
     }
 
@@ -237,6 +357,7 @@ impl Law {
             Law::Clearance { .. } => ["k1", "k2", "e1", "e2", "r", "s"][i].into(),
             Law::Coulomb { .. } => ["fc", "v_reg"][i].into(),
             Law::Jenkins { .. } => ["kt", "fs"][i].into(),
+            Law::CoupledPolynomial { terms, .. } => terms[i].name(),
         }
     }
 
@@ -255,6 +376,7 @@ impl Law {
             Law::Clearance { .. } => ["N/m^r", "N/m^s", "m", "m", "-", "-"][i].into(),
             Law::Coulomb { .. } => ["N", "m/s"][i].into(),
             Law::Jenkins { .. } => ["N/m", "N"][i].into(),
+            Law::CoupledPolynomial { terms, .. } => format!("N/m^{}", terms[i].degree()),
         }
     }
 
@@ -280,6 +402,7 @@ impl Law {
             } => [*k1, *k2, *e1, *e2, *r, *s][i],
             Law::Coulomb { fc, v_reg } => [*fc, *v_reg][i],
             Law::Jenkins { kt, fs } => [*kt, *fs][i],
+            Law::CoupledPolynomial { terms, .. } => terms[i].coef,
         }
     }
 
@@ -324,6 +447,7 @@ impl Law {
                     fs
                 }
             }
+            Law::CoupledPolynomial { terms, .. } => &mut terms[i].coef,
         }
     }
 
@@ -449,6 +573,52 @@ impl Law {
                 }
                 nonneg("fs", *fs, "a slip force")
             }
+            Law::CoupledPolynomial { inputs, terms } => {
+                if *inputs < 2 {
+                    return Err(Error::invalid(
+                        format!("element '{element}'"),
+                        format!(
+                            "a coupled_polynomial law needs at least 2 coordinates (has {inputs}); \
+                             one coordinate is a polynomial law"
+                        ),
+                    ));
+                }
+                if terms.is_empty() {
+                    return Err(Error::invalid(
+                        format!("element '{element}'"),
+                        "a coupled_polynomial law needs at least one term",
+                    ));
+                }
+                for (a, t) in terms.iter().enumerate() {
+                    if t.powers.len() != *inputs || t.output >= *inputs {
+                        return Err(Error::invalid(
+                            format!("element '{element}', term {}", t.name()),
+                            format!(
+                                "needs {inputs} powers and a force index from 1 to {inputs} \
+                                 (one per coordinate)"
+                            ),
+                        ));
+                    }
+                    let d = t.degree();
+                    if d == 0 || d > 15 {
+                        return Err(Error::InvalidParameter {
+                            name: name(&t.name()),
+                            value: f64::from(d),
+                            reason: "the total degree of a term must be from 1 to 15".into(),
+                        });
+                    }
+                    if terms[..a]
+                        .iter()
+                        .any(|o| o.output == t.output && o.powers == t.powers)
+                    {
+                        return Err(Error::DuplicateName {
+                            what: "polynomial term".into(),
+                            name: name(&t.name()),
+                        });
+                    }
+                }
+                Ok(())
+            }
         }
     }
 
@@ -548,6 +718,71 @@ impl Law {
                     }
                 }
             }
+            // No scalar form: every consumer dispatches on `arity()` first.
+            Law::CoupledPolynomial { .. } => LawEval::default(),
+        }
+    }
+
+    /// Forces `g_i(u)` (N) of a law on `u.len()` coordinates (m) into `force`, and
+    /// `∂g_i/∂u_j` (N/m) into `jac[i·m + j]` (row-major, `m × m`). For a one-coordinate law
+    /// it is [`Law::eval`] at zero velocity and state. Allocation-free.
+    ///
+    /// # Panics
+    /// When `u`, `force` or `jac` do not match [`Law::arity`] (a programming error).
+    #[inline]
+    pub fn eval_coupled(&self, u: &[f64], force: &mut [f64], jac: &mut [f64]) {
+        let m = self.arity();
+        assert!(
+            u.len() == m && force.len() == m && jac.len() == m * m,
+            "eval_coupled: buffer sizes"
+        );
+        match self {
+            Law::CoupledPolynomial { terms, .. } => {
+                force.fill(0.0);
+                jac.fill(0.0);
+                for t in terms {
+                    force[t.output] += t.coef * t.monomial(u);
+                    for (j, &p) in t.powers.iter().enumerate() {
+                        if p == 0 {
+                            continue;
+                        }
+                        // ∂/∂u_j of Π u^p: p u_j^{p−1} Π_{l≠j} u_l^{p_l}.
+                        let mut d = t.coef * f64::from(p) * u[j].powi(p as i32 - 1);
+                        for (l, (&pl, &ul)) in t.powers.iter().zip(u).enumerate() {
+                            if l != j {
+                                d *= ul.powi(pl as i32);
+                            }
+                        }
+                        jac[t.output * m + j] += d;
+                    }
+                }
+            }
+            scalar => {
+                let e = scalar.eval(u[0], 0.0, &[]);
+                force[0] = e.force;
+                jac[0] = e.df_du;
+            }
+        }
+    }
+
+    /// `∂g_i/∂p_k` of a [`Law::CoupledPolynomial`] at coordinates `u` into `out[i·n_params + k]`
+    /// (`m × n_params`, row-major): the monomial of term `k` in the row of its output.
+    ///
+    /// # Panics
+    /// When `out` has the wrong length or the law is not coupled (a programming error).
+    pub fn dforce_dparams_coupled(&self, u: &[f64], out: &mut [f64]) {
+        let Law::CoupledPolynomial { inputs, terms } = self else {
+            panic!("dforce_dparams_coupled: not a coupled law");
+        };
+        let np = terms.len();
+        assert_eq!(
+            out.len(),
+            inputs * np,
+            "dforce_dparams_coupled: output length"
+        );
+        out.fill(0.0);
+        for (k, t) in terms.iter().enumerate() {
+            out[t.output * np + k] = t.monomial(u);
         }
     }
 
@@ -622,6 +857,8 @@ impl Law {
                     out[1] = 1.0_f64.copysign(trial);
                 }
             }
+            // No scalar form (see `dforce_dparams_coupled`).
+            Law::CoupledPolynomial { .. } => out.fill(0.0),
         }
     }
 }
@@ -704,17 +941,25 @@ impl Coupling {
     }
 }
 
-/// A named nonlinear element: a law acting on a coupling coordinate.
+/// A named nonlinear element: a law acting on a coupling coordinate (or, for a law of
+/// [`Law::arity`] `m > 1`, on `m` coordinates).
 #[derive(Debug, Clone, PartialEq)]
 pub struct NonlinearElement {
     name: String,
     law: Law,
-    coupling: Coupling,
+    couplings: Vec<Coupling>,
 }
 
 impl NonlinearElement {
-    /// A validated element. Names are identifiers: letters, digits, `_`, `-`.
+    /// A validated element. Names are identifiers: letters, digits, `_`, `-`. A law on several
+    /// coordinates needs [`NonlinearElement::coupled`].
     pub fn new(name: impl Into<String>, law: Law, coupling: Coupling) -> Result<Self> {
+        Self::coupled(name, law, vec![coupling])
+    }
+
+    /// A validated element whose law acts on the coordinates `couplings` (one per
+    /// [`Law::arity`], in the order of the law's coordinates).
+    pub fn coupled(name: impl Into<String>, law: Law, couplings: Vec<Coupling>) -> Result<Self> {
         let name = name.into();
         if !crate::param::is_valid_name(&name) {
             return Err(Error::invalid(
@@ -729,10 +974,21 @@ impl NonlinearElement {
             ));
         }
         law.validate(&name)?;
+        if couplings.len() != law.arity() {
+            return Err(Error::invalid(
+                format!("element '{name}'"),
+                format!(
+                    "its {} law acts on {} coordinate(s), {} given",
+                    law.kind(),
+                    law.arity(),
+                    couplings.len()
+                ),
+            ));
+        }
         Ok(NonlinearElement {
             name,
             law,
-            coupling,
+            couplings,
         })
     }
 
@@ -746,9 +1002,19 @@ impl NonlinearElement {
         &self.law
     }
 
-    /// Its coordinate.
+    /// Its coordinate (the first of a coupled law's).
     pub fn coupling(&self) -> &Coupling {
-        &self.coupling
+        &self.couplings[0]
+    }
+
+    /// Its coordinates, one per [`Law::arity`].
+    pub fn couplings(&self) -> &[Coupling] {
+        &self.couplings
+    }
+
+    /// True when the law acts on more than one coordinate.
+    pub fn is_coupled(&self) -> bool {
+        self.couplings.len() > 1
     }
 
     /// Full name of parameter `i`: `element.param`.

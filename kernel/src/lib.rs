@@ -33,7 +33,7 @@ pub mod testing;
 pub use adapters::Stored;
 pub use damping::{Damping, DampingBand, ModalDamping};
 pub use dof::{Component, DofLabel, DofMap};
-pub use element::{Coupling, Law, LawEval, NonlinearElement, PolyTerm};
+pub use element::{Coupling, Law, LawEval, MonomialTerm, NonlinearElement, PolyTerm};
 pub use error::{Error, Result};
 pub use model::{
     ElementGroup, Excitation, ForceHarmonic, MatrixDerivative, Model, ModelBuilder, Quantity,

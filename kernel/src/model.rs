@@ -398,7 +398,9 @@ impl Model {
 
     /// Adds a nonlinear element; its DOFs must exist and its name must be new.
     pub fn add_element(&mut self, element: NonlinearElement) -> Result<()> {
-        self.check_coupling(element.name(), element.coupling())?;
+        for c in element.couplings() {
+            self.check_coupling(element.name(), c)?;
+        }
         if self.elements.iter().any(|e| e.name() == element.name()) {
             return Err(Error::DuplicateName {
                 what: "element".into(),
@@ -561,7 +563,7 @@ impl Model {
         let mut d: Vec<usize> = self
             .elements
             .iter()
-            .flat_map(|e| e.coupling().dofs().iter().copied())
+            .flat_map(|e| e.couplings().iter().flat_map(|c| c.dofs().iter().copied()))
             .collect();
         d.sort_unstable();
         d.dedup();

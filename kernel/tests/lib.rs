@@ -156,6 +156,7 @@ mod elements {
             } => [k1, k2, e1, e2, r, s].into_iter().nth(i).unwrap(),
             Law::Coulomb { fc, v_reg } => [fc, v_reg].into_iter().nth(i).unwrap(),
             Law::Jenkins { kt, fs } => [kt, fs].into_iter().nth(i).unwrap(),
+            Law::CoupledPolynomial { terms, .. } => &mut terms[i].coef,
         }
     }
 
@@ -866,4 +867,92 @@ fn one_triangle_refuses_a_pair_given_on_both_sides() {
     let mixed =
         SparseSym::from_lower_triplets("K", 3, &[(1, 0, -1.0), (1, 2, -2.0), (2, 2, 1.0)]).unwrap();
     assert_eq!((mixed.get(0, 1), mixed.get(2, 1)), (-1.0, -2.0));
+}
+
+/// The coupled polynomial law: forces and tangent against central differences, parameter
+/// names and derivatives, and the errors of a malformed law or element.
+#[test]
+fn coupled_polynomial_law() {
+    let law = Law::from_named(
+        "geom",
+        "coupled_polynomial",
+        &[
+            ("k1_2_1", 3.0),
+            ("k2_0_3", -2.0),
+            ("k1_1_0", 0.5),
+            ("k2_1_1", 4.0),
+        ],
+    )
+    .unwrap();
+    assert_eq!(law.arity(), 2);
+    assert_eq!(law.kind(), "coupled_polynomial");
+    assert_eq!(law.param_name(0), "k1_2_1");
+    assert_eq!(law.param_unit(0), "N/m^3");
+    assert_eq!(law.param_unit(2), "N/m^1");
+    let u = [0.3, -0.7];
+    let (mut f, mut j) = ([0.0; 2], [0.0; 4]);
+    law.eval_coupled(&u, &mut f, &mut j);
+    // g1 = 3 u1² u2 + 0.5 u1, g2 = −2 u2³ + 4 u1 u2.
+    assert!((f[0] - (3.0 * 0.09 * -0.7 + 0.15)).abs() < 1e-15);
+    assert!((f[1] - (-2.0 * -0.343 + 4.0 * 0.3 * -0.7)).abs() < 1e-15);
+    for b in 0..2 {
+        let h = 1e-6;
+        let (mut up, mut um) = (u, u);
+        up[b] += h;
+        um[b] -= h;
+        let (mut fp, mut fm, mut s) = ([0.0; 2], [0.0; 2], [0.0; 4]);
+        law.eval_coupled(&up, &mut fp, &mut s);
+        law.eval_coupled(&um, &mut fm, &mut s);
+        for a in 0..2 {
+            let fd = (fp[a] - fm[a]) / (2.0 * h);
+            assert!((fd - j[a * 2 + b]).abs() < 1e-9, "∂g{a}/∂u{b}");
+        }
+    }
+    let mut d = vec![0.0; 2 * 4];
+    law.dforce_dparams_coupled(&u, &mut d);
+    assert!((d[0] - 0.09 * -0.7).abs() < 1e-15); // ∂g1/∂k1_2_1
+    assert!((d[4 + 1] + 0.343).abs() < 1e-15); // ∂g2/∂k2_0_3
+    assert_eq!(d[1], 0.0); // k2_0_3 does not act on g1
+    // A scalar law through the coupled entry point.
+    let (mut f1, mut j1) = ([0.0; 1], [0.0; 1]);
+    Law::Cubic { k3: 2.0 }.eval_coupled(&[0.5], &mut f1, &mut j1);
+    assert_eq!((f1[0], j1[0]), (0.25, 1.5));
+
+    let err = |pairs: &[(&str, f64)]| {
+        Law::from_named("geom", "coupled_polynomial", pairs)
+            .and_then(|l| NonlinearElement::coupled("geom", l, vec![Coupling::single(0); 2]))
+            .unwrap_err()
+            .to_string()
+    };
+    assert!(err(&[("k1_2", 1.0), ("k1_1_1", 1.0)]).contains("one power per coordinate"));
+    assert!(err(&[("x1_1_1", 1.0)]).contains("k<i>_<p1>"));
+    assert!(err(&[("k3_1_1", 1.0)]).contains("force index from 1 to 2"));
+    assert!(err(&[("k1_0_0", 1.0)]).contains("total degree"));
+    assert!(err(&[("k1_16_0", 1.0)]).contains("total degree"));
+    assert!(err(&[]).contains("at least one"));
+    assert!(err(&[("k1_1", 1.0)]).contains("at least 2 coordinates"));
+    assert!(
+        Law::from_named("geom", "coupled_polynomial", &[("k1_1_1", f64::NAN)])
+            .and_then(|l| l.validate("geom"))
+            .unwrap_err()
+            .to_string()
+            .contains("finite")
+    );
+    // One coupling for a two-coordinate law, or a coupled law through `new`.
+    let e = NonlinearElement::coupled("geom", law.clone(), vec![Coupling::single(0)]);
+    assert!(
+        e.unwrap_err()
+            .to_string()
+            .contains("2 coordinate(s), 1 given")
+    );
+    assert!(NonlinearElement::new("geom", law.clone(), Coupling::single(0)).is_err());
+    let el = NonlinearElement::coupled(
+        "geom",
+        law,
+        vec![Coupling::single(0), Coupling::relative(1, 2)],
+    )
+    .unwrap();
+    assert!(el.is_coupled());
+    assert_eq!(el.couplings().len(), 2);
+    assert_eq!(el.param_full_name(3), "geom.k2_1_1");
 }

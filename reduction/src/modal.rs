@@ -105,12 +105,28 @@ pub fn port_index(ports: &[Port], name: &str) -> Result<usize> {
     })
 }
 
-/// The ports of a model: its nonlinear elements, excitation points and sensors, in that order,
-/// then `extra_dofs`.
+/// The name of the port of coordinate `j` (0-based) of `element`: its name, or `name[j+1]` for
+/// the coordinates of a coupled law (`geometry[1]`, `geometry[2]`).
+pub fn element_port_name(element: &nlsim_kernel::NonlinearElement, j: usize) -> String {
+    if element.is_coupled() {
+        format!("{}[{}]", element.name(), j + 1)
+    } else {
+        element.name().to_string()
+    }
+}
+
+/// The ports of a model: its nonlinear elements (one per coordinate), excitation points and
+/// sensors, in that order, then `extra_dofs`.
 pub fn model_ports(model: &Model, extra_dofs: &[usize]) -> Result<Vec<Port>> {
     let mut ports = Vec::new();
     for e in model.elements() {
-        ports.push(Port::coupling(e.name(), PortKind::Element, e.coupling()));
+        for (j, c) in e.couplings().iter().enumerate() {
+            ports.push(Port::coupling(
+                element_port_name(e, j),
+                PortKind::Element,
+                c,
+            ));
+        }
     }
     for x in model.excitation() {
         ports.push(Port::dof(&x.name, PortKind::Excitation, x.dof));
@@ -136,8 +152,10 @@ pub fn model_ports(model: &Model, extra_dofs: &[usize]) -> Result<Vec<Port>> {
 /// in the model's order. The simulator and the harmonic balance both start from it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ModelPortMap {
-    /// Port of each nonlinear element.
+    /// Port of each nonlinear element (of its first coordinate for a coupled law).
     pub elements: Vec<usize>,
+    /// Ports of every coordinate of each nonlinear element (one for a scalar law).
+    pub element_coordinates: Vec<Vec<usize>>,
     /// `(name, port)` of each excitation point.
     pub inputs: Vec<(String, usize)>,
     /// `(name, port, quantity)` of each sensor.
@@ -146,20 +164,25 @@ pub struct ModelPortMap {
 
 /// Matches `model`'s elements, excitation points and sensors to `ports` by name.
 pub fn model_port_map(model: &Model, ports: &[Port]) -> Result<ModelPortMap> {
-    let elements = model
+    let element_coordinates = model
         .elements()
         .iter()
         .map(|e| {
-            let p = port_index(ports, e.name())?;
-            if ports[p].kind != PortKind::Element {
-                return Err(Error::invalid(
-                    format!("element '{}'", e.name()),
-                    "its name matches a port that is not an element port",
-                ));
-            }
-            Ok(p)
+            (0..e.couplings().len())
+                .map(|j| {
+                    let p = port_index(ports, &element_port_name(e, j))?;
+                    if ports[p].kind != PortKind::Element {
+                        return Err(Error::invalid(
+                            format!("element '{}'", e.name()),
+                            "its name matches a port that is not an element port",
+                        ));
+                    }
+                    Ok(p)
+                })
+                .collect::<Result<Vec<_>>>()
         })
         .collect::<Result<Vec<_>>>()?;
+    let elements = element_coordinates.iter().map(|c| c[0]).collect();
     let inputs = model
         .excitation()
         .iter()
@@ -172,6 +195,7 @@ pub fn model_port_map(model: &Model, ports: &[Port]) -> Result<ModelPortMap> {
         .collect::<Result<Vec<_>>>()?;
     Ok(ModelPortMap {
         elements,
+        element_coordinates,
         inputs,
         sensors,
     })

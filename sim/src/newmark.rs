@@ -103,6 +103,9 @@ impl Newmark {
                 format!("{} is outside [-1/3, 0]", cfg.alpha),
             ));
         }
+        for e in model.elements() {
+            crate::plant::refuse_coupled(e)?;
+        }
         let damping = match model.damping() {
             Damping::None => DampingOp::None,
             Damping::Rayleigh { alpha, beta } => DampingOp::Rayleigh(*alpha, *beta),

@@ -39,6 +39,24 @@ pub struct Plant {
     pub outputs: Vec<OutputSpec>,
 }
 
+/// Time integration acts on scalar element coordinates: a law on several coordinates
+/// ([`nlsim_kernel::Law::CoupledPolynomial`]) is refused with a message that names it and the
+/// analyses that take it.
+pub(crate) fn refuse_coupled(e: &nlsim_kernel::NonlinearElement) -> Result<()> {
+    if e.is_coupled() {
+        return Err(Error::invalid(
+            format!("element '{}'", e.name()),
+            format!(
+                "its {} law couples {} coordinates; time integration takes one-coordinate \
+                 laws only (harmonic balance takes it: `nlsim frf`, `nlsim nnm`)",
+                e.law().kind(),
+                e.couplings().len()
+            ),
+        ));
+    }
+    Ok(())
+}
+
 impl Plant {
     /// The plant of `model` reduced to `system`: the model's elements (matched to their ports
     /// by name), its excitation points as inputs, and its sensors as outputs.
@@ -87,6 +105,7 @@ impl Plant {
         for e in &elements {
             check(format!("element '{}'", e.element.name()), e.port)?;
             e.element.law().validate(e.element.name())?;
+            refuse_coupled(&e.element)?;
         }
         for (name, p) in &inputs {
             check(format!("input '{name}'"), *p)?;
