@@ -725,19 +725,9 @@ fn read_coupled_element(
         t.used.push(key.to_string());
     }
     let named: Vec<(&str, f64)> = pairs.iter().map(|(k, v)| (k.as_str(), *v)).collect();
-    let located = |t: &Tab<'_, '_>, e: nlsim_kernel::Error| {
-        if let nlsim_kernel::Error::InvalidParameter { name, .. } = &e
-            && let Some((_, p)) = name.rsplit_once('.')
-            && let Some((k, v)) = t.t.iter().find(|(k, _)| k.get_ref().as_ref() == p)
-        {
-            return t
-                .doc
-                .err(k.span().start..v.span().end, &t.key(p), e.to_string());
-        }
-        t.doc.err(t.span.clone(), &t.path, e.to_string())
-    };
-    let law = Law::from_named(name, "coupled_polynomial", &named).map_err(|e| located(t, e))?;
-    NonlinearElement::coupled(name, law, couplings).map_err(|e| located(t, e))
+    let law =
+        Law::from_named(name, "coupled_polynomial", &named).map_err(|e| element_error(t, e))?;
+    NonlinearElement::coupled(name, law, couplings).map_err(|e| element_error(t, e))
 }
 
 fn read_element(t: &mut Tab<'_, '_>, dofs: &DofMap) -> Result<NonlinearElement> {
@@ -820,16 +810,19 @@ fn read_element(t: &mut Tab<'_, '_>, dofs: &DofMap) -> Result<NonlinearElement> 
             ));
         }
     };
-    NonlinearElement::new(name, law, coupling).map_err(|e| {
-        // Point at the offending parameter's own line when the file gives it.
-        if let nlsim_kernel::Error::InvalidParameter { name, .. } = &e
-            && let Some((_, p)) = name.rsplit_once('.')
-            && let Some((k, v)) = t.t.iter().find(|(k, _)| k.get_ref().as_ref() == p)
-        {
-            return t
-                .doc
-                .err(k.span().start..v.span().end, &t.key(p), e.to_string());
-        }
-        t.doc.err(t.span.clone(), &t.path, e.to_string())
-    })
+    NonlinearElement::new(name, law, coupling).map_err(|e| element_error(t, e))
+}
+
+/// An element's model error at the offending parameter's own line when the file gives it,
+/// otherwise at the element's table.
+fn element_error(t: &Tab<'_, '_>, e: nlsim_kernel::Error) -> Error {
+    if let nlsim_kernel::Error::InvalidParameter { name, .. } = &e
+        && let Some((_, p)) = name.rsplit_once('.')
+        && let Some((k, v)) = t.t.iter().find(|(k, _)| k.get_ref().as_ref() == p)
+    {
+        return t
+            .doc
+            .err(k.span().start..v.span().end, &t.key(p), e.to_string());
+    }
+    t.doc.err(t.span.clone(), &t.path, e.to_string())
 }

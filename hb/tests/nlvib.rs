@@ -246,14 +246,9 @@ fn example4_backbone_matches_shooting() {
     assert!(rep.points.windows(2).all(|w| w[1].omega > w[0].omega));
 }
 
-/// Example 5: `m = [0.02, 1]`, `k = [0, 40, 600]`, no viscous damping, regularised dry
-/// friction `5 tanh(u̇/0.05)` on DOF 1. Its first nonlinear mode goes from the stuck joint
-/// (DOF 1 held: `ω² = 640`, 4.0263 Hz) to full slip (the free structure's first mode,
-/// `ω² = 583.5`, 3.8446 Hz) with a damping peak between (microslip), and the damping falls
-/// back as the friction force becomes small against the elastic forces: checked against
-/// those closed-form limits.
-#[test]
-fn example5_friction_mode_runs_from_stuck_to_slipping() {
+/// Example 5's model: `m = [0.02, 1]`, `k = [0, 40, 600]`, no viscous damping, regularised
+/// dry friction `5 tanh(u̇/0.05)` on DOF 1, an (unforced) input on DOF 2.
+fn example5() -> Model {
     let k = vec![vec![40.0, -40.0], vec![-40.0, 640.0]];
     let mut model = Model::new(
         "nlvib_ex5",
@@ -283,6 +278,18 @@ fn example5_friction_mode_runs_from_stuck_to_slipping() {
             harmonics: Vec::new(),
         })
         .unwrap();
+    model
+}
+
+/// Example 5: `m = [0.02, 1]`, `k = [0, 40, 600]`, no viscous damping, regularised dry
+/// friction `5 tanh(u̇/0.05)` on DOF 1. Its first nonlinear mode goes from the stuck joint
+/// (DOF 1 held: `ω² = 640`, 4.0263 Hz) to full slip (the free structure's first mode,
+/// `ω² = 583.5`, 3.8446 Hz) with a damping peak between (microslip), and the damping falls
+/// back as the friction force becomes small against the elastic forces: checked against
+/// those closed-form limits.
+#[test]
+fn example5_friction_mode_runs_from_stuck_to_slipping() {
+    let model = example5();
     let red = both_modes(&model);
     let sys = HbSystem::from_model(
         &model,
@@ -873,35 +880,7 @@ fn example6_nonlinear_mode_matches_shooting() {
 /// reference's own (about 1e-6 in full slip).
 #[test]
 fn example5_damped_mode_matches_shooting() {
-    let k = vec![vec![40.0, -40.0], vec![-40.0, 640.0]];
-    let mut model = Model::new(
-        "nlvib_ex5",
-        DofMap::scalar(2),
-        SparseSym::diagonal("M", &[0.02, 1.0]).unwrap(),
-        SparseSym::from_dense_rows("K", &k).unwrap(),
-    )
-    .unwrap();
-    model
-        .add_element(
-            NonlinearElement::new(
-                "friction",
-                Law::Coulomb {
-                    fc: 5.0,
-                    v_reg: 0.05,
-                },
-                Coupling::single(0),
-            )
-            .unwrap(),
-        )
-        .unwrap();
-    model
-        .add_excitation(Excitation {
-            name: "f".into(),
-            dof: 1,
-            amplitude: 0.0,
-            harmonics: Vec::new(),
-        })
-        .unwrap();
+    let model = example5();
     let red = both_modes(&model);
     let accel = |q: [f64; 2], v: [f64; 2], xi: f64| -> [f64; 2] {
         let f = 5.0 * (v[0] / 0.05).tanh();
