@@ -54,6 +54,8 @@ pub struct NnmRequest {
     pub modes: usize,
     /// Parallelism of the reduction.
     pub par: faer::Par,
+    /// Lanczos settings of the reduction.
+    pub lanczos: crate::run::Lanczos,
 }
 
 impl NnmRequest {
@@ -217,7 +219,8 @@ pub fn run_nnm(
         })?;
     }
     let t0 = Instant::now();
-    let reduced = crate::run::Reductions::default().get(&free, modes, false, req.par)?;
+    let reduced =
+        crate::run::Reductions::default().get(&free, modes, false, req.par, req.lanczos)?;
     // Within a cluster of equal frequencies (the two bending directions of a symmetric
     // section) any basis is a basis of modes; the free motion needs the one where the
     // cluster's members beyond the rank of its participation at the elements do not move

@@ -45,15 +45,44 @@ pub fn apply_sets(model: &mut Model, sets: &[String]) -> Result<()> {
     Ok(())
 }
 
+/// The Lanczos settings of a run's reduction (`--basis`, `--restarts` of `simulate`, `frf`
+/// and `nnm`, as of `modes`): what the eigensolver's message advises when modes do not
+/// converge.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Lanczos {
+    /// Basis size before a restart; `None`: the solver's default `max(2k, k + 4 block)`.
+    pub basis: Option<usize>,
+    /// Most restarts before the solver gives up.
+    pub restarts: usize,
+}
+
+impl Default for Lanczos {
+    fn default() -> Self {
+        let d = EigenConfig::default();
+        Self {
+            basis: d.basis_size,
+            restarts: d.max_restarts,
+        }
+    }
+}
+
 /// The reduction every run uses: the lowest `modes` modes, with or without residual
 /// flexibility.
-fn reduce(model: &Model, modes: usize, residual: bool, par: faer::Par) -> Result<ReducedModel> {
+fn reduce(
+    model: &Model,
+    modes: usize,
+    residual: bool,
+    par: faer::Par,
+    lanczos: Lanczos,
+) -> Result<ReducedModel> {
     Ok(nlsim_reduction::reduce(
         model,
         &ReductionConfig {
             eigen: EigenConfig {
                 selection: ModeSelection::Lowest(modes),
                 par,
+                basis_size: lanczos.basis,
+                max_restarts: lanczos.restarts,
                 ..EigenConfig::default()
             },
             residual_flexibility: residual,
@@ -94,8 +123,9 @@ impl Reductions {
         modes: usize,
         residual: bool,
         par: faer::Par,
+        lanczos: Lanczos,
     ) -> Result<Arc<ReducedModel>> {
-        let key = reduction_key(model, modes, residual)?;
+        let key = reduction_key(model, modes, residual, lanczos)?;
         let bytes = model.n_dofs().saturating_mul(modes).saturating_mul(8);
         let slot = {
             let mut guard = self.slots.lock().unwrap_or_else(|p| p.into_inner());
@@ -111,13 +141,13 @@ impl Reductions {
         };
         let Some(slot) = slot else {
             self.computed.fetch_add(1, Ordering::Relaxed);
-            return Ok(Arc::new(reduce(model, modes, residual, par)?));
+            return Ok(Arc::new(reduce(model, modes, residual, par, lanczos)?));
         };
         let mut fresh = false;
         let r = slot.get_or_init(|| {
             fresh = true;
             self.computed.fetch_add(1, Ordering::Relaxed);
-            reduce(model, modes, residual, par)
+            reduce(model, modes, residual, par, lanczos)
                 .map(Arc::new)
                 .map_err(|e| e.to_string())
         });
@@ -137,7 +167,7 @@ impl Reductions {
 }
 
 /// A hash of what the reduction of `model` to `modes` modes reads (see [`Reductions`]).
-fn reduction_key(model: &Model, modes: usize, residual: bool) -> Result<u64> {
+fn reduction_key(model: &Model, modes: usize, residual: bool, lanczos: Lanczos) -> Result<u64> {
     use std::hash::{Hash, Hasher};
     fn matrix(a: &nlsim_kernel::SparseSym, h: &mut impl Hasher) {
         let f = a.as_faer();
@@ -155,7 +185,7 @@ fn reduction_key(model: &Model, modes: usize, residual: bool) -> Result<u64> {
         d => format!("{d:?}").hash(&mut h),
     }
     format!("{:?}", nlsim_reduction::model_ports(model, &[])?).hash(&mut h);
-    (modes, residual).hash(&mut h);
+    (modes, residual, lanczos).hash(&mut h);
     Ok(h.finish())
 }
 
@@ -306,6 +336,8 @@ pub struct FrfRequest {
     pub stability: bool,
     /// Parallelism of the reduction (faer's `Par`; `Par::rayon(0)` uses the current pool).
     pub par: faer::Par,
+    /// Lanczos settings of the reduction.
+    pub lanczos: Lanczos,
 }
 
 impl Default for FrfRequest {
@@ -325,6 +357,7 @@ impl Default for FrfRequest {
             residual: true,
             stability: true,
             par: faer::Par::rayon(0),
+            lanczos: Lanczos::default(),
         }
     }
 }
@@ -648,7 +681,7 @@ pub fn run_frf_shared(
     }
     let modes = req.modes.min(model.n_dofs());
     let t0 = Instant::now();
-    let reduced = reductions.get(model, modes, req.residual, req.par)?;
+    let reduced = reductions.get(model, modes, req.residual, req.par, req.lanczos)?;
     let modes = reduced.modes.len();
     let reduce_seconds = t0.elapsed().as_secs_f64();
     let system = if req.force.is_some() || !req.force_harmonics.is_empty() {
@@ -1074,6 +1107,8 @@ pub struct SimRequest {
     pub hht_alpha: f64,
     /// Parallelism of the reduction (faer's `Par`; `Par::rayon(0)` uses the current pool).
     pub par: faer::Par,
+    /// Lanczos settings of the reduction.
+    pub lanczos: Lanczos,
 }
 
 impl Default for SimRequest {
@@ -1091,6 +1126,7 @@ impl Default for SimRequest {
             substeps: 1,
             hht_alpha: -0.05,
             par: faer::Par::rayon(0),
+            lanczos: Lanczos::default(),
         }
     }
 }
@@ -1345,7 +1381,7 @@ pub fn run_simulation_shared(
         req.modes.min(model.n_dofs())
     };
     let t0 = Instant::now();
-    let reduced = reductions.get(model, modes, req.residual, req.par)?;
+    let reduced = reductions.get(model, modes, req.residual, req.par, req.lanczos)?;
     let modes = if unreduced { 0 } else { reduced.modes.len() };
     let f1 = reduced.modes.frequencies_hz()[0];
     let reduce_seconds = t0.elapsed().as_secs_f64();
@@ -1440,8 +1476,9 @@ mod tests {
     #[test]
     fn a_reduction_is_shared_exactly_when_the_linear_model_is_the_same() {
         let model = nlsim_fixtures::ecl_beam().model;
-        let key =
-            |m: &Model, modes: usize, residual: bool| reduction_key(m, modes, residual).unwrap();
+        let key = |m: &Model, modes: usize, residual: bool| {
+            reduction_key(m, modes, residual, Lanczos::default()).unwrap()
+        };
         let base = key(&model, 10, true);
         // Element parameters act through the ports: the same reduction.
         let mut softer = model.clone();
@@ -1473,12 +1510,18 @@ mod tests {
 
         // Shared reductions are the ones a run computes for itself, bit for bit.
         let shared = Reductions::default();
-        let a = shared.get(&model, 10, true, faer::Par::Seq).unwrap();
-        let b = shared.get(&softer, 10, true, faer::Par::Seq).unwrap();
-        let c = shared.get(&sprung, 10, true, faer::Par::Seq).unwrap();
+        let a = shared
+            .get(&model, 10, true, faer::Par::Seq, Lanczos::default())
+            .unwrap();
+        let b = shared
+            .get(&softer, 10, true, faer::Par::Seq, Lanczos::default())
+            .unwrap();
+        let c = shared
+            .get(&sprung, 10, true, faer::Par::Seq, Lanczos::default())
+            .unwrap();
         assert!(Arc::ptr_eq(&a, &b) && !Arc::ptr_eq(&a, &c));
         assert_eq!(shared.counts(), (2, 1));
-        let fresh = reduce(&softer, 10, true, faer::Par::Seq).unwrap();
+        let fresh = reduce(&softer, 10, true, faer::Par::Seq, Lanczos::default()).unwrap();
         assert_eq!(fresh.modes.eigenvalues, b.modes.eigenvalues);
         assert_eq!(fresh.residual, b.residual);
         assert_eq!(fresh.participation, b.participation);

@@ -5502,3 +5502,48 @@ fn coupled_polynomial_element_from_a_model_file() {
         assert!(err.contains("bad.toml:") && err.contains(key), "{err}");
     }
 }
+
+/// The options the eigensolver's message advises exist on every command that reduces: with no
+/// restart allowed, `simulate`, `frf` and `nnm` on a Lanczos-sized bracket stop with the
+/// message naming `--basis` and `--restarts`; a basis large enough to converge without a
+/// restart (`--basis 120`) then runs, and a basis too small for the modes is a usage error.
+#[test]
+fn lanczos_options_the_messages_advise_exist() {
+    let model = "bracket:dofs=3000,nonlinear=bump_stop";
+    let d = scratch("lanczos_options");
+    let out = d.join("s.csv");
+    let out = out.to_str().unwrap();
+    let runs: [Vec<&str>; 3] = [
+        vec!["simulate", model, "--duration", "0.01", "--rate", "1000"],
+        vec![
+            "frf",
+            model,
+            "--from",
+            "100",
+            "--to",
+            "101",
+            "--no-stability",
+        ],
+        vec![
+            "nnm", model, "--from", "1e-6", "--to", "1e-5", "--points", "2", "--modes", "20",
+        ],
+    ];
+    for base in &runs {
+        let mut args = base.clone();
+        args.extend(["--restarts", "0", "--out", out]);
+        let (code, _, err) = nlsim(&args);
+        assert_ne!(code, 0, "{args:?}");
+        assert!(
+            err.contains("converged after 0 restarts") && err.contains("`--basis`, `--restarts`"),
+            "{args:?}: {err}"
+        );
+        args.extend(["--basis", "120"]);
+        let (code, _, err) = nlsim(&args);
+        assert_eq!(code, 0, "{args:?}: {err}");
+    }
+    let mut args = runs[0].clone();
+    args.extend(["--basis", "2"]);
+    let (code, _, err) = nlsim(&args);
+    assert_ne!(code, 0);
+    assert!(err.contains("a basis of 2 vectors"), "{err}");
+}

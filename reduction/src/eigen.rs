@@ -1197,7 +1197,8 @@ impl KrylovSchur<'_> {
                     format!(
                         "{nconv} of {nev} modes converged after {restarts} restarts (worst \
                          relative Ritz residual {worst:.2e} > tolerance {:.1e}); raise the basis \
-                         size or the restart limit (`nlsim modes --basis`, `--restarts`)",
+                         size or the restart limit (`--basis`, `--restarts` of `nlsim modes`, `simulate`, \
+                         `frf` and `nnm`)",
                         self.tol
                     )
                 });

@@ -203,6 +203,7 @@ impl Batch {
                     // Jobs run in parallel, each sequential inside: results independent of
                     // the thread and shard count.
                     par: faer::Par::Seq,
+                    lanczos: Default::default(),
                 };
                 req.check()
                     .map_err(|e| err(at("[frf]"), "frf", e.to_string()))?;
@@ -255,6 +256,7 @@ impl Batch {
                     substeps: t.substeps.unwrap_or(d.substeps),
                     hht_alpha: t.hht_alpha.unwrap_or(d.hht_alpha),
                     par: faer::Par::Seq,
+                    lanczos: Default::default(),
                 };
                 req.check()
                     .map_err(|e| err(at("[simulate]"), "simulate", e.to_string()))?;

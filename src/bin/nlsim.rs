@@ -1,7 +1,7 @@
 //! The `nlsim` command line. Exit codes: 0 success, 1 a run failed (bad model, numerical
 //! failure), 2 bad usage.
 
-use clap::{Parser, Subcommand};
+use clap::{Args, Parser, Subcommand};
 use nlsim::kernel::ValidationConfig;
 use nlsim::reduction::{EigenConfig, EigenSolver, ModeSelection};
 use std::io::Write as _;
@@ -65,6 +65,28 @@ struct Cli {
     threads: Option<usize>,
     #[command(subcommand)]
     command: Command,
+}
+
+/// The Lanczos settings of a run's reduction (as `nlsim modes --basis --restarts`): what the
+/// eigensolver advises when modes do not converge.
+#[derive(Args, Debug)]
+struct LanczosArgs {
+    /// Lanczos basis size of the reduction before a restart (default max(2 k, k + 4 block)
+    /// for k modes).
+    #[arg(long)]
+    basis: Option<usize>,
+    /// Most Lanczos restarts of the reduction before giving up.
+    #[arg(long, default_value_t = 200)]
+    restarts: usize,
+}
+
+impl LanczosArgs {
+    fn settings(&self) -> nlsim::run::Lanczos {
+        nlsim::run::Lanczos {
+            basis: self.basis,
+            restarts: self.restarts,
+        }
+    }
 }
 
 #[derive(Subcommand, Debug)]
@@ -158,6 +180,8 @@ enum Command {
         /// Do not locate contact events inside steps (foh).
         #[arg(long)]
         no_events: bool,
+        #[command(flatten)]
+        lanczos: LanczosArgs,
         /// Compress the HDF5 series (shuffle + deflate): about 1.8x smaller, 2.5x slower to write
         #[arg(long)]
         compress: bool,
@@ -236,6 +260,8 @@ enum Command {
         /// Skip Hill stability (faster; no stable/unstable distinction).
         #[arg(long)]
         no_stability: bool,
+        #[command(flatten)]
+        lanczos: LanczosArgs,
         /// Output file: .h5 (HDF5) or .csv.
         #[arg(long)]
         out: Option<std::path::PathBuf>,
@@ -403,6 +429,8 @@ enum Command {
         /// Retained modes of the reduced model.
         #[arg(long, default_value_t = 10)]
         modes: usize,
+        #[command(flatten)]
+        lanczos: LanczosArgs,
         /// Output file: .h5 (HDF5) or .csv.
         #[arg(long)]
         out: Option<std::path::PathBuf>,
@@ -714,6 +742,7 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             modes,
             no_residual,
             no_events,
+            lanczos,
             compress,
             rtol,
             atol,
@@ -738,6 +767,7 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 substeps: *substeps,
                 hht_alpha: *hht_alpha,
                 par: par(cli),
+                lanczos: lanczos.settings(),
             };
             simulate(
                 model,
@@ -763,6 +793,7 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             modes,
             no_residual,
             no_stability,
+            lanczos,
             out,
             plot,
             magnitude,
@@ -788,6 +819,7 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 residual: !no_residual,
                 stability: !no_stability,
                 par: par(cli),
+                lanczos: lanczos.settings(),
             };
             let outputs = FrfOutputs {
                 out: out.as_deref(),
@@ -806,6 +838,7 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             points,
             harmonics,
             modes,
+            lanczos,
             out,
             plot,
             set,
@@ -818,6 +851,7 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 harmonics: *harmonics,
                 modes: *modes,
                 par: par(cli),
+                lanczos: lanczos.settings(),
             };
             nnm(model, &req, set, (out.as_deref(), plot.as_deref()), cli)
         }
