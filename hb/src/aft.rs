@@ -185,24 +185,7 @@ impl AftPlan {
     /// (rad/s). History-dependent laws (Jenkins) are marched over repeated periods from a
     /// zero state until the state at the period's start repeats.
     pub fn evaluate(&self, law: &Law, x: &[f64], omega0: f64, jacobian: bool) -> ElementHarmonics {
-        let nh = self.set.len();
-        let mut scratch = AftScratch::default();
-        let mut force = vec![0.0; nh];
-        let mut jac = jacobian.then(|| Mat::zeros(nh, nh));
-        self.evaluate_into(
-            law,
-            x,
-            omega0,
-            &mut scratch,
-            &mut force,
-            jac.as_mut().map(|j| j.as_mut()),
-        );
-        ElementHarmonics {
-            force,
-            jacobian: jac,
-            stiffness: scratch.kt,
-            damping: scratch.ct,
-        }
+        self.evaluate_element(law, x, omega0, jacobian)
     }
 
     /// [`AftPlan::evaluate`] into caller buffers: the force coefficients into `force` (2H+1),
@@ -307,8 +290,8 @@ impl AftPlan {
     /// Evaluates a law on [`Law::arity`] `m` coordinates whose coefficients are `x`
     /// (`m (2H+1)`, coordinate after coordinate), at base frequency `omega0` (rad/s): the force
     /// coefficients of every coordinate in the same layout, `∂G/∂x` (`m(2H+1)` square, blocks
-    /// `P diag(∂g_a/∂u_b) E`) when asked for, the tangent samples. A one-coordinate law is
-    /// [`AftPlan::evaluate`].
+    /// `P diag(∂g_a/∂u_b) E`) when asked for, the tangent samples. For a one-coordinate law
+    /// this is [`AftPlan::evaluate`].
     pub fn evaluate_element(
         &self,
         law: &Law,
@@ -316,9 +299,6 @@ impl AftPlan {
         omega0: f64,
         jacobian: bool,
     ) -> ElementHarmonics {
-        if law.arity() == 1 {
-            return self.evaluate(law, x, omega0, jacobian);
-        }
         let w = law.arity() * self.set.len();
         let mut scratch = AftScratch::default();
         let mut force = vec![0.0; w];
@@ -335,7 +315,7 @@ impl AftPlan {
             force,
             jacobian: jac,
             stiffness: scratch.kt,
-            damping: Vec::new(),
+            damping: scratch.ct,
         }
     }
 
@@ -737,18 +717,14 @@ mod tests {
     fn coupled_law_forces_jacobian_and_parameters() {
         let set = HarmonicSet::new(4, 1).unwrap();
         let nh = set.len();
-        let term = |output: usize, powers: [u32; 2], coef: f64| nlsim_kernel::MonomialTerm {
-            output,
-            powers: powers.to_vec(),
-            coef,
-        };
+        let term = nlsim_kernel::MonomialTerm::new;
         let law = Law::CoupledPolynomial {
             inputs: 2,
             terms: vec![
-                term(0, [1, 1], 2.0),
-                term(1, [2, 0], 1.0),
-                term(1, [1, 2], -3.0),
-                term(0, [0, 1], 0.5),
+                term(0, &[1, 1], 2.0),
+                term(1, &[2, 0], 1.0),
+                term(1, &[1, 2], -3.0),
+                term(0, &[0, 1], 0.5),
             ],
         };
         let plan = AftPlan::new(set, samples_for(&law, &set)).unwrap();

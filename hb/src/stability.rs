@@ -116,8 +116,8 @@ impl HbSystem {
             }
         }
         // K_eff(t) per sample (coordinates × coordinates), then its harmonics 0..2H.
-        let mut keff = kt.clone();
-        if quasi_static {
+        let keff = if quasi_static {
+            let mut keff = vec![vec![vec![0.0; n]; ne]; ne];
             for i in 0..n {
                 let a = Mat::from_fn(ne, ne, |r, c| {
                     f64::from(u8::from(r == c))
@@ -131,7 +131,10 @@ impl HbSystem {
                     }
                 }
             }
-        }
+            keff
+        } else {
+            kt
+        };
         let phi = |e: usize, r: usize| lin.phi[(self.element_ports[e], dynamic[r])];
         let tangents = HillTangents {
             keff: &keff,

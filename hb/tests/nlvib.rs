@@ -14,6 +14,28 @@ fn both_modes(model: &Model) -> nlsim_reduction::modal::ReducedModel {
     reduce(model, &ReductionConfig::lowest(2)).unwrap()
 }
 
+/// The harmonic-balance system of `model` on `red` with `h` harmonics.
+fn system(model: &Model, red: &nlsim_reduction::modal::ReducedModel, h: usize) -> HbSystem {
+    HbSystem::from_model(
+        model,
+        red,
+        HarmonicSet::new(h, 1).unwrap(),
+        HbConfig::default(),
+    )
+    .unwrap()
+}
+
+/// One classical RK4 step of `ż = f(t, z)` for a 4-state system.
+fn rk4_step(f: &dyn Fn(f64, [f64; 4]) -> [f64; 4], t: f64, z: [f64; 4], h: f64) -> [f64; 4] {
+    let add =
+        |a: [f64; 4], b: [f64; 4], s: f64| -> [f64; 4] { std::array::from_fn(|j| a[j] + s * b[j]) };
+    let k1 = f(t, z);
+    let k2 = f(t + 0.5 * h, add(z, k1, 0.5 * h));
+    let k3 = f(t + 0.5 * h, add(z, k2, 0.5 * h));
+    let k4 = f(t + h, add(z, k3, h));
+    std::array::from_fn(|j| z[j] + h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]))
+}
+
 /// Example 3: the chain `m = [1, 1]`, `k = [0, 1, 1]` (grounded-left, coupling,
 /// grounded-right), `d = 0.03 k`, a unilateral spring of stiffness 100 beyond a gap of 1 on
 /// DOF 1, a force of 0.1 on DOF 2.
@@ -63,13 +85,7 @@ fn example3() -> Model {
 fn example3_has_two_folds_and_no_ripple_folds() {
     let model = example3();
     let red = both_modes(&model);
-    let sys = HbSystem::from_model(
-        &model,
-        &red,
-        HarmonicSet::new(21, 1).unwrap(),
-        HbConfig::default(),
-    )
-    .unwrap();
+    let sys = system(&model, &red, 21);
     let mut cc = ContinuationConfig::frequency(0.8 / (2.0 * PI), 0.5 / (2.0 * PI));
     cc.stability = false;
     let rep = continuation(&sys, &cc, None).unwrap();
@@ -146,13 +162,7 @@ fn example4_backbone_matches_shooting() {
             .unwrap();
     }
     let red = both_modes(&model);
-    let sys = HbSystem::from_model(
-        &model,
-        &red,
-        HarmonicSet::new(9, 1).unwrap(),
-        HbConfig::default(),
-    )
-    .unwrap();
+    let sys = system(&model, &red, 9);
     let amps: Vec<f64> = (0..=20)
         .map(|i| 10f64.powf(-2.0 + 2.3 * i as f64 / 20.0))
         .collect();
@@ -161,33 +171,11 @@ fn example4_backbone_matches_shooting() {
     assert_eq!(rep.points.len(), amps.len());
     let first = &rep.points[0];
     assert!((first.omega - 1.0).abs() < 1e-3, "{}", first.omega);
-    let nh = 19;
-    let phi = &red.participation; // ports × modes; the ports are the DOFs here
-    let ports = &red.ports;
-    let dof_row = |d: usize| {
-        ports
-            .iter()
-            .position(|p| p.dofs == [d] && p.weights == [1.0])
-            .unwrap()
-    };
     let mut worst = 0.0f64;
     for p in rep.points.iter().step_by(4) {
         assert!(p.xi.abs() < 1e-9 * p.omega, "conservative: ξ = {}", p.xi);
-        // Physical state at t = 0.
-        let x0: Vec<f64> = (0..2)
-            .map(|d| {
-                let row = dof_row(d);
-                (0..2)
-                    .map(|r| {
-                        phi[(row, r)]
-                            * (0..nh)
-                                .filter(|j| j % 2 == 1 || *j == 0)
-                                .map(|j| p.eta[r * nh + j])
-                                .sum::<f64>()
-                    })
-                    .sum()
-            })
-            .collect();
+        // Physical state at t = 0 (velocities zero by the phase normalisation).
+        let x0 = nnm_state(&red, p);
         // Shooting: x1(0) fixed, x2(0) and T free; v(T/2) = 0.
         let rhs = |z: [f64; 4]| -> [f64; 4] {
             [
@@ -202,16 +190,7 @@ fn example4_backbone_matches_shooting() {
             let h = 0.5 * t / n as f64;
             let mut z = [x0[0], x2, 0.0, 0.0];
             for _ in 0..n {
-                let add = |a: [f64; 4], b: [f64; 4], s: f64| -> [f64; 4] {
-                    std::array::from_fn(|j| a[j] + s * b[j])
-                };
-                let k1 = rhs(z);
-                let k2 = rhs(add(z, k1, 0.5 * h));
-                let k3 = rhs(add(z, k2, 0.5 * h));
-                let k4 = rhs(add(z, k3, h));
-                z = std::array::from_fn(|j| {
-                    z[j] + h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
-                });
+                z = rk4_step(&|_, z| rhs(z), 0.0, z, h);
             }
             [z[2], z[3]]
         };
@@ -291,13 +270,7 @@ fn example5() -> Model {
 fn example5_friction_mode_runs_from_stuck_to_slipping() {
     let model = example5();
     let red = both_modes(&model);
-    let sys = HbSystem::from_model(
-        &model,
-        &red,
-        HarmonicSet::new(7, 1).unwrap(),
-        HbConfig::default(),
-    )
-    .unwrap();
+    let sys = system(&model, &red, 7);
     let amps: Vec<f64> = (0..=40)
         .map(|i| 10f64.powf(-3.0 + 4.0 * i as f64 / 40.0))
         .collect();
@@ -370,11 +343,7 @@ fn example6(level: f64) -> Model {
     for (pk, ek) in p.iter().zip(&e) {
         for (output, &coef) in ek.iter().enumerate() {
             if coef != 0.0 {
-                terms.push(MonomialTerm {
-                    output,
-                    powers: pk.to_vec(),
-                    coef,
-                });
+                terms.push(MonomialTerm::new(output, pk, coef));
             }
         }
     }
@@ -441,15 +410,7 @@ fn example6_flow(
     let mut q1 = Vec::with_capacity(n);
     for i in 0..n {
         q1.push(z[0]);
-        let t = i as f64 * h;
-        let add = |a: [f64; 4], b: [f64; 4], s: f64| -> [f64; 4] {
-            std::array::from_fn(|j| a[j] + s * b[j])
-        };
-        let k1 = rhs(t, z);
-        let k2 = rhs(t + 0.5 * h, add(z, k1, 0.5 * h));
-        let k3 = rhs(t + 0.5 * h, add(z, k2, 0.5 * h));
-        let k4 = rhs(t + h, add(z, k3, h));
-        z = std::array::from_fn(|j| z[j] + h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]));
+        z = rk4_step(&rhs, i as f64 * h, z, h);
     }
     (z, q1)
 }
@@ -620,13 +581,7 @@ fn example6_frequency_responses_match_shooting() {
         let model = example6(level);
         let red = both_modes(&model);
         for (h, tol_amp, tol_fold, tol_pd) in [(7, 1e-7, 1e-7, 3e-8), (11, 1e-9, 1e-9, 1e-9)] {
-            let sys = HbSystem::from_model(
-                &model,
-                &red,
-                HarmonicSet::new(h, 1).unwrap(),
-                HbConfig::default(),
-            )
-            .unwrap();
+            let sys = system(&model, &red, h);
             let cc = ContinuationConfig::frequency(1.6 / (2.0 * PI), 0.8 / (2.0 * PI));
             let rep = continuation(&sys, &cc, None).unwrap();
             assert!(rep.is_complete(), "{}", rep.detail);
@@ -739,16 +694,7 @@ fn epmc_shooting(
             let eta = modal([z[0], z[1]]);
             c1 += eta * th.cos();
             s1 += eta * th.sin();
-            let add = |a: [f64; 4], b: [f64; 4], s: f64| -> [f64; 4] {
-                std::array::from_fn(|j| a[j] + s * b[j])
-            };
-            let k1 = rhs(z);
-            let k2 = rhs(add(z, k1, 0.5 * h));
-            let k3 = rhs(add(z, k2, 0.5 * h));
-            let k4 = rhs(add(z, k3, h));
-            z = std::array::from_fn(|j| {
-                z[j] + h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
-            });
+            z = rk4_step(&|_, z| rhs(z), 0.0, z, h);
         }
         let mut r: Vec<f64> = (0..4).map(|j| z[j] - z0[j]).collect();
         r.push(2.0 / n as f64 * c1 - a);
@@ -833,13 +779,7 @@ fn example6_nonlinear_mode_matches_shooting() {
     let accel = |q: [f64; 2], v: [f64; 2], xi: f64| example6_accel(q, v, 0.0, 0.0, 1.0, xi);
     let eta1 = modal_coordinate(&red, 0);
     for h in [7, 13] {
-        let sys = HbSystem::from_model(
-            &model,
-            &red,
-            HarmonicSet::new(h, 1).unwrap(),
-            HbConfig::default(),
-        )
-        .unwrap();
+        let sys = system(&model, &red, h);
         let rep = nlsim_hb::nnm::nonlinear_mode(&sys, 0, &amps, &mut |_| {}).unwrap();
         assert!(rep.status.is_converged(), "{}", rep.detail);
         let first = &rep.points[0];
@@ -895,13 +835,7 @@ fn example5_damped_mode_matches_shooting() {
     let eta1 = modal_coordinate(&red, 0);
     let mut previous: Option<Vec<(f64, f64)>> = None;
     for h in [7, 21, 41] {
-        let sys = HbSystem::from_model(
-            &model,
-            &red,
-            HarmonicSet::new(h, 1).unwrap(),
-            HbConfig::default(),
-        )
-        .unwrap();
+        let sys = system(&model, &red, h);
         let rep = nlsim_hb::nnm::nonlinear_mode(&sys, 0, &amps, &mut |_| {}).unwrap();
         assert!(rep.status.is_converged(), "{}", rep.detail);
         let mut errors = Vec::new();

@@ -218,18 +218,14 @@ fn coupled_polynomial_sensitivities_match_finite_differences() {
             beta: 1e-5,
         })
         .unwrap();
-    let term = |output: usize, powers: [u32; 2], coef: f64| MonomialTerm {
-        output,
-        powers: powers.to_vec(),
-        coef,
-    };
+    let term = MonomialTerm::new;
     let law = Law::CoupledPolynomial {
         inputs: 2,
         terms: vec![
-            term(0, [2, 1], 3e9),
-            term(0, [2, 0], 2e7),
-            term(1, [3, 0], 1e9),
-            term(1, [0, 3], 4e12),
+            term(0, &[2, 1], 3e9),
+            term(0, &[2, 0], 2e7),
+            term(1, &[3, 0], 1e9),
+            term(1, &[0, 3], 4e12),
         ],
     };
     model

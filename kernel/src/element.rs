@@ -50,6 +50,15 @@ pub struct MonomialTerm {
 }
 
 impl MonomialTerm {
+    /// The term `coef · Π_j u_j^{powers[j]}` of force `output` (0-based).
+    pub fn new(output: usize, powers: &[u32], coef: f64) -> Self {
+        Self {
+            output,
+            powers: powers.to_vec(),
+            coef,
+        }
+    }
+
     /// Total degree `Σ_j powers[j]`.
     pub fn degree(&self) -> u32 {
         self.powers.iter().sum()

@@ -71,11 +71,10 @@ struct Cli {
 /// eigensolver advises when modes do not converge.
 #[derive(Args, Debug)]
 struct LanczosArgs {
-    /// Lanczos basis size of the reduction before a restart (default max(2 k, k + 4 block)
-    /// for k modes).
+    /// Lanczos basis size before a restart (default max(2 k, k + 4 block) for k modes).
     #[arg(long)]
     basis: Option<usize>,
-    /// Most Lanczos restarts of the reduction before giving up.
+    /// Most Lanczos restarts before giving up.
     #[arg(long, default_value_t = 200)]
     restarts: usize,
 }
@@ -129,12 +128,8 @@ enum Command {
         /// Lanczos block size (the largest multiplicity found without relying on round-off).
         #[arg(long, default_value_t = 6)]
         block: usize,
-        /// Lanczos basis size before a restart (default max(2 k, k + 4 block) for k modes).
-        #[arg(long)]
-        basis: Option<usize>,
-        /// Most Lanczos restarts before giving up.
-        #[arg(long, default_value_t = 200)]
-        restarts: usize,
+        #[command(flatten)]
+        lanczos: LanczosArgs,
         /// Skip the Sturm sequence check (saves one factorisation; `--fmax` always counts).
         #[arg(long)]
         no_sturm_check: bool,
@@ -645,8 +640,7 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             out,
             tol,
             block,
-            basis,
-            restarts,
+            lanczos,
             no_sturm_check,
             report: report_dir,
         } => {
@@ -665,8 +659,8 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 selection,
                 tol: *tol,
                 block_size: *block,
-                basis_size: *basis,
-                max_restarts: *restarts,
+                basis_size: lanczos.basis,
+                max_restarts: lanczos.restarts,
                 sturm_check: !no_sturm_check,
                 par: par(cli),
                 ..EigenConfig::default()
