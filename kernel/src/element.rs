@@ -59,9 +59,9 @@ impl MonomialTerm {
         }
     }
 
-    /// Total degree `Σ_j powers[j]`.
+    /// Total degree `Σ_j powers[j]` (saturating: a file may give any powers).
     pub fn degree(&self) -> u32 {
-        self.powers.iter().sum()
+        self.powers.iter().fold(0u32, |a, &p| a.saturating_add(p))
     }
 
     /// The parameter name `k<i>_<p_1>_…_<p_m>` (output `i` 1-based): `k1_2_1` is the

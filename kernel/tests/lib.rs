@@ -929,6 +929,7 @@ fn coupled_polynomial_law() {
     assert!(err(&[("k3_1_1", 1.0)]).contains("force index from 1 to 2"));
     assert!(err(&[("k1_0_0", 1.0)]).contains("total degree"));
     assert!(err(&[("k1_16_0", 1.0)]).contains("total degree"));
+    assert!(err(&[("k1_4294967295_4294967295", 1.0)]).contains("total degree"));
     assert!(err(&[]).contains("at least one"));
     assert!(err(&[("k1_1", 1.0)]).contains("at least 2 coordinates"));
     assert!(
