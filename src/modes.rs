@@ -89,13 +89,22 @@ pub fn format_table(r: &ModeReport) -> String {
             let _ = writeln!(
                 s,
                 "  solver: shift-invert block Lanczos, shift {:.4e} rad²/s², block {}, basis {}, \
-                 {} restarts, {} solves, factor {:.1} M values",
+                 {} restarts, {} solves, factor {:.1} M values ({} ordering{})",
                 st.shift,
                 st.block_size,
                 st.basis_size,
                 st.restarts,
                 st.operator_applications,
-                st.factor_nnz as f64 * 1e-6
+                st.factor_nnz as f64 * 1e-6,
+                match st.ordering {
+                    Some(nlsim_reduction::Ordering::NestedDissection) => "nested-dissection",
+                    _ => "AMD",
+                },
+                if st.factor_released {
+                    "; Sturm check in its storage"
+                } else {
+                    ""
+                }
             );
             let _ = writeln!(
                 s,

@@ -54,6 +54,11 @@ pub struct Lanczos {
     pub basis: Option<usize>,
     /// Most restarts before the solver gives up.
     pub restarts: usize,
+    /// Fill-reducing ordering of the sparse factor (`--ordering`).
+    pub ordering: nlsim_reduction::Ordering,
+    /// Bytes the factors may take together (`--memory-budget`; see
+    /// [`EigenConfig::memory_budget`]); `None`: no limit.
+    pub memory_budget: Option<usize>,
 }
 
 impl Default for Lanczos {
@@ -62,8 +67,20 @@ impl Default for Lanczos {
         Self {
             basis: d.basis_size,
             restarts: d.max_restarts,
+            ordering: d.ordering,
+            memory_budget: d.memory_budget,
         }
     }
+}
+
+/// Half the memory the system reports available (`MemAvailable` of `/proc/meminfo`, bytes):
+/// the command line's default factor budget, so that a model whose two factors would not fit
+/// beside each other is checked in the storage of one. `None` where the file is not there.
+pub fn default_memory_budget() -> Option<usize> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: usize = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib.saturating_mul(1024) / 2)
 }
 
 /// The reduction every run uses: the lowest `modes` modes, with or without residual
@@ -83,6 +100,8 @@ fn reduce(
                 par,
                 basis_size: lanczos.basis,
                 max_restarts: lanczos.restarts,
+                ordering: lanczos.ordering,
+                memory_budget: lanczos.memory_budget,
                 ..EigenConfig::default()
             },
             residual_flexibility: residual,

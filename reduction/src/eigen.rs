@@ -22,8 +22,8 @@
 //! (`−10⁻⁸ max_i K_ii/M_ii`), which keeps rigid-body modes (`λ ≈ 0`) in the spectrum.
 
 use crate::factor::{ShiftFactor, ShiftedPencil};
+use crate::ordering::Ordering;
 use faer::linalg::matmul::matmul;
-use faer::sparse::linalg::matmul::sparse_dense_matmul;
 use faer::{Accum, Mat, MatMut, MatRef, Par};
 use nlsim_kernel::{Error, Result, SparseSym, Status};
 use std::time::Instant;
@@ -77,6 +77,15 @@ pub struct EigenConfig {
     /// default `Par::rayon(0)` uses the current rayon pool). Results are bit-identical for
     /// a given `par`; `Par::Seq` makes them independent of the machine's thread count.
     pub par: faer::Par,
+    /// Fill-reducing ordering of the factor ([`Ordering::Auto`]: AMD or nested dissection,
+    /// whichever leaves fewer values).
+    pub ordering: Ordering,
+    /// Bytes the numeric factors may take together (`None`: no limit). When the Sturm check's
+    /// `L D Lᵀ` beside the operator's `L Lᵀ` would pass it, the check factorises into the
+    /// operator factor's storage and the factor is released ([`EigenSolver::factor`] is then
+    /// `None`, and the residual flexibility refactorises once at the same shift): the peak
+    /// holds one factor instead of two.
+    pub memory_budget: Option<usize>,
 }
 
 impl Default for EigenConfig {
@@ -92,6 +101,8 @@ impl Default for EigenConfig {
             sturm_check: true,
             dense_below: 200,
             par: faer::Par::rayon(0),
+            ordering: Ordering::Auto,
+            memory_budget: None,
         }
     }
 }
@@ -113,6 +124,11 @@ pub struct EigenStats {
     pub operator_applications: usize,
     /// Values stored in the Cholesky factor (fill included).
     pub factor_nnz: usize,
+    /// The fill-reducing ordering of the factor (`None` on the dense path).
+    pub ordering: Option<Ordering>,
+    /// Whether the Sturm check reused the operator factor's storage (the memory budget), so
+    /// that the factor is no longer held.
+    pub factor_released: bool,
     /// Whether the symbolic analysis of an earlier solve was reused.
     pub reused_analysis: bool,
     /// Seconds in symbolic analysis.
@@ -281,6 +297,8 @@ impl SplitMix {
 pub struct EigenSolver {
     pencil: Option<ShiftedPencil>,
     factor: Option<ShiftFactor>,
+    /// The shift of the last Lanczos solve (kept when its factor was released).
+    shift: Option<f64>,
 }
 
 /// Checks shared by every entry point: sizes, finite values, mass on every DOF.
@@ -353,46 +371,12 @@ fn norm_inf(a: &SparseSym) -> f64 {
 }
 
 fn sparse_times(a: &SparseSym, x: MatRef<'_, f64>, par: Par) -> Mat<f64> {
-    let mut y = Mat::zeros(x.nrows(), x.ncols());
-    sparse_dense_matmul(y.as_mut(), Accum::Replace, a.as_faer(), x, 1.0, par);
-    y
-}
-
-/// `xᵀ A x` summed over the stored entries with error-free products (`mul_add`) and
-/// Neumaier-compensated sums: accurate to a few ulps of the result even where the terms cancel
-/// (a near-null mode of `K`), unlike `xᵀ(Ax)` from a rounded product, which is off by up to
-/// `ε xᵀ|A|x`.
-fn quadratic_form(a: &SparseSym, x: faer::ColRef<'_, f64>) -> f64 {
-    let (mut sum, mut comp) = (0.0f64, 0.0f64);
-    let mut add = |t: f64| {
-        let s = sum + t;
-        comp += if sum.abs() >= t.abs() {
-            (sum - s) + t
-        } else {
-            (t - s) + sum
-        };
-        sum = s;
-    };
-    for j in 0..a.n() {
-        let (rows, vals) = a.col(j);
-        let xj = x[j];
-        for (&i, &v) in rows.iter().zip(vals) {
-            // v·x_i = p + e exactly; (p + e)·x_j = q + f + e·x_j to within one rounding of
-            // a term far below the sum's ulp.
-            let p = v * x[i];
-            let e = v.mul_add(x[i], -p);
-            let q = p * xj;
-            let f = p.mul_add(xj, -q);
-            add(q);
-            add(f + e * xj);
-        }
-    }
-    sum + comp
+    crate::products::symmetric_times(a, x, par)
 }
 
 /// Finishes computed eigenpairs: the sign convention (largest entry positive), each
 /// eigenvalue replaced by its vector's Rayleigh quotient `φᵀKφ / φᵀMφ` (from
-/// [`quadratic_form`]: the best estimate the vector gives, with an error quadratic in the
+/// error-free products and sums, `crate::rayleigh`: the best estimate the vector gives, with an error quadratic in the
 /// vector's), and the backward errors `‖Kφ − λMφ‖ / ((‖K‖ + |λ|‖M‖)‖φ‖)`.
 fn finish_vectors(
     k: &SparseSym,
@@ -416,12 +400,12 @@ fn finish_vectors(
                 vectors[(i, c)] = -vectors[(i, c)];
             }
         }
-        let (kq, mq) = (
-            quadratic_form(k, vectors.col(c)),
-            quadratic_form(m, vectors.col(c)),
-        );
-        if mq > 0.0 && (kq / mq).is_finite() {
-            values[c] = kq / mq;
+    }
+    let kq = crate::rayleigh::quadratic_forms(k, vectors.as_ref(), par);
+    let mq = crate::rayleigh::quadratic_forms(m, vectors.as_ref(), par);
+    for c in 0..vectors.ncols() {
+        if mq[c] > 0.0 && (kq[c] / mq[c]).is_finite() {
+            values[c] = kq[c] / mq[c];
         }
     }
     let kx = sparse_times(k, vectors.as_ref(), par);
@@ -472,9 +456,46 @@ impl EigenSolver {
         self.factor.as_ref()
     }
 
-    /// The pencil and its factor, when a Lanczos solve has run.
+    /// The pencil and its factor, when a Lanczos solve has run and kept its factor.
     pub fn pencil_and_factor(&self) -> Option<(&ShiftedPencil, &ShiftFactor)> {
         Some((self.pencil.as_ref()?, self.factor.as_ref()?))
+    }
+
+    /// The shift `σ` (rad²/s²) of the last Lanczos solve, also when its factor was released
+    /// under [`EigenConfig::memory_budget`].
+    pub fn shift(&self) -> Option<f64> {
+        self.shift
+    }
+
+    /// The factor of `K − σM` of the last Lanczos solve for `k`, `m` (the held one, or one
+    /// computed again at the same shift on the same analysis when it was released), or one
+    /// made from nothing for a model this solver has not analysed (the dense path); what is
+    /// made here is kept in `own` / `own_factor`.
+    pub fn operator<'a>(
+        &'a self,
+        k: &SparseSym,
+        m: &SparseSym,
+        par: Par,
+        own: &'a mut Option<ShiftedPencil>,
+        own_factor: &'a mut Option<ShiftFactor>,
+    ) -> Result<(&'a ShiftedPencil, &'a ShiftFactor)> {
+        match (&self.pencil, &self.factor, self.shift) {
+            (Some(p), Some(f), _) if p.n() == k.n() => Ok((p, f)),
+            (Some(p), None, Some(sigma)) if p.n() == k.n() => {
+                let f = p.cholesky(sigma)?.map_err(|step| Error::Numerical {
+                    what: "factor of K − σM (released by the eigen solve's memory budget)".into(),
+                    detail: format!("no longer factors at σ = {sigma:e} (pivot {step})"),
+                })?;
+                Ok((p, own_factor.insert(f)))
+            }
+            _ => {
+                let mut p = ShiftedPencil::new(k, m)?;
+                p.set_par(par);
+                let f = factor_below_spectrum(&p, k, m, None)?;
+                let p = own.insert(p);
+                Ok((p, own_factor.insert(f)))
+            }
+        }
     }
 
     /// Solves `K φ = λ M φ` for the modes `cfg.selection` asks for.
@@ -497,14 +518,18 @@ impl EigenSolver {
             return solve_dense(k, m, cfg, None);
         }
         let t0 = Instant::now();
+        self.factor = None;
+        self.shift = None;
         let reused = match self.pencil.as_mut() {
-            Some(p) if p.n() == n => p.set_values(k, m)?,
+            Some(p) if p.n() == n && p.requested_ordering() == cfg.ordering => {
+                p.set_values(k, m)?
+            }
             _ => {
-                self.pencil = Some(ShiftedPencil::new(k, m)?);
+                self.pencil = None;
+                self.pencil = Some(ShiftedPencil::with_ordering(k, m, cfg.ordering)?);
                 false
             }
         };
-        self.factor = None;
         if let Some(p) = self.pencil.as_mut() {
             p.set_par(cfg.par);
         }
@@ -517,8 +542,9 @@ impl EigenSolver {
 
         // Shift and operator factor.
         let t1 = Instant::now();
-        let factor = factor_below_spectrum(pencil, k, m, cfg.shift)?;
-        let sigma = factor.shift();
+        let mut factor = Some(factor_below_spectrum(pencil, k, m, cfg.shift)?);
+        let sigma = factor.as_ref().map_or(0.0, ShiftFactor::shift);
+        let factor_nnz = pencil.factor_nnz();
         // Whether K itself is positive definite (then no mode is rigid): known from the shift
         // search, else one more factorisation at σ = 0 for a negative shift given by the user.
         let definite = match cfg.shift {
@@ -603,7 +629,7 @@ impl EigenSolver {
             }
             let ks = KrylovSchur {
                 pencil,
-                factor: &factor,
+                factor: factor.as_ref().expect("held during the iteration"),
                 m,
                 nev,
                 block,
@@ -635,6 +661,12 @@ impl EigenSolver {
             // the converged Ritz values there.
             let mut sturm = None;
             let mut missed = false;
+            // Under a memory budget that two factors would pass, the check factorises into the
+            // operator factor's storage (refactorised only if the iteration must run again).
+            let release = cfg
+                .memory_budget
+                .is_some_and(|b| 2 * pencil.factor_nnz() * core::mem::size_of::<f64>() > b);
+            let mut storage = Vec::new();
             let check = stopped.is_none()
                 && match cfg.selection {
                     ModeSelection::Lowest(_) => cfg.sturm_check,
@@ -647,12 +679,16 @@ impl EigenSolver {
                     .fold(0.0f64, |a, v| a.max(v.abs()))
                     .max(1e-300);
                 let mut sc = last + 1e-8 * last.abs().max(scale * 1e-6);
+                if release && let Some(f) = factor.take() {
+                    storage = f.into_storage();
+                }
                 let count = loop {
-                    match pencil.count_below(sc) {
+                    match pencil.count_below_in(sc, &mut storage) {
                         Ok(c) => break c,
                         Err(_) => sc += 1e-8 * scale,
                     }
                 };
+                drop(core::mem::take(&mut storage));
                 let found = ritz
                     .theta
                     .iter()
@@ -671,6 +707,12 @@ impl EigenSolver {
             }
             if missed && attempt < 3 && block < n / 4 {
                 block *= 2;
+                if factor.is_none() {
+                    factor = Some(pencil.cholesky(sigma)?.map_err(|step| Error::Numerical {
+                        what: "shift-invert Lanczos".into(),
+                        detail: format!("K − σM no longer factors at σ = {sigma:e} (pivot {step})"),
+                    })?);
+                }
                 check_seconds += t3.elapsed().as_secs_f64();
                 continue;
             }
@@ -708,7 +750,9 @@ impl EigenSolver {
                     basis_size: basis,
                     restarts: ritz.restarts,
                     operator_applications: ritz.applications,
-                    factor_nnz: factor.nnz(),
+                    factor_nnz,
+                    ordering: Some(pencil.ordering()),
+                    factor_released: factor.is_none(),
                     reused_analysis: reused,
                     analysis_seconds,
                     factor_seconds,
@@ -724,7 +768,8 @@ impl EigenSolver {
                     detail: stopped.unwrap_or_default(),
                 },
             };
-            self.factor = Some(factor);
+            self.factor = factor;
+            self.shift = Some(sigma);
             return Ok(modes);
         }
     }
@@ -889,6 +934,8 @@ fn solve_dense(
             restarts: 0,
             operator_applications: 0,
             factor_nnz: n * (n + 1) / 2,
+            ordering: None,
+            factor_released: false,
             reused_analysis: false,
             analysis_seconds: 0.0,
             factor_seconds: 0.0,

@@ -9,6 +9,7 @@
 //!   count is the number of eigenvalues of `K φ = λ M φ` below `σ` (the Sturm sequence check).
 
 use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::perm::PermRef;
 use faer::sparse::linalg::cholesky::{
     CholeskySymbolicParams, LltRef, SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering,
     factorize_symbolic_cholesky,
@@ -16,6 +17,8 @@ use faer::sparse::linalg::cholesky::{
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par, Side};
 use nlsim_kernel::{Error, Result, SparseSym};
+
+use crate::ordering::{Ordering, nested_dissection};
 
 /// `K − σM` on the union of the patterns of `K` and `M` (lower triangle), with its symbolic
 /// Cholesky analysis.
@@ -27,6 +30,9 @@ pub struct ShiftedPencil {
     k_vals: Vec<f64>,
     m_vals: Vec<f64>,
     symbolic: SymbolicCholesky<usize>,
+    ordering: Ordering,
+    requested: Ordering,
+    predicted: Vec<(Ordering, usize)>,
     analyses: usize,
     par: Par,
 }
@@ -47,6 +53,12 @@ impl ShiftFactor {
     /// Number of stored values of `L`.
     pub fn nnz(&self) -> usize {
         self.values.len()
+    }
+
+    /// The factor's storage, for another factorisation of the same pencil to reuse
+    /// ([`ShiftedPencil::count_below_in`]).
+    pub fn into_storage(self) -> Vec<f64> {
+        self.values
     }
 }
 
@@ -107,6 +119,87 @@ fn faer_error(what: &str, e: impl core::fmt::Debug) -> Error {
     }
 }
 
+/// A symbolic analysis, the ordering it used, and the factor size of each ordering tried.
+type Analysis = (SymbolicCholesky<usize>, Ordering, Vec<(Ordering, usize)>);
+
+/// Symbolic analysis of the pattern under `ordering`: for [`Ordering::Auto`] both AMD and nested
+/// dissection are analysed and the one with the fewer factor values kept (AMD on a tie, or
+/// when the graph is too large for METIS's 32-bit indices).
+fn analyse(
+    n: usize,
+    col_ptr: &[usize],
+    row_idx: &[usize],
+    ordering: Ordering,
+    params: CholeskySymbolicParams<'_>,
+) -> Result<Analysis> {
+    let pattern = SymbolicSparseColMatRef::new_checked(n, n, col_ptr, None, row_idx);
+    let amd = |params| {
+        factorize_symbolic_cholesky(pattern, Side::Lower, SymmetricOrdering::Amd, params)
+            .map_err(|e| faer_error("symbolic Cholesky analysis of K − σM (AMD ordering)", e))
+    };
+    let nd = |params| -> Result<Option<SymbolicCholesky<usize>>> {
+        let Some((fwd, inv)) = nested_dissection(n, col_ptr, row_idx)? else {
+            return Ok(None);
+        };
+        let perm = PermRef::new_checked(&fwd, &inv, n);
+        factorize_symbolic_cholesky(
+            pattern,
+            Side::Lower,
+            SymmetricOrdering::Custom(perm),
+            params,
+        )
+        .map(Some)
+        .map_err(|e| {
+            faer_error(
+                "symbolic Cholesky analysis of K − σM (nested-dissection ordering)",
+                e,
+            )
+        })
+    };
+    match ordering {
+        Ordering::Amd => {
+            let s = amd(params)?;
+            let p = vec![(Ordering::Amd, s.len_val())];
+            Ok((s, Ordering::Amd, p))
+        }
+        Ordering::NestedDissection => match nd(params)? {
+            Some(s) => {
+                let p = vec![(Ordering::NestedDissection, s.len_val())];
+                Ok((s, Ordering::NestedDissection, p))
+            }
+            None => Err(Error::invalid(
+                "fill-reducing ordering",
+                format!(
+                    "nested dissection takes graphs of at most 2³¹ − 1 edge ends; this pencil \
+                     of {n} DOFs has more: use the AMD ordering"
+                ),
+            )),
+        },
+        Ordering::Auto => {
+            let a = amd(params)?;
+            let mut predicted = vec![(Ordering::Amd, a.len_val())];
+            // Small patterns: AMD is near optimal and METIS's setup dominates.
+            if n < AUTO_ND_MIN {
+                return Ok((a, Ordering::Amd, predicted));
+            }
+            match nd(params)? {
+                Some(d) => {
+                    predicted.push((Ordering::NestedDissection, d.len_val()));
+                    if d.len_val() < a.len_val() {
+                        Ok((d, Ordering::NestedDissection, predicted))
+                    } else {
+                        Ok((a, Ordering::Amd, predicted))
+                    }
+                }
+                None => Ok((a, Ordering::Amd, predicted)),
+            }
+        }
+    }
+}
+
+/// Below this order [`Ordering::Auto`] keeps AMD without trying nested dissection.
+const AUTO_ND_MIN: usize = 2000;
+
 impl ShiftedPencil {
     /// The parallelism of its factorisations and solves (default `Par::rayon(0)`: the
     /// current rayon pool).
@@ -119,17 +212,24 @@ impl ShiftedPencil {
         self.par
     }
 
-    /// Builds the union pattern of `K` and `M` and runs the symbolic analysis (approximate
-    /// minimum degree ordering, supernodal structure).
+    /// Builds the union pattern of `K` and `M` and runs the symbolic analysis (supernodal
+    /// structure) with the ordering of fewer factor values of AMD and nested dissection
+    /// ([`Ordering::Auto`]).
     pub fn new(k: &SparseSym, m: &SparseSym) -> Result<Self> {
-        Self::with_params(k, m, CholeskySymbolicParams::default())
+        Self::with_ordering(k, m, Ordering::Auto)
     }
 
-    /// As [`ShiftedPencil::new`], with faer's symbolic parameters (tests force the simplicial
-    /// or the supernodal kernels with them).
+    /// As [`ShiftedPencil::new`], with the fill-reducing ordering chosen by the caller.
+    pub fn with_ordering(k: &SparseSym, m: &SparseSym, ordering: Ordering) -> Result<Self> {
+        Self::with_params(k, m, ordering, CholeskySymbolicParams::default())
+    }
+
+    /// As [`ShiftedPencil::with_ordering`], with faer's symbolic parameters (tests force the
+    /// simplicial or the supernodal kernels with them).
     pub fn with_params(
         k: &SparseSym,
         m: &SparseSym,
+        ordering: Ordering,
         params: CholeskySymbolicParams<'_>,
     ) -> Result<Self> {
         if k.n() != m.n() {
@@ -141,10 +241,7 @@ impl ShiftedPencil {
         }
         let n = k.n();
         let (col_ptr, row_idx, k_vals, m_vals) = union_lower(k, m);
-        let pattern = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx);
-        let symbolic =
-            factorize_symbolic_cholesky(pattern, Side::Lower, SymmetricOrdering::Amd, params)
-                .map_err(|e| faer_error("symbolic Cholesky analysis of K − σM", e))?;
+        let (symbolic, used, predicted) = analyse(n, &col_ptr, &row_idx, ordering, params)?;
         Ok(ShiftedPencil {
             par: Par::rayon(0),
             n,
@@ -153,8 +250,27 @@ impl ShiftedPencil {
             k_vals,
             m_vals,
             symbolic,
+            ordering: used,
+            requested: ordering,
+            predicted,
             analyses: 1,
         })
+    }
+
+    /// The ordering the symbolic analysis uses ([`Ordering::Amd`] or
+    /// [`Ordering::NestedDissection`]; `Auto` is resolved).
+    pub fn ordering(&self) -> Ordering {
+        self.ordering
+    }
+
+    /// The ordering asked for when the pencil was made (`Auto` included).
+    pub fn requested_ordering(&self) -> Ordering {
+        self.requested
+    }
+
+    /// The factor sizes (values of `L`) the analysis predicted for each ordering it tried.
+    pub fn predicted_factor_nnz(&self) -> &[(Ordering, usize)] {
+        &self.predicted
     }
 
     /// Replaces the values of `K` and `M` (a parameter study). The symbolic analysis is kept
@@ -173,8 +289,9 @@ impl ShiftedPencil {
             self.m_vals = m_vals;
             Ok(true)
         } else {
-            let analyses = self.analyses;
-            *self = Self::new(k, m)?;
+            let (analyses, par) = (self.analyses, self.par);
+            *self = Self::with_ordering(k, m, self.requested)?;
+            self.par = par;
             self.analyses = analyses + 1;
             Ok(false)
         }
@@ -272,17 +389,36 @@ impl ShiftedPencil {
     /// the pivots of `L D Lᵀ = K − σM` (Sylvester's law of inertia). `Err` when a pivot is
     /// exactly zero (σ is an eigenvalue to working precision: move it).
     pub fn count_below(&self, sigma: f64) -> Result<usize> {
+        self.count_below_in(sigma, &mut Vec::new())
+    }
+
+    /// As [`ShiftedPencil::count_below`], factorising into `storage` (resized to the factor's
+    /// length; the storage of a released [`ShiftFactor`] holds it without a new allocation).
+    pub fn count_below_in(&self, sigma: f64, storage: &mut Vec<f64>) -> Result<usize> {
         let a_vals = self.shifted(sigma);
         let a = self.matrix(&a_vals);
         let par = self.par;
-        let mut values = vec![0.0f64; self.symbolic.len_val()];
+        let len = self.symbolic.len_val();
+        if storage.len() < len {
+            storage
+                .try_reserve_exact(len - storage.len())
+                .map_err(|_| Error::Numerical {
+                    what: format!("Sturm count at shift {sigma:e} rad²/s²"),
+                    detail: format!(
+                        "out of memory allocating {len} factor values ({:.1} GB)",
+                        len as f64 * 8e-9
+                    ),
+                })?;
+        }
+        storage.resize(len, 0.0);
+        let values = &mut storage[..];
         let mut mem = MemBuffer::new(
             self.symbolic
                 .factorize_numeric_ldlt_scratch::<f64>(par, Default::default()),
         );
         self.symbolic
             .factorize_numeric_ldlt(
-                &mut values,
+                &mut *values,
                 a,
                 Side::Lower,
                 Default::default(),
@@ -313,7 +449,7 @@ impl ShiftedPencil {
                     '_,
                     usize,
                     f64,
-                >::new(s, &values);
+                >::new(s, values);
                 for k in 0..s.n_supernodes() {
                     let node = sn.supernode(k);
                     let v = node.val();
@@ -368,15 +504,23 @@ mod tests {
                 supernodal_flop_ratio_threshold: threshold,
                 ..Default::default()
             };
-            let p = ShiftedPencil::with_params(&k, &m, params).unwrap();
-            for w in dense.values.windows(2).step_by(7) {
-                let sigma = 0.5 * (w[0] + w[1]);
-                let expected = dense.values.iter().filter(|&&l| l < sigma).count();
-                assert_eq!(p.count_below(sigma).unwrap(), expected, "σ = {sigma}");
+            for ordering in [Ordering::Amd, Ordering::NestedDissection] {
+                let p = ShiftedPencil::with_params(&k, &m, ordering, params).unwrap();
+                assert_eq!(p.ordering(), ordering);
+                for w in dense.values.windows(2).step_by(7) {
+                    let sigma = 0.5 * (w[0] + w[1]);
+                    let expected = dense.values.iter().filter(|&&l| l < sigma).count();
+                    assert_eq!(p.count_below(sigma).unwrap(), expected, "σ = {sigma}");
+                }
+                // Positive definite below the spectrum, not above its first eigenvalue.
+                assert!(p.cholesky(0.5 * dense.values[0]).unwrap().is_ok());
+                assert!(p.cholesky(1.5 * dense.values[1]).unwrap().is_err());
+                // The check in a released factor's storage counts alike.
+                let f = p.cholesky(0.5 * dense.values[0]).unwrap().unwrap();
+                let mut storage = f.into_storage();
+                let sigma = 0.5 * (dense.values[10] + dense.values[11]);
+                assert_eq!(p.count_below_in(sigma, &mut storage).unwrap(), 11);
             }
-            // Positive definite below the spectrum, not above its first eigenvalue.
-            assert!(p.cholesky(0.5 * dense.values[0]).unwrap().is_ok());
-            assert!(p.cholesky(1.5 * dense.values[1]).unwrap().is_err());
         }
     }
 

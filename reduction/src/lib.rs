@@ -7,6 +7,7 @@
 //!   restarts on a sparse Cholesky factor of `K − σM` (symbolic analysis reused across parameter
 //!   values), checked by residuals and a Sturm sequence count;
 //! - [`factor`]: the shifted pencil `K − σM` with its reusable symbolic analysis;
+//! - [`ordering`]: the fill-reducing orderings of that analysis (AMD, METIS nested dissection);
 //! - [`modal`]: ports (elements, excitation, sensors), modal participation and the residual
 //!   flexibility of the truncated modes at the ports (the feedthrough `D_L`, `D_NL` of eq. 10);
 //! - [`sensitivity`]: analytic eigenvalue and mode-shape derivatives with respect to FE-level
@@ -19,6 +20,9 @@
 pub mod eigen;
 pub mod factor;
 pub mod modal;
+pub mod ordering;
+mod products;
+mod rayleigh;
 pub mod sensitivity;
 pub mod state_space;
 
@@ -31,6 +35,7 @@ pub use modal::{
     EffectiveMass, ModelPortMap, Port, PortKind, ReducedModel, ReductionConfig, damping_ratios,
     effective_masses, model_port_map, model_ports, reduce, reduce_with,
 };
+pub use ordering::Ordering;
 pub use sensitivity::{
     EigenSensitivities, ReducedSensitivities, SensitivityConfig, eigen_sensitivities,
     reduced_sensitivities,

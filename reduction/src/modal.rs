@@ -15,7 +15,6 @@
 //! displacement feedthrough `D_L`, `D_NL` of thesis eq. (10).
 
 use crate::eigen::{EigenConfig, EigenProgress, EigenSolver, ModeSelection, Modes};
-use crate::factor::ShiftedPencil;
 use faer::Mat;
 use nlsim_kernel::{Component, Coupling, Damping, Error, Model, Result};
 
@@ -416,18 +415,16 @@ fn residual_flexibility(
             w[(d, p)] += wt;
         }
     }
-    // The eigen solve's factor when it ran Lanczos; otherwise factor here (small models).
-    let own;
-    let (pencil, factor) = match solver.pencil_and_factor() {
-        Some(pf) => pf,
-        None => {
-            let mut p = ShiftedPencil::new(model.stiffness(), model.mass())?;
-            p.set_par(par);
-            let f = crate::eigen::factor_below_spectrum(&p, model.stiffness(), model.mass(), None)?;
-            own = (p, f);
-            (&own.0, &own.1)
-        }
-    };
+    // The eigen solve's factor when it ran Lanczos (again at its shift when released under
+    // its memory budget); otherwise a factor made here (small models).
+    let (mut own, mut own_factor) = (None, None);
+    let (pencil, factor) = solver.operator(
+        model.stiffness(),
+        model.mass(),
+        par,
+        &mut own,
+        &mut own_factor,
+    )?;
     let sigma = factor.shift();
     let mut x = w.clone();
     pencil.solve_in_place(factor, x.as_mut());

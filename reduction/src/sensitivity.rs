@@ -21,7 +21,7 @@
 //! (nearly) repeated eigenvalues has no unique shape derivative within the cluster; such
 //! pairs are listed and their mutual term is left out.
 
-use crate::eigen::{EigenSolver, Modes, factor_below_spectrum};
+use crate::eigen::{EigenSolver, Modes};
 use crate::factor::{ShiftFactor, ShiftedPencil};
 use faer::sparse::linalg::matmul::sparse_dense_matmul;
 use faer::{Accum, Mat, MatRef, Par};
@@ -173,8 +173,14 @@ pub fn eigen_sensitivities(
         return Ok(out);
     }
 
-    let mut own = None;
-    let (pencil, factor) = shift_factor(model, solver, cfg.par, &mut own)?;
+    let (mut own, mut own_factor) = (None, None);
+    let (pencil, factor) = solver.operator(
+        model.stiffness(),
+        model.mass(),
+        cfg.par,
+        &mut own,
+        &mut own_factor,
+    )?;
     let sigma = factor.shift();
     let mass = model.mass();
     check_factor(pencil, factor, mass, modes, cfg.par)?;
@@ -252,26 +258,6 @@ pub fn eigen_sensitivities(
     }
     out.shapes = shapes;
     Ok(out)
-}
-
-/// The factor of `K − σM` the eigen solve holds, or one made here (kept in `own`) when it
-/// holds none of this order (the dense path of small models).
-fn shift_factor<'a>(
-    model: &Model,
-    solver: &'a EigenSolver,
-    par: Par,
-    own: &'a mut Option<(ShiftedPencil, ShiftFactor)>,
-) -> Result<(&'a ShiftedPencil, &'a ShiftFactor)> {
-    match solver.pencil_and_factor() {
-        Some(pf) if pf.0.n() == model.n_dofs() => Ok(pf),
-        _ => {
-            let mut p = ShiftedPencil::new(model.stiffness(), model.mass())?;
-            p.set_par(par);
-            let f = factor_below_spectrum(&p, model.stiffness(), model.mass(), None)?;
-            let o = own.insert((p, f));
-            Ok((&o.0, &o.1))
-        }
-    }
 }
 
 /// Derivatives of a reduced model's port data (thesis eq. 10 in the frequency domain,
@@ -374,8 +360,14 @@ pub fn reduced_sensitivities(
     let residual = if reduced.residual.norm_max() == 0.0 || np == 0 {
         vec![Mat::zeros(np, np); params.len()]
     } else {
-        let mut own = None;
-        let (pencil, factor) = shift_factor(model, solver, cfg.par, &mut own)?;
+        let (mut own, mut own_factor) = (None, None);
+        let (pencil, factor) = solver.operator(
+            model.stiffness(),
+            model.mass(),
+            cfg.par,
+            &mut own,
+            &mut own_factor,
+        )?;
         let sigma = reduced.residual_shift;
         if factor.shift() != sigma {
             return Err(Error::invalid(

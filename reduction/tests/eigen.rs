@@ -615,3 +615,89 @@ fn a_negative_signed_block_is_described_and_its_negation_solves() {
         "{e}"
     );
 }
+
+#[test]
+fn nested_dissection_orders_a_solid_with_less_fill_and_the_same_modes() {
+    use nlsim_reduction::{Ordering, ShiftedPencil};
+    // A 3-D solid mesh: dissection leaves markedly less fill than minimum degree.
+    let (k3, m3) = bracket(3, true);
+    let p = ShiftedPencil::new(&k3, &m3).unwrap();
+    let predicted = p.predicted_factor_nnz().to_vec();
+    let amd = predicted
+        .iter()
+        .find(|(o, _)| *o == Ordering::Amd)
+        .unwrap()
+        .1;
+    let nd = predicted
+        .iter()
+        .find(|(o, _)| *o == Ordering::NestedDissection)
+        .unwrap()
+        .1;
+    assert_eq!(p.ordering(), Ordering::NestedDissection, "{predicted:?}");
+    assert_eq!(p.factor_nnz(), nd);
+    assert!((nd as f64) < 0.9 * amd as f64, "{predicted:?}");
+    // Both orderings give the dense solver's modes, and the same Sturm counts.
+    let (k, m) = bracket(1, true);
+    for ordering in [Ordering::Amd, Ordering::NestedDissection] {
+        let cfg = EigenConfig {
+            ordering,
+            ..lanczos(ModeSelection::Lowest(30))
+        };
+        let modes = EigenSolver::new().solve(&k, &m, &cfg).unwrap();
+        assert_eq!(modes.stats.ordering, Some(ordering));
+        compare(&k, &m, &modes, 1e-10, 0.0);
+        assert_eq!(modes.stats.sturm.unwrap().0, 30);
+    }
+}
+
+#[test]
+fn a_memory_budget_checks_in_the_factors_storage_with_identical_results() {
+    use nlsim_reduction::{ReductionConfig, reduce};
+    let f = nlsim_fixtures::bracket_fixture(
+        &BracketConfig {
+            refinement: 1,
+            clamped: true,
+            lumped_mass: false,
+        },
+        "bump_stop",
+    )
+    .unwrap();
+    let (k, m) = (f.model.stiffness(), f.model.mass());
+    let free = lanczos(ModeSelection::Lowest(20));
+    // Two factors never fit in 1 byte: the check reuses the operator factor's storage.
+    let tight = EigenConfig {
+        memory_budget: Some(1),
+        ..free.clone()
+    };
+    let mut s = EigenSolver::new();
+    let a = s.solve(k, m, &free).unwrap();
+    assert!(!a.stats.factor_released && s.factor().is_some());
+    let b = s.solve(k, m, &tight).unwrap();
+    assert!(b.stats.factor_released && s.factor().is_none());
+    assert_eq!(a.stats.sturm, b.stats.sturm);
+    assert_eq!(a.eigenvalues, b.eigenvalues);
+    assert_eq!(a.vectors, b.vectors);
+    // A generous budget keeps the factor.
+    let roomy = EigenConfig {
+        memory_budget: Some(usize::MAX / 4),
+        ..free.clone()
+    };
+    assert!(!s.solve(k, m, &roomy).unwrap().stats.factor_released);
+    // The reduction refactorises at the same shift for its residual flexibility: the same
+    // reduced model to the bit.
+    let reduced = |eigen: EigenConfig| {
+        reduce(
+            &f.model,
+            &ReductionConfig {
+                eigen,
+                residual_flexibility: true,
+                ..Default::default()
+            },
+        )
+        .unwrap()
+    };
+    let (ra, rb) = (reduced(free), reduced(tight));
+    assert!(ra.residual.norm_max() > 0.0);
+    assert_eq!(ra.residual, rb.residual);
+    assert_eq!(ra.residual_shift, rb.residual_shift);
+}

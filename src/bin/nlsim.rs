@@ -77,14 +77,38 @@ struct LanczosArgs {
     /// Most Lanczos restarts before giving up.
     #[arg(long, default_value_t = 200)]
     restarts: usize,
+    /// Fill-reducing ordering of the sparse factor: auto (the fewer factor values of amd and
+    /// nd), amd (approximate minimum degree) or nd (METIS nested dissection).
+    #[arg(long, default_value = "auto", value_parser = parse_ordering)]
+    ordering: nlsim_reduction::Ordering,
+    /// Memory the sparse factors may take together (GB); above it the Sturm check reuses the
+    /// operator factor's storage. Default: half the memory available at start.
+    #[arg(long, value_name = "GB")]
+    memory_budget: Option<f64>,
+}
+
+fn parse_ordering(s: &str) -> Result<nlsim_reduction::Ordering, String> {
+    nlsim_reduction::Ordering::parse(s)
+        .ok_or_else(|| format!("'{s}' is not an ordering (auto, amd or nd)"))
 }
 
 impl LanczosArgs {
-    fn settings(&self) -> nlsim::run::Lanczos {
-        nlsim::run::Lanczos {
+    fn settings(&self) -> Result<nlsim::run::Lanczos, nlsim::Error> {
+        let memory_budget = match self.memory_budget {
+            Some(gb) if gb.is_finite() && gb > 0.0 => Some((gb * 1e9) as usize),
+            Some(gb) => {
+                return Err(nlsim::Error::Usage(format!(
+                    "--memory-budget {gb}: give a positive number of GB"
+                )));
+            }
+            None => nlsim::run::default_memory_budget(),
+        };
+        Ok(nlsim::run::Lanczos {
             basis: self.basis,
             restarts: self.restarts,
-        }
+            ordering: self.ordering,
+            memory_budget,
+        })
     }
 }
 
@@ -655,12 +679,15 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 // The default: 10 modes, or every mode of a smaller model.
                 (None, None) => ModeSelection::Lowest(10.min(loaded.model.n_dofs())),
             };
+            let settings = lanczos.settings()?;
             let cfg = EigenConfig {
                 selection,
                 tol: *tol,
                 block_size: *block,
-                basis_size: lanczos.basis,
-                max_restarts: lanczos.restarts,
+                basis_size: settings.basis,
+                max_restarts: settings.restarts,
+                ordering: settings.ordering,
+                memory_budget: settings.memory_budget,
                 sturm_check: !no_sturm_check,
                 par: par(cli),
                 ..EigenConfig::default()
@@ -761,7 +788,7 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 substeps: *substeps,
                 hht_alpha: *hht_alpha,
                 par: par(cli),
-                lanczos: lanczos.settings(),
+                lanczos: lanczos.settings()?,
             };
             simulate(
                 model,
@@ -813,7 +840,7 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 residual: !no_residual,
                 stability: !no_stability,
                 par: par(cli),
-                lanczos: lanczos.settings(),
+                lanczos: lanczos.settings()?,
             };
             let outputs = FrfOutputs {
                 out: out.as_deref(),
@@ -845,7 +872,7 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 harmonics: *harmonics,
                 modes: *modes,
                 par: par(cli),
-                lanczos: lanczos.settings(),
+                lanczos: lanczos.settings()?,
             };
             nnm(model, &req, set, (out.as_deref(), plot.as_deref()), cli)
         }
