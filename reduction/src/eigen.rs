@@ -525,6 +525,7 @@ impl EigenSolver {
                 p.set_values(k, m)?
             }
             _ => {
+                // Free the old analysis before making the new one.
                 self.pencil = None;
                 self.pencil = Some(ShiftedPencil::with_ordering(k, m, cfg.ordering)?);
                 false

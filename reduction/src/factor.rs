@@ -182,8 +182,10 @@ fn analyse(
             if n < AUTO_ND_MIN {
                 return Ok((a, Ordering::Amd, predicted));
             }
-            match nd(params)? {
-                Some(d) => {
+            // AMD is a valid ordering: when dissection cannot be had (a graph beyond METIS's
+            // indices, or METIS out of memory), the run goes on with it.
+            match nd(params) {
+                Ok(Some(d)) => {
                     predicted.push((Ordering::NestedDissection, d.len_val()));
                     if d.len_val() < a.len_val() {
                         Ok((d, Ordering::NestedDissection, predicted))
@@ -191,7 +193,7 @@ fn analyse(
                         Ok((a, Ordering::Amd, predicted))
                     }
                 }
-                None => Ok((a, Ordering::Amd, predicted)),
+                Ok(None) | Err(_) => Ok((a, Ordering::Amd, predicted)),
             }
         }
     }

@@ -13,7 +13,9 @@ use nlsim_kernel::{Error, Result};
 /// Which fill-reducing ordering the symbolic analysis of `K − σM` uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum Ordering {
-    /// Both orderings analysed; the one with the fewer factor values is kept (default).
+    /// Both orderings analysed; the one with the fewer factor values is kept (default). AMD
+    /// alone when nested dissection fails (METIS out of memory, or a graph beyond its 32-bit
+    /// indices).
     #[default]
     Auto,
     /// Approximate minimum degree (faer).
