@@ -1,17 +1,26 @@
 //! Sparse symmetric structural matrices (mass, stiffness, damping) on faer.
 //!
-//! Both triangles are stored (compressed sparse columns), so products need no
-//! special casing and a factorisation can read either side. Assembly sums repeated
-//! entries, the way finite-element assembly expects.
+//! Both triangles are stored (compressed sparse columns, rows sorted within each column), so
+//! products need no special casing and a factorisation can read either side. Assembly sums
+//! repeated entries, the way finite-element assembly expects.
+//!
+//! The pattern and the values are reference counted: a clone costs nothing, and the mass and
+//! stiffness matrices of a finite-element model, which have the same pattern, hold it once
+//! ([`SparseSym::share_pattern`]). At 10⁶ DOFs the pattern is 0.7 GB.
+
+use std::sync::Arc;
 
 use crate::error::{Error, Result};
-use faer::sparse::{SparseColMat, SparseColMatRef, Triplet};
+use faer::sparse::{SparseColMat, SparseColMatRef, SymbolicSparseColMat, Triplet};
 use faer::{Mat, Side};
 
 /// An `n × n` sparse matrix that is meant to be symmetric (checked by [`SparseSym::symmetry_defect`]).
+///
+/// Invariants: square, compressed columns with strictly increasing row indices.
 #[derive(Debug, Clone)]
 pub struct SparseSym {
-    mat: SparseColMat<usize, f64>,
+    pattern: Arc<SymbolicSparseColMat<usize>>,
+    vals: Arc<Vec<f64>>,
 }
 
 /// The worst asymmetric entry pair of a matrix.
@@ -97,10 +106,20 @@ impl SparseSym {
             what: format!("assembly of {name}"),
             detail: format!("{e:?}"),
         })?;
-        Ok(SparseSym { mat })
+        Ok(Self::from_sorted(mat))
     }
 
-    /// Wraps a faer matrix; fails unless it is square.
+    /// Takes a compressed matrix whose columns hold strictly increasing rows.
+    fn from_sorted(mat: SparseColMat<usize, f64>) -> Self {
+        let (pattern, vals) = mat.into_parts();
+        SparseSym {
+            pattern: Arc::new(pattern),
+            vals: Arc::new(vals),
+        }
+    }
+
+    /// Wraps a faer matrix; fails unless it is square. Columns with unsorted rows or a
+    /// non-compact layout are normalised (repeated entries summed).
     pub fn from_faer(name: &str, mat: SparseColMat<usize, f64>) -> Result<Self> {
         if mat.nrows() != mat.ncols() {
             return Err(Error::DimensionMismatch {
@@ -109,7 +128,55 @@ impl SparseSym {
                 found: mat.ncols(),
             });
         }
-        Ok(SparseSym { mat })
+        let a = mat.as_ref();
+        let compact = a.symbolic().col_nnz().is_none();
+        let sorted =
+            (0..a.ncols()).all(|j| a.row_idx_of_col_raw(j).windows(2).all(|w| w[0] < w[1]));
+        if compact && sorted {
+            return Ok(Self::from_sorted(mat));
+        }
+        let t: Vec<_> = (0..a.ncols())
+            .flat_map(|j| {
+                a.row_idx_of_col_raw(j)
+                    .iter()
+                    .zip(a.val_of_col(j))
+                    .map(move |(&i, &v)| Triplet::new(i, j, v))
+            })
+            .collect();
+        Self::from_faer_triplets(name, a.nrows(), &t)
+    }
+
+    /// Whether both matrices have the same pattern (the same storage, or equal index arrays).
+    pub fn same_pattern(&self, other: &SparseSym) -> bool {
+        Arc::ptr_eq(&self.pattern, &other.pattern)
+            || (self.pattern.col_ptr() == other.pattern.col_ptr()
+                && self.pattern.row_idx() == other.pattern.row_idx())
+    }
+
+    /// Whether both matrices hold one pattern storage (after [`SparseSym::share_pattern`]).
+    pub fn shares_pattern(&self, other: &SparseSym) -> bool {
+        Arc::ptr_eq(&self.pattern, &other.pattern)
+    }
+
+    /// When `self` has the same pattern as `other`, drops its own copy and refers to the other's
+    /// (the mass and stiffness matrices of one mesh); returns whether it did.
+    pub fn share_pattern(&mut self, other: &SparseSym) -> bool {
+        if self.same_pattern(other) {
+            self.pattern = Arc::clone(&other.pattern);
+            true
+        } else {
+            false
+        }
+    }
+
+    /// The column pointers and row indices (both triangles, rows increasing in each column).
+    pub fn pattern(&self) -> (&[usize], &[usize]) {
+        (self.pattern.col_ptr(), self.pattern.row_idx())
+    }
+
+    /// The stored values, in the order of [`SparseSym::pattern`].
+    pub fn values(&self) -> &[f64] {
+        &self.vals
     }
 
     /// A dense matrix given row by row, keeping its nonzero entries.
@@ -141,23 +208,24 @@ impl SparseSym {
 
     /// Order `n` of the matrix.
     pub fn n(&self) -> usize {
-        self.mat.nrows()
+        self.pattern.ncols()
     }
 
     /// Number of stored entries (both triangles).
     pub fn nnz(&self) -> usize {
-        self.mat.compute_nnz()
+        self.vals.len()
     }
 
     /// The faer matrix (both triangles stored).
     pub fn as_faer(&self) -> SparseColMatRef<'_, usize, f64> {
-        self.mat.as_ref()
+        SparseColMatRef::new(self.pattern.as_ref().as_ref(), &self.vals)
     }
 
     /// Column `j` as (row indices, values).
     pub fn col(&self, j: usize) -> (&[usize], &[f64]) {
-        let m = self.mat.as_ref();
-        (m.row_idx_of_col_raw(j), m.val_of_col(j))
+        let cp = self.pattern.col_ptr();
+        let r = cp[j]..cp[j + 1];
+        (&self.pattern.row_idx()[r.clone()], &self.vals[r])
     }
 
     /// Iterates over all stored entries as `(row, col, value)`.
@@ -181,7 +249,7 @@ impl SparseSym {
 
     /// Largest absolute entry.
     pub fn max_abs(&self) -> f64 {
-        self.mat.val().iter().fold(0.0_f64, |m, v| m.max(v.abs()))
+        self.vals.iter().fold(0.0_f64, |m, v| m.max(v.abs()))
     }
 
     /// The infinity norm `max_i Σ_j |A_ij|` (the largest absolute row sum; for a symmetric
@@ -286,19 +354,61 @@ impl SparseSym {
                 found: bm.n(),
             });
         }
-        let mut t = Vec::with_capacity(am.nnz() + bm.nnz());
-        t.extend(am.entries().map(|(i, j, v)| Triplet::new(i, j, a * v)));
-        t.extend(bm.entries().map(|(i, j, v)| Triplet::new(i, j, b * v)));
-        Self::from_faer_triplets(name, am.n(), &t)
+        if am.same_pattern(bm) {
+            let vals = am
+                .vals
+                .iter()
+                .zip(bm.vals.iter())
+                .map(|(x, y)| a * x + b * y);
+            return Ok(SparseSym {
+                pattern: Arc::clone(&am.pattern),
+                vals: Arc::new(vals.collect()),
+            });
+        }
+        // Column by column, merging the two sorted row lists.
+        let n = am.n();
+        let mut col_ptr = Vec::with_capacity(n + 1);
+        let mut row_idx = Vec::new();
+        let mut vals = Vec::new();
+        col_ptr.push(0);
+        for j in 0..n {
+            let ((ra, va), (rb, vb)) = (am.col(j), bm.col(j));
+            let (mut p, mut q) = (0, 0);
+            while p < ra.len() || q < rb.len() {
+                let i = match (ra.get(p), rb.get(q)) {
+                    (Some(&x), Some(&y)) => x.min(y),
+                    (Some(&x), None) => x,
+                    (None, Some(&y)) => y,
+                    (None, None) => unreachable!("loop condition"),
+                };
+                let mut v = 0.0;
+                if ra.get(p) == Some(&i) {
+                    v += a * va[p];
+                    p += 1;
+                }
+                if rb.get(q) == Some(&i) {
+                    v += b * vb[q];
+                    q += 1;
+                }
+                row_idx.push(i);
+                vals.push(v);
+            }
+            col_ptr.push(row_idx.len());
+        }
+        // Every column's rows were emitted increasing and below n: a valid pattern.
+        let pattern = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
+        Ok(SparseSym {
+            pattern: Arc::new(pattern),
+            vals: Arc::new(vals),
+        })
     }
 
-    /// The same matrix scaled by `s`.
+    /// The same matrix scaled by `s` (sharing the pattern).
     pub fn scaled(&self, s: f64) -> Self {
-        let mut mat = self.mat.clone();
-        for v in mat.val_mut() {
-            *v *= s;
+        SparseSym {
+            pattern: Arc::clone(&self.pattern),
+            vals: Arc::new(self.vals.iter().map(|v| v * s).collect()),
         }
-        SparseSym { mat }
     }
 
     /// The dense copy (for tests and small models).
@@ -316,11 +426,13 @@ impl SparseSym {
     pub fn cholesky(
         &self,
     ) -> core::result::Result<faer::sparse::linalg::solvers::Llt<usize, f64>, usize> {
-        self.mat.sp_cholesky(Side::Lower).map_err(|e| match e {
-            faer::sparse::linalg::LltError::Numeric(
-                faer::linalg::cholesky::llt::factor::LltError::NonPositivePivot { index },
-            ) => index,
-            _ => usize::MAX,
-        })
+        self.as_faer()
+            .sp_cholesky(Side::Lower)
+            .map_err(|e| match e {
+                faer::sparse::linalg::LltError::Numeric(
+                    faer::linalg::cholesky::llt::factor::LltError::NonPositivePivot { index },
+                ) => index,
+                _ => usize::MAX,
+            })
     }
 }

@@ -386,6 +386,86 @@ mod sparse {
         assert_eq!(c.get(0, 1), -2.0);
     }
 
+    /// Pseudo-random symmetric pattern and values (no two calls alike for different seeds).
+    fn random_sym(n: usize, seed: u64, density: u64) -> SparseSym {
+        let mut s = seed;
+        let mut next = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            s >> 33
+        };
+        let mut t = Vec::new();
+        for j in 0..n {
+            t.push((j, j, 1.0 + (next() % 7) as f64));
+            for i in j + 1..n {
+                if next() % 100 < density {
+                    t.push((i, j, (next() % 13) as f64 - 6.0));
+                }
+            }
+        }
+        SparseSym::from_lower_triplets("A", n, &t).unwrap()
+    }
+
+    #[test]
+    fn combinations_of_different_patterns_match_dense_and_keep_rows_sorted() {
+        for (sa, sb) in [(1, 2), (3, 3), (5, 8)] {
+            let a = random_sym(30, sa, 15);
+            let b = random_sym(30, sb, 10);
+            let c = SparseSym::linear_combination("C", 2.0, &a, -0.5, &b).unwrap();
+            let dense = a.to_dense() * faer::Scale(2.0) - b.to_dense() * faer::Scale(0.5);
+            assert_eq!(c.to_dense(), dense, "seeds {sa}, {sb}");
+            let (cp, ri) = c.pattern();
+            for j in 0..30 {
+                assert!(ri[cp[j]..cp[j + 1]].windows(2).all(|w| w[0] < w[1]));
+            }
+            // Same pattern: the result shares it.
+            let d = SparseSym::linear_combination("D", 1.0, &a, 1.0, &a.scaled(3.0)).unwrap();
+            assert!(d.shares_pattern(&a));
+            assert_eq!(d.to_dense(), a.to_dense() * faer::Scale(4.0));
+        }
+    }
+
+    #[test]
+    fn mass_and_stiffness_of_one_mesh_hold_one_pattern() {
+        let k = random_sym(20, 7, 20);
+        // M: same pattern, other values, assembled separately (its own index arrays).
+        let t: Vec<_> = k
+            .entries()
+            .map(|(i, j, v)| (i, j, 0.1 * v.abs() + 0.01))
+            .collect();
+        let m = SparseSym::from_triplets("M", 20, &t).unwrap();
+        assert!(m.same_pattern(&k) && !m.shares_pattern(&k));
+        let model = Model::new("shared", DofMap::scalar(20), m.clone(), k.clone()).unwrap();
+        assert!(model.mass().shares_pattern(model.stiffness()));
+        assert_eq!(model.mass().to_dense(), m.to_dense());
+        assert_eq!(model.stiffness().to_dense(), k.to_dense());
+        // A lumped mass has its own pattern and keeps it.
+        let lumped = SparseSym::diagonal("M", &[1.0; 20]).unwrap();
+        let model = Model::new("lumped", DofMap::scalar(20), lumped, k).unwrap();
+        assert!(!model.mass().shares_pattern(model.stiffness()));
+    }
+
+    #[test]
+    fn unsorted_faer_columns_are_normalised() {
+        use faer::sparse::{SparseColMat, SymbolicSparseColMat};
+        // Column 0 holds rows 2, 0 (unsorted); column 2 holds row 0.
+        let sym = SymbolicSparseColMat::new_unsorted_checked(
+            3,
+            3,
+            vec![0usize, 2, 3, 4],
+            None,
+            vec![2usize, 0, 1, 0],
+        );
+        let a =
+            SparseSym::from_faer("A", SparseColMat::new(sym, vec![5.0, 1.0, 2.0, 5.0])).unwrap();
+        assert_eq!(
+            (a.get(0, 0), a.get(2, 0), a.get(1, 1), a.get(0, 2)),
+            (1.0, 5.0, 2.0, 5.0)
+        );
+        assert_eq!(a.pattern().1, &[0, 2, 1, 0]);
+    }
+
     #[test]
     fn symmetry_defect_finds_worst_pair_and_one_sided_entries() {
         let a = SparseSym::from_triplets(

@@ -408,16 +408,23 @@ fn finish_vectors(
             values[c] = kq[c] / mq[c];
         }
     }
-    let kx = sparse_times(k, vectors.as_ref(), par);
-    let mx = sparse_times(m, vectors.as_ref(), par);
+    // A few columns at a time: `K Φ` and `M Φ` whole would be two more matrices of the size of
+    // the modes (0.9 GB for 50 modes at 10⁶ DOFs).
+    const COLUMNS: usize = 8;
     let (kn, mn) = (norm_inf(k), norm_inf(m));
-    (0..vectors.ncols())
-        .map(|c| {
-            let l = values[c];
+    let mut residuals = Vec::with_capacity(vectors.ncols());
+    for c0 in (0..vectors.ncols()).step_by(COLUMNS) {
+        let w = COLUMNS.min(vectors.ncols() - c0);
+        let x = vectors.subcols(c0, w);
+        let kx = sparse_times(k, x, par);
+        let mx = sparse_times(m, x, par);
+        for c in 0..w {
+            let l = values[c0 + c];
             let r = (kx.col(c) - mx.col(c) * faer::Scale(l)).norm_l2();
-            r / ((kn + l.abs() * mn) * vectors.col(c).norm_l2())
-        })
-        .collect()
+            residuals.push(r / ((kn + l.abs() * mn) * x.col(c).norm_l2()));
+        }
+    }
+    residuals
 }
 
 /// Near-null modes: when the lowest computed eigenvalues lie below this fraction of the next
@@ -643,7 +650,7 @@ impl EigenSolver {
             let iteration_seconds = t2.elapsed().as_secs_f64();
 
             let t3 = Instant::now();
-            let kept = ritz.vectors.ncols();
+            let kept = ritz.kept();
             let mut values: Vec<f64> = ritz.theta[..kept].iter().map(|t| sigma + 1.0 / t).collect();
             // A near-null K (it factored at 0, but with a mode far below the rest): redo at a
             // shift from the spectrum just found.
@@ -656,8 +663,12 @@ impl EigenSolver {
                 again.shift = Some(-NEAR_NULL_SHIFT * next);
                 return self.solve_with_progress(k, m, &again, progress);
             }
-            let mut vectors = ritz.vectors;
-            let mut stopped = ritz.stopped;
+            let mut stopped = ritz.stopped.clone();
+            let (restarts, applications) = (ritz.restarts, ritz.applications);
+            let (theta, converged) = (ritz.theta.clone(), ritz.converged.clone());
+            // The Ritz vectors are formed in the basis's storage, which is then freed: the Sturm
+            // check below holds them (half the basis) beside the factor, not the whole basis.
+            let mut vectors = ritz.into_vectors(cfg.par);
             // Sturm check: eigenvalues below a point just above the last wanted one, against
             // the converged Ritz values there.
             let mut sturm = None;
@@ -690,10 +701,9 @@ impl EigenSolver {
                     }
                 };
                 drop(core::mem::take(&mut storage));
-                let found = ritz
-                    .theta
+                let found = theta
                     .iter()
-                    .zip(&ritz.converged)
+                    .zip(&converged)
                     .filter(|(t, c)| **c && sigma + 1.0 / **t < sc)
                     .count();
                 sturm = Some((count, sc));
@@ -749,8 +759,8 @@ impl EigenSolver {
                     shift: sigma,
                     block_size: block,
                     basis_size: basis,
-                    restarts: ritz.restarts,
-                    operator_applications: ritz.applications,
+                    restarts,
+                    operator_applications: applications,
                     factor_nnz,
                     ordering: Some(pencil.ordering()),
                     factor_released: factor.is_none(),
@@ -967,13 +977,56 @@ struct KrylovSchur<'a> {
 struct Ritz {
     theta: Vec<f64>,
     converged: Vec<bool>,
-    /// The first `nev` Ritz vectors, and those of converged Ritz values in the cluster of the
-    /// last wanted one.
-    vectors: Mat<f64>,
+    /// The final basis `V` (its first columns) and the coefficients `Y` of the kept Ritz vectors
+    /// in it (the first `nev`, and those of converged Ritz values in the cluster of the last
+    /// wanted one): the vectors are `V Y`, formed in `V`'s storage by [`Ritz::into_vectors`].
+    basis: Mat<f64>,
+    coefficients: Mat<f64>,
     restarts: usize,
     applications: usize,
     /// Why the iteration stopped before every wanted pair converged (the restart limit).
     stopped: Option<String>,
+}
+
+impl Ritz {
+    /// How many Ritz vectors are kept.
+    fn kept(&self) -> usize {
+        self.coefficients.ncols()
+    }
+
+    /// The kept Ritz vectors `V Y`, formed in the basis's storage.
+    fn into_vectors(self, par: Par) -> Mat<f64> {
+        let mut v = self.basis;
+        rotate_in_place(v.as_mut(), self.coefficients.as_ref(), par);
+        let keep = self.coefficients.ncols();
+        v.subcols(0, keep).to_owned()
+    }
+}
+
+/// `V[:, ..keep] ← V[:, ..j] Y` for `Y` of `j × keep` (`keep ≤ j`), a block of rows at a time:
+/// the basis is rotated without a second basis-sized matrix (0.7 GB at 10⁶ DOFs). Each row
+/// block's product is the same whatever the thread count.
+fn rotate_in_place(mut v: MatMut<'_, f64>, y: MatRef<'_, f64>, par: Par) {
+    const ROWS: usize = 2048;
+    let (n, j, keep) = (v.nrows(), y.nrows(), y.ncols());
+    let mut tmp = Mat::<f64>::zeros(ROWS.min(n), keep);
+    let mut r0 = 0;
+    while r0 < n {
+        let rows = ROWS.min(n - r0);
+        let mut t = tmp.as_mut().subrows_mut(0, rows);
+        matmul(
+            t.as_mut(),
+            Accum::Replace,
+            v.as_ref().submatrix(r0, 0, rows, j),
+            y,
+            1.0,
+            par,
+        );
+        v.as_mut()
+            .submatrix_mut(r0, 0, rows, keep)
+            .copy_from(t.as_ref());
+        r0 += rows;
+    }
 }
 
 impl KrylovSchur<'_> {
@@ -982,14 +1035,14 @@ impl KrylovSchur<'_> {
         y
     }
 
-    /// `x ← x − V (Vᵀ M x)` twice, with `M V` stored so that no product with `M` is needed
-    /// (`mx` is updated alongside: `M x ← M x − M V c`); returns the coefficients `Vᵀ M x`.
+    /// `x ← x − V (Vᵀ M x)` twice, `M x` recomputed after each pass (`mx` holds `M x` on entry
+    /// and on exit); returns the coefficients `Vᵀ M x`. `M V` is not stored: at 10⁶ DOFs it
+    /// would be another basis-sized matrix, and a product with `M` costs a few percent of a solve.
     fn orth_against(
         &self,
         v: MatRef<'_, f64>,
-        mv: MatRef<'_, f64>,
         mut x: MatMut<'_, f64>,
-        mut mx: MatMut<'_, f64>,
+        mx: &mut Mat<f64>,
         par: Par,
     ) -> Mat<f64> {
         let mut coef = Mat::<f64>::zeros(v.ncols(), x.ncols());
@@ -997,9 +1050,9 @@ impl KrylovSchur<'_> {
             return coef;
         }
         for _ in 0..2 {
-            let c = mv.transpose() * x.as_ref();
+            let c = v.transpose() * mx.as_ref();
             matmul(x.as_mut(), Accum::Add, v, c.as_ref(), -1.0, par);
-            matmul(mx.as_mut(), Accum::Add, mv, c.as_ref(), -1.0, par);
+            *mx = sparse_times(self.m, x.as_ref(), par);
             coef += &c;
         }
         coef
@@ -1032,7 +1085,6 @@ impl KrylovSchur<'_> {
     fn orthonormalize(
         &self,
         v: MatRef<'_, f64>,
-        mv: MatRef<'_, f64>,
         x: &mut Mat<f64>,
         mx: &mut Mat<f64>,
         norms_in: &[f64],
@@ -1072,7 +1124,7 @@ impl KrylovSchur<'_> {
             return Ok(r_total);
         }
         x.copy_from(&x0);
-        let r = self.orthonormalize_columns(v, mv, x, norms_in, rng, par)?;
+        let r = self.orthonormalize_columns(v, x, norms_in, rng, par)?;
         *mx = sparse_times(self.m, x.as_ref(), par);
         Ok(r)
     }
@@ -1087,7 +1139,6 @@ impl KrylovSchur<'_> {
     fn orthonormalize_columns(
         &self,
         v: MatRef<'_, f64>,
-        mv: MatRef<'_, f64>,
         x: &mut Mat<f64>,
         norms_in: &[f64],
         rng: &mut SplitMix,
@@ -1146,7 +1197,7 @@ impl KrylovSchur<'_> {
                 }
                 let mut xc = x.subcols_mut(c, 1);
                 let mut mxc = sparse_times(self.m, xc.as_ref(), par);
-                let _ = self.orth_against(v, mv, xc.as_mut(), mxc.as_mut(), par);
+                let _ = self.orth_against(v, xc.as_mut(), &mut mxc, par);
                 let nrm0 = self.m_norm(xc.as_ref(), par)?;
                 for i in 0..n {
                     xc[(i, 0)] /= nrm0.max(f64::MIN_POSITIVE);
@@ -1160,10 +1211,9 @@ impl KrylovSchur<'_> {
         let par = self.pencil.par();
         let (n, b, nv, nev) = (self.pencil.n(), self.block, self.basis, self.nev);
         let mut rng = SplitMix::new(self.seed);
-        // The basis V, M V, the projection H = Vᵀ M Op V and the coupling B of V to the next
-        // block W: Op V = V H + W B.
+        // The basis V, the projection H = Vᵀ M Op V and the coupling B of V to the next block W:
+        // Op V = V H + W B.
         let mut v = Mat::<f64>::zeros(n, nv);
-        let mut mv = Mat::<f64>::zeros(n, nv);
         let mut h = Mat::<f64>::zeros(nv, nv);
         let mut bc = Mat::<f64>::zeros(b, nv);
         let mut applications = 0;
@@ -1175,7 +1225,7 @@ impl KrylovSchur<'_> {
         let mut mw = sparse_times(self.m, w.as_ref(), par);
         let norms = Self::block_norms(w.as_ref(), mw.as_ref())?;
         let empty = v.subcols(0, 0);
-        self.orthonormalize(empty, empty, &mut w, &mut mw, &norms, &mut rng, par)?;
+        self.orthonormalize(empty, &mut w, &mut mw, &norms, &mut rng, par)?;
         mw = sparse_times(self.m, w.as_ref(), par);
         let mut j = 0;
         let mut restarts = 0;
@@ -1183,7 +1233,6 @@ impl KrylovSchur<'_> {
             // Expand to the full basis.
             while j + b <= nv {
                 v.subcols_mut(j, b).copy_from(&w);
-                mv.subcols_mut(j, b).copy_from(&mw);
                 // Rows of H for the new block against the old columns: the old coupling.
                 for r in 0..b {
                     for c in 0..j {
@@ -1194,17 +1243,10 @@ impl KrylovSchur<'_> {
                 applications += b;
                 let mut mx = sparse_times(self.m, x.as_ref(), par);
                 let norms = Self::block_norms(x.as_ref(), mx.as_ref())?;
-                let coef = self.orth_against(
-                    v.subcols(0, j + b),
-                    mv.subcols(0, j + b),
-                    x.as_mut(),
-                    mx.as_mut(),
-                    par,
-                );
+                let coef = self.orth_against(v.subcols(0, j + b), x.as_mut(), &mut mx, par);
                 h.submatrix_mut(0, j, j + b, b).copy_from(&coef);
                 let r = self.orthonormalize(
                     v.subcols(0, j + b),
-                    mv.subcols(0, j + b),
                     &mut x,
                     &mut mx,
                     &norms,
@@ -1213,9 +1255,9 @@ impl KrylovSchur<'_> {
                 )?;
                 bc.fill(0.0);
                 bc.submatrix_mut(0, j, b, b).copy_from(&r);
-                // `M W` enters the stored `M V` and every later orthogonalisation: compute it
-                // afresh rather than keep the updated `M X`, whose round-off grows with the
-                // condition of the block's Cholesky factor and would build up in `M V`.
+                // `M W` enters every later orthogonalisation: compute it afresh rather than keep
+                // the updated `M X`, whose round-off grows with the condition of the block's
+                // Cholesky factor.
                 drop(mx);
                 mw = sparse_times(self.m, x.as_ref(), par);
                 w = x;
@@ -1261,10 +1303,12 @@ impl KrylovSchur<'_> {
                         keep += 1;
                     }
                 }
+                v.truncate(n, j);
                 return Ok(Ritz {
                     theta,
                     converged,
-                    vectors: v.subcols(0, j) * y.subcols(0, keep),
+                    basis: v,
+                    coefficients: y.subcols(0, keep).to_owned(),
                     restarts,
                     applications,
                     stopped,
@@ -1272,12 +1316,7 @@ impl KrylovSchur<'_> {
             }
             // Thick restart: keep the best `keep` Ritz vectors.
             let keep = ((nev + j) / 2).max(nev).min(j - b);
-            let vk = v.subcols(0, j) * y.subcols(0, keep);
-            v.subcols_mut(0, keep).copy_from(&vk);
-            drop(vk);
-            let mvk = mv.subcols(0, j) * y.subcols(0, keep);
-            mv.subcols_mut(0, keep).copy_from(&mvk);
-            drop(mvk);
+            rotate_in_place(v.subcols_mut(0, j), y.subcols(0, keep), par);
             h.fill(0.0);
             for c in 0..keep {
                 h[(c, c)] = theta[c];
