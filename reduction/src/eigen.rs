@@ -234,7 +234,10 @@ impl Modes {
             return Ok(self);
         }
         Err(Error::Numerical {
-            what: "shift-invert Lanczos".into(),
+            what: match self.stats.method {
+                EigenMethod::Dense => "dense eigen solve".into(),
+                EigenMethod::Lanczos => "shift-invert Lanczos".into(),
+            },
             detail: self.stats.detail,
         })
     }

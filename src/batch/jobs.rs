@@ -30,6 +30,10 @@ struct FrfTable {
     modes: Option<usize>,
     residual: Option<bool>,
     stability: Option<bool>,
+    basis: Option<usize>,
+    restarts: Option<usize>,
+    ordering: Option<String>,
+    memory_budget: Option<f64>,
 }
 
 /// The `[simulate]` table: the options of `nlsim simulate`.
@@ -47,6 +51,46 @@ struct SimTable {
     atol: Option<f64>,
     substeps: Option<usize>,
     hht_alpha: Option<f64>,
+    basis: Option<usize>,
+    restarts: Option<usize>,
+    ordering: Option<String>,
+    memory_budget: Option<f64>,
+}
+
+/// The reduction's Lanczos keys of `[frf]` and `[simulate]` (as `--basis`, `--restarts`,
+/// `--ordering` and `--memory-budget GB` of the command line); `Err((key, message))` names the
+/// bad one.
+fn lanczos_keys(
+    basis: Option<usize>,
+    restarts: Option<usize>,
+    ordering: Option<&str>,
+    memory_budget_gb: Option<f64>,
+) -> std::result::Result<crate::run::Lanczos, (&'static str, String)> {
+    let d = crate::run::Lanczos::default();
+    let ordering = match ordering {
+        None => d.ordering,
+        Some(o) => nlsim_reduction::Ordering::parse(o)
+            .ok_or(("ordering", format!("'{o}': use auto, amd or nd")))?,
+    };
+    let memory_budget = match memory_budget_gb {
+        None => d.memory_budget,
+        Some(gb) if gb.is_finite() && gb > 0.0 => Some((gb * 1e9) as usize),
+        Some(gb) => {
+            return Err((
+                "memory_budget",
+                format!("{gb}: give a positive number of GB"),
+            ));
+        }
+    };
+    if restarts == Some(0) {
+        return Err(("restarts", "0: give at least 1".into()));
+    }
+    Ok(crate::run::Lanczos {
+        basis: basis.or(d.basis),
+        restarts: restarts.unwrap_or(d.restarts),
+        ordering,
+        memory_budget,
+    })
 }
 
 #[derive(Debug, Deserialize)]
@@ -203,7 +247,13 @@ impl Batch {
                     // Jobs run in parallel, each sequential inside: results independent of
                     // the thread and shard count.
                     par: faer::Par::Seq,
-                    lanczos: Default::default(),
+                    lanczos: lanczos_keys(
+                        t.basis,
+                        t.restarts,
+                        t.ordering.as_deref(),
+                        t.memory_budget,
+                    )
+                    .map_err(|(k, m)| err(at(k), &format!("frf.{k}"), m))?,
                 };
                 req.check()
                     .map_err(|e| err(at("[frf]"), "frf", e.to_string()))?;
@@ -256,7 +306,13 @@ impl Batch {
                     substeps: t.substeps.unwrap_or(d.substeps),
                     hht_alpha: t.hht_alpha.unwrap_or(d.hht_alpha),
                     par: faer::Par::Seq,
-                    lanczos: Default::default(),
+                    lanczos: lanczos_keys(
+                        t.basis,
+                        t.restarts,
+                        t.ordering.as_deref(),
+                        t.memory_budget,
+                    )
+                    .map_err(|(k, m)| err(at(k), &format!("simulate.{k}"), m))?,
                 };
                 req.check()
                     .map_err(|e| err(at("[simulate]"), "simulate", e.to_string()))?;

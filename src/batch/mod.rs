@@ -317,6 +317,24 @@ params = [{ set = "spring.c", min = 0.1, max = 10.0, log = true }]
                 7,
                 "'sideways'",
             ),
+            (
+                "name = \"a\"\ncommand = \"frf\"\nmodel = \"m\"\n[frf]\nfrom = 1.0\nto = 2.0\n\
+                 ordering = \"metis5\"\n",
+                7,
+                "frf.ordering: 'metis5': use auto, amd or nd",
+            ),
+            (
+                "name = \"a\"\ncommand = \"simulate\"\nmodel = \"m\"\n[simulate]\nduration = 1.0\n\
+                 rate = 100.0\nmemory_budget = -2.0\n",
+                7,
+                "simulate.memory_budget: -2: give a positive number of GB",
+            ),
+            (
+                "name = \"a\"\ncommand = \"simulate\"\nmodel = \"m\"\n[simulate]\nduration = 1.0\n\
+                 rate = 100.0\nrestarts = 0\n",
+                7,
+                "simulate.restarts: 0: give at least 1",
+            ),
         ];
         for (text, line, what) in cases {
             let e = Batch::parse(text, Path::new("jobs.toml")).unwrap_err();
@@ -326,6 +344,34 @@ params = [{ set = "spring.c", min = 0.1, max = 10.0, log = true }]
                 "{msg}"
             );
         }
+    }
+
+    #[test]
+    fn lanczos_keys_reach_the_requests() {
+        let frf = "name = \"a\"\ncommand = \"frf\"\nmodel = \"duffing_fig3\"\n[frf]\nfrom = 80.0\n\
+                   to = 90.0\nbasis = 40\nrestarts = 7\nordering = \"nd\"\nmemory_budget = 2.5\n";
+        let BatchCommand::Frf(r) = Batch::parse(frf, Path::new("j.toml")).unwrap().command else {
+            panic!("an frf batch");
+        };
+        assert_eq!(r.lanczos.basis, Some(40));
+        assert_eq!(r.lanczos.restarts, 7);
+        assert_eq!(
+            r.lanczos.ordering,
+            nlsim_reduction::Ordering::NestedDissection
+        );
+        assert_eq!(r.lanczos.memory_budget, Some(2_500_000_000));
+        let sim = "name = \"a\"\ncommand = \"simulate\"\nmodel = \"duffing_fig3\"\n[simulate]\n\
+                   duration = 1.0\nrate = 100.0\nordering = \"amd\"\n";
+        let BatchCommand::Simulate(r) = Batch::parse(sim, Path::new("j.toml")).unwrap().command
+        else {
+            panic!("a simulate batch");
+        };
+        let d = crate::run::Lanczos::default();
+        assert_eq!(r.lanczos.ordering, nlsim_reduction::Ordering::Amd);
+        assert_eq!(
+            (r.lanczos.basis, r.lanczos.restarts, r.lanczos.memory_budget),
+            (d.basis, d.restarts, d.memory_budget)
+        );
     }
 
     #[test]
