@@ -430,6 +430,56 @@ fn finish_vectors(
     residuals
 }
 
+/// The residual check of every finished solve, dense or Lanczos. A mode whose backward error
+/// `‖Kφ − λMφ‖ / ((‖K‖ + |λ|‖M‖)‖φ‖)` is not finite, or above
+/// `max(1e-8, 10·tol) · max(1, |λ − σ| / min_j |λ_j − σ|)`, is not an eigenpair of the pencil to
+/// the accuracy the solve can give it. A stable solve of the inverted pencil `(K − σM)⁻¹M` leaves
+/// each mode a backward error of about `ε |λ − σ| / min_j |λ_j − σ|` (relative to the largest
+/// `1/(λ − σ)`), hence the ratio; a converged Ritz pair is within about `tol`. Returns the status
+/// and a message naming the worst mode (1-based) against its limit, or `None` when all pass.
+fn residual_failure(
+    residuals: &[f64],
+    values: &[f64],
+    sigma: f64,
+    tol: f64,
+) -> Option<(Status, String)> {
+    if let Some(i) = residuals.iter().position(|r| !r.is_finite()) {
+        return Some((
+            Status::NonFinite,
+            format!(
+                "mode {} has a non-finite backward error ({})",
+                i + 1,
+                residuals[i]
+            ),
+        ));
+    }
+    let base = (10.0 * tol).max(1e-8);
+    let nearest = values
+        .iter()
+        .map(|v| (v - sigma).abs())
+        .fold(f64::INFINITY, f64::min)
+        .max(f64::MIN_POSITIVE);
+    let (mut worst, mut worst_ratio, mut worst_limit) = (0, 0.0f64, base);
+    for (i, (&r, &v)) in residuals.iter().zip(values).enumerate() {
+        let limit = base * ((v - sigma).abs() / nearest).max(1.0);
+        if r / limit > worst_ratio {
+            (worst, worst_ratio, worst_limit) = (i, r / limit, limit);
+        }
+    }
+    (worst_ratio > 1.0).then(|| {
+        (
+            Status::Singular,
+            format!(
+                "mode {} has backward error {:.2e} > {worst_limit:.1e}: the computed pair is not \
+                 an eigenpair of K and M to that accuracy (the shifted pencil K − σM, σ = \
+                 {sigma:e} rad²/s², is close to singular or the matrices are badly scaled)",
+                worst + 1,
+                residuals[worst]
+            ),
+        )
+    })
+}
+
 /// Near-null modes: when the lowest computed eigenvalues lie below this fraction of the next
 /// one, inverting the pencil at σ = 0 costs the others their accuracy (the inverse's rounding,
 /// ε/λ₁ in absolute terms, is ε λ/λ₁ relative on λ: 1e-4 on a loudspeaker model whose
@@ -747,6 +797,7 @@ impl EigenSolver {
             let residuals = finish_vectors(k, m, &mut values, &mut vectors, cfg.par);
             check_seconds += t3.elapsed().as_secs_f64();
             let max_residual = residuals.iter().fold(0.0f64, |a, &r| a.max(r));
+            let failed = residual_failure(&residuals, &values, sigma, cfg.tol);
             let modes = Modes {
                 eigenvalues: values,
                 vectors,
@@ -774,12 +825,12 @@ impl EigenSolver {
                     check_seconds,
                     sturm,
                     max_residual,
-                    status: if stopped.is_some() {
-                        Status::IterationLimit
-                    } else {
-                        Status::Converged
+                    status: match (&stopped, &failed) {
+                        (Some(_), _) => Status::IterationLimit,
+                        (None, Some((status, _))) => *status,
+                        (None, None) => Status::Converged,
                     },
-                    detail: stopped.unwrap_or_default(),
+                    detail: stopped.or(failed.map(|f| f.1)).unwrap_or_default(),
                 },
             };
             self.factor = factor;
@@ -929,6 +980,7 @@ fn solve_dense(
     let t = Instant::now();
     let residuals = finish_vectors(k, m, &mut values, &mut vectors, cfg.par);
     let max_residual = residuals.iter().fold(0.0f64, |a, &r| a.max(r));
+    let failed = residual_failure(&residuals, &values, sigma, cfg.tol);
     let scale = stiffness_scale(k, m);
     Ok(Modes {
         eigenvalues: values,
@@ -957,8 +1009,8 @@ fn solve_dense(
             check_seconds: t.elapsed().as_secs_f64(),
             sturm: None,
             max_residual,
-            status: Status::Converged,
-            detail: String::new(),
+            status: failed.as_ref().map_or(Status::Converged, |f| f.0),
+            detail: failed.map(|f| f.1).unwrap_or_default(),
         },
     })
 }
@@ -1330,5 +1382,37 @@ impl KrylovSchur<'_> {
             j = keep;
             restarts += 1;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn residual_check_scales_with_each_modes_distance_from_the_shift() {
+        let values = [1.0, 4.0, 1e6];
+        assert_eq!(
+            residual_failure(&[1e-14, 3e-13, 1e-9], &values, 0.0, 1e-10),
+            None
+        );
+        // Mode 2 (λ/λ₁ = 4) may have 4e-8, not 2e-6.
+        let (status, msg) = residual_failure(&[1e-14, 2e-6, 1e-4], &values, -0.5, 1e-10).unwrap();
+        assert_eq!(status, Status::Singular);
+        assert!(
+            msg.starts_with("mode 2 has backward error 2.00e-6 > 3.0e-8"),
+            "{msg}"
+        );
+        assert!(msg.contains("σ = -5e-1"), "{msg}");
+        // The highest mode, 10⁶ times farther from the shift, passes with 1e-4 alone.
+        assert_eq!(
+            residual_failure(&[1e-14, 1e-9, 1e-4], &values, 0.0, 1e-10),
+            None
+        );
+        // A looser tolerance moves the limit with it.
+        assert_eq!(residual_failure(&[2e-6], &[1.0], 0.0, 1e-6), None);
+        let (status, msg) = residual_failure(&[1e-14, f64::NAN], &values[..2], 0.0, 1e-10).unwrap();
+        assert_eq!(status, Status::NonFinite);
+        assert!(msg.starts_with("mode 2 has a non-finite"), "{msg}");
     }
 }
