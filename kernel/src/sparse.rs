@@ -365,33 +365,15 @@ impl SparseSym {
                 vals: Arc::new(vals.collect()),
             });
         }
-        // Column by column, merging the two sorted row lists.
         let n = am.n();
         let mut col_ptr = Vec::with_capacity(n + 1);
         let mut row_idx = Vec::new();
         let mut vals = Vec::new();
         col_ptr.push(0);
         for j in 0..n {
-            let ((ra, va), (rb, vb)) = (am.col(j), bm.col(j));
-            let (mut p, mut q) = (0, 0);
-            while p < ra.len() || q < rb.len() {
-                let i = match (ra.get(p), rb.get(q)) {
-                    (Some(&x), Some(&y)) => x.min(y),
-                    (Some(&x), None) => x,
-                    (None, Some(&y)) => y,
-                    (None, None) => unreachable!("loop condition"),
-                };
-                let mut v = 0.0;
-                if ra.get(p) == Some(&i) {
-                    v += a * va[p];
-                    p += 1;
-                }
-                if rb.get(q) == Some(&i) {
-                    v += b * vb[q];
-                    q += 1;
-                }
+            for (i, x, y) in am.merged_col(bm, j, 0) {
                 row_idx.push(i);
-                vals.push(v);
+                vals.push(a * x + b * y);
             }
             col_ptr.push(row_idx.len());
         }
@@ -400,6 +382,40 @@ impl SparseSym {
         Ok(SparseSym {
             pattern: Arc::new(pattern),
             vals: Arc::new(vals),
+        })
+    }
+
+    /// Column `j` of `self` and of `other` (same order) merged on the union of their rows, from
+    /// row `from` on: `(row, self[row, j], other[row, j])` with rows increasing, zero where a
+    /// matrix has no entry. Both store sorted rows, so this is a two-way merge.
+    pub fn merged_col<'a>(
+        &'a self,
+        other: &'a SparseSym,
+        j: usize,
+        from: usize,
+    ) -> impl Iterator<Item = (usize, f64, f64)> + 'a {
+        let ((ra, va), (rb, vb)) = (self.col(j), other.col(j));
+        let (mut p, mut q) = (
+            ra.partition_point(|&i| i < from),
+            rb.partition_point(|&i| i < from),
+        );
+        core::iter::from_fn(move || {
+            let i = match (ra.get(p), rb.get(q)) {
+                (Some(&x), Some(&y)) => x.min(y),
+                (Some(&x), None) => x,
+                (None, Some(&y)) => y,
+                (None, None) => return None,
+            };
+            let (mut x, mut y) = (0.0, 0.0);
+            if ra.get(p) == Some(&i) {
+                x = va[p];
+                p += 1;
+            }
+            if rb.get(q) == Some(&i) {
+                y = vb[q];
+                q += 1;
+            }
+            Some((i, x, y))
         })
     }
 

@@ -703,8 +703,17 @@ impl EigenSolver {
             let iteration_seconds = t2.elapsed().as_secs_f64();
 
             let t3 = Instant::now();
-            let kept = ritz.kept();
-            let mut values: Vec<f64> = ritz.theta[..kept].iter().map(|t| sigma + 1.0 / t).collect();
+            let Ritz {
+                theta,
+                converged,
+                basis: ritz_basis,
+                coefficients,
+                restarts,
+                applications,
+                mut stopped,
+            } = ritz;
+            let kept = coefficients.ncols();
+            let mut values: Vec<f64> = theta[..kept].iter().map(|t| sigma + 1.0 / t).collect();
             // A near-null K (it factored at 0, but with a mode far below the rest): redo at a
             // shift from the spectrum just found.
             // (Unconverged Ritz values are estimates enough for a gap of 1e8.)
@@ -716,12 +725,9 @@ impl EigenSolver {
                 again.shift = Some(-NEAR_NULL_SHIFT * next);
                 return self.solve_with_progress(k, m, &again, progress);
             }
-            let mut stopped = ritz.stopped.clone();
-            let (restarts, applications) = (ritz.restarts, ritz.applications);
-            let (theta, converged) = (ritz.theta.clone(), ritz.converged.clone());
             // The Ritz vectors are formed in the basis's storage, which is then freed: the Sturm
             // check below holds them (half the basis) beside the factor, not the whole basis.
-            let mut vectors = ritz.into_vectors(cfg.par);
+            let mut vectors = ritz_vectors(ritz_basis, &coefficients, cfg.par);
             // Sturm check: eigenvalues below a point just above the last wanted one, against
             // the converged Ritz values there.
             let mut sturm = None;
@@ -1034,7 +1040,7 @@ struct Ritz {
     converged: Vec<bool>,
     /// The final basis `V` (its first columns) and the coefficients `Y` of the kept Ritz vectors
     /// in it (the first `nev`, and those of converged Ritz values in the cluster of the last
-    /// wanted one): the vectors are `V Y`, formed in `V`'s storage by [`Ritz::into_vectors`].
+    /// wanted one): the vectors are `V Y`, formed in `V`'s storage by [`ritz_vectors`].
     basis: Mat<f64>,
     coefficients: Mat<f64>,
     restarts: usize,
@@ -1043,19 +1049,10 @@ struct Ritz {
     stopped: Option<String>,
 }
 
-impl Ritz {
-    /// How many Ritz vectors are kept.
-    fn kept(&self) -> usize {
-        self.coefficients.ncols()
-    }
-
-    /// The kept Ritz vectors `V Y`, formed in the basis's storage.
-    fn into_vectors(self, par: Par) -> Mat<f64> {
-        let mut v = self.basis;
-        rotate_in_place(v.as_mut(), self.coefficients.as_ref(), par);
-        let keep = self.coefficients.ncols();
-        v.subcols(0, keep).to_owned()
-    }
+/// The kept Ritz vectors `V Y` ([`Ritz`]'s basis and coefficients), formed in the basis's storage.
+fn ritz_vectors(mut basis: Mat<f64>, coefficients: &Mat<f64>, par: Par) -> Mat<f64> {
+    rotate_in_place(basis.as_mut(), coefficients.as_ref(), par);
+    basis.subcols(0, coefficients.ncols()).to_owned()
 }
 
 /// `V[:, ..keep] ← V[:, ..j] Y` for `Y` of `j × keep` (`keep ≤ j`), a block of rows at a time:

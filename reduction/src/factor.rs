@@ -65,38 +65,20 @@ impl ShiftFactor {
 }
 
 /// Visits the lower triangle of the union of the patterns of `K` and `M`, column by column and
-/// rows increasing, as `f(row, col, K_ij, M_ij)` (zero where a matrix has no entry). Both
-/// matrices keep their rows sorted, so each column is a merge.
+/// rows increasing, as `f(row, col, K_ij, M_ij)` (zero where a matrix has no entry).
 fn for_each_lower(k: &SparseSym, m: &SparseSym, mut f: impl FnMut(usize, usize, f64, f64)) {
     let shared = k.shares_pattern(m);
     for j in 0..k.n() {
-        let (kr, kx) = k.col(j);
-        let (mr, mx) = m.col(j);
-        let pk = kr.partition_point(|&i| i < j);
         if shared {
-            for p in pk..kr.len() {
+            // One pattern: the entries pair up by position.
+            let ((kr, kx), (_, mx)) = (k.col(j), m.col(j));
+            for p in kr.partition_point(|&i| i < j)..kr.len() {
                 f(kr[p], j, kx[p], mx[p]);
             }
-            continue;
-        }
-        let (mut p, mut q) = (pk, mr.partition_point(|&i| i < j));
-        while p < kr.len() || q < mr.len() {
-            let i = match (kr.get(p), mr.get(q)) {
-                (Some(&a), Some(&b)) => a.min(b),
-                (Some(&a), None) => a,
-                (None, Some(&b)) => b,
-                (None, None) => break,
-            };
-            let (mut kv, mut mv) = (0.0, 0.0);
-            if kr.get(p) == Some(&i) {
-                kv = kx[p];
-                p += 1;
+        } else {
+            for (i, kv, mv) in k.merged_col(m, j, j) {
+                f(i, j, kv, mv);
             }
-            if mr.get(q) == Some(&i) {
-                mv = mx[q];
-                q += 1;
-            }
-            f(i, j, kv, mv);
         }
     }
 }
