@@ -4276,6 +4276,19 @@ mod hardening {
                 ],
                 "from 2 to 1000000",
             ),
+            (
+                vec![
+                    "modes",
+                    "bracket:refinement=4",
+                    "--count",
+                    "5",
+                    "--basis",
+                    "1000000",
+                    "--out",
+                    o,
+                ],
+                "give a smaller basis",
+            ),
         ];
         for (args, want) in &cases {
             let (rc, _, err) = sh("ulimit -v 3000000; exec", args, "");

@@ -1055,6 +1055,23 @@ fn ritz_vectors(mut basis: Mat<f64>, coefficients: &Mat<f64>, par: Par) -> Mat<f
     basis.subcols(0, coefficients.ncols()).to_owned()
 }
 
+/// A zero `rows × cols` matrix of the Lanczos iteration (`basis` vectors): out of memory is an
+/// error naming the basis size, not an abort (a `--basis` near the model's order asks for an
+/// `n × n` basis).
+fn basis_zeros(rows: usize, cols: usize, basis: usize) -> Result<Mat<f64>> {
+    let mut a = Mat::<f64>::new();
+    a.try_reserve(rows, cols).map_err(|_| Error::Numerical {
+        what: "shift-invert Lanczos".into(),
+        detail: format!(
+            "out of memory allocating a {rows} × {cols} matrix ({:.1} GB) for a basis of {basis} \
+             vectors: give a smaller basis (`--basis`, or `basis` in a jobs file)",
+            (rows as f64) * (cols as f64) * 8e-9
+        ),
+    })?;
+    a.resize_with(rows, cols, |_, _| 0.0);
+    Ok(a)
+}
+
 /// `V[:, ..keep] ← V[:, ..j] Y` for `Y` of `j × keep` (`keep ≤ j`), a block of rows at a time:
 /// the basis is rotated without a second basis-sized matrix (0.7 GB at 10⁶ DOFs). Each row
 /// block's product is the same whatever the thread count.
@@ -1265,8 +1282,8 @@ impl KrylovSchur<'_> {
         let mut rng = SplitMix::new(self.seed);
         // The basis V, the projection H = Vᵀ M Op V and the coupling B of V to the next block W:
         // Op V = V H + W B.
-        let mut v = Mat::<f64>::zeros(n, nv);
-        let mut h = Mat::<f64>::zeros(nv, nv);
+        let mut v = basis_zeros(n, nv, nv)?;
+        let mut h = basis_zeros(nv, nv, nv)?;
         let mut bc = Mat::<f64>::zeros(b, nv);
         let mut applications = 0;
 
