@@ -272,38 +272,41 @@ impl SparseSym {
             return None;
         }
         let mut worst: Option<SymmetryDefect> = None;
-        for (i, j, a_ij) in self.entries() {
-            if i <= j {
-                // Each unordered pair is visited from its lower entry; an upper entry with no
-                // stored mirror is caught when the mirror is read as zero below.
+        // The mirror of (i, j) is row j of column i. Visiting the columns in order, the rows
+        // looked up in any one column increase, so a cursor per column replaces a search.
+        let mut cursor = vec![0usize; self.n()];
+        for j in 0..self.n() {
+            let (rows, vals) = self.col(j);
+            for (&i, &a_ij) in rows.iter().zip(vals) {
                 if i == j {
                     continue;
                 }
-                let a_ji = self.get(j, i);
-                if a_ji == 0.0 {
-                    let d = a_ij.abs() / scale;
-                    if worst.is_none_or(|w| d > w.rel_diff) {
-                        worst = Some(SymmetryDefect {
-                            row: i,
-                            col: j,
-                            a_ij,
-                            a_ji,
-                            rel_diff: d,
-                        });
-                    }
+                let (ri, vi) = self.col(i);
+                let mut p = cursor[i];
+                while p < ri.len() && ri[p] < j {
+                    p += 1;
                 }
-                continue;
-            }
-            let a_ji = self.get(j, i);
-            let d = (a_ij - a_ji).abs() / scale;
-            if worst.is_none_or(|w| d > w.rel_diff) {
-                worst = Some(SymmetryDefect {
-                    row: i,
-                    col: j,
-                    a_ij,
-                    a_ji,
-                    rel_diff: d,
-                });
+                cursor[i] = p;
+                let a_ji = if p < ri.len() && ri[p] == j {
+                    vi[p]
+                } else {
+                    0.0
+                };
+                if i < j && a_ji != 0.0 {
+                    // Each unordered pair is judged from its lower entry; an upper entry with
+                    // no stored mirror is caught here, with the mirror read as zero.
+                    continue;
+                }
+                let d = (a_ij - a_ji).abs() / scale;
+                if worst.is_none_or(|w| d > w.rel_diff) {
+                    worst = Some(SymmetryDefect {
+                        row: i,
+                        col: j,
+                        a_ij,
+                        a_ji,
+                        rel_diff: d,
+                    });
+                }
             }
         }
         worst

@@ -698,6 +698,10 @@ impl EigenSolver {
                 tol: cfg.tol,
                 max_restarts: cfg.max_restarts,
                 seed: cfg.seed.wrapping_add(attempt as u64 - 1),
+                // `M V` beside `V` when the budget holds the factor and both.
+                keep_mv: cfg.memory_budget.is_none_or(|budget| {
+                    (factor_nnz + 2 * n * basis) * core::mem::size_of::<f64>() <= budget
+                }),
             };
             let ritz = ks.run(progress)?;
             let iteration_seconds = t2.elapsed().as_secs_f64();
@@ -1032,6 +1036,9 @@ struct KrylovSchur<'a> {
     tol: f64,
     max_restarts: usize,
     seed: u64,
+    /// Whether `M V` is stored beside the basis (two products with `M` per block instead of
+    /// four), which the memory budget decides.
+    keep_mv: bool,
 }
 
 /// Ritz pairs of the final basis, largest `θ` first.
@@ -1104,12 +1111,14 @@ impl KrylovSchur<'_> {
         y
     }
 
-    /// `x ← x − V (Vᵀ M x)` twice, `M x` recomputed after each pass (`mx` holds `M x` on entry
-    /// and on exit); returns the coefficients `Vᵀ M x`. `M V` is not stored: at 10⁶ DOFs it
-    /// would be another basis-sized matrix, and a product with `M` costs a few percent of a solve.
+    /// `x ← x − V (Vᵀ M x)` twice (`mx` holds `M x` on entry and on exit); returns the
+    /// coefficients `Vᵀ M x`. With `mv` (`M V`) the product is updated alike; without it (a
+    /// memory budget that leaves no room for a second basis-sized matrix) `M x` is recomputed
+    /// after each pass.
     fn orth_against(
         &self,
         v: MatRef<'_, f64>,
+        mv: Option<MatRef<'_, f64>>,
         mut x: MatMut<'_, f64>,
         mx: &mut Mat<f64>,
         par: Par,
@@ -1119,9 +1128,17 @@ impl KrylovSchur<'_> {
             return coef;
         }
         for _ in 0..2 {
-            let c = v.transpose() * mx.as_ref();
+            // With `M V`, the coefficients come from `x` itself: the updated `M x` carries the
+            // cancellation of the pass, `(M V)ᵀ x` does not.
+            let c = match mv {
+                Some(mv) => mv.transpose() * x.as_ref(),
+                None => v.transpose() * mx.as_ref(),
+            };
             matmul(x.as_mut(), Accum::Add, v, c.as_ref(), -1.0, par);
-            *mx = sparse_times(self.m, x.as_ref(), par);
+            match mv {
+                Some(mv) => matmul(mx.as_mut(), Accum::Add, mv, c.as_ref(), -1.0, par),
+                None => *mx = sparse_times(self.m, x.as_ref(), par),
+            }
             coef += &c;
         }
         coef
@@ -1154,6 +1171,7 @@ impl KrylovSchur<'_> {
     fn orthonormalize(
         &self,
         v: MatRef<'_, f64>,
+        mv: Option<MatRef<'_, f64>>,
         x: &mut Mat<f64>,
         mx: &mut Mat<f64>,
         norms_in: &[f64],
@@ -1193,7 +1211,7 @@ impl KrylovSchur<'_> {
             return Ok(r_total);
         }
         x.copy_from(&x0);
-        let r = self.orthonormalize_columns(v, x, norms_in, rng, par)?;
+        let r = self.orthonormalize_columns(v, mv, x, norms_in, rng, par)?;
         *mx = sparse_times(self.m, x.as_ref(), par);
         Ok(r)
     }
@@ -1208,6 +1226,7 @@ impl KrylovSchur<'_> {
     fn orthonormalize_columns(
         &self,
         v: MatRef<'_, f64>,
+        mv: Option<MatRef<'_, f64>>,
         x: &mut Mat<f64>,
         norms_in: &[f64],
         rng: &mut SplitMix,
@@ -1266,7 +1285,7 @@ impl KrylovSchur<'_> {
                 }
                 let mut xc = x.subcols_mut(c, 1);
                 let mut mxc = sparse_times(self.m, xc.as_ref(), par);
-                let _ = self.orth_against(v, xc.as_mut(), &mut mxc, par);
+                let _ = self.orth_against(v, mv, xc.as_mut(), &mut mxc, par);
                 let nrm0 = self.m_norm(xc.as_ref(), par)?;
                 for i in 0..n {
                     xc[(i, 0)] /= nrm0.max(f64::MIN_POSITIVE);
@@ -1283,6 +1302,11 @@ impl KrylovSchur<'_> {
         // The basis V, the projection H = Vᵀ M Op V and the coupling B of V to the next block W:
         // Op V = V H + W B.
         let mut v = basis_zeros(n, nv, nv)?;
+        let mut mv = if self.keep_mv {
+            Some(basis_zeros(n, nv, nv)?)
+        } else {
+            None
+        };
         let mut h = basis_zeros(nv, nv, nv)?;
         let mut bc = Mat::<f64>::zeros(b, nv);
         let mut applications = 0;
@@ -1294,7 +1318,8 @@ impl KrylovSchur<'_> {
         let mut mw = sparse_times(self.m, w.as_ref(), par);
         let norms = Self::block_norms(w.as_ref(), mw.as_ref())?;
         let empty = v.subcols(0, 0);
-        self.orthonormalize(empty, &mut w, &mut mw, &norms, &mut rng, par)?;
+        let no_mv = mv.as_ref().map(|m| m.subcols(0, 0));
+        self.orthonormalize(empty, no_mv, &mut w, &mut mw, &norms, &mut rng, par)?;
         mw = sparse_times(self.m, w.as_ref(), par);
         let mut j = 0;
         let mut restarts = 0;
@@ -1302,6 +1327,9 @@ impl KrylovSchur<'_> {
             // Expand to the full basis.
             while j + b <= nv {
                 v.subcols_mut(j, b).copy_from(&w);
+                if let Some(mv) = mv.as_mut() {
+                    mv.subcols_mut(j, b).copy_from(&mw);
+                }
                 // Rows of H for the new block against the old columns: the old coupling.
                 for r in 0..b {
                     for c in 0..j {
@@ -1312,10 +1340,12 @@ impl KrylovSchur<'_> {
                 applications += b;
                 let mut mx = sparse_times(self.m, x.as_ref(), par);
                 let norms = Self::block_norms(x.as_ref(), mx.as_ref())?;
-                let coef = self.orth_against(v.subcols(0, j + b), x.as_mut(), &mut mx, par);
+                let mvj = mv.as_ref().map(|m| m.subcols(0, j + b));
+                let coef = self.orth_against(v.subcols(0, j + b), mvj, x.as_mut(), &mut mx, par);
                 h.submatrix_mut(0, j, j + b, b).copy_from(&coef);
                 let r = self.orthonormalize(
                     v.subcols(0, j + b),
+                    mvj,
                     &mut x,
                     &mut mx,
                     &norms,
@@ -1386,6 +1416,9 @@ impl KrylovSchur<'_> {
             // Thick restart: keep the best `keep` Ritz vectors.
             let keep = ((nev + j) / 2).max(nev).min(j - b);
             rotate_in_place(v.subcols_mut(0, j), y.subcols(0, keep), par);
+            if let Some(mv) = mv.as_mut() {
+                rotate_in_place(mv.subcols_mut(0, j), y.subcols(0, keep), par);
+            }
             h.fill(0.0);
             for c in 0..keep {
                 h[(c, c)] = theta[c];

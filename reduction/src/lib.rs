@@ -25,6 +25,7 @@ mod products;
 mod rayleigh;
 pub mod sensitivity;
 pub mod state_space;
+mod trisolve;
 
 pub use eigen::{
     EigenConfig, EigenMethod, EigenProgress, EigenSolver, EigenStats, ModeSelection, Modes,

@@ -29,16 +29,47 @@ impl WithSimd for Rows<'_> {
 
     #[inline(always)]
     fn with_simd<S: Simd>(self, _simd: S) {
-        let b = self.b;
-        for (r, y) in self.out.chunks_exact_mut(b).enumerate() {
-            let (rows, vals) = self.a.col(self.first + r);
-            y.fill(0.0);
-            for (&i, &v) in rows.iter().zip(vals) {
-                let x = &self.xt[i * b..(i + 1) * b];
-                for (yc, &xc) in y.iter_mut().zip(x) {
-                    *yc = v.mul_add(xc, *yc);
+        // Fixed widths for the usual block sizes: whole vector operations on each row.
+        match self.b {
+            1 => self.fixed::<1>(),
+            2 => self.fixed::<2>(),
+            3 => self.fixed::<3>(),
+            4 => self.fixed::<4>(),
+            5 => self.fixed::<5>(),
+            6 => self.fixed::<6>(),
+            7 => self.fixed::<7>(),
+            8 => self.fixed::<8>(),
+            b => {
+                for (r, y) in self.out.chunks_exact_mut(b).enumerate() {
+                    let (rows, vals) = self.a.col(self.first + r);
+                    y.fill(0.0);
+                    for (&i, &v) in rows.iter().zip(vals) {
+                        let x = &self.xt[i * b..(i + 1) * b];
+                        for (yc, &xc) in y.iter_mut().zip(x) {
+                            *yc = v.mul_add(xc, *yc);
+                        }
+                    }
                 }
             }
+        }
+    }
+}
+
+impl Rows<'_> {
+    #[inline(always)]
+    fn fixed<const B: usize>(self) {
+        let (xt, _) = self.xt.as_chunks::<B>();
+        let (out, _) = self.out.as_chunks_mut::<B>();
+        for (r, y) in out.iter_mut().enumerate() {
+            let (rows, vals) = self.a.col(self.first + r);
+            let mut acc = [0.0f64; B];
+            for (&i, &v) in rows.iter().zip(vals) {
+                let x = &xt[i];
+                for k in 0..B {
+                    acc[k] = v.mul_add(x[k], acc[k]);
+                }
+            }
+            *y = acc;
         }
     }
 }

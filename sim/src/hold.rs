@@ -68,24 +68,41 @@ impl std::fmt::Display for Hold {
 
 const FACTORIAL: [f64; 4] = [1.0, 1.0, 2.0, 6.0];
 
+/// `1/(22 − j)!` for `j = 0, 1, …, 19`: the coefficients of `φ_3`'s Taylor series in Horner
+/// order, highest power first. (Factorials beyond 18! are rounded in f64, by an ulp that the
+/// series does not notice.)
+const PHI3_HORNER: [f64; 20] = {
+    let mut c = [0.0; 20];
+    let mut j = 0;
+    while j < 20 {
+        let mut p = 1.0;
+        let mut i = 2;
+        while i <= 22 - j {
+            p *= i as f64;
+            i += 1;
+        }
+        c[j] = 1.0 / p;
+        j += 1;
+    }
+    c
+};
+
 /// `[φ_0(x), φ_1(x), φ_2(x), φ_3(x)]` with `φ_0 = eˣ`, `φ_k(x) = Σ_j x^j/(j+k)!`.
 ///
-/// Relative accuracy near round-off for all `x`: a Taylor series below `|x| = 1/2` (where the
-/// recurrence would cancel), the recurrence `φ_{k+1} = (φ_k − 1/k!)/x` above.
+/// Relative accuracy near round-off for all `x`: below `|x| = 1/2` the Taylor series of `φ_3`
+/// (Horner form) and `φ_k = 1/k! + x φ_{k+1}` downwards, where `|x φ_{k+1}| < 1/(2 k!)` so
+/// nothing cancels; above, the recurrence `φ_{k+1} = (φ_k − 1/k!)/x` upwards.
 pub fn phi_functions(x: c64) -> [c64; 4] {
     if x.norm() < 0.5 {
-        let mut out = [c64::new(0.0, 0.0); 4];
-        for (k, o) in out.iter_mut().enumerate() {
-            // Σ_j x^j / (j+k)!, 20 terms: |x|^20/20! < 1e-24.
-            let mut term = c64::new(1.0 / FACTORIAL[k], 0.0);
-            let mut sum = term;
-            for j in 1..20 {
-                term = term * x / (j + k) as f64;
-                sum += term;
-            }
-            *o = sum;
+        // φ_3(x) = Σ_j x^j/(j+3)!, 20 terms: |x|^20/23! < 1e-28.
+        let mut p3 = c64::new(PHI3_HORNER[0], 0.0);
+        for &c in &PHI3_HORNER[1..] {
+            p3 = p3 * x + c;
         }
-        out
+        let p2 = p3 * x + 0.5;
+        let p1 = p2 * x + 1.0;
+        let p0 = p1 * x + 1.0;
+        [p0, p1, p2, p3]
     } else {
         let e = x.exp();
         let p1 = (e - 1.0) / x;
@@ -152,6 +169,38 @@ pub fn bias_error(hold: Hold, theta: f64) -> (f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn phi_functions_match_their_series_near_zero() {
+        // The defining series summed term by term, smallest terms first (60 terms).
+        let series = |x: c64, k: usize| {
+            let mut terms = Vec::new();
+            let mut t = c64::new(1.0 / FACTORIAL[k], 0.0);
+            for j in 0..60 {
+                terms.push(t);
+                t = t * x / (j + 1 + k) as f64;
+            }
+            terms.iter().rev().fold(c64::new(0.0, 0.0), |a, &t| a + t)
+        };
+        for (r, ang) in [
+            (1e-9, 0.3),
+            (1e-3, 2.0),
+            (0.1, -1.2),
+            (0.3, 3.0),
+            (0.49, 1.4),
+        ] {
+            let x = c64::new(r * f64::cos(ang), r * f64::sin(ang));
+            let p = phi_functions(x);
+            for k in 0..4 {
+                let want = series(x, k);
+                assert!(
+                    (p[k] - want).norm() <= 4.0 * f64::EPSILON * want.norm(),
+                    "φ_{k}({x}) = {} against {want}",
+                    p[k]
+                );
+            }
+        }
+    }
 
     #[test]
     fn phi_functions_agree_across_the_switch() {
