@@ -100,7 +100,8 @@ fn table(c: &mut Criterion, rows: &str) {
             panic!("NLSIM_BENCH_ROWS: `{row}` is not REFINEMENT:MODES");
         };
         if built.as_ref().is_none_or(|(r, _)| *r != refinement) {
-            built = None;
+            // The previous model goes before the next is built.
+            drop(built.take());
             let cfg = BracketConfig {
                 refinement,
                 clamped: true,
@@ -113,7 +114,14 @@ fn table(c: &mut Criterion, rows: &str) {
         }
         let (_, model) = built.as_ref().expect("built above");
         let (k, m) = (model.stiffness(), model.mass());
-        modes(&mut g, &format!("lanczos_{}_{count}", model.n_dofs()), k, m, count, true);
+        modes(
+            &mut g,
+            &format!("lanczos_{}_{count}", model.n_dofs()),
+            k,
+            m,
+            count,
+            true,
+        );
     }
     g.finish();
 }
