@@ -4297,6 +4297,16 @@ mod hardening {
             assert!(err.contains(want), "{args:?}: want '{want}' in {err}");
             assert!(!out.exists(), "{args:?} left {o}");
         }
+        // A built-in mesh whose matrices do not fit (about 0.8 GB for 407 000 DOFs under a
+        // 0.6 GB limit): the assembly names what it could not allocate.
+        let args = ["check", "bracket:refinement=10", "--no-definiteness"];
+        let (rc, _, err) = sh("ulimit -v 600000; exec", &args, "");
+        assert_eq!(rc, 1, "{err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        assert!(
+            err.contains("bracket refinement 10") && err.contains("give a smaller refinement"),
+            "{err}"
+        );
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

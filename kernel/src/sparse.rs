@@ -158,6 +158,23 @@ impl SparseSym {
         Arc::ptr_eq(&self.pattern, &other.pattern)
     }
 
+    /// A matrix on this one's pattern (shared, not copied) with the values `vals`, stored in
+    /// the same order (column by column, rows increasing); `name` names it in the error when
+    /// the number of values differs.
+    pub fn with_values(&self, name: &str, vals: Vec<f64>) -> Result<SparseSym> {
+        if vals.len() != self.vals.len() {
+            return Err(Error::DimensionMismatch {
+                what: format!("{name} values (one per stored entry of the shared pattern)"),
+                expected: self.vals.len(),
+                found: vals.len(),
+            });
+        }
+        Ok(SparseSym {
+            pattern: Arc::clone(&self.pattern),
+            vals: Arc::new(vals),
+        })
+    }
+
     /// When `self` has the same pattern as `other`, drops its own copy and refers to the other's
     /// (the mass and stiffness matrices of one mesh); returns whether it did.
     pub fn share_pattern(&mut self, other: &SparseSym) -> bool {

@@ -480,6 +480,20 @@ mod sparse {
     }
 
     #[test]
+    fn with_values_shares_the_pattern_and_checks_the_count() {
+        let k = SparseSym::from_lower_triplets("K", 3, &[(0, 0, 2.0), (1, 0, -1.0), (2, 2, 3.0)])
+            .unwrap();
+        let m = k.with_values("M", vec![0.5, 0.1, 0.1, 0.25]).unwrap();
+        assert!(m.shares_pattern(&k));
+        assert_eq!((m.get(1, 0), m.get(0, 1), m.get(2, 2)), (0.1, 0.1, 0.25));
+        let e = k.with_values("M", vec![1.0; 3]).unwrap_err().to_string();
+        assert!(
+            e.contains("M values") && e.contains('4') && e.contains('3'),
+            "{e}"
+        );
+    }
+
+    #[test]
     fn symmetry_defect_agrees_with_a_dense_scan() {
         // Random patterns with perturbed mirrors, one-sided entries on either side and stored
         // zeros; the worst pair and its position must match a dense scan in column order.
