@@ -84,7 +84,9 @@ pub struct EigenConfig {
     /// `L D Lᵀ` beside the operator's `L Lᵀ` would pass it, the check factorises into the
     /// operator factor's storage and the factor is released ([`EigenSolver::factor`] is then
     /// `None`, and the residual flexibility refactorises once at the same shift): the peak
-    /// holds one factor instead of two.
+    /// holds one factor instead of two. The Lanczos iteration keeps `M V` beside its basis
+    /// only when the budget holds the factor, `V` and `M V` (else it recomputes the products
+    /// with `M`, two more per block).
     pub memory_budget: Option<usize>,
 }
 

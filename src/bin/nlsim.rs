@@ -82,7 +82,8 @@ struct LanczosArgs {
     #[arg(long, default_value = "auto", value_parser = parse_ordering)]
     ordering: nlsim_reduction::Ordering,
     /// Memory the sparse factors may take together (GB); above it the Sturm check reuses the
-    /// operator factor's storage. Default: half the memory available at start.
+    /// operator factor's storage, and the Lanczos iteration keeps no `M V` beside its basis
+    /// unless that fits too. Default: half the memory available at start.
     #[arg(long, value_name = "GB")]
     memory_budget: Option<f64>,
 }
