@@ -329,6 +329,30 @@ struct Node<'a> {
     inside: usize,
 }
 
+impl<'a> Node<'a> {
+    /// Supernode `s` of the factor `values`, swept over rows below `hi`.
+    #[inline(always)]
+    fn new(
+        sym: &'a SymbolicSupernodalCholesky<usize>,
+        values: &'a [f64],
+        s: usize,
+        hi: usize,
+    ) -> Self {
+        let f = sym.supernode_begin()[s];
+        let w = sym.supernode_end()[s] - f;
+        let pattern = sym.supernode(s).pattern();
+        let val_ptr = sym.col_ptr_for_val();
+        Node {
+            ls: &values[val_ptr[s]..val_ptr[s + 1]],
+            ld: w + pattern.len(),
+            f,
+            w,
+            pattern,
+            inside: pattern.partition_point(|&i| i < hi),
+        }
+    }
+}
+
 impl<const B: usize> WithSimd for Forward<'_, B> {
     type Output = ();
 
@@ -344,20 +368,9 @@ impl<const B: usize> WithSimd for Forward<'_, B> {
             out,
             out_lo,
         } = self;
-        let begin = sym.supernode_begin();
-        let end = sym.supernode_end();
-        let val_ptr = sym.col_ptr_for_val();
         for s in supernodes {
-            let (f, w) = (begin[s], end[s] - begin[s]);
-            let pattern = sym.supernode(s).pattern();
-            let node = Node {
-                ls: &values[val_ptr[s]..val_ptr[s + 1]],
-                ld: w + pattern.len(),
-                f,
-                w,
-                pattern,
-                inside: pattern.partition_point(|&i| i < hi),
-            };
+            let node = Node::new(sym, values, s, hi);
+            let w = node.w;
             let mut c = 0;
             while c + GROUP <= w {
                 forward_group::<B, GROUP>(&node, c, x, lo, out, out_lo);
@@ -471,20 +484,9 @@ impl<const B: usize> WithSimd for Backward<'_, B> {
             above,
             above_lo,
         } = self;
-        let begin = sym.supernode_begin();
-        let end = sym.supernode_end();
-        let val_ptr = sym.col_ptr_for_val();
         for s in supernodes.rev() {
-            let (f, w) = (begin[s], end[s] - begin[s]);
-            let pattern = sym.supernode(s).pattern();
-            let node = Node {
-                ls: &values[val_ptr[s]..val_ptr[s + 1]],
-                ld: w + pattern.len(),
-                f,
-                w,
-                pattern,
-                inside: pattern.partition_point(|&i| i < hi),
-            };
+            let node = Node::new(sym, values, s, hi);
+            let w = node.w;
             // The same groups as the forward sweep, last first.
             let mut c = w;
             let tail = w % BACK_GROUP;
