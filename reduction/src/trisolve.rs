@@ -160,6 +160,30 @@ pub(crate) fn solve_llt(
     }
 }
 
+/// The rows below the top chain cut into each subtree's own (they tile them in order).
+fn subtrees_of<'t, 'x, const B: usize>(
+    tasks: &'t [Task],
+    mut rest: &'x mut [[f64; B]],
+) -> Vec<(&'t Task, &'x mut [[f64; B]])> {
+    let mut pieces = Vec::with_capacity(tasks.len());
+    for t in tasks {
+        let (mine, after) = rest.split_at_mut(t.cols.end - t.cols.start);
+        pieces.push((t, mine));
+        rest = after;
+    }
+    pieces
+}
+
+/// `f` on every item, in parallel or in order; each item's work does not depend on which.
+fn for_each<T: Send>(items: &mut [T], parallel: bool, f: impl Fn(&mut T) + Sync + Send) {
+    if parallel {
+        use rayon::prelude::*;
+        items.par_iter_mut().for_each(f);
+    } else {
+        items.iter_mut().for_each(f);
+    }
+}
+
 fn solve_block<const B: usize>(
     sym: &SymbolicSupernodalCholesky<usize>,
     tree: &Split,
@@ -194,14 +218,11 @@ fn solve_block<const B: usize>(
     let top_lo = tree.top.cols.start;
     {
         let (below, top) = x.split_at_mut(top_lo);
-        let mut pieces = Vec::with_capacity(tree.tasks.len());
-        let mut rest = below;
-        for t in &tree.tasks {
-            let (mine, after) = rest.split_at_mut(t.cols.end - t.cols.start);
-            pieces.push((t, mine, vec![[0.0f64; B]; n - top_lo]));
-            rest = after;
-        }
-        let sweep = |(t, mine, buf): &mut (&Task, &mut [[f64; B]], Vec<[f64; B]>)| {
+        let mut pieces: Vec<_> = subtrees_of(&tree.tasks, below)
+            .into_iter()
+            .map(|(t, mine)| (t, mine, vec![[0.0f64; B]; n - top_lo]))
+            .collect();
+        for_each(&mut pieces, parallel, |(t, mine, buf)| {
             arch.dispatch(Forward {
                 sym,
                 values,
@@ -212,13 +233,7 @@ fn solve_block<const B: usize>(
                 out: buf,
                 out_lo: top_lo,
             })
-        };
-        if parallel {
-            use rayon::prelude::*;
-            pieces.par_iter_mut().for_each(sweep);
-        } else {
-            pieces.iter_mut().for_each(sweep);
-        }
+        });
         for (_, _, buf) in &pieces {
             for (xi, u) in top.iter_mut().zip(buf) {
                 for k in 0..B {
@@ -252,14 +267,8 @@ fn solve_block<const B: usize>(
             above_lo: n,
         });
         let top: &[[f64; B]] = top;
-        let mut pieces = Vec::with_capacity(tree.tasks.len());
-        let mut rest = below;
-        for t in &tree.tasks {
-            let (mine, after) = rest.split_at_mut(t.cols.end - t.cols.start);
-            pieces.push((t, mine));
-            rest = after;
-        }
-        let sweep = |(t, mine): &mut (&Task, &mut [[f64; B]])| {
+        let mut pieces = subtrees_of(&tree.tasks, below);
+        for_each(&mut pieces, parallel, |(t, mine)| {
             arch.dispatch(Backward {
                 sym,
                 values,
@@ -270,13 +279,7 @@ fn solve_block<const B: usize>(
                 above: top,
                 above_lo: top_lo,
             })
-        };
-        if parallel {
-            use rayon::prelude::*;
-            pieces.par_iter_mut().for_each(sweep);
-        } else {
-            pieces.iter_mut().for_each(sweep);
-        }
+        });
     }
 
     // rhs[fwd[i]] = x[i].
