@@ -697,12 +697,34 @@ mod tests {
         )
     }
 
+    /// Two uncoupled copies of a pencil: an elimination forest with more than one root.
+    fn two_copies(k: &SparseSym, m: &SparseSym) -> (SparseSym, SparseSym) {
+        let n = k.n();
+        let twice = |a: &SparseSym, name: &str| {
+            let t: Vec<_> = a
+                .entries()
+                .filter(|(i, j, _)| i >= j)
+                .flat_map(|(i, j, v)| [(i, j, v), (i + n, j + n, 1.5 * v)])
+                .collect();
+            SparseSym::from_lower_triplets(name, 2 * n, &t).unwrap()
+        };
+        (twice(k, "K"), twice(m, "M"))
+    }
+
     /// The supernodal solve against faer's own and against the dense matrix, for block widths
     /// on both sides of the sweep's group of 8 columns, with nested dissection (subtrees solved
-    /// in parallel) and AMD; the same bits with one thread and with two.
+    /// in parallel) and AMD, on a connected grid and on two uncoupled ones (several roots);
+    /// the same bits with one thread and with two.
     #[test]
     fn supernodal_solve_matches_faer_and_dense_for_any_thread_count() {
         let (k, m) = grid(11);
+        check_supernodal_solve(&k, &m);
+        let (k, m) = grid(6);
+        let (k2, m2) = two_copies(&k, &m);
+        check_supernodal_solve(&k2, &m2);
+    }
+
+    fn check_supernodal_solve(k: &SparseSym, m: &SparseSym) {
         let n = k.n();
         let params = CholeskySymbolicParams {
             supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
@@ -711,7 +733,7 @@ mod tests {
         let sigma = -0.5;
         let a = k.to_dense() - m.to_dense() * faer::Scale(sigma);
         for ordering in [Ordering::NestedDissection, Ordering::Amd] {
-            let mut p = ShiftedPencil::with_params(&k, &m, ordering, params).unwrap();
+            let mut p = ShiftedPencil::with_params(k, m, ordering, params).unwrap();
             let SymbolicCholeskyRaw::Supernodal(sym) = p.symbolic.raw() else {
                 panic!("supernodal forced");
             };
