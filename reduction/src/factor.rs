@@ -32,6 +32,8 @@ pub struct ShiftedPencil {
     k: SparseSym,
     m: SparseSym,
     symbolic: SymbolicCholesky<usize>,
+    /// The supernodal tree's split for the parallel solve (`None` for a simplicial factor).
+    tree: Option<crate::trisolve::Split>,
     ordering: Ordering,
     requested: Ordering,
     predicted: Vec<(Ordering, usize)>,
@@ -279,12 +281,17 @@ impl ShiftedPencil {
             let (col_ptr, row_idx) = union_lower(k, m);
             analyse(n, &col_ptr, &row_idx, ordering, params)?
         };
+        let tree = match symbolic.raw() {
+            SymbolicCholeskyRaw::Supernodal(s) => Some(crate::trisolve::split(s)),
+            SymbolicCholeskyRaw::Simplicial(_) => None,
+        };
         Ok(ShiftedPencil {
             par: Par::rayon(0),
             n,
             k: k.clone(),
             m: m.clone(),
             symbolic,
+            tree,
             ordering: used,
             requested: ordering,
             predicted,
@@ -456,9 +463,11 @@ impl ShiftedPencil {
     /// and the result is the same for any thread count.
     pub fn solve_in_place(&self, factor: &ShiftFactor, rhs: MatMut<'_, f64>) {
         let par = self.par;
-        if let SymbolicCholeskyRaw::Supernodal(s) = self.symbolic.raw() {
-            let perm = self.symbolic.perm().map(|p| p.arrays());
-            crate::trisolve::solve_llt(s, perm, &factor.values, rhs, par);
+        if let (SymbolicCholeskyRaw::Supernodal(s), Some(tree)) =
+            (self.symbolic.raw(), self.tree.as_ref())
+        {
+            let fwd = self.symbolic.perm().map(|p| p.arrays().0);
+            crate::trisolve::solve_llt(s, tree, fwd, &factor.values, rhs, par);
             return;
         }
         let llt = LltRef::<'_, usize, f64>::new(&self.symbolic, &factor.values);
@@ -734,12 +743,10 @@ mod tests {
         let a = k.to_dense() - m.to_dense() * faer::Scale(sigma);
         for ordering in [Ordering::NestedDissection, Ordering::Amd] {
             let mut p = ShiftedPencil::with_params(k, m, ordering, params).unwrap();
-            let SymbolicCholeskyRaw::Supernodal(sym) = p.symbolic.raw() else {
-                panic!("supernodal forced");
-            };
+            let tree = p.tree.as_ref().expect("supernodal forced");
             if ordering == Ordering::NestedDissection {
                 assert!(
-                    crate::trisolve::subtrees(sym) >= 2,
+                    tree.subtrees() >= 2,
                     "dissection gives independent subtrees"
                 );
             }

@@ -34,8 +34,9 @@ struct Task {
 }
 
 /// How the elimination tree is split: independent subtrees, then the top chain above them.
+/// Made once per symbolic analysis ([`split`]).
 #[derive(Debug, Clone)]
-struct Split {
+pub(crate) struct Split {
     tasks: Vec<Task>,
     /// The top chain: supernodes and columns, swept after the tasks (forward) or before them
     /// (backward).
@@ -43,7 +44,7 @@ struct Split {
 }
 
 /// Splits the supernodal elimination tree at its first node with more than one child.
-fn split(sym: &SymbolicSupernodalCholesky<usize>) -> Split {
+pub(crate) fn split(sym: &SymbolicSupernodalCholesky<usize>) -> Split {
     let ns = sym.n_supernodes();
     let n = sym.nrows();
     let begin = sym.supernode_begin();
@@ -60,7 +61,6 @@ fn split(sym: &SymbolicSupernodalCholesky<usize>) -> Split {
     }
     // Parent of each supernode: the one holding its first off-diagonal row.
     let mut parent = vec![usize::MAX; ns];
-    let mut children = vec![0usize; ns];
     let mut size = vec![1usize; ns];
     for s in 0..ns {
         let pattern = sym.supernode(s).pattern();
@@ -70,7 +70,6 @@ fn split(sym: &SymbolicSupernodalCholesky<usize>) -> Split {
                 return whole;
             }
             parent[s] = p;
-            children[p] += 1;
         }
     }
     for s in 0..ns {
@@ -120,18 +119,22 @@ fn split(sym: &SymbolicSupernodalCholesky<usize>) -> Split {
     }
 }
 
-/// Number of subtrees the sweeps run independently (1: the tree is swept as one).
-#[cfg(test)]
-pub(crate) fn subtrees(sym: &SymbolicSupernodalCholesky<usize>) -> usize {
-    split(sym).tasks.len().max(1)
+impl Split {
+    /// Number of subtrees the sweeps run independently (1: the tree is swept as one).
+    #[cfg(test)]
+    pub(crate) fn subtrees(&self) -> usize {
+        self.tasks.len().max(1)
+    }
 }
 
-/// Solves `L Lᵀ X = B` in place for a supernodal factor `values` of `sym`, whose analysis
-/// ordered the rows by `perm` (`fwd`, `inv` arrays; `None`: identity). `par` runs the subtrees
-/// of the elimination tree in parallel; the result is the same for any `par`.
+/// Solves `L Lᵀ X = B` in place for a supernodal factor `values` of `sym` (its tree split by
+/// [`split`]), whose analysis put row `fwd[i]` of the original order at `i` (`None`:
+/// identity). `par` runs the subtrees of the elimination tree in parallel; the result is the
+/// same for any `par`.
 pub(crate) fn solve_llt(
     sym: &SymbolicSupernodalCholesky<usize>,
-    perm: Option<(&[usize], &[usize])>,
+    tree: &Split,
+    perm: Option<&[usize]>,
     values: &[f64],
     mut rhs: MatMut<'_, f64>,
     par: Par,
@@ -141,20 +144,19 @@ pub(crate) fn solve_llt(
     if n == 0 || rhs.ncols() == 0 {
         return;
     }
-    let tree = split(sym);
     let mut c0 = 0;
     while c0 < rhs.ncols() {
         let b = (rhs.ncols() - c0).min(MAX_BLOCK);
         let block = rhs.rb_mut().subcols_mut(c0, b);
         match b {
-            1 => solve_block::<1>(sym, &tree, perm, values, block, par),
-            2 => solve_block::<2>(sym, &tree, perm, values, block, par),
-            3 => solve_block::<3>(sym, &tree, perm, values, block, par),
-            4 => solve_block::<4>(sym, &tree, perm, values, block, par),
-            5 => solve_block::<5>(sym, &tree, perm, values, block, par),
-            6 => solve_block::<6>(sym, &tree, perm, values, block, par),
-            7 => solve_block::<7>(sym, &tree, perm, values, block, par),
-            _ => solve_block::<8>(sym, &tree, perm, values, block, par),
+            1 => solve_block::<1>(sym, tree, perm, values, block, par),
+            2 => solve_block::<2>(sym, tree, perm, values, block, par),
+            3 => solve_block::<3>(sym, tree, perm, values, block, par),
+            4 => solve_block::<4>(sym, tree, perm, values, block, par),
+            5 => solve_block::<5>(sym, tree, perm, values, block, par),
+            6 => solve_block::<6>(sym, tree, perm, values, block, par),
+            7 => solve_block::<7>(sym, tree, perm, values, block, par),
+            _ => solve_block::<8>(sym, tree, perm, values, block, par),
         }
         c0 += b;
     }
@@ -187,7 +189,7 @@ fn for_each<T: Send>(items: &mut [T], parallel: bool, f: impl Fn(&mut T) + Sync 
 fn solve_block<const B: usize>(
     sym: &SymbolicSupernodalCholesky<usize>,
     tree: &Split,
-    perm: Option<(&[usize], &[usize])>,
+    perm: Option<&[usize]>,
     values: &[f64],
     mut rhs: MatMut<'_, f64>,
     par: Par,
@@ -198,7 +200,7 @@ fn solve_block<const B: usize>(
     for c in 0..rhs.ncols() {
         let col = rhs.rb().col(c);
         match perm {
-            Some((fwd, _)) => {
+            Some(fwd) => {
                 for (xi, &f) in x.iter_mut().zip(fwd) {
                     xi[c] = col[f];
                 }
@@ -286,7 +288,7 @@ fn solve_block<const B: usize>(
     for c in 0..rhs.ncols() {
         let mut col = rhs.rb_mut().col_mut(c);
         match perm {
-            Some((fwd, _)) => {
+            Some(fwd) => {
                 for (xi, &f) in x.iter().zip(fwd) {
                     col[f] = xi[c];
                 }
