@@ -9,11 +9,16 @@
 //! complex factorisation, and count two Newton iterations per point: the bound
 //! `2 (H+1) t_LDLᵀ` flatters the full-DOF method.
 //!
+//! The thesis Duffing curve (`duffing_fig3`, 25–35 Hz by arclength continuation, as
+//! `nlsim frf duffing_fig3 --from 25 --to 35 --harmonics H` runs it) is timed beside the
+//! references of issue 18, measured on this machine: NLvib in Octave ≈ 25 s CPU per curve,
+//! an independent numpy HB with Hill stability 1.0–1.8 s (0.7–1.0 s without).
+//!
 //! Run with `cargo bench -p nlsim-bench --bench hb -- --quick --noplot`; the 10⁵-DOF bracket
 //! with `NLSIM_BENCH_LARGE=1`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use nlsim_hb::{HarmonicSet, HbConfig, HbSystem, stepped_sine};
+use nlsim_hb::{ContinuationConfig, HarmonicSet, HbConfig, HbSystem, continuation, stepped_sine};
 use nlsim_kernel::Model;
 use nlsim_reduction::modal::{ReductionConfig, reduce};
 use nlsim_reduction::{EigenConfig, ModeSelection, ShiftedPencil};
@@ -143,7 +148,72 @@ fn bench_model(c: &mut Criterion, name: &str, model: &Model) {
     );
 }
 
+/// NLvib (Octave) CPU seconds per Duffing curve, measured when issue 18 was filed.
+const NLVIB_CURVE_S: f64 = 25.0;
+/// The numpy HB with Hill stability, fastest measured CPU seconds per curve (with, without
+/// stability).
+const NUMPY_CURVE_S: [f64; 2] = [1.0, 0.7];
+
+/// The thesis Duffing curve, 25–35 Hz, at H = 1 and 7, with and without stability.
+fn duffing_curve(c: &mut Criterion) {
+    let model = nlsim_fixtures::build("duffing_fig3", &[]).unwrap().model;
+    let red = reduce(&model, &ReductionConfig::lowest(1)).unwrap();
+    let mut g = c.benchmark_group("hb_duffing_curve");
+    g.sample_size(20);
+    g.warm_up_time(Duration::from_millis(300));
+    g.measurement_time(Duration::from_secs(3));
+    let mut table = Vec::new();
+    for h in [1, 7] {
+        let sys = HbSystem::from_model(
+            &model,
+            &red,
+            HarmonicSet::new(h, 1).unwrap(),
+            HbConfig::default(),
+        )
+        .unwrap();
+        for stability in [true, false] {
+            let mut cfg = ContinuationConfig::frequency(25.0, 35.0);
+            cfg.stability = stability;
+            let run = || {
+                continuation(&sys, &cfg, None)
+                    .unwrap()
+                    .into_branch()
+                    .unwrap()
+            };
+            let points = run().points.len();
+            let label = if stability {
+                "with_stability"
+            } else {
+                "no_stability"
+            };
+            g.bench_function(format!("h{h}_{label}"), |b| b.iter(|| black_box(run())));
+            let reps = 20;
+            let t = Instant::now();
+            for _ in 0..reps {
+                black_box(run());
+            }
+            let s = t.elapsed().as_secs_f64() / reps as f64;
+            table.push((h, stability, points, s));
+        }
+    }
+    g.finish();
+    eprintln!("\n  Duffing curve 25–35 Hz (thesis fig. 3), one thread:");
+    for (h, stability, points, s) in table {
+        let numpy = NUMPY_CURVE_S[usize::from(!stability)];
+        eprintln!(
+            "    H = {h}, stability {stability:5}: {points} points, {:.1} ms per curve, \
+             {:.0}x NLvib, {:.0}x numpy HB",
+            1e3 * s,
+            NLVIB_CURVE_S / s,
+            numpy / s
+        );
+    }
+}
+
 fn hb(c: &mut Criterion) {
+    // As the CLI runs it: faer's own parallelism off (the work here is small matrices).
+    faer::set_global_parallelism(faer::Par::Seq);
+    duffing_curve(c);
     let ecl = nlsim_fixtures::build("ecl_beam", &[]).unwrap().model;
     bench_model(c, "ecl_beam", &ecl);
     let mut sizes = vec![10_000usize];

@@ -121,7 +121,7 @@ impl AftPlan {
 
     /// [`AftPlan::to_time`] into `u` and `v` (resized to `N`; no allocation once they hold
     /// `N` values).
-    fn to_time_into(&self, x: &[f64], omega0: f64, u: &mut Vec<f64>, v: &mut Vec<f64>) {
+    pub(crate) fn to_time_into(&self, x: &[f64], omega0: f64, u: &mut Vec<f64>, v: &mut Vec<f64>) {
         let nh = self.set.len();
         u.resize(self.n, 0.0);
         v.resize(self.n, 0.0);
@@ -157,7 +157,7 @@ impl AftPlan {
     }
 
     /// [`AftPlan::to_freq`] into `out` (2H+1 values).
-    fn to_freq_into(&self, g: &[f64], out: &mut [f64]) {
+    pub(crate) fn to_freq_into(&self, g: &[f64], out: &mut [f64]) {
         for (j, o) in out.iter_mut().enumerate() {
             *o = (0..self.n).map(|i| self.p[(j, i)] * g[i]).sum();
         }

@@ -11,11 +11,12 @@
 //! - [`stepped_sine`]: what a test does: frequency after frequency, each solved from the last
 //!   solution, so that past a fold the response jumps to the other branch.
 
-use crate::dense::{Lu, norm_inf};
+use crate::dense::{LuInPlace, norm_inf};
 use crate::stability::Stability;
-use crate::system::{HbSystem, NewtonReport};
+use crate::system::{HbSystem, NewtonReport, PathBuffers};
 use faer::Mat;
 use nlsim_kernel::{Error, Result, Status};
+use std::cell::RefCell;
 use std::f64::consts::PI;
 
 /// Scaled arclength below which a converged step that turns the tangent sharply (but not
@@ -376,6 +377,44 @@ struct Tracker<'a> {
     cfg: &'a ContinuationConfig,
     xs: f64,
     ps: f64,
+    /// The buffers of the evaluations and of the bordered solves: a corrector iteration
+    /// allocates nothing once they are sized.
+    work: RefCell<TrackWork>,
+}
+
+/// Buffers of [`Tracker`].
+struct TrackWork {
+    path: PathBuffers,
+    /// Unscaled unknowns of the evaluation.
+    x: Vec<f64>,
+    /// The bordered matrix `[R_x̂ R_p̂; tᵀ]`.
+    aug: Mat<f64>,
+    lu: LuInPlace,
+    rhs: Vec<f64>,
+}
+
+impl Default for TrackWork {
+    fn default() -> Self {
+        Self {
+            path: PathBuffers::default(),
+            x: Vec::new(),
+            aug: Mat::new(),
+            lu: LuInPlace::default(),
+            rhs: Vec::new(),
+        }
+    }
+}
+
+impl<'a> Tracker<'a> {
+    fn new(sys: &'a HbSystem, cfg: &'a ContinuationConfig, xs: f64) -> Self {
+        Self {
+            sys,
+            cfg,
+            xs,
+            ps: cfg.to - cfg.from,
+            work: RefCell::default(),
+        }
+    }
 }
 
 impl<'a> Tracker<'a> {
@@ -388,12 +427,7 @@ impl<'a> Tracker<'a> {
             .map(|p| norm_inf(&p.x))
             .fold(0.0f64, f64::max)
             .max(1e-300);
-        Self {
-            sys,
-            cfg,
-            xs,
-            ps: cfg.to - cfg.from,
-        }
+        Self::new(sys, cfg, xs)
     }
 
     /// Point `p` in the scaled variables `(x / xs, (p − from) / ps)`.
@@ -432,27 +466,32 @@ impl<'a> Tracker<'a> {
         )
     }
 
+    /// The evaluation at scaled `y` into `w.path` (unscaled: `R` in `ev.r`, `R_x` in
+    /// `ev.jac`, `R_p` in `rp`).
+    fn fill(&self, y: &[f64], w: &mut TrackWork) {
+        let n = y.len() - 1;
+        w.x.clear();
+        w.x.extend(y[..n].iter().map(|v| v * self.xs));
+        let (omega, scale) = self.omega_scale(self.cfg.from + y[n] * self.ps);
+        let frequency = self.cfg.parameter == Parameter::Frequency;
+        self.sys
+            .evaluate_along(&w.x, omega, scale, frequency, &mut w.path);
+    }
+
+    /// The scaled Jacobian `[R_x̂ | R_p̂]` (n × n+1) of the last [`Tracker::fill`].
+    fn jacobian(&self, w: &TrackWork) -> Mat<f64> {
+        let (j, rp) = (&w.path.ev.jac, &w.path.rp);
+        let n = rp.len();
+        let c = self.ps / self.xs;
+        Mat::from_fn(n, n + 1, |i, k| if k < n { j[(i, k)] } else { rp[i] * c })
+    }
+
     /// Scaled residual, Jacobian `[R_x̂ | R_p̂]` (n × n+1).
     fn eval(&self, y: &[f64]) -> (Vec<f64>, Mat<f64>) {
-        let sys = self.sys;
-        let n = y.len() - 1;
-        let (x, p) = self.unscale(y);
-        let (omega, scale) = self.omega_scale(p);
-        let rec = sys.receptances(omega, false);
-        let ev = sys.evaluate(&rec, &x, omega, scale, true);
-        let rp: Vec<f64> = match self.cfg.parameter {
-            Parameter::Frequency => sys.dr_domega(&x, omega, scale, &ev, &rec),
-            Parameter::ForceLevel => rec.b.iter().map(|b| -b).collect(),
-        };
-        let j = ev.jacobian.as_ref().expect("asked for");
-        let mut a = Mat::<f64>::zeros(n, n + 1);
-        for i in 0..n {
-            for c in 0..n {
-                a[(i, c)] = j[(i, c)];
-            }
-            a[(i, n)] = rp[i] * self.ps / self.xs;
-        }
-        (ev.r.iter().map(|r| r / self.xs).collect(), a)
+        let w = &mut *self.work.borrow_mut();
+        self.fill(y, w);
+        let r = w.path.ev.r.iter().map(|r| r / self.xs).collect();
+        (r, self.jacobian(w))
     }
 
     fn where_(&self, y: &[f64]) -> String {
@@ -465,29 +504,32 @@ impl<'a> Tracker<'a> {
     /// towards `to` without one), and the sign of `det [J; tᵀ]`.
     fn tangent(&self, a: &Mat<f64>, prev: Option<&[f64]>) -> Result<(Vec<f64>, f64)> {
         let n = a.nrows();
-        let guide: Vec<f64> = match prev {
-            Some(t) => t.to_vec(),
-            None => {
-                let mut g = vec![0.0; n + 1];
-                g[n] = 1.0;
-                g
-            }
-        };
-        let mut aug = Mat::<f64>::zeros(n + 1, n + 1);
-        for i in 0..n {
-            for c in 0..=n {
-                aug[(i, c)] = a[(i, c)];
-            }
+        let w = &mut *self.work.borrow_mut();
+        let TrackWork { aug, lu, rhs, .. } = w;
+        if aug.nrows() != n + 1 {
+            *aug = Mat::zeros(n + 1, n + 1);
         }
         for c in 0..=n {
-            aug[(n, c)] = guide[c];
+            for i in 0..n {
+                aug[(i, c)] = a[(i, c)];
+            }
+            aug[(n, c)] = match prev {
+                Some(t) => t[c],
+                None => f64::from(u8::from(c == n)),
+            };
         }
-        let lu = Lu::new(&aug, &|| "continuation tangent".to_string())?;
-        let mut rhs = vec![0.0; n + 1];
+        if !lu.factor(aug) {
+            return Err(Error::Numerical {
+                what: "continuation tangent".into(),
+                detail: "the Jacobian is singular or not finite".into(),
+            });
+        }
+        rhs.clear();
+        rhs.resize(n + 1, 0.0);
         rhs[n] = 1.0;
-        let z = lu.solve(&rhs);
-        let norm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
-        let t: Vec<f64> = z.iter().map(|v| v / norm).collect();
+        lu.solve_in_place(rhs);
+        let norm = rhs.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let t: Vec<f64> = rhs.iter().map(|v| v / norm).collect();
         // det [J; tᵀ] has the sign of det [J; guideᵀ] since guide·t > 0.
         Ok((t, lu.det_sign()))
     }
@@ -496,32 +538,46 @@ impl<'a> Tracker<'a> {
     fn correct(&self, pred: &[f64], t: &[f64]) -> Option<(Vec<f64>, Mat<f64>, usize)> {
         let n = pred.len() - 1;
         let mut y = pred.to_vec();
+        let w = &mut *self.work.borrow_mut();
         for it in 0..=self.cfg.max_corrector {
-            let (r, a) = self.eval(&y);
+            self.fill(&y, w);
+            let r = &w.path.ev.r;
             if r.iter().any(|v| !v.is_finite()) {
                 return None;
             }
-            let rn = norm_inf(&r);
+            let rn = norm_inf(r) / self.xs;
             if rn <= self.sys.config.rtol * norm_inf(&y[..n]).max(1e-3) {
-                return Some((y, a, it));
+                return Some((y, self.jacobian(w), it));
             }
             if it == self.cfg.max_corrector {
                 return None;
             }
-            let mut aug = Mat::<f64>::zeros(n + 1, n + 1);
-            for i in 0..n {
-                for c in 0..=n {
-                    aug[(i, c)] = a[(i, c)];
+            let TrackWork {
+                path, aug, lu, rhs, ..
+            } = w;
+            if aug.nrows() != n + 1 {
+                *aug = Mat::zeros(n + 1, n + 1);
+            }
+            let c = self.ps / self.xs;
+            for k in 0..n {
+                for i in 0..n {
+                    aug[(i, k)] = path.ev.jac[(i, k)];
                 }
             }
-            for c in 0..=n {
-                aug[(n, c)] = t[c];
+            for i in 0..n {
+                aug[(i, n)] = path.rp[i] * c;
             }
-            let lu = Lu::new(&aug, &String::new).ok()?;
-            let mut rhs: Vec<f64> = r.iter().map(|v| -v).collect();
+            for k in 0..=n {
+                aug[(n, k)] = t[k];
+            }
+            if !lu.factor(aug) {
+                return None;
+            }
+            rhs.clear();
+            rhs.extend(path.ev.r.iter().map(|v| -v / self.xs));
             rhs.push(-(0..=n).map(|i| t[i] * (y[i] - pred[i])).sum::<f64>());
-            let d = lu.solve(&rhs);
-            y.iter_mut().zip(&d).for_each(|(a, b)| *a += b);
+            lu.solve_in_place(rhs);
+            y.iter_mut().zip(rhs.iter()).for_each(|(a, b)| *a += b);
         }
         None
     }
@@ -639,14 +695,13 @@ fn follow(
             rep.status, branch, stats, what, why,
         ));
     }
-    let mut tr = Tracker {
+    let mut tr = Tracker::new(
         sys,
         cfg,
-        xs: norm_inf(&x0)
+        norm_inf(&x0)
             .max(norm_inf(&sys.linear_guess(om0, sc0)))
             .max(1e-300),
-        ps: cfg.to - cfg.from,
-    };
+    );
     let n = x0.len();
     let mut y0: Vec<f64> = x0.iter().map(|v| v / tr.xs).collect();
     y0.push(0.0);

@@ -14,8 +14,10 @@
 //!   control, recovery of any sensor, multi-harmonic FRFs `H_ijν = Q_ν/F_ν` (eq. 14), the full
 //!   formulation on the modal coordinates as a cross-check, and parameter sensitivities
 //!   `dx/dp = −R_x⁻¹ R_p`.
-//! - [`stability`]: Hill's method with the Floquet exponents sorted by the weight of their
-//!   eigenvectors in the central harmonic.
+//! - [`stability`]: Hill's method, the Floquet exponents taken as one representative per
+//!   multiplier in the band `|Im s| ≤ ω0/2`; its small companion matrices are solved by a
+//!   Francis QR of this crate, split into even and odd harmonics when the tangents have
+//!   half-wave symmetry.
 //! - [`mod@continuation`]: pseudo-arclength continuation through folds with fold and
 //!   branch-point detection, stepped-sine sweeps up or down, force-level sweeps, branches
 //!   followed from an inner point to both ends, peaks located between points.
@@ -29,6 +31,7 @@
 pub mod aft;
 pub mod continuation;
 mod dense;
+mod eigs;
 pub mod harmonics;
 pub mod linear;
 pub mod nnm;

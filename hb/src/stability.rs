@@ -10,7 +10,8 @@
 //! companion matrix of size `2 m (2H+1)`, assembled in the real Fourier basis of the same
 //! space (Galerkin products of the sampled tangents; real arithmetic, eigenvalues only: 3× less
 //! time than the complex basis with eigenvectors on the ECL beam, which a test keeps as the
-//! oracle); of its eigenvalues only `2m` are Floquet exponents,
+//! oracle), split into even and odd harmonics when the tangents have half-wave symmetry, and
+//! solved by this crate's Francis QR; of its eigenvalues only `2m` are Floquet exponents,
 //! the rest being copies shifted by `ikω0` (exact copies for the untruncated problem). The
 //! exponents are picked as the `2m` eigenvalues of smallest imaginary part, the
 //! representatives in the band `|Im s| ≤ ω0/2`: the copies near the truncation edge are the
@@ -196,6 +197,55 @@ fn representatives(all: &[c64], m: usize, w0: f64) -> Vec<c64> {
     }
 }
 
+/// Relative size (to the largest entry) below which the couplings between the even and the
+/// odd harmonics of Hill's matrix are rounding: the tangents of a solution with half-wave
+/// symmetry carry odd harmonics of about `1e-16` of their mean.
+const PARITY_COUPLING: f64 = 1e-12;
+
+/// Eigenvalues of Hill's companion matrix `a` in the real Fourier basis (`nb = 2H + 1`
+/// coefficients per mode and half). When the tangents have period `T/2` (an odd law under
+/// odd forcing: the Duffing oscillator, a cubic spring, a symmetric clearance), harmonic `k`
+/// couples only to harmonics of its parity: `a` is then, after a permutation, block
+/// diagonal, and the even and odd blocks (about half the size each) are solved apart: a
+/// quarter of the QR work. The couplings dropped are checked to be below
+/// [`PARITY_COUPLING`] of the largest entry; otherwise the whole matrix is solved.
+fn companion_eigenvalues(a: &Mat<f64>, nb: usize) -> std::result::Result<Vec<c64>, String> {
+    let n = a.nrows();
+    let parity = |i: usize| (i % nb).div_ceil(2) % 2;
+    let mut top = 0.0f64;
+    let mut cross = 0.0f64;
+    for c in 0..n {
+        for r in 0..n {
+            let v = a[(r, c)].abs();
+            top = top.max(v);
+            if parity(r) != parity(c) {
+                cross = cross.max(v);
+            }
+        }
+    }
+    let mut work = Vec::new();
+    let mut out = Vec::with_capacity(n);
+    // This crate's Francis QR; faer's driver if it does not converge.
+    let mut solve = |m: &Mat<f64>, out: &mut Vec<c64>| {
+        let start = out.len();
+        if crate::eigs::eigenvalues_into(m, &mut work, out).is_err() {
+            out.truncate(start);
+            out.extend(m.eigenvalues().map_err(|e| format!("{e:?}"))?);
+        }
+        Ok::<(), String>(())
+    };
+    if cross > PARITY_COUPLING * top || nb < 3 {
+        solve(a, &mut out)?;
+        return Ok(out);
+    }
+    for p in 0..2 {
+        let idx: Vec<usize> = (0..n).filter(|&i| parity(i) == p).collect();
+        let block = Mat::from_fn(idx.len(), idx.len(), |r, c| a[(idx[r], idx[c])]);
+        solve(&block, &mut out)?;
+    }
+    Ok(out)
+}
+
 /// A Hill eigenvalue solver: [`HbSystem::hill_real`] (or, in tests, the complex-basis
 /// oracle).
 type HillEigenvalues =
@@ -308,7 +358,7 @@ impl HbSystem {
         for i in 0..size {
             a[(i, size + i)] = 1.0;
         }
-        a.eigenvalues().map_err(|e| format!("{e:?}"))
+        companion_eigenvalues(&a, nb)
     }
 
     #[cfg(test)]

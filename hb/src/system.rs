@@ -124,15 +124,26 @@ pub(crate) struct ReceptanceParts {
     pub ext: Mat<f64>,
 }
 
+impl Default for ReceptanceParts {
+    fn default() -> Self {
+        Self {
+            a: Mat::new(),
+            ext: Mat::new(),
+        }
+    }
+}
+
 /// The buffers of one residual evaluation ([`HbSystem::evaluate_into`]).
 #[derive(Debug)]
 pub(crate) struct EvalBuffers {
     aft: AftScratch,
     g: Vec<f64>,
-    r: Vec<f64>,
+    /// The residual `R`.
+    pub(crate) r: Vec<f64>,
     dg: Vec<Mat<f64>>,
     damping: Vec<Vec<f64>>,
-    jac: Mat<f64>,
+    /// `∂R/∂x` (when asked for).
+    pub(crate) jac: Mat<f64>,
 }
 
 impl Default for EvalBuffers {
@@ -173,6 +184,25 @@ impl EvalBuffers {
             self.jac = Mat::zeros(n, n);
         }
     }
+}
+
+/// The buffers of [`HbSystem::evaluate_along`]: an evaluation's, the receptances and their
+/// `Ω`-derivatives, and the samples of `∂G/∂Ω`. Sized on first use; no allocation after.
+#[derive(Debug, Default)]
+pub(crate) struct PathBuffers {
+    /// The evaluation: `R` in `ev.r`, `∂R/∂x` in `ev.jac`.
+    pub(crate) ev: EvalBuffers,
+    /// `∂R/∂p` of the followed parameter.
+    pub(crate) rp: Vec<f64>,
+    parts: ReceptanceParts,
+    dparts: ReceptanceParts,
+    f: Vec<f64>,
+    b: Vec<f64>,
+    db: Vec<f64>,
+    dg: Vec<f64>,
+    u: Vec<f64>,
+    v: Vec<f64>,
+    smp: Vec<f64>,
 }
 
 /// The buffers of one Newton solve: an evaluation's, and the force, step and LU.
@@ -710,6 +740,84 @@ impl HbSystem {
     /// The forcing-independent receptances at `omega`: `H_NL,NL` and `H_NL,ext` in the real
     /// layout (or their `Ω`-derivatives).
     fn receptance_parts(&self, omega: f64, deriv: bool) -> ReceptanceParts {
+        let mut out = ReceptanceParts::default();
+        self.receptance_parts_into(omega, deriv, &mut out);
+        out
+    }
+
+    /// [`HbSystem::receptance_parts`] into `out`. With proportional damping (a diagonal
+    /// modal damping matrix) the sums `H_ij(kω0) = Σ_r φ_ir φ_jr / (ω_r² − (kω0)² + i kω0
+    /// c_r) + D_ij` and their derivatives `∂H/∂Ω = (k/ν) Σ_r φ_ir φ_jr (2kω0 − i c_r) /
+    /// z_r²` are written straight into the real layout with no allocation once `out` has the
+    /// shape; a full damping matrix goes through one complex solve per harmonic.
+    fn receptance_parts_into(&self, omega: f64, deriv: bool, out: &mut ReceptanceParts) {
+        let lin = &self.linear;
+        if !lin.diagonal {
+            *out = self.receptance_parts_general(omega, deriv);
+            return;
+        }
+        let set = &self.set;
+        let nh = set.len();
+        let w0 = set.base(omega);
+        let np = self.element_ports.len();
+        let ni = self.inputs.len();
+        for (m, cols) in [(&mut out.a, np), (&mut out.ext, ni)] {
+            if m.nrows() != np * nh || m.ncols() != cols * nh {
+                *m = Mat::zeros(np * nh, cols * nh);
+            }
+        }
+        let nm = lin.n_modes();
+        // One pass per harmonic and port pair: the modal sum in mode order.
+        let entry = |k: usize, pa: usize, pb: usize| -> c64 {
+            let w = k as f64 * w0;
+            let mut h = c64::new(0.0, 0.0);
+            for r in 0..nm {
+                let c = lin.damping[(r, r)];
+                let d = c64::new(lin.w2[r] - w * w, w * c).inv();
+                let pp = lin.phi[(pa, r)] * lin.phi[(pb, r)];
+                h += if deriv {
+                    d * d * c64::new(2.0 * w, -c) * pp
+                } else {
+                    d * pp
+                };
+            }
+            if deriv {
+                h * (k as f64 / set.nu as f64)
+            } else {
+                h + c64::new(lin.residual[(pa, pb)], 0.0)
+            }
+        };
+        let fill = |m: &mut Mat<f64>, cols: &[usize]| {
+            for (i, &pa) in self.element_ports.iter().enumerate() {
+                for (j, &pb) in cols.iter().enumerate() {
+                    m[(i * nh, j * nh)] = if deriv { 0.0 } else { entry(0, pa, pb).re };
+                    for k in 1..=set.h {
+                        let z = entry(k, pa, pb);
+                        let (r, c) = (i * nh + 2 * k - 1, j * nh + 2 * k - 1);
+                        m[(r, c)] = z.re;
+                        m[(r, c + 1)] = z.im;
+                        m[(r + 1, c)] = -z.im;
+                        m[(r + 1, c + 1)] = z.re;
+                    }
+                }
+            }
+        };
+        fill(&mut out.a, &self.element_ports);
+        let inputs: [usize; 4];
+        let many;
+        let cols: &[usize] = if ni <= 4 {
+            inputs = std::array::from_fn(|i| self.inputs.get(i).map_or(0, |x| x.1));
+            &inputs[..ni]
+        } else {
+            many = self.input_ports();
+            &many
+        };
+        fill(&mut out.ext, cols);
+    }
+
+    /// [`HbSystem::receptance_parts`] through the per-harmonic complex receptances of
+    /// [`LinearPart`] (any damping matrix).
+    fn receptance_parts_general(&self, omega: f64, deriv: bool) -> ReceptanceParts {
         let a = expand(
             &self.set,
             &self.harmonic_receptances(omega, &self.element_ports, &self.element_ports, deriv),
@@ -777,7 +885,6 @@ impl HbSystem {
         s: &mut EvalBuffers,
     ) {
         let nh = self.set.len();
-        let n = self.n_unknowns();
         let w0 = self.set.base(omega);
         s.size(&self.offsets, nh);
         for (e, el) in self.elements.iter().enumerate() {
@@ -798,27 +905,84 @@ impl HbSystem {
             s.damping[e].clear();
             s.damping[e].extend_from_slice(s.aft.damping());
         }
-        for i in 0..n {
-            let ag: f64 = (0..n).map(|j| a[(i, j)] * s.g[j]).sum();
-            s.r[i] = x[i] + ag - scale * b[i];
+        // R = x + A g − λ b, by columns of A (contiguous).
+        for ((r, x), b) in s.r.iter_mut().zip(x).zip(b) {
+            *r = x - scale * b;
+        }
+        for (j, &gj) in s.g.iter().enumerate() {
+            for (r, a) in s.r.iter_mut().zip(a.col_as_slice(j)) {
+                *r += a * gj;
+            }
         }
         if jacobian {
-            // J = I + A blockdiag(∂G_e/∂x_e)
+            // J = I + A blockdiag(∂G_e/∂x_e), column by column: J[:, o+c] = e_{o+c} +
+            // Σ_l A[:, o+l] d[l, c].
             let j = &mut s.jac;
-            for c in 0..n {
-                for r in 0..n {
-                    j[(r, c)] = if r == c { 1.0 } else { 0.0 };
-                }
-            }
-            for i in 0..n {
-                for (e, d) in s.dg.iter().enumerate() {
-                    let o = self.offsets[e] * nh;
-                    for c in 0..d.ncols() {
-                        let v: f64 = (0..d.nrows()).map(|l| a[(i, o + l)] * d[(l, c)]).sum();
-                        j[(i, o + c)] += v;
+            for (e, d) in s.dg.iter().enumerate() {
+                let o = self.offsets[e] * nh;
+                for c in 0..d.ncols() {
+                    let col = j.col_as_slice_mut(o + c);
+                    col.fill(0.0);
+                    for l in 0..d.nrows() {
+                        let dlc = d[(l, c)];
+                        for (v, a) in col.iter_mut().zip(a.col_as_slice(o + l)) {
+                            *v += a * dlc;
+                        }
                     }
+                    col[o + c] += 1.0;
                 }
             }
+        }
+    }
+
+    /// The residual, its Jacobian and `∂R/∂p` of the parameter a continuation follows (`Ω`
+    /// when `frequency`, else the force level: `∂R/∂λ = −H_NL,ext F`) at `x`, into `s`
+    /// (`s.ev.r`, `s.ev.jac`, `s.rp`): one corrector iteration's work, with no allocation once
+    /// `s` is sized (proportional damping; [`HbSystem::dr_domega`] is the same derivative).
+    pub(crate) fn evaluate_along(
+        &self,
+        x: &[f64],
+        omega: f64,
+        scale: f64,
+        frequency: bool,
+        s: &mut PathBuffers,
+    ) {
+        self.receptance_parts_into(omega, false, &mut s.parts);
+        self.forced(&s.parts, &mut s.f, &mut s.b);
+        self.evaluate_into(&s.parts.a, &s.b, x, omega, scale, true, &mut s.ev);
+        let n = self.n_unknowns();
+        s.rp.resize(n, 0.0);
+        if !frequency {
+            for (r, b) in s.rp.iter_mut().zip(&s.b) {
+                *r = -b;
+            }
+            return;
+        }
+        self.receptance_parts_into(omega, true, &mut s.dparts);
+        self.forced(&s.dparts, &mut s.f, &mut s.db);
+        // ∂G/∂Ω through the velocity u̇ = ω0 E' x: P diag(∂g/∂u̇) E' x / ν.
+        let w0 = self.set.base(omega);
+        s.dg.clear();
+        s.dg.resize(n, 0.0);
+        for (e, plan) in self.plans.iter().enumerate() {
+            let c = &s.ev.damping[e];
+            if c.iter().all(|&v| v == 0.0) {
+                continue;
+            }
+            let r = self.unknowns(e);
+            plan.to_time_into(&x[r.clone()], w0, &mut s.u, &mut s.v);
+            s.smp.clear();
+            let nu = self.set.nu as f64;
+            s.smp
+                .extend(s.v.iter().zip(c).map(|(v, c)| c * v / w0 / nu));
+            plan.to_freq_into(&s.smp, &mut s.dg[r]);
+        }
+        let (da, a) = (&s.dparts.a, &s.parts.a);
+        for i in 0..n {
+            s.rp[i] = (0..n)
+                .map(|j| da[(i, j)] * s.ev.g[j] + a[(i, j)] * s.dg[j])
+                .sum::<f64>()
+                - scale * s.db[i];
         }
     }
 
