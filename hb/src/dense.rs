@@ -137,6 +137,42 @@ pub(crate) fn norm_inf(v: &[f64]) -> f64 {
     v.iter().fold(0.0f64, |m, x| m.max(x.abs()))
 }
 
+/// Helpers of this crate's unit tests.
+#[cfg(test)]
+pub(crate) mod test_util {
+    use faer::c64;
+
+    /// Uniform draws in `[−1/2, 1/2)` from a xorshift generator with `seed` (non-zero).
+    pub(crate) fn uniform(mut seed: u64) -> impl FnMut() -> f64 {
+        move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        }
+    }
+
+    /// Each value of `a` matched to its nearest in `b` (removed once matched; the order of
+    /// a pair with rounding-level imaginary parts is arbitrary): the largest distance over
+    /// `scale`. The lengths must agree.
+    pub(crate) fn matched_distance(a: &[c64], b: &[c64], scale: f64) -> f64 {
+        assert_eq!(a.len(), b.len());
+        let mut left = b.to_vec();
+        let mut worst = 0.0f64;
+        for x in a {
+            let (i, d) = left
+                .iter()
+                .enumerate()
+                .map(|(i, y)| (i, (x - y).norm()))
+                .min_by(|p, q| p.1.total_cmp(&q.1))
+                .unwrap();
+            worst = worst.max(d / scale);
+            left.swap_remove(i);
+        }
+        worst
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -165,13 +201,7 @@ mod tests {
     /// oracle) on random matrices of orders 1–9, pivoting through every kind of permutation.
     #[test]
     fn in_place_determinant_sign_matches_the_eigenvalue_product() {
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut next = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut next = test_util::uniform(0x2545_f491_4f6c_dd1d);
         let mut ip = LuInPlace::default();
         for trial in 0..200 {
             let n = 1 + trial % 9;

@@ -330,26 +330,8 @@ fn francis(h: &mut [f64], n: usize, out: &mut Vec<c64>) -> Result<(), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::dense::test_util::matched_distance as distance;
     use faer::linalg::solvers::DenseSolveCore;
-
-    /// Each eigenvalue of `a` matched to its nearest in `b` (removed once matched): the
-    /// largest distance relative to `scale`.
-    fn distance(a: &[c64], b: &[c64], scale: f64) -> f64 {
-        assert_eq!(a.len(), b.len());
-        let mut left = b.to_vec();
-        let mut worst = 0.0f64;
-        for x in a {
-            let (i, d) = left
-                .iter()
-                .enumerate()
-                .map(|(i, y)| (i, (x - y).norm()))
-                .min_by(|p, q| p.1.total_cmp(&q.1))
-                .unwrap();
-            worst = worst.max(d / scale);
-            left.swap_remove(i);
-        }
-        worst
-    }
 
     /// Against faer's general eigenvalue driver (an independent implementation): random
     /// matrices of orders 1–40 with well separated spectra, companion matrices of damped
@@ -357,13 +339,7 @@ mod tests {
     /// eigenvalues (a similarity of a block diagonal with complex pairs).
     #[test]
     fn eigenvalues_match_faer_and_known_spectra() {
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut next = crate::dense::test_util::uniform(0x9e37_79b9_7f4a_7c15);
         let (mut work, mut out) = (Vec::new(), Vec::new());
         for trial in 0..120 {
             let n = 1 + trial % 40;

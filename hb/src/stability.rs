@@ -492,18 +492,12 @@ mod tests {
                 // Each exponent against its nearest counterpart (the order of a pair with
                 // rounding-level imaginary parts is arbitrary).
                 let w0 = sys.harmonics().base(p.omega);
-                assert_eq!(real.exponents.len(), complex.exponents.len());
-                let mut left = complex.exponents.clone();
-                for x in &real.exponents {
-                    let (i, d) = left
-                        .iter()
-                        .enumerate()
-                        .map(|(i, y)| (i, (x - y).norm()))
-                        .min_by(|a, b| a.1.total_cmp(&b.1))
-                        .unwrap();
-                    worst = worst.max(d / w0);
-                    left.swap_remove(i);
-                }
+                let d = crate::dense::test_util::matched_distance(
+                    &real.exponents,
+                    &complex.exponents,
+                    w0,
+                );
+                worst = worst.max(d);
             }
             eprintln!(
                 "{name}: real vs complex Hill exponents within {worst:.1e} ω0, {unstable} unstable"

@@ -1808,7 +1808,9 @@ mod tests {
     /// harmonics 0–5) and at a sub-harmonic base (`ν = 3`).
     #[test]
     fn direct_receptances_match_the_complex_path_and_differences() {
-        let model = nlsim_fixtures::build("bumpstop_cantilever", &[]).unwrap().model;
+        let model = nlsim_fixtures::build("bumpstop_cantilever", &[])
+            .unwrap()
+            .model;
         let red = reduce(&model, &ReductionConfig::lowest(6)).unwrap();
         for (h, nu) in [(5, 1), (9, 3)] {
             let sys = HbSystem::from_model(
