@@ -478,12 +478,19 @@ impl<'a> Tracker<'a> {
             .evaluate_along(&w.x, omega, scale, frequency, &mut w.path);
     }
 
+    /// Entry `(i, k)` of the scaled Jacobian `[R_x̂ | R_p̂]` of evaluation `path`.
+    fn scaled_jacobian(&self, path: &PathBuffers, i: usize, k: usize) -> f64 {
+        if k < path.rp.len() {
+            path.ev.jac[(i, k)]
+        } else {
+            path.rp[i] * (self.ps / self.xs)
+        }
+    }
+
     /// The scaled Jacobian `[R_x̂ | R_p̂]` (n × n+1) of the last [`Tracker::fill`].
     fn jacobian(&self, w: &TrackWork) -> Mat<f64> {
-        let (j, rp) = (&w.path.ev.jac, &w.path.rp);
-        let n = rp.len();
-        let c = self.ps / self.xs;
-        Mat::from_fn(n, n + 1, |i, k| if k < n { j[(i, k)] } else { rp[i] * c })
+        let n = w.path.rp.len();
+        Mat::from_fn(n, n + 1, |i, k| self.scaled_jacobian(&w.path, i, k))
     }
 
     /// Scaled residual, Jacobian `[R_x̂ | R_p̂]` (n × n+1).
@@ -506,18 +513,12 @@ impl<'a> Tracker<'a> {
         let n = a.nrows();
         let w = &mut *self.work.borrow_mut();
         let TrackWork { aug, lu, rhs, .. } = w;
-        if aug.nrows() != n + 1 {
-            *aug = Mat::zeros(n + 1, n + 1);
-        }
-        for c in 0..=n {
-            for i in 0..n {
-                aug[(i, c)] = a[(i, c)];
-            }
-            aug[(n, c)] = match prev {
-                Some(t) => t[c],
-                None => f64::from(u8::from(c == n)),
-            };
-        }
+        bordered(
+            aug,
+            n,
+            |i, c| a[(i, c)],
+            |c| prev.map_or(f64::from(u8::from(c == n)), |t| t[c]),
+        );
         if !lu.factor(aug) {
             return Err(Error::Numerical {
                 what: "continuation tangent".into(),
@@ -555,21 +556,7 @@ impl<'a> Tracker<'a> {
             let TrackWork {
                 path, aug, lu, rhs, ..
             } = w;
-            if aug.nrows() != n + 1 {
-                *aug = Mat::zeros(n + 1, n + 1);
-            }
-            let c = self.ps / self.xs;
-            for k in 0..n {
-                for i in 0..n {
-                    aug[(i, k)] = path.ev.jac[(i, k)];
-                }
-            }
-            for i in 0..n {
-                aug[(i, n)] = path.rp[i] * c;
-            }
-            for k in 0..=n {
-                aug[(n, k)] = t[k];
-            }
+            bordered(aug, n, |i, k| self.scaled_jacobian(path, i, k), |k| t[k]);
             if !lu.factor(aug) {
                 return None;
             }
@@ -872,6 +859,25 @@ fn follow(
             tr.point(&next, PointKind::Regular)?,
         );
         cur = next;
+    }
+}
+
+/// Fills `aug` (resized to `n+1` square) with the bordered matrix `[J; bᵀ]`: `J(i, k)` in its
+/// first `n` rows, `b(k)` in the last.
+fn bordered(
+    aug: &mut Mat<f64>,
+    n: usize,
+    j: impl Fn(usize, usize) -> f64,
+    b: impl Fn(usize) -> f64,
+) {
+    if aug.nrows() != n + 1 {
+        *aug = Mat::zeros(n + 1, n + 1);
+    }
+    for k in 0..=n {
+        for i in 0..n {
+            aug[(i, k)] = j(i, k);
+        }
+        aug[(n, k)] = b(k);
     }
 }
 

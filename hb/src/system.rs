@@ -110,8 +110,6 @@ pub(crate) struct Evaluation {
     pub g: Vec<f64>,
     /// Per element `∂G_e/∂x_e` (a block per pair of its coordinates).
     pub dg: Vec<Mat<f64>>,
-    /// Per element `∂g/∂u̇` samples (for `∂G/∂ω0`).
-    pub damping: Vec<Vec<f64>>,
     pub jacobian: Option<Mat<f64>>,
 }
 
@@ -787,9 +785,11 @@ impl HbSystem {
                 h + c64::new(lin.residual[(pa, pb)], 0.0)
             }
         };
-        let fill = |m: &mut Mat<f64>, cols: &[usize]| {
+        // Columns j = 0..ncols at ports port(j).
+        let fill = |m: &mut Mat<f64>, ncols: usize, port: &dyn Fn(usize) -> usize| {
             for (i, &pa) in self.element_ports.iter().enumerate() {
-                for (j, &pb) in cols.iter().enumerate() {
+                for j in 0..ncols {
+                    let pb = port(j);
                     m[(i * nh, j * nh)] = if deriv { 0.0 } else { entry(0, pa, pb).re };
                     for k in 1..=set.h {
                         let z = entry(k, pa, pb);
@@ -802,17 +802,8 @@ impl HbSystem {
                 }
             }
         };
-        fill(&mut out.a, &self.element_ports);
-        let inputs: [usize; 4];
-        let many;
-        let cols: &[usize] = if ni <= 4 {
-            inputs = std::array::from_fn(|i| self.inputs.get(i).map_or(0, |x| x.1));
-            &inputs[..ni]
-        } else {
-            many = self.input_ports();
-            &many
-        };
-        fill(&mut out.ext, cols);
+        fill(&mut out.a, np, &|j| self.element_ports[j]);
+        fill(&mut out.ext, ni, &|j| self.inputs[j].1);
     }
 
     /// [`HbSystem::receptance_parts`] through the per-harmonic complex receptances of
@@ -850,12 +841,7 @@ impl HbSystem {
         let mut s = EvalBuffers::default();
         self.evaluate_into(&rec.a, &rec.b, x, omega, scale, jacobian, &mut s);
         let EvalBuffers {
-            g,
-            r,
-            mut dg,
-            damping,
-            jac,
-            ..
+            g, r, mut dg, jac, ..
         } = s;
         if !jacobian {
             dg.clear();
@@ -864,7 +850,6 @@ impl HbSystem {
             r,
             g,
             dg,
-            damping,
             jacobian: jacobian.then_some(jac),
         }
     }
@@ -938,7 +923,7 @@ impl HbSystem {
     /// The residual, its Jacobian and `∂R/∂p` of the parameter a continuation follows (`Ω`
     /// when `frequency`, else the force level: `∂R/∂λ = −H_NL,ext F`) at `x`, into `s`
     /// (`s.ev.r`, `s.ev.jac`, `s.rp`): one corrector iteration's work, with no allocation once
-    /// `s` is sized (proportional damping; [`HbSystem::dr_domega`] is the same derivative).
+    /// `s` is sized (proportional damping).
     pub(crate) fn evaluate_along(
         &self,
         x: &[f64],
@@ -999,45 +984,6 @@ impl HbSystem {
         out
     }
 
-    /// `∂R/∂Ω` at a solution (m s/rad).
-    pub(crate) fn dr_domega(
-        &self,
-        x: &[f64],
-        omega: f64,
-        scale: f64,
-        ev: &Evaluation,
-        rec: &Receptances,
-    ) -> Vec<f64> {
-        let n = self.n_unknowns();
-        let d = self.receptances(omega, true);
-        // ∂G/∂Ω through the velocity u̇ = ω0 E' x: P diag(∂g/∂u̇) E' x / ν.
-        let w0 = self.set.base(omega);
-        let mut dg = vec![0.0; n];
-        for (e, plan) in self.plans.iter().enumerate() {
-            // A coupled law has no velocity dependence (and no damping samples).
-            let c = &ev.damping[e];
-            if c.iter().all(|&v| v == 0.0) {
-                continue;
-            }
-            let r = self.unknowns(e);
-            let (_, v) = plan.to_time(&x[r.clone()], w0);
-            let s: Vec<f64> = v
-                .iter()
-                .zip(c)
-                .map(|(v, c)| c * v / w0 / self.set.nu as f64)
-                .collect();
-            dg[r].copy_from_slice(&plan.to_freq(&s));
-        }
-        (0..n)
-            .map(|i| {
-                (0..n)
-                    .map(|j| d.a[(i, j)] * ev.g[j] + rec.a[(i, j)] * dg[j])
-                    .sum::<f64>()
-                    - scale * d.b[i]
-            })
-            .collect()
-    }
-
     /// The residual `R(x) = x + H_NL,NL G(x) − λ H_NL,ext F` (m, real layout) at fundamental
     /// `omega` (rad/s) and force level `scale`.
     pub fn residual(&self, x: &[f64], omega: f64, scale: f64) -> Result<Vec<f64>> {
@@ -1060,13 +1006,13 @@ impl HbSystem {
 
     /// `dx/dΩ = −R_x⁻¹ R_Ω` along the branch through solution `x` (m s/rad).
     pub fn dx_domega(&self, x: &[f64], omega: f64, scale: f64) -> Result<Vec<f64>> {
-        let rec = self.receptances(omega, false);
-        let ev = self.evaluate(&rec, x, omega, scale, true);
-        let rp = self.dr_domega(x, omega, scale, &ev, &rec);
-        let lu = Lu::new(ev.jacobian.as_ref().expect("asked for"), &|| {
+        self.check_unknowns("harmonic balance unknowns", x)?;
+        let mut s = PathBuffers::default();
+        self.evaluate_along(x, omega, scale, true, &mut s);
+        let lu = Lu::new(&s.ev.jac, &|| {
             format!("branch tangent at {:.6} Hz", omega / (2.0 * PI))
         })?;
-        Ok(lu.solve(&rp).into_iter().map(|v| -v).collect())
+        Ok(lu.solve(&s.rp).into_iter().map(|v| -v).collect())
     }
 
     /// The linear response `λ H_NL,ext F` at `omega`: the start of Newton at low level.
