@@ -146,7 +146,9 @@ impl AftPlan {
                 fe[(i, j)] = f[i] * self.e[(i, j)];
             }
         }
-        &self.p * &fe
+        let g = &self.p * &fe;
+        crate::eigs::clear_upper_state();
+        g
     }
 
     /// Harmonic coefficients of samples `g`.
@@ -284,6 +286,7 @@ impl AftPlan {
                 1.0,
                 Par::Seq,
             );
+            crate::eigs::clear_upper_state();
         }
     }
 
@@ -405,6 +408,7 @@ impl AftPlan {
                     );
                 }
             }
+            crate::eigs::clear_upper_state();
         }
     }
 

@@ -42,7 +42,7 @@ pub struct HbConfig {
     pub max_iterations: usize,
     /// Convergence: `‖R‖∞ ≤ rtol · max(‖x‖∞, ‖λ H F‖∞)`.
     pub rtol: f64,
-    /// Most modes kept dynamic in Hill's method (the lowest, those below `(H+1) ω0`); the
+    /// Most modes kept dynamic in Hill's method (the lowest, those below `(H + ½) ω0`); the
     /// others enter as quasi-static flexibility.
     pub hill_max_modes: usize,
 }
