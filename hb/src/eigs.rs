@@ -21,7 +21,7 @@ const SWEEPS_PER_EIGENVALUE: usize = 40;
 /// rounding), but in VEX encoding: faer's matrix-product kernels return with the upper
 /// halves of the vector registers dirty, and legacy-encoded SSE code that runs after them
 /// (the baseline target's) is then about 2.8× slower on this machine until the next
-/// `vzeroupper`. Measured on the Duffing Hill blocks of order 16: 15.6 µs each on a clean
+/// `vzeroupper` (see `AftPlan::project`, which clears them after its products). Measured on the Duffing Hill blocks of order 16: 15.6 µs each on a clean
 /// state, 44 µs after one faer product of 15 × 30 by 30 × 15; compiled for the native target
 /// (VEX throughout), 15 µs in both cases.
 pub(crate) fn eigenvalues_into(
@@ -30,25 +30,6 @@ pub(crate) fn eigenvalues_into(
     out: &mut Vec<c64>,
 ) -> Result<(), String> {
     pulp::Arch::new().dispatch(Eigenvalues { a, work, out })
-}
-
-/// Clears the upper halves of the vector registers (`vzeroupper` on x86, which the compiler
-/// places at the return of a function that used them: here one 256- or 512-bit register
-/// value).
-pub(crate) fn clear_upper_state() {
-    pulp::Arch::new().dispatch(ClearUpper);
-}
-
-/// [`clear_upper_state`] as a `pulp` kernel.
-struct ClearUpper;
-
-impl pulp::WithSimd for ClearUpper {
-    type Output = ();
-
-    #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, simd: S) {
-        std::hint::black_box(simd.splat_f64s(std::hint::black_box(0.0)));
-    }
 }
 
 /// [`eigenvalues_into`] as a `pulp` kernel.
