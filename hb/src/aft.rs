@@ -123,23 +123,94 @@ impl AftPlan {
     /// `N` values).
     pub(crate) fn to_time_into(&self, x: &[f64], omega0: f64, u: &mut Vec<f64>, v: &mut Vec<f64>) {
         let nh = self.set.len();
+        u.clear();
         u.resize(self.n, 0.0);
+        v.clear();
         v.resize(self.n, 0.0);
-        for i in 0..self.n {
-            let (mut a, mut b) = (0.0, 0.0);
-            for j in 0..nh {
-                a += self.e[(i, j)] * x[j];
-                b += self.ed[(i, j)] * x[j];
+        // Column by column: the tables are column-major.
+        for (j, &xj) in x.iter().enumerate().take(nh) {
+            let xv = omega0 * xj;
+            for ((a, b), (e, ed)) in u
+                .iter_mut()
+                .zip(v.iter_mut())
+                .zip(self.e.col_as_slice(j).iter().zip(self.ed.col_as_slice(j)))
+            {
+                *a += e * xj;
+                *b += ed * xv;
             }
-            u[i] = a;
-            v[i] = omega0 * b;
         }
+    }
+
+    /// Samples of `∂g/∂u` of a one-coordinate law for Hill's method, each averaged over its
+    /// sample cell `[θ_i − δ/2, θ_i + δ/2]` (`δ = 2π/N`) where the tangent jumps.
+    ///
+    /// A clearance or a Jenkins slider switches its stiffness at instants that fall between
+    /// samples; sampled at points, the tangent's harmonics are off by up to the jump times
+    /// `δ/(2π)` and jump whenever an instant crosses a sample, so that the Floquet exponents
+    /// of a contact branch scatter from point to point (up to ±3e-2 ω0 on NLvib's example 3).
+    /// Where the coordinate moves monotonically across a cell, the force's divided difference
+    /// between the cell's ends, `(g(θ_i + δ/2) − g(θ_i − δ/2)) / (u(θ_i + δ/2) − u(θ_i − δ/2))`,
+    /// is the average of `∂g/∂u` over the displacement the cell sweeps, i.e. its time
+    /// average up to the curvature of `u` within the cell: the harmonics are then off by
+    /// `O(k δ²)` and move continuously with the solution. The half-sample values come from the
+    /// coefficients shifted by `δ/2`, and the law runs along the interleaved grid (with its
+    /// history, periodically started). Cells where the velocity changes sign (the coordinate
+    /// turns) keep the point sample.
+    pub(crate) fn cell_tangent(&self, law: &Law, x: &[f64], omega0: f64) -> Vec<f64> {
+        let (n, h) = (self.n, self.set.h);
+        let half = PI / n as f64;
+        let mut shifted = x.to_vec();
+        for k in 1..=h {
+            let (s, c) = (k as f64 * half).sin_cos();
+            let (a, b) = (x[2 * k - 1], x[2 * k]);
+            shifted[2 * k - 1] = a * c + b * s;
+            shifted[2 * k] = b * c - a * s;
+        }
+        let (u, v) = self.to_time(x, omega0);
+        let (uh, vh) = self.to_time(&shifted, omega0);
+        // Interleaved grid: 2i is sample i, 2i + 1 the end of its cell.
+        let uu: Vec<f64> = (0..2 * n)
+            .map(|j| if j % 2 == 0 { u[j / 2] } else { uh[j / 2] })
+            .collect();
+        let vv: Vec<f64> = (0..2 * n)
+            .map(|j| if j % 2 == 0 { v[j / 2] } else { vh[j / 2] })
+            .collect();
+        let (mut state, mut start) = (Vec::new(), Vec::new());
+        periodic_start_into(law, &uu, &vv, &mut state, &mut start);
+        let mut g = vec![0.0; 2 * n];
+        let mut point = vec![0.0; n];
+        for j in 0..2 * n {
+            let e = law.eval(uu[j], vv[j], &state);
+            g[j] = e.force;
+            if j % 2 == 0 {
+                point[j / 2] = e.df_du;
+            }
+            law.commit_state(uu[j], vv[j], &mut state);
+        }
+        let scale = uu.iter().fold(0.0f64, |m, a| m.max(a.abs()));
+        (0..n)
+            .map(|i| {
+                let (a, b) = ((2 * i + 2 * n - 1) % (2 * n), 2 * i + 1);
+                let du = uu[b] - uu[a];
+                let monotone = vv[a].signum() == v[i].signum() && vv[b].signum() == v[i].signum();
+                if monotone && du.abs() > 1e-12 * scale {
+                    (g[b] - g[a]) / du
+                } else {
+                    point[i]
+                }
+            })
+            .collect()
     }
 
     /// The Galerkin matrix `P diag(f) E` ((2H+1) × (2H+1)) of the multiplication by the
     /// sampled function `f`: the coefficients of `f(θ) u(θ)` from those of `u`, truncated.
     pub(crate) fn galerkin(&self, f: &[f64]) -> Mat<f64> {
         let nh = self.set.len();
+        if self.dense() {
+            let mut g = Mat::<f64>::zeros(nh, nh);
+            self.galerkin_into(f, &mut Vec::new(), g.as_mut());
+            return g;
+        }
         let mut fe = Mat::<f64>::zeros(self.n, nh);
         for i in 0..self.n {
             for j in 0..nh {
@@ -149,6 +220,65 @@ impl AftPlan {
         let mut g = Mat::<f64>::zeros(nh, nh);
         self.project(g.as_mut(), fe.as_ref());
         g
+    }
+
+    /// True when the plan samples far more densely than the harmonics need (`N ≥ 8(2H+1)`:
+    /// the kinks of clearance and Jenkins, steep friction): Galerkin matrices then come from
+    /// the `4H + 1` Fourier sums of the sampled function ([`AftPlan::galerkin_into`]), `O(N H)`
+    /// work instead of the product's `O(N H²)`.
+    fn dense(&self) -> bool {
+        self.n >= 8 * self.set.len()
+    }
+
+    /// `dst = P diag(f) E` from the discrete Fourier sums of `f`, `C_m = ⟨f cos mθ⟩` and
+    /// `S_m = ⟨f sin mθ⟩` (`m = 0..=2H`, `⟨·⟩` the mean over the samples): by the
+    /// product-to-sum identities, sample by sample, row `cos kθ` and column `cos lθ` is
+    /// `C_{k−l} + C_{k+l}`, (`cos k`, `sin l`) `S_{l+k} + S_{l−k}`, (`sin k`, `cos l`)
+    /// `S_{k+l} + S_{k−l}`, (`sin k`, `sin l`) `C_{k−l} − C_{k+l}` (`C_{−m} = C_m`,
+    /// `S_{−m} = −S_m`; the constant is `cos 0θ`, and its row carries half the weight). Equal
+    /// to the product up to rounding. `sums` is scratch.
+    fn galerkin_into(&self, f: &[f64], sums: &mut Vec<f64>, mut dst: MatMut<'_, f64>) {
+        let (n, h, nh) = (self.n, self.set.h, self.set.len());
+        let (cos, sin) = (self.e.col_as_slice(1), self.e.col_as_slice(2));
+        sums.clear();
+        sums.resize(2 * (2 * h + 1), 0.0);
+        let (c, s) = sums.split_at_mut(2 * h + 1);
+        for m in 0..=2 * h {
+            // cos(m θ_i) = cos θ_{m i mod N}.
+            let (mut a, mut b, mut at) = (0.0, 0.0, 0usize);
+            for &fi in &f[..n] {
+                a += fi * cos[at];
+                b += fi * sin[at];
+                at += m;
+                if at >= n {
+                    at -= n;
+                }
+            }
+            c[m] = a / n as f64;
+            s[m] = b / n as f64;
+        }
+        let cm = |m: isize| c[m.unsigned_abs()];
+        let sm = |m: isize| {
+            if m < 0 {
+                -s[m.unsigned_abs()]
+            } else {
+                s[m as usize]
+            }
+        };
+        let kind = |j: usize| (j.div_ceil(2) as isize, j > 0 && j.is_multiple_of(2));
+        for col in 0..nh {
+            let (l, l_sin) = kind(col);
+            for row in 0..nh {
+                let (k, k_sin) = kind(row);
+                let v = match (k_sin, l_sin) {
+                    (false, false) => cm(k - l) + cm(k + l),
+                    (false, true) => sm(l + k) + sm(l - k),
+                    (true, false) => sm(k + l) + sm(k - l),
+                    (true, true) => cm(k - l) - cm(k + l),
+                };
+                dst[(row, col)] = if row == 0 { 0.5 * v } else { v };
+            }
+        }
     }
 
     /// `dst = P w`: the harmonic coefficients of the sampled columns of `w`, by faer's
@@ -171,8 +301,17 @@ impl AftPlan {
 
     /// [`AftPlan::to_freq`] into `out` (2H+1 values).
     pub(crate) fn to_freq_into(&self, g: &[f64], out: &mut [f64]) {
+        // P's row j is E's column j weighted by 1/N (j = 0) or 2/N: E is column-major.
+        let n = self.n as f64;
         for (j, o) in out.iter_mut().enumerate() {
-            *o = (0..self.n).map(|i| self.p[(j, i)] * g[i]).sum();
+            let w = if j == 0 { 1.0 } else { 2.0 } / n;
+            *o = w * self
+                .e
+                .col_as_slice(j)
+                .iter()
+                .zip(g)
+                .map(|(e, g)| e * g)
+                .sum::<f64>();
         }
     }
 
@@ -230,6 +369,8 @@ impl AftPlan {
             start,
             slip_ref,
             w,
+            sums,
+            gc,
             ..
         } = scratch;
         self.to_time_into(x, omega0, u, v);
@@ -273,7 +414,26 @@ impl AftPlan {
             }
         }
         self.to_freq_into(g, force);
-        if let Some(jac) = jacobian {
+        if let Some(mut jac) = jacobian {
+            if !history && self.dense() {
+                self.galerkin_into(kt, sums, jac.as_mut());
+                if ct.iter().any(|&c| c != 0.0) {
+                    if gc.nrows() != nh {
+                        *gc = Mat::zeros(nh, nh);
+                    }
+                    self.galerkin_into(ct, sums, gc.as_mut());
+                    // ω0 P diag(ct) E' = ω0 G(ct) D: E' has −k sin kθ in the cosine column
+                    // of harmonic k and k cos kθ in its sine column.
+                    for k in 1..=self.set.h {
+                        let wk = omega0 * k as f64;
+                        for r in 0..nh {
+                            jac[(r, 2 * k - 1)] -= wk * gc[(r, 2 * k)];
+                            jac[(r, 2 * k)] += wk * gc[(r, 2 * k - 1)];
+                        }
+                    }
+                }
+                return;
+            }
             if w.nrows() != n || w.ncols() != nh {
                 *w = Mat::zeros(n, nh);
             }
@@ -531,6 +691,10 @@ pub struct AftScratch {
     start: Vec<f64>,
     slip_ref: Vec<usize>,
     w: Mat<f64>,
+    /// Densely sampled laws: the tangents' Fourier sums and the damping tangent's Galerkin
+    /// matrix.
+    sums: Vec<f64>,
+    gc: Mat<f64>,
     /// Coupled laws: coordinate samples (sample-major), forces (coordinate-major), and one
     /// sample's forces and tangent.
     coords: Vec<f64>,
@@ -554,6 +718,8 @@ impl Default for AftScratch {
             start: Default::default(),
             slip_ref: Default::default(),
             w: Mat::new(),
+            sums: Default::default(),
+            gc: Mat::new(),
             coords: Default::default(),
             forces: Default::default(),
             point_force: Default::default(),
@@ -599,6 +765,35 @@ mod tests {
         for (a, b) in r.force.iter().zip(want) {
             assert!((a - b).abs() < 1e-15, "{:?}", r.force);
         }
+    }
+
+    #[test]
+    fn galerkin_from_fourier_sums_equals_the_product() {
+        let set = HarmonicSet::new(7, 1).unwrap();
+        let plan = AftPlan::new(set, 16 * set.len()).unwrap();
+        assert!(plan.dense());
+        let nh = set.len();
+        // A step (a contact tangent) plus a smooth part.
+        let f: Vec<f64> = (0..plan.n)
+            .map(|i| {
+                let t = 2.0 * PI * i as f64 / plan.n as f64;
+                f64::from(u8::from(t.sin() > 0.3)) * 100.0 + (3.0 * t).cos() - 0.2 * t.sin()
+            })
+            .collect();
+        let mut fe = Mat::<f64>::zeros(plan.n, nh);
+        for j in 0..nh {
+            for i in 0..plan.n {
+                fe[(i, j)] = f[i] * plan.e[(i, j)];
+            }
+        }
+        let mut direct = Mat::<f64>::zeros(nh, nh);
+        plan.project(direct.as_mut(), fe.as_ref());
+        let sums = plan.galerkin(&f);
+        let err = (0..nh)
+            .flat_map(|r| (0..nh).map(move |c| (r, c)))
+            .map(|(r, c)| (sums[(r, c)] - direct[(r, c)]).abs())
+            .fold(0.0f64, f64::max);
+        assert!(err < 1e-13 * direct.norm_max(), "{err:e}");
     }
 
     #[test]

@@ -168,10 +168,10 @@ pub const WIGGLE_RESPONSE: f64 = 0.1;
 
 /// Dismisses ripples among the folds of `branch`: successive turning points within
 /// [`WIGGLE_PARAMETER`]` · span` of each other with the response within [`WIGGLE_RESPONSE`]
-/// form a cluster; a cluster across which the branch turns (an odd number of turning
-/// points) keeps one fold, at its extreme parameter in the direction the branch entered it,
-/// and one across which it does not turn keeps none. Returns the number of turning points
-/// dismissed, over 2 (the ripple pairs).
+/// form a cluster; a cluster across which the branch turns (read from the directions it
+/// enters and leaves in, a ripple band away) keeps one fold, at the extreme parameter in the
+/// direction the branch entered it, and one across which it does not turn keeps none.
+/// Returns the number of turning points dismissed, over 2 (the ripple pairs).
 fn dismiss_wiggles(branch: &mut Branch, span: f64) -> usize {
     let param = |p: &SolutionPoint| match branch.parameter {
         Parameter::Frequency => p.omega,
@@ -193,42 +193,30 @@ fn dismiss_wiggles(branch: &mut Branch, span: f64) -> usize {
             e += 1;
         }
         if e > c {
-            let first = folds[c];
-            // Each turning point flips the direction: an odd cluster turns the branch.
-            let before =
-                param(&branch.points[first]) - param(&branch.points[first.saturating_sub(1)]);
-            let turns = (e - c).is_multiple_of(2);
-            // The fold kept is the point of the cluster's stretch of branch with the extreme
-            // parameter (a regular point between ripples may pass the located ones).
-            // The stretch runs on past the last turning point while the branch stays within
-            // the ripple band of the cluster's extreme (a turn back that fell between two
-            // steps was not detected).
+            let (first, last) = (folds[c], folds[e]);
             let n = branch.points.len();
-            let sign = if before > 0.0 { 1.0 } else { -1.0 };
-            let mut extreme = folds[c..=e]
-                .iter()
-                .map(|&i| sign * param(&branch.points[i]))
-                .fold(f64::NEG_INFINITY, f64::max);
-            let mut end = folds[e];
-            while end + 1 < n {
-                let v = sign * param(&branch.points[end + 1]);
-                if v < extreme - WIGGLE_PARAMETER * span {
-                    break;
-                }
-                extreme = extreme.max(v);
-                end += 1;
-            }
-            let stretch = first..=end;
-            let by = |i: &usize, j: &usize| {
-                param(&branch.points[*i]).total_cmp(&param(&branch.points[*j]))
+            let at = |i: usize| param(&branch.points[i]);
+            // The directions the branch enters and leaves the cluster in, taken a ripple band
+            // away from its first and last turning points: a turning point is flagged a step
+            // late when a step passes the extreme, and one that falls between two steps is
+            // not flagged at all, so neither the step before the first nor the parity of the
+            // count is reliable. The parity serves when the branch starts or ends in the band.
+            let band = WIGGLE_PARAMETER * span;
+            let entry = (0..first).rev().find(|&i| (at(i) - at(first)).abs() > band);
+            let exit = (last + 1..n).find(|&i| (at(i) - at(last)).abs() > band);
+            let sign_in = match entry {
+                Some(i) => (at(first) - at(i)).signum(),
+                None => (at(first) - at(first.saturating_sub(1))).signum(),
             };
-            let keep = if !turns {
-                None
-            } else if before > 0.0 {
-                stretch.max_by(by)
-            } else {
-                stretch.min_by(by)
+            let turns = match (entry, exit) {
+                (Some(_), Some(j)) => (at(j) - at(last)).signum() != sign_in,
+                _ => (e - c).is_multiple_of(2),
             };
+            // The fold kept is the point of the branch between entry and exit with the
+            // extreme parameter (a regular point between ripples may pass the flagged ones).
+            let stretch = entry.map_or(0, |i| i + 1)..=exit.map_or(n - 1, |j| j - 1);
+            let by = |i: &usize, j: &usize| (sign_in * at(*i)).total_cmp(&(sign_in * at(*j)));
+            let keep = if turns { stretch.max_by(by) } else { None };
             for &i in &folds[c..=e] {
                 branch.points[i].kind = PointKind::Regular;
             }

@@ -104,7 +104,11 @@ impl HbSystem {
             let r = plan.evaluate_element(el.law(), &x[self.unknowns(e)], w0, false);
             let m = c.len();
             if m == 1 {
-                kt[c.start][c.start] = r.stiffness;
+                kt[c.start][c.start] = if el.law().is_nonsmooth() {
+                    plan.cell_tangent(el.law(), &x[self.unknowns(e)], w0)
+                } else {
+                    r.stiffness
+                };
                 ct[c.start] = r.damping;
             } else {
                 for a in 0..m {
