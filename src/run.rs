@@ -320,6 +320,188 @@ impl FrfStart {
     }
 }
 
+/// A continuation start read from an earlier `nlsim frf` HDF5 file (`--start-file`): a
+/// solution point whose branch the continuation follows through the range, e.g. an isolated
+/// sub-harmonic branch found once, or a branch to redo with more harmonics.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StartFile {
+    /// The file (written by `nlsim frf --out FILE.h5`).
+    pub path: std::path::PathBuf,
+    /// The file's point nearest this fundamental frequency (Hz) is taken. `None`: among the
+    /// points within the range, the one with the most sub-harmonic content (harmonics of
+    /// `Ω/ν` that are not harmonics of `Ω`) when `ν ≥ 2`, otherwise the largest response.
+    pub at_hz: Option<f64>,
+}
+
+/// The point [`read_start`] took: its index in the file, fundamental (Hz) and the unknowns
+/// on this run's harmonics.
+struct StartPoint {
+    index: usize,
+    hz: f64,
+    x: Vec<f64>,
+    /// Harmonics of the file.
+    h_file: usize,
+}
+
+/// Most values a start file may make nlsim read (2²⁶, 512 MiB).
+const START_FILE_BUDGET: usize = 1 << 26;
+
+/// Reads the start point of `sf` for `sys` over `from_hz..to_hz`. The file must hold the
+/// same sub-harmonic order and an `/elements/<name>` dataset for every element of `sys`;
+/// its harmonics may differ (the coefficients are cut or padded with zeros). Sizes are checked
+/// against the datasets' shapes and a budget before anything is read; errors name the file
+/// and the object.
+fn read_start(sf: &StartFile, sys: &HbSystem, from_hz: f64, to_hz: f64) -> Result<StartPoint> {
+    use hdf5_metno as hdf5;
+    let path = &sf.path;
+    let err = |object: &str, message: String| Error::Hdf5 {
+        path: path.to_path_buf(),
+        message: format!("start file, {object}: {message}"),
+    };
+    let f = hdf5::File::open(path).map_err(|e| err("file", e.to_string()))?;
+    let attr = |name: &str| -> Result<f64> {
+        f.attr(name)
+            .and_then(|a| a.read_scalar::<f64>())
+            .map_err(|e| {
+                err(
+                    "/",
+                    format!("attribute '{name}': {e} (is it an `nlsim frf` output?)"),
+                )
+            })
+    };
+    let (h_attr, nu_attr) = (attr("harmonics")?, attr("subharmonic_order")?);
+    let set = sys.harmonics();
+    let whole = |v: f64| v >= 1.0 && v <= MAX_FRF_HARMONICS as f64 && v.fract() == 0.0;
+    if !whole(h_attr) || !whole(nu_attr) {
+        return Err(err(
+            "/",
+            format!("harmonics {h_attr} and subharmonic_order {nu_attr} are not valid orders"),
+        ));
+    }
+    let (h_file, nu_file) = (h_attr as usize, nu_attr as usize);
+    if nu_file != set.nu {
+        return Err(err(
+            "/",
+            format!(
+                "its branch has harmonics of Ω/{nu_file}, this run of Ω/{} (use \
+                 --subharmonic {nu_file})",
+                set.nu
+            ),
+        ));
+    }
+    let ds = |name: &str| f.dataset(name).map_err(|e| err(name, e.to_string()));
+    let freq = ds("frequency")?;
+    let shape = freq.shape();
+    if shape.len() != 1 || shape[0] == 0 || shape[0] > MAX_FRF_POINTS {
+        return Err(err(
+            "frequency",
+            format!("shape {shape:?}: expected 1 to {MAX_FRF_POINTS} points"),
+        ));
+    }
+    let n = shape[0];
+    let hz: Vec<f64> = freq
+        .read_raw()
+        .map_err(|e| err("frequency", e.to_string()))?;
+    let nh_file = 2 * h_file + 1;
+    let nh = set.len();
+    let mut x_file = Vec::new();
+    for (e, el) in sys.elements().iter().enumerate() {
+        let name = format!("elements/{}", el.name());
+        let d = f.dataset(&name).map_err(|_| {
+            let there = f
+                .group("elements")
+                .and_then(|g| g.member_names())
+                .map_or("none".into(), |v| v.join(", "));
+            err(
+                &name,
+                format!(
+                    "no such dataset: the file holds another model's elements ({there}), not \
+                     this model's '{}'",
+                    el.name()
+                ),
+            )
+        })?;
+        let m = sys.coordinates(e).len();
+        let want = [n, m * nh_file];
+        if d.shape() != want {
+            return Err(err(
+                &name,
+                format!(
+                    "shape {:?}, expected {want:?} ({n} points, {m} coordinate(s) of 2·{h_file} + 1 \
+                     coefficients)",
+                    d.shape()
+                ),
+            ));
+        }
+        if (x_file.len() + n * m * nh_file) > START_FILE_BUDGET {
+            return Err(err(&name, format!("more than {START_FILE_BUDGET} values")));
+        }
+        let v: Vec<f64> = d.read_raw().map_err(|e| err(&name, e.to_string()))?;
+        x_file.push((v, m));
+    }
+    let (lo, hi) = (from_hz.min(to_hz), from_hz.max(to_hz));
+    let inside: Vec<usize> = (0..n)
+        .filter(|&i| hz[i].is_finite() && hz[i] >= lo && hz[i] <= hi)
+        .collect();
+    if inside.is_empty() {
+        return Err(err(
+            "frequency",
+            format!("none of its {n} points lies within {lo} to {hi} Hz"),
+        ));
+    }
+    // The unknowns of point i on this run's harmonics.
+    let point = |i: usize| -> Vec<f64> {
+        let mut x = Vec::with_capacity(sys.n_unknowns());
+        for (v, m) in &x_file {
+            let row = &v[i * m * nh_file..(i + 1) * m * nh_file];
+            for c in 0..*m {
+                let block = &row[c * nh_file..(c + 1) * nh_file];
+                x.extend((0..nh).map(|j| block.get(j).copied().unwrap_or(0.0)));
+            }
+        }
+        x
+    };
+    let measure = |i: usize| -> f64 {
+        let x = point(i);
+        if set.nu >= 2 {
+            // Harmonics k of Ω/ν with ν ∤ k.
+            x.chunks(nh)
+                .flat_map(|b| {
+                    (1..=set.h)
+                        .filter(|k| k % set.nu != 0)
+                        .map(move |k| b[2 * k - 1].hypot(b[2 * k]))
+                })
+                .fold(0.0f64, f64::max)
+        } else {
+            x.iter().fold(0.0f64, |a, v| a.max(v.abs()))
+        }
+    };
+    let index = match sf.at_hz {
+        Some(at) => inside
+            .iter()
+            .copied()
+            .min_by(|&a, &b| (hz[a] - at).abs().total_cmp(&(hz[b] - at).abs())),
+        None => inside
+            .iter()
+            .copied()
+            .max_by(|&a, &b| measure(a).total_cmp(&measure(b))),
+    }
+    .unwrap_or(inside[0]);
+    let x = point(index);
+    if let Some(j) = x.iter().position(|v| !v.is_finite()) {
+        return Err(err(
+            "elements",
+            format!("point {index} has a non-finite coefficient (unknown {j})"),
+        ));
+    }
+    Ok(StartPoint {
+        index,
+        hz: hz[index],
+        x,
+        h_file,
+    })
+}
+
 /// A multi-harmonic FRF to compute (the options of `nlsim frf`).
 #[derive(Debug, Clone)]
 pub struct FrfRequest {
@@ -347,6 +529,8 @@ pub struct FrfRequest {
     pub max_step_hz: Option<f64>,
     /// How a continuation starts.
     pub start: FrfStart,
+    /// A continuation start from a point of an earlier FRF file instead (`--start-file`).
+    pub start_file: Option<StartFile>,
     /// Retained modes.
     pub modes: usize,
     /// Residual flexibility of the truncated modes.
@@ -372,6 +556,7 @@ impl Default for FrfRequest {
             points: None,
             max_step_hz: None,
             start: FrfStart::Auto,
+            start_file: None,
             modes: 20,
             residual: true,
             stability: true,
@@ -444,6 +629,31 @@ impl FrfRequest {
                  frequencies are the points)",
                 self.mode.as_str()
             )));
+        }
+        if let Some(sf) = &self.start_file {
+            if self.mode != SweepMode::Continuation {
+                return Err(usage(format!(
+                    "a start file ({}) starts a continuation; a {} sweep starts every \
+                     frequency from the last (drop one of them)",
+                    sf.path.display(),
+                    self.mode.as_str()
+                )));
+            }
+            if self.start != FrfStart::Auto {
+                return Err(usage(format!(
+                    "start = {} and a start file ({}) are two starts: give one",
+                    self.start.as_str(),
+                    sf.path.display()
+                )));
+            }
+            if let Some(hz) = sf.at_hz {
+                let (lo, hi) = (self.from_hz.min(self.to_hz), self.from_hz.max(self.to_hz));
+                if !(hz >= lo && hz <= hi) {
+                    return Err(usage(format!(
+                        "start frequency {hz} Hz is outside the range {lo} to {hi} Hz"
+                    )));
+                }
+            }
         }
         if self.start == FrfStart::Subharmonic && self.subharmonic < 2 {
             return Err(usage(
@@ -741,7 +951,11 @@ pub fn run_frf_shared(
             c.max_points = c.max_points.min(MAX_FRF_POINTS);
             c.ds = c.ds.min(c.ds_max);
             c.ds_min = c.ds_min.min(c.ds);
-            let search = set.nu >= 2 && req.start != FrfStart::Rest;
+            let from_file = match &req.start_file {
+                Some(sf) => Some(read_start(sf, &system, req.from_hz, req.to_hz)?),
+                None => None,
+            };
+            let search = set.nu >= 2 && req.start != FrfStart::Rest && from_file.is_none();
             let found = if search {
                 let omegas: Vec<f64> = (0..SUBHARMONIC_SEARCH)
                     .map(|i| {
@@ -755,8 +969,27 @@ pub fn run_frf_shared(
             } else {
                 None
             };
-            let report = match found {
-                Some(st) => {
+            let report = match (from_file, found) {
+                (Some(sp), _) => {
+                    let sf = req
+                        .start_file
+                        .as_ref()
+                        .map_or("", |s| s.path.to_str().unwrap_or("the start file"));
+                    notes.push(format!(
+                        "start: point {} of {sf} at {:.5} Hz (H = {} there{}); the branch \
+                         through it is followed to both ends of the range",
+                        sp.index + 1,
+                        sp.hz,
+                        sp.h_file,
+                        if sp.h_file == set.h {
+                            String::new()
+                        } else {
+                            format!(", {} here", set.h)
+                        }
+                    ));
+                    nlsim_hb::continuation_through(&system, &c, 2.0 * PI * sp.hz, &sp.x, progress)?
+                }
+                (None, Some(st)) => {
                     notes.push(format!(
                         "sub-harmonic start: a 1/{} solution at {:.5} Hz ({:.0} % of the \
                          response at Ω/{}) from the backbone of mode {} ({} Newton starts); \
@@ -770,7 +1003,7 @@ pub fn run_frf_shared(
                     ));
                     nlsim_hb::continuation_through(&system, &c, st.omega, &st.x, progress)?
                 }
-                None => {
+                (None, None) => {
                     if req.start == FrfStart::Subharmonic {
                         return Err(Error::Failed(format!(
                             "no 1/{} sub-harmonic solution found: Newton from the backbones of \

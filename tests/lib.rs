@@ -4870,6 +4870,170 @@ mod hb_vs_shooting {
         assert!(worst < 1e-8, "{worst:e}");
     }
 
+    /// Issue 18: a continuation started from a point of an earlier FRF file
+    /// (`--start-file`). The 1/3 sub-harmonic branch of the thesis Duffing at 200 N, written
+    /// once to HDF5 (found by the search), is taken up again from its point nearest 95 Hz
+    /// over another range, and at H = 15 from the file's H = 9 (coefficients padded): both
+    /// runs say where they started, stay on the branch (the Ω/3 harmonic above ten times the
+    /// fundamental's at every point, where the primary branch has 6e-23 m) and find its fold
+    /// at 89.0999 Hz. A start file of another sub-harmonic order or model, without a point in
+    /// the range, missing, or beside a stepped sine is an error naming what is wrong.
+    #[test]
+    fn a_subharmonic_branch_restarts_from_its_file() {
+        let d = scratch("start_file");
+        let h5 = d.join("sub.h5");
+        let h5s = h5.to_str().unwrap();
+        let base = [
+            "frf",
+            "duffing_fig3",
+            "--subharmonic",
+            "3",
+            "--force",
+            "200",
+            "--no-stability",
+        ];
+        let run = |extra: &[&str]| {
+            let mut args = base.to_vec();
+            args.extend_from_slice(extra);
+            nlsim(&args)
+        };
+        let (code, _, err) = run(&[
+            "--harmonics",
+            "9",
+            "--from",
+            "85",
+            "--to",
+            "110",
+            "--out",
+            h5s,
+        ]);
+        assert_eq!(code, 0, "{err}");
+        for (h, at, says) in [
+            ("9", Some("95"), "start: point "),
+            ("15", None, "(H = 9 there, 15 here)"),
+        ] {
+            let csv = d.join(format!("restart_h{h}.csv"));
+            let mut extra = vec![
+                "--harmonics",
+                h,
+                "--from",
+                "88",
+                "--to",
+                "100",
+                "--start-file",
+                h5s,
+                "--out",
+                csv.to_str().unwrap(),
+            ];
+            if let Some(hz) = at {
+                extra.extend_from_slice(&["--start-hz", hz]);
+            }
+            let (code, out, err) = run(&extra);
+            assert_eq!(code, 0, "{err}");
+            assert!(
+                out.contains(says) && out.contains("fold at 89.0999"),
+                "{out}"
+            );
+            let text = std::fs::read_to_string(&csv).unwrap();
+            let rows: Vec<Vec<f64>> = text
+                .lines()
+                .filter(|l| !l.starts_with('#') && !l.starts_with("frequency"))
+                .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+                .collect();
+            assert!(rows.len() > 20, "{} points", rows.len());
+            for r in &rows {
+                // Columns: frequency, level, stable, kind, max real, then per harmonic k of
+                // Ω/3 its real and imaginary parts.
+                let q = |k: usize| r[5 + 2 * k].hypot(r[6 + 2 * k]);
+                assert!(
+                    q(1) > 10.0 * q(3),
+                    "H = {h}: not sub-harmonic at {} Hz",
+                    r[0]
+                );
+            }
+        }
+        let other = d.join("primary.h5");
+        let (code, _, err) = nlsim(&[
+            "frf",
+            "duffing_fig3",
+            "--from",
+            "25",
+            "--to",
+            "35",
+            "--no-stability",
+            "--out",
+            other.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{err}");
+        let bump = d.join("bump.h5");
+        let (code, _, err) = nlsim(&[
+            "frf",
+            "bumpstop_cantilever",
+            "--from",
+            "20",
+            "--to",
+            "21",
+            "--no-stability",
+            "--out",
+            bump.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{err}");
+        let missing = d.join("missing.h5");
+        for (extra, code, says) in [
+            (
+                vec!["--start-file", other.to_str().unwrap()],
+                1,
+                "harmonics of Ω/1, this run of Ω/3 (use --subharmonic 1)",
+            ),
+            (
+                vec!["--start-file", h5s, "--from", "120", "--to", "130"],
+                1,
+                "none of its",
+            ),
+            (
+                vec!["--start-file", missing.to_str().unwrap()],
+                1,
+                "missing.h5",
+            ),
+            (
+                vec!["--start-file", h5s, "--start-hz", "120"],
+                2,
+                "start frequency 120 Hz is outside the range",
+            ),
+            (
+                vec!["--start-file", h5s, "--mode", "step-up"],
+                2,
+                "a step-up sweep starts every frequency from the last",
+            ),
+            (
+                vec!["--start-file", h5s, "--start", "rest"],
+                2,
+                "two starts",
+            ),
+        ] {
+            let mut args = base.to_vec();
+            if !extra.contains(&"--from") {
+                args.extend_from_slice(&["--from", "88", "--to", "100"]);
+            }
+            args.extend_from_slice(&extra);
+            let (c, _, err) = nlsim(&args);
+            assert_eq!(c, code, "{extra:?}: {err}");
+            assert!(err.contains(says), "{extra:?}: {err}");
+        }
+        let (c, _, err) = nlsim(&[
+            "frf",
+            "duffing_fig3",
+            "--from",
+            "20",
+            "--to",
+            "21",
+            "--start-file",
+            bump.to_str().unwrap(),
+        ]);
+        assert_eq!(c, 1, "{err}");
+        assert!(err.contains("another model's elements"), "{err}");
+    }
+
     /// Issue 18: the thesis Duffing's resonance peak (`|Y_1|` at 2 N), located by `nlsim frf`
     /// between computed points at H = 7, against the ODE-exact maximum: the periodic orbits
     /// parametrised by the phase of their fundamental (monotone through the resonance),

@@ -241,6 +241,7 @@ impl Batch {
                     points: t.points,
                     max_step_hz: t.max_step,
                     start,
+                    start_file: None,
                     modes: t.modes.unwrap_or(d.modes),
                     residual: t.residual.unwrap_or(d.residual),
                     stability: t.stability.unwrap_or(d.stability),

@@ -271,6 +271,16 @@ enum Command {
         /// `subharmonic` (fail when none is found).
         #[arg(long, default_value = "auto", value_parser = ["auto", "rest", "subharmonic"])]
         start: String,
+        /// Continuation start from a point of an earlier `nlsim frf --out FILE.h5` (the same
+        /// model and --subharmonic; other harmonics are cut or padded): the branch through it
+        /// is followed to both ends of the range. The point is the one nearest --start-hz,
+        /// or within the range the one with the most sub-harmonic content (largest response
+        /// when --subharmonic is 1).
+        #[arg(long, value_name = "FILE.h5")]
+        start_file: Option<std::path::PathBuf>,
+        /// With --start-file: start from the file's point nearest this frequency (Hz).
+        #[arg(long, value_name = "HZ", requires = "start_file")]
+        start_hz: Option<f64>,
         /// Retained modes of the reduced model.
         #[arg(long, default_value_t = 20)]
         modes: usize,
@@ -812,6 +822,8 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
             points,
             max_step,
             start,
+            start_file,
+            start_hz,
             modes,
             no_residual,
             no_stability,
@@ -837,6 +849,10 @@ fn run(cli: &Cli) -> nlsim::Result<()> {
                 points: *points,
                 max_step_hz: *max_step,
                 start: nlsim::run::FrfStart::parse(start).expect("clap checked the value"),
+                start_file: start_file.as_ref().map(|path| nlsim::run::StartFile {
+                    path: path.clone(),
+                    at_hz: *start_hz,
+                }),
                 modes: *modes,
                 residual: !no_residual,
                 stability: !no_stability,
