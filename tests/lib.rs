@@ -4952,32 +4952,26 @@ mod hb_vs_shooting {
                 );
             }
         }
-        let other = d.join("primary.h5");
-        let (code, _, err) = nlsim(&[
-            "frf",
-            "duffing_fig3",
-            "--from",
-            "25",
-            "--to",
-            "35",
-            "--no-stability",
-            "--out",
-            other.to_str().unwrap(),
-        ]);
-        assert_eq!(code, 0, "{err}");
-        let bump = d.join("bump.h5");
-        let (code, _, err) = nlsim(&[
-            "frf",
-            "bumpstop_cantilever",
-            "--from",
-            "20",
-            "--to",
-            "21",
-            "--no-stability",
-            "--out",
-            bump.to_str().unwrap(),
-        ]);
-        assert_eq!(code, 0, "{err}");
+        // A primary-branch file of the same model and one of another model.
+        let write = |model: &str, from: &str, to: &str, file: &Path| {
+            let out = file.to_str().unwrap();
+            let args = [
+                "frf",
+                model,
+                "--from",
+                from,
+                "--to",
+                to,
+                "--no-stability",
+                "--out",
+                out,
+            ];
+            let (code, _, err) = nlsim(&args);
+            assert_eq!(code, 0, "{err}");
+        };
+        let (other, bump) = (d.join("primary.h5"), d.join("bump.h5"));
+        write("duffing_fig3", "25", "35", &other);
+        write("bumpstop_cantilever", "20", "21", &bump);
         let missing = d.join("missing.h5");
         for (extra, code, says) in [
             (
