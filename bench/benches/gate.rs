@@ -219,12 +219,14 @@ fn calibration(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::Wal
     });
 }
 
-/// The median of the later half of the logged calls (the earlier include criterion's
-/// warm-up).
-fn median(v: &[f64]) -> f64 {
+/// The lower quartile of the later half of the logged calls (the earlier include
+/// criterion's warm-up). Interference from other work on a shared machine only slows calls:
+/// a stretch of it once moved the median of `foh_ecl` to 2.1× criterion's own estimate in the
+/// same run and failed the gate, while the lower quartile keeps to the undisturbed calls.
+fn lower_quartile(v: &[f64]) -> f64 {
     let mut v = v[v.len() / 2..].to_vec();
     v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
+    v[v.len() / 4]
 }
 
 /// The records of `bench/gate.txt`: `ratio value` per line, `#` comments.
@@ -261,12 +263,12 @@ fn main() {
     c.final_summary();
 
     let log = log.borrow();
-    let time = |id: &str| log.get(id).map(|v| median(v));
+    let time = |id: &str| log.get(id).map(|v| lower_quartile(v));
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("gate.txt");
     let recorded = records(&path);
     let mut failed = Vec::new();
     let mut bless = String::from(
-        "# Ratios kernel/reference of bench/benches/gate.rs (median per-iteration times in one\n\
+        "# Ratios kernel/reference of bench/benches/gate.rs (lower-quartile per-iteration times in one\n\
          # process). CI fails when a ratio exceeds its value here by more than 2x.\n\
          # Rewrite with NLSIM_GATE_BLESS=1 cargo bench -p nlsim-bench --bench gate -- --quick --noplot\n",
     );
