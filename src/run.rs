@@ -483,8 +483,9 @@ fn read_start(sf: &StartFile, sys: &HbSystem, from_hz: f64, to_hz: f64) -> Resul
             .min_by(|&a, &b| (hz[a] - at).abs().total_cmp(&(hz[b] - at).abs())),
         None => inside
             .iter()
-            .copied()
-            .max_by(|&a, &b| measure(a).total_cmp(&measure(b))),
+            .map(|&i| (i, measure(i)))
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(i, _)| i),
     }
     .unwrap_or(inside[0]);
     let x = point(index);

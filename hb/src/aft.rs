@@ -157,8 +157,9 @@ impl AftPlan {
     /// history, periodically started). Cells where the velocity changes sign (the coordinate
     /// turns) keep the point sample: a Jenkins slider sticks again exactly at a reversal, so
     /// its two reversal cells per period still switch with the sampling (its stick-to-slip
-    /// switches in between are averaged).
-    pub(crate) fn cell_tangent(&self, law: &Law, x: &[f64], omega0: f64) -> Vec<f64> {
+    /// switches in between are averaged). Returns these stiffness samples and the point
+    /// samples of `∂g/∂u̇` (both laws' kinks are in `u`).
+    pub(crate) fn cell_tangent(&self, law: &Law, x: &[f64], omega0: f64) -> (Vec<f64>, Vec<f64>) {
         let (n, h) = (self.n, self.set.h);
         let half = PI / n as f64;
         let mut shifted = x.to_vec();
@@ -180,17 +181,18 @@ impl AftPlan {
         let (mut state, mut start) = (Vec::new(), Vec::new());
         periodic_start_into(law, &uu, &vv, &mut state, &mut start);
         let mut g = vec![0.0; 2 * n];
-        let mut point = vec![0.0; n];
+        let (mut point, mut damping) = (vec![0.0; n], vec![0.0; n]);
         for j in 0..2 * n {
             let e = law.eval(uu[j], vv[j], &state);
             g[j] = e.force;
             if j % 2 == 0 {
                 point[j / 2] = e.df_du;
+                damping[j / 2] = e.df_dv;
             }
             law.commit_state(uu[j], vv[j], &mut state);
         }
         let scale = uu.iter().fold(0.0f64, |m, a| m.max(a.abs()));
-        (0..n)
+        let stiffness = (0..n)
             .map(|i| {
                 let (a, b) = ((2 * i + 2 * n - 1) % (2 * n), 2 * i + 1);
                 let du = uu[b] - uu[a];
@@ -201,7 +203,8 @@ impl AftPlan {
                     point[i]
                 }
             })
-            .collect()
+            .collect();
+        (stiffness, damping)
     }
 
     /// The Galerkin matrix `P diag(f) E` ((2H+1) × (2H+1)) of the multiplication by the
@@ -815,7 +818,7 @@ mod tests {
                 true,
             ),
         ] {
-            let cell = plan.cell_tangent(&law, &x, 1.0);
+            let (cell, _) = plan.cell_tangent(&law, &x, 1.0);
             let point = plan.evaluate(&law, &x, 1.0, false).stiffness;
             let (mut worst, mut worst_point, mut mean) = (0.0f64, 0.0f64, 0.0f64);
             for i in 0..n {

@@ -101,14 +101,15 @@ impl HbSystem {
         let mut ct = vec![vec![0.0; n]; ne];
         for (e, el) in self.elements.iter().enumerate() {
             let c = self.coordinates(e);
-            let r = plan.evaluate_element(el.law(), &x[self.unknowns(e)], w0, false);
+            let xe = &x[self.unknowns(e)];
             let m = c.len();
+            if m == 1 && el.law().is_nonsmooth() {
+                (kt[c.start][c.start], ct[c.start]) = plan.cell_tangent(el.law(), xe, w0);
+                continue;
+            }
+            let r = plan.evaluate_element(el.law(), xe, w0, false);
             if m == 1 {
-                kt[c.start][c.start] = if el.law().is_nonsmooth() {
-                    plan.cell_tangent(el.law(), &x[self.unknowns(e)], w0)
-                } else {
-                    r.stiffness
-                };
+                kt[c.start][c.start] = r.stiffness;
                 ct[c.start] = r.damping;
             } else {
                 for a in 0..m {
