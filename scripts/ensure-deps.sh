@@ -42,6 +42,22 @@ if [ ${#missing[@]} -gt 0 ]; then
   fi
 fi
 
+# Disk: a cold `make test` writes about 2.8 GB under the target directory (more with
+# incremental caches), `make demo` about 1 GB more. Warn before a build would stop halfway
+# with "No space left on device".
+target="${CARGO_TARGET_DIR:-target}"
+probe="$target"
+while [ ! -e "$probe" ]; do probe="$(dirname "$probe")"; done
+need_mb=1500
+[ "${1:-}" = "--test" ] && need_mb=4000
+have_mb=$(df -Pm "$probe" | awk 'NR == 2 { print $4 }')
+used_mb=0
+[ -d "$target" ] && used_mb=$(du -sm "$target" 2>/dev/null | cut -f1)
+if [ -n "$have_mb" ] && [ $((have_mb + used_mb)) -lt "$need_mb" ]; then
+  say "warning: $have_mb MB free on the disk of $target (which holds $used_mb MB); a cold build"
+  say "  needs about $need_mb MB. Free space, or point CARGO_TARGET_DIR at a larger disk."
+fi
+
 # rustfmt and clippy for `make test`.
 if [ "${1:-}" = "--test" ]; then
   for comp in rustfmt clippy; do

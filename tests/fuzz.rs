@@ -163,10 +163,37 @@ fn scale() -> usize {
         .unwrap_or(1)
 }
 
-fn scratch() -> PathBuf {
+/// A scratch directory for one test, removed when the test passes. A failing test (a
+/// panic while it is alive) leaves it in place for inspection; its path is in the message.
+struct Scratch(PathBuf);
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for Scratch {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            eprintln!("scratch directory kept: {}", self.0.display());
+        } else {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+}
+
+fn scratch() -> Scratch {
     let d = std::env::temp_dir().join(format!("nlsim-fuzz-{}", std::process::id()));
     std::fs::create_dir_all(&d).unwrap();
-    d
+    Scratch(d)
 }
 
 fn root() -> &'static Path {

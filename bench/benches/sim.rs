@@ -55,10 +55,7 @@ fn synthetic(ns: usize) -> Plant {
     let el = NonlinearElement::new("k3", Law::Cubic { k3: 1e6 }, Coupling::single(0)).unwrap();
     Plant::new(
         sys,
-        vec![ElementPort {
-            element: el,
-            port: 0,
-        }],
+        vec![ElementPort::new(el, 0)],
         vec![("x".into(), 0)],
         vec![OutputSpec {
             name: "x".into(),

@@ -482,7 +482,8 @@ NlsimCode nlsim_model_set_modal_damping(NlsimModel model, double zeta);
  * `"polynomial k2=1e5 k3=2e9 c3=10"`, `"clearance k1=5e5 e1=1e-3 k2=5e5 e2=2e-3"`,
  * `"bump_stop k=1e6 gap=1e-3"`, `"quadratic_damping c2=20"`, `"coulomb fc=10 v_reg=1e-3"`,
  * `"jenkins kt=1e5 fs=20"`. It acts on DOF `dof` (a label, `"12:uz"`), or on `dof − dof2`
- * when `dof2` is not null. Its parameters are then `NAME.KEY` ([`nlsim_param_name`]).
+ * when `dof2` is not null. Its parameters are then `NAME.KEY` ([`nlsim_param_name`]). A law on
+ * several coordinates is added by [`nlsim_model_add_coupled_element`].
  *
  * # Safety
  * `name`, `law` and `dof` are strings; `dof2` is null or a string.
@@ -492,6 +493,23 @@ NlsimCode nlsim_model_add_element(NlsimModel model,
                                   const char *law,
                                   const char *dof,
                                   const char *dof2);
+
+/**
+ * Adds a nonlinear element named `name` whose law acts on several coordinates: the geometric
+ * nonlinearity `g_i = Σ k_i,p u_1^p1 ⋯ u_m^pm` of a `coupled_polynomial`, with the model-file
+ * keys (`"coupled_polynomial k1_2_0=1.915 k1_1_1=4 k2_0_3=2.638"`: the coefficient of
+ * `u1² u0⁰`… in `g_1`, one power per coordinate). Coordinate `u_j` is DOF `dofs[j − 1]`
+ * (labels, `n_dofs` of them, as many as the law's powers). Its parameters are then
+ * `NAME.k<i>_<p1>_…` ([`nlsim_param_name`]). Harmonic balance and [`nlsim_simulate`] take it.
+ *
+ * # Safety
+ * `name` and `law` are strings; `dofs` points to `n_dofs` strings.
+ */
+NlsimCode nlsim_model_add_coupled_element(NlsimModel model,
+                                          const char *name,
+                                          const char *law,
+                                          const char *const *dofs,
+                                          size_t n_dofs);
 
 /**
  * Adds a force input `name` at DOF `dof` with nominal amplitude `amplitude` (N): the

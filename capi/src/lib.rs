@@ -887,7 +887,8 @@ fn dof_index(model: &Model, label: &str) -> Result<usize, Failure> {
 /// `"polynomial k2=1e5 k3=2e9 c3=10"`, `"clearance k1=5e5 e1=1e-3 k2=5e5 e2=2e-3"`,
 /// `"bump_stop k=1e6 gap=1e-3"`, `"quadratic_damping c2=20"`, `"coulomb fc=10 v_reg=1e-3"`,
 /// `"jenkins kt=1e5 fs=20"`. It acts on DOF `dof` (a label, `"12:uz"`), or on `dof − dof2`
-/// when `dof2` is not null. Its parameters are then `NAME.KEY` ([`nlsim_param_name`]).
+/// when `dof2` is not null. Its parameters are then `NAME.KEY` ([`nlsim_param_name`]). A law on
+/// several coordinates is added by [`nlsim_model_add_coupled_element`].
 ///
 /// # Safety
 /// `name`, `law` and `dof` are strings; `dof2` is null or a string.
@@ -927,6 +928,49 @@ pub unsafe extern "C" fn nlsim_model_add_element(
         };
         let law = parse_law(name, law)?;
         m.add_element(NonlinearElement::new(name, law, coupling)?)?;
+        Ok(Done::Complete)
+    })
+}
+
+/// Adds a nonlinear element named `name` whose law acts on several coordinates: the geometric
+/// nonlinearity `g_i = Σ k_i,p u_1^p1 ⋯ u_m^pm` of a `coupled_polynomial`, with the model-file
+/// keys (`"coupled_polynomial k1_2_0=1.915 k1_1_1=4 k2_0_3=2.638"`: the coefficient of
+/// `u1² u0⁰`… in `g_1`, one power per coordinate). Coordinate `u_j` is DOF `dofs[j − 1]`
+/// (labels, `n_dofs` of them, as many as the law's powers). Its parameters are then
+/// `NAME.k<i>_<p1>_…` ([`nlsim_param_name`]). Harmonic balance and [`nlsim_simulate`] take it.
+///
+/// # Safety
+/// `name` and `law` are strings; `dofs` points to `n_dofs` strings.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn nlsim_model_add_coupled_element(
+    model: NlsimModel,
+    name: *const c_char,
+    law: *const c_char,
+    dofs: *const *const c_char,
+    n_dofs: usize,
+) -> NlsimCode {
+    guard(|| {
+        // SAFETY (every block below): the function's contract.
+        let name = unsafe { text(name, "name")? };
+        let law = unsafe { text(law, "law")? };
+        let labels = unsafe { texts(dofs, n_dofs, "dofs")? };
+        let m = get_model(model)?;
+        let mut guard = write(&m);
+        let m = Arc::make_mut(&mut guard);
+        let couplings = labels
+            .iter()
+            .map(|l| Ok(Coupling::single(dof_index(m, l)?)))
+            .collect::<Result<Vec<_>, Failure>>()?;
+        let law = parse_law(name, law)?;
+        if law.arity() != couplings.len() {
+            return Err(Failure::input(format!(
+                "element '{name}': its {} law acts on {} coordinates but {} dofs were given",
+                law.kind(),
+                law.arity(),
+                couplings.len()
+            )));
+        }
+        m.add_element(NonlinearElement::coupled(name, law, couplings)?)?;
         Ok(Done::Complete)
     })
 }
@@ -1830,6 +1874,83 @@ mod tests {
                 .unwrap_or_else(|| panic!("{bad} parsed"));
             assert!(e.message.contains(why), "{bad}: {}", e.message);
         }
+    }
+
+    /// NLvib's example 6 built through the ABI (its coupled element from a law string and two
+    /// DOF labels) is the model file's, and simulates to the same samples, bit for bit.
+    #[cfg(feature = "io")]
+    #[test]
+    fn a_coupled_element_through_the_abi_is_the_model_files() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../examples/models/nlvib_ex6.toml"
+        );
+        let file = nlsim::load_model(path).unwrap().model;
+        let el = file.elements()[0].clone();
+        let law = std::iter::once("coupled_polynomial".to_string())
+            .chain(
+                (0..el.law().n_params())
+                    .map(|i| format!("{}={:e}", el.law().param_name(i), el.law().param(i))),
+            )
+            .collect::<Vec<_>>()
+            .join(" ");
+        let mut bare = file.clone();
+        bare.clear_elements();
+        let handle = |m: Model| insert(Object::Model(Arc::new(RwLock::new(Arc::new(m)))));
+        let (a, b) = (handle(file.clone()), handle(bare));
+        let law_c = std::ffi::CString::new(law).unwrap();
+        let dofs = [c"1:u".as_ptr(), c"2:u".as_ptr()];
+        // SAFETY: strings and an array of two strings.
+        let add = |d: &[*const c_char]| unsafe {
+            nlsim_model_add_coupled_element(
+                b,
+                c"geometry".as_ptr(),
+                law_c.as_ptr(),
+                d.as_ptr(),
+                d.len(),
+            )
+        };
+        assert_eq!(add(&dofs[..1]), NlsimCode::ErrInput);
+        // SAFETY: the message is a NUL-terminated string of this thread.
+        let msg = unsafe { CStr::from_ptr(nlsim_last_error()) }
+            .to_str()
+            .unwrap()
+            .to_owned();
+        assert!(
+            msg.contains("'geometry'") && msg.contains("2 coordinates"),
+            "{msg}"
+        );
+        assert_eq!(add(&dofs), NlsimCode::Ok);
+        let built = get_model(b).unwrap();
+        assert_eq!(built.read().unwrap().elements(), file.elements());
+        let run = |m: NlsimModel| {
+            let mut red = 0;
+            // SAFETY: `red` is writable.
+            assert_eq!(unsafe { nlsim_reduce(m, 2, 1, &mut red) }, NlsimCode::Ok);
+            let n = 400;
+            let forces: Vec<f64> = (0..2 * (n + 1))
+                .map(|i| 0.03 * (1.1 * 0.05 * (i % (n + 1)) as f64).sin())
+                .collect();
+            let mut y = vec![0.0; 2 * (n + 1)];
+            // SAFETY: the lengths given are the buffers'.
+            let code = unsafe {
+                nlsim_simulate(
+                    red,
+                    0.05,
+                    n,
+                    forces.as_ptr(),
+                    forces.len(),
+                    y.as_mut_ptr(),
+                    y.len(),
+                    std::ptr::null_mut(),
+                )
+            };
+            assert_eq!(code, NlsimCode::Ok);
+            y
+        };
+        let (ya, yb) = (run(a), run(b));
+        assert!(ya.iter().fold(0.0f64, |m, v| m.max(v.abs())) > 0.05);
+        assert_eq!(ya, yb);
     }
 
     /// The same 3×3 matrix in every storage the ABI accepts equals its dense assembly.

@@ -1,7 +1,9 @@
 //! The algebraic loop on the nonlinear ports: find the element forces `f` with
 //! `f = g(d_pred − S_d f, v_pred − S_v f)`, where `S_d`, `S_v` are the (small, precomputed)
 //! sensitivities of the port displacements and velocities to the element forces at the end of
-//! the step. Damped Newton in `n_NL` unknowns, allocation-free.
+//! the step. Damped Newton in `n_NL` unknowns, allocation-free. A law on several coordinates
+//! is evaluated once for its group of ports and contributes its `m × m` block `∂g_a/∂u_b` to
+//! the loop's Jacobian.
 
 use crate::plant::ElementPort;
 
@@ -51,6 +53,13 @@ pub(crate) struct Feedback {
     pub last_v: Vec<f64>,
     /// Static stiffness of each element's port (N/m), for the absolute force tolerance.
     stiffness: Vec<f64>,
+    /// Per port: the first port of its element's group and the group's size (1 for a
+    /// one-coordinate law).
+    group: Vec<(usize, usize)>,
+    /// Per port of a coupled group: the offset of its row of `∂g/∂u` in `gjac`.
+    row_at: Vec<usize>,
+    /// `∂g_a/∂u_b` of every coupled group, row-major blocks.
+    gjac: Vec<f64>,
 }
 
 impl Feedback {
@@ -69,8 +78,28 @@ impl Feedback {
                 }
             })
             .collect();
+        let mut group = Vec::with_capacity(n);
+        let mut row_at = vec![0; n];
+        let mut blocks = 0;
+        let mut i = 0;
+        while i < n {
+            let m = plant.elements[i].element.law().arity().max(1);
+            for a in 0..m {
+                group.push((i, m));
+                if m > 1 {
+                    row_at[i + a] = blocks + a * m;
+                }
+            }
+            if m > 1 {
+                blocks += m * m;
+            }
+            i += m;
+        }
         Feedback {
             stiffness,
+            group,
+            row_at,
+            gjac: vec![0.0; blocks],
             n,
             d: vec![0.0; n],
             v: vec![0.0; n],
@@ -101,31 +130,50 @@ impl Feedback {
         rtol: f64,
     ) -> (f64, bool) {
         let n = self.n;
-        let mut norm = 0.0f64;
-        let mut ok = true;
         for i in 0..n {
             let (mut d, mut v) = (d_pred[i], v_pred[i]);
             for j in 0..n {
                 d -= sd[i * n + j] * f[j];
                 v -= sv[i * n + j] * f[j];
             }
-            let e = elements[i].element.law().eval(d, v, &states[i]);
             self.d[i] = d;
             self.v[i] = v;
-            self.g[i] = e.force;
-            self.gu[i] = e.df_du;
-            self.gv[i] = e.df_dv;
-            let r = f[i] - e.force;
-            self.r[i] = r;
-            norm = norm.max(r.abs());
-            // Force scale of the port's motion: its static stiffness times |u|. It keeps the
-            // test meaningful where the element force itself vanishes (at a contact kink).
-            let floor = self.stiffness[i] * d.abs();
-            let tol = rtol * (f[i].abs() + e.force.abs() + floor) + 1e-300;
-            // NaN fails too.
-            if r.abs().partial_cmp(&tol) != Some(std::cmp::Ordering::Less) && r.abs() != tol {
-                ok = false;
+        }
+        let mut norm = 0.0f64;
+        let mut ok = true;
+        let mut i = 0;
+        while i < n {
+            let m = self.group[i].1;
+            let law = elements[i].element.law();
+            if m == 1 {
+                let e = law.eval(self.d[i], self.v[i], &states[i]);
+                self.g[i] = e.force;
+                self.gu[i] = e.df_du;
+                self.gv[i] = e.df_dv;
+            } else {
+                let o = self.row_at[i];
+                law.eval_coupled(
+                    &self.d[i..i + m],
+                    &mut self.g[i..i + m],
+                    &mut self.gjac[o..o + m * m],
+                );
             }
+            for a in i..i + m {
+                let (d, g) = (self.d[a], self.g[a]);
+                let r = f[a] - g;
+                self.r[a] = r;
+                norm = norm.max(r.abs());
+                // Force scale of the port's motion: its static stiffness times |u|. It keeps
+                // the test meaningful where the element force itself vanishes (at a contact
+                // kink).
+                let floor = self.stiffness[a] * d.abs();
+                let tol = rtol * (f[a].abs() + g.abs() + floor) + 1e-300;
+                // NaN fails too.
+                if r.abs().partial_cmp(&tol) != Some(std::cmp::Ordering::Less) && r.abs() != tol {
+                    ok = false;
+                }
+            }
+            i += m;
         }
         (norm, ok)
     }
@@ -164,12 +212,25 @@ impl Feedback {
                 });
             }
             it += 1;
-            // J = I + diag(g_u) S_d + diag(g_v) S_v; solve J Δ = −r.
+            // J = I + G_u S_d + G_v S_v (G diagonal but for the blocks of coupled laws, whose
+            // velocity tangent is zero); solve J Δ = −r.
             for i in 0..n {
-                for j in 0..n {
-                    self.jac[i * n + j] = f64::from(u8::from(i == j))
-                        + self.gu[i] * sd[i * n + j]
-                        + self.gv[i] * sv[i * n + j];
+                let (s0, m) = self.group[i];
+                if m == 1 {
+                    for j in 0..n {
+                        self.jac[i * n + j] = f64::from(u8::from(i == j))
+                            + self.gu[i] * sd[i * n + j]
+                            + self.gv[i] * sv[i * n + j];
+                    }
+                } else {
+                    let row = &self.gjac[self.row_at[i]..self.row_at[i] + m];
+                    for j in 0..n {
+                        let mut x = f64::from(u8::from(i == j));
+                        for (b, g) in row.iter().enumerate() {
+                            x += g * sd[(s0 + b) * n + j];
+                        }
+                        self.jac[i * n + j] = x;
+                    }
                 }
                 self.step[i] = -self.r[i];
             }

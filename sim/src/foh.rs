@@ -471,7 +471,7 @@ impl Simulator {
                     ),
                     detail: format!(
                         "the response of element '{}' is not finite: the run diverged",
-                        elements[bad].element.name()
+                        elements[bad].coordinate_name()
                     ),
                 };
                 stop = Some((Status::NonFinite, err));
@@ -525,10 +525,7 @@ impl Simulator {
                 })
                 .collect(),
             inputs: plant.inputs.iter().map(|(n, _)| n.clone()).zip(e).collect(),
-            element_names: elements
-                .iter()
-                .map(|e| e.element.name().to_string())
-                .collect(),
+            element_names: elements.iter().map(ElementPort::coordinate_name).collect(),
             element_displacements: d_hist,
             element_velocities: v_hist,
             element_forces: f_hist,
@@ -839,7 +836,9 @@ pub(crate) fn loop_error(e: LoopFailure, elements: &[ElementPort], step: usize, 
              (u = {:.6e} m); try a smaller time step",
             e.iterations,
             e.residual,
-            elements.get(e.element).map_or("?", |x| x.element.name()),
+            elements
+                .get(e.element)
+                .map_or_else(|| "?".into(), ElementPort::coordinate_name),
             e.displacement
         ),
     }

@@ -102,7 +102,7 @@ impl LoadCase {
         };
         let mut elements = plant.elements.clone();
         for (p, v) in &self.parameters {
-            nlsim_kernel::param::set_element_param(&mut elements, p, *v)?;
+            crate::plant::set_entry_param(&mut elements, p, *v)?;
         }
         Ok((z0, elements))
     }
@@ -113,7 +113,7 @@ impl LoadCase {
 pub struct ContactEvent {
     /// Time of the event (s).
     pub time: f64,
-    /// Element index in [`Plant::elements`].
+    /// Element entry index in [`Plant::elements`].
     pub element: usize,
     /// `true` when contact closes, `false` when it opens.
     pub closing: bool,
@@ -163,9 +163,10 @@ pub struct TimeHistory {
     pub outputs: Vec<Series>,
     /// Input forces `(name, samples)` (N).
     pub inputs: Vec<(String, Vec<f64>)>,
-    /// Element names.
+    /// Element names, one per [`Plant::elements`] entry: a law on several coordinates has one
+    /// per coordinate, `name[j]` ([`crate::ElementPort::coordinate_name`]).
     pub element_names: Vec<String>,
-    /// Element coordinates `u` (m), one series per element.
+    /// Element coordinates `u` (m), one series per [`Plant::elements`] entry.
     pub element_displacements: Vec<Vec<f64>>,
     /// Element velocities `u̇` (m/s).
     pub element_velocities: Vec<Vec<f64>>,

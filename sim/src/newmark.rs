@@ -104,7 +104,7 @@ impl Newmark {
             ));
         }
         for e in model.elements() {
-            crate::plant::refuse_coupled(e)?;
+            refuse_coupled(e)?;
         }
         let damping = match model.damping() {
             Damping::None => DampingOp::None,
@@ -564,4 +564,22 @@ fn coupling_dot(c: &Coupling, x: &[f64]) -> f64 {
         .zip(c.weights())
         .map(|(&d, &w)| w * x[d])
         .sum()
+}
+
+/// The unreduced Newmark reference acts on scalar element coordinates: a law on several
+/// coordinates ([`nlsim_kernel::Law::CoupledPolynomial`]) is refused with a message that names
+/// it and the integrators that take it.
+fn refuse_coupled(e: &nlsim_kernel::NonlinearElement) -> Result<()> {
+    if e.is_coupled() {
+        return Err(Error::invalid(
+            format!("element '{}'", e.name()),
+            format!(
+                "its {} law couples {} coordinates; the unreduced Newmark reference takes \
+                 one-coordinate laws only (the FOH and RK45 integrators take it)",
+                e.law().kind(),
+                e.couplings().len()
+            ),
+        ));
+    }
+    Ok(())
 }

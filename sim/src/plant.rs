@@ -6,13 +6,38 @@ use nlsim_kernel::param::{element_param, element_parameters, set_element_param};
 use nlsim_kernel::{Error, Law, Model, NonlinearElement, Param, Parameterized, Quantity, Result};
 use nlsim_reduction::ModalSystem;
 
-/// A nonlinear element fed back at a port of the modal system.
+/// A nonlinear element fed back at a port of the modal system: one coordinate of its law.
+///
+/// A one-coordinate law is one entry (`coordinate` 0). A law on `m` coordinates
+/// ([`Law::CoupledPolynomial`]) is `m` consecutive entries with coordinates `0..m`, each at the
+/// port of its coordinate and each holding the whole element: the integrators evaluate the law
+/// once for the group and feed force `g_j` back at coordinate `j`'s port. Build them with
+/// [`PlantBuilder::coupled_element`] or [`Plant::from_model`].
 #[derive(Debug, Clone)]
 pub struct ElementPort {
     /// The element (its coupling is already folded into the port).
     pub element: NonlinearElement,
     /// Port index in [`ModalSystem::ports`].
     pub port: usize,
+    /// The coordinate of the element's law at this port (0 for a one-coordinate law).
+    pub coordinate: usize,
+}
+
+impl ElementPort {
+    /// A one-coordinate element at `port`.
+    pub fn new(element: NonlinearElement, port: usize) -> Self {
+        ElementPort {
+            element,
+            port,
+            coordinate: 0,
+        }
+    }
+
+    /// The name of this entry's coordinate: the element's name, with `[j]` (from 1) for a law
+    /// on several coordinates (as [`nlsim_reduction::modal::element_port_name`] names the ports).
+    pub fn coordinate_name(&self) -> String {
+        nlsim_reduction::modal::element_port_name(&self.element, self.coordinate)
+    }
 }
 
 /// A requested output: a quantity at a port.
@@ -39,20 +64,70 @@ pub struct Plant {
     pub outputs: Vec<OutputSpec>,
 }
 
-/// Time integration acts on scalar element coordinates: a law on several coordinates
-/// ([`nlsim_kernel::Law::CoupledPolynomial`]) is refused with a message that names it and the
-/// analyses that take it.
-pub(crate) fn refuse_coupled(e: &nlsim_kernel::NonlinearElement) -> Result<()> {
-    if e.is_coupled() {
-        return Err(Error::invalid(
-            format!("element '{}'", e.name()),
-            format!(
-                "its {} law couples {} coordinates; time integration takes one-coordinate \
-                 laws only (harmonic balance takes it: `nlsim frf`, `nlsim nnm`)",
-                e.law().kind(),
-                e.couplings().len()
-            ),
-        ));
+/// Checks that a plant's element entries come in whole groups: a one-coordinate law as one
+/// entry with coordinate 0, a law on `m` coordinates as `m` consecutive entries of the same
+/// element with coordinates `0..m`.
+fn check_groups(elements: &[ElementPort]) -> Result<()> {
+    let mut i = 0;
+    while i < elements.len() {
+        let e = &elements[i].element;
+        let m = e.law().arity();
+        let what = || format!("element '{}'", e.name());
+        if elements[i].coordinate != 0 {
+            return Err(Error::invalid(
+                what(),
+                format!(
+                    "entry {} starts a group at coordinate {} (each element's entries start at \
+                     coordinate 0)",
+                    i + 1,
+                    elements[i].coordinate
+                ),
+            ));
+        }
+        if i + m > elements.len() {
+            return Err(Error::invalid(
+                what(),
+                format!(
+                    "its {} law acts on {m} coordinates but the plant has {} entries for it \
+                     (use PlantBuilder::coupled_element with one port per coordinate)",
+                    e.law().kind(),
+                    elements.len() - i
+                ),
+            ));
+        }
+        for j in 1..m {
+            let x = &elements[i + j];
+            if x.coordinate != j || x.element != *e {
+                return Err(Error::invalid(
+                    what(),
+                    format!(
+                        "its {} law acts on {m} coordinates: entries {}..{} must hold it at \
+                         coordinates 1..{m} in order (use PlantBuilder::coupled_element)",
+                        e.law().kind(),
+                        i + 1,
+                        i + m
+                    ),
+                ));
+            }
+        }
+        i += m;
+    }
+    Ok(())
+}
+
+/// Sets element parameter `p` on every entry of its element (a coupled element has one entry
+/// per coordinate), with the law's range checks.
+pub(crate) fn set_entry_param(elements: &mut [ElementPort], p: &Param, value: f64) -> Result<()> {
+    set_element_param(elements, p, value)?;
+    if let Param::Element { element, .. } = p
+        && let Some(first) = elements.iter().position(|e| e.element.name() == element)
+    {
+        let e = elements[first].element.clone();
+        for x in &mut elements[first + 1..] {
+            if x.element.name() == element {
+                x.element = e.clone();
+            }
+        }
     }
     Ok(())
 }
@@ -65,10 +140,16 @@ impl Plant {
         let elements = model
             .elements()
             .iter()
-            .zip(map.elements)
-            .map(|(e, port)| ElementPort {
-                element: e.clone(),
-                port,
+            .zip(map.element_coordinates)
+            .flat_map(|(e, ports)| {
+                ports
+                    .into_iter()
+                    .enumerate()
+                    .map(|(coordinate, port)| ElementPort {
+                        element: e.clone(),
+                        port,
+                        coordinate,
+                    })
             })
             .collect();
         let outputs = map
@@ -105,8 +186,8 @@ impl Plant {
         for e in &elements {
             check(format!("element '{}'", e.element.name()), e.port)?;
             e.element.law().validate(e.element.name())?;
-            refuse_coupled(&e.element)?;
         }
+        check_groups(&elements)?;
         for (name, p) in &inputs {
             check(format!("input '{name}'"), *p)?;
         }
@@ -342,7 +423,9 @@ impl AsMut<NonlinearElement> for ElementPort {
 /// modal parameters are set on the reduced model before the plant is built.
 impl Parameterized for Plant {
     fn parameters(&self) -> Vec<Param> {
-        element_parameters(&self.elements)
+        // A coupled element's parameters once (its first entry).
+        let first: Vec<&ElementPort> = self.elements.iter().filter(|e| e.coordinate == 0).collect();
+        element_parameters(&first)
     }
 
     fn param(&self, p: &Param) -> Result<f64> {
@@ -350,7 +433,7 @@ impl Parameterized for Plant {
     }
 
     fn set_param(&mut self, p: &Param, value: f64) -> Result<()> {
-        set_element_param(&mut self.elements, p, value)
+        set_entry_param(&mut self.elements, p, value)
     }
 }
 
@@ -366,9 +449,23 @@ pub struct PlantBuilder {
 }
 
 impl PlantBuilder {
-    /// A nonlinear element fed back at port `port`.
+    /// A nonlinear element with a one-coordinate law fed back at port `port`.
     pub fn element(mut self, element: NonlinearElement, port: usize) -> Self {
-        self.elements.push(ElementPort { element, port });
+        self.elements.push(ElementPort::new(element, port));
+        self
+    }
+
+    /// A nonlinear element whose law acts on several coordinates ([`Law::arity`] of them),
+    /// coordinate `j` at port `ports[j]`: force `g_j(u)` is fed back at `ports[j]`. A count
+    /// of ports other than the arity is an error of [`PlantBuilder::build`].
+    pub fn coupled_element(mut self, element: NonlinearElement, ports: &[usize]) -> Self {
+        for (coordinate, &port) in ports.iter().enumerate() {
+            self.elements.push(ElementPort {
+                element: element.clone(),
+                port,
+                coordinate,
+            });
+        }
         self
     }
 

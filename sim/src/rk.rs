@@ -267,7 +267,7 @@ impl Record {
             element_names: plant
                 .elements
                 .iter()
-                .map(|e| e.element.name().to_string())
+                .map(crate::plant::ElementPort::coordinate_name)
                 .collect(),
             element_displacements: rec.d,
             element_velocities: rec.v,

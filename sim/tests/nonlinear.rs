@@ -440,3 +440,269 @@ fn accelerations_with_residual_flexibility_do_not_depend_on_the_output_rate() {
         assert!(e < 1e-5, "{name}: {e:e}");
     }
 }
+
+/// NLvib's example 6 (a mass on two orthogonal springs under large deflection, in its two
+/// modal coordinates) with its geometric nonlinearity as one coupled polynomial element:
+/// `g1 = a1/2 (3q1² + q2²) + a2 q1q2 + c q1 (q1² + q2²)`,
+/// `g2 = a2/2 (3q2² + q1²) + a1 q1q2 + c q2 (q1² + q2²)`, `a_i = ω_i²`, `c = (a1 + a2)/2`.
+fn geometric_2dof() -> Model {
+    use nlsim_kernel::{
+        Coupling, DofMap, Excitation, Law, MonomialTerm, NonlinearElement, Sensor, SparseSym,
+    };
+    let (w1, w2, z1, z2) = (1.13f64, 2.0f64, 1e-3, 5e-3);
+    let (a1, a2) = (w1 * w1, w2 * w2);
+    let c = (a1 + a2) / 2.0;
+    let mut m = Model::new(
+        "geometric_2dof",
+        DofMap::scalar(2),
+        SparseSym::diagonal("M", &[1.0, 1.0]).unwrap(),
+        SparseSym::diagonal("K", &[a1, a2]).unwrap(),
+    )
+    .unwrap();
+    m.set_damping(Damping::Matrix(
+        SparseSym::diagonal("C", &[2.0 * z1 * w1, 2.0 * z2 * w2]).unwrap(),
+    ))
+    .unwrap();
+    // (output, powers of q1 and q2, coefficient)
+    let terms = [
+        (0, [2, 0], 1.5 * a1),
+        (0, [0, 2], a1 / 2.0),
+        (0, [1, 1], a2),
+        (0, [3, 0], c),
+        (0, [1, 2], c),
+        (1, [0, 2], 1.5 * a2),
+        (1, [2, 0], a2 / 2.0),
+        (1, [1, 1], a1),
+        (1, [0, 3], c),
+        (1, [2, 1], c),
+    ]
+    .iter()
+    .map(|&(o, p, k)| MonomialTerm::new(o, &p, k))
+    .collect();
+    m.add_element(
+        NonlinearElement::coupled(
+            "geometry",
+            Law::CoupledPolynomial { inputs: 2, terms },
+            vec![Coupling::single(0), Coupling::single(1)],
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    for d in 0..2 {
+        m.add_excitation(Excitation {
+            name: format!("f{}", d + 1),
+            dof: d,
+            amplitude: 1.0,
+            harmonics: Vec::new(),
+        })
+        .unwrap();
+        m.add_sensor(Sensor {
+            name: format!("q{}", d + 1),
+            dof: d,
+            quantity: Quantity::Displacement,
+        })
+        .unwrap();
+    }
+    m
+}
+
+/// The geometric forces of [`geometric_2dof`] written out by hand.
+fn geometric_forces(q1: f64, q2: f64) -> [f64; 2] {
+    let (a1, a2) = (1.13f64 * 1.13, 4.0);
+    let c = (a1 + a2) / 2.0;
+    let r2 = q1 * q1 + q2 * q2;
+    [
+        a1 / 2.0 * (3.0 * q1 * q1 + q2 * q2) + a2 * q1 * q2 + c * q1 * r2,
+        a2 / 2.0 * (3.0 * q2 * q2 + q1 * q1) + a1 * q1 * q2 + c * q2 * r2,
+    ]
+}
+
+/// `(q1, q2)` of [`geometric_2dof`] under `amp · sin(Ω t)` on both coordinates, from rest, by
+/// classical RK4 on the equations of motion written out (`q̈ = f − D q̇ − K q − g(q)`), sampled
+/// every `every` steps of `h`.
+fn geometric_rk4(amp: f64, omega: f64, h: f64, steps: usize, every: usize) -> [Vec<f64>; 2] {
+    let (w1, w2, z1, z2) = (1.13f64, 2.0f64, 1e-3, 5e-3);
+    let rhs = |t: f64, z: [f64; 4]| -> [f64; 4] {
+        let g = geometric_forces(z[0], z[1]);
+        let f = amp * (omega * t).sin();
+        [
+            z[2],
+            z[3],
+            f - 2.0 * z1 * w1 * z[2] - w1 * w1 * z[0] - g[0],
+            f - 2.0 * z2 * w2 * z[3] - w2 * w2 * z[1] - g[1],
+        ]
+    };
+    let mut z = [0.0; 4];
+    let mut out = [vec![0.0], vec![0.0]];
+    for i in 0..steps {
+        let t = i as f64 * h;
+        let k1 = rhs(t, z);
+        let at = |k: &[f64; 4], s: f64| std::array::from_fn::<f64, 4, _>(|j| z[j] + s * k[j]);
+        let k2 = rhs(t + h / 2.0, at(&k1, h / 2.0));
+        let k3 = rhs(t + h / 2.0, at(&k2, h / 2.0));
+        let k4 = rhs(t + h, at(&k3, h));
+        for j in 0..4 {
+            z[j] += h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]);
+        }
+        if (i + 1) % every == 0 {
+            out[0].push(z[0]);
+            out[1].push(z[1]);
+        }
+    }
+    out
+}
+
+/// A law on two coordinates in the time domain: FOH (and RK45) on the reduced plant against
+/// RK4 on the equations of motion written out independently of the element, with the
+/// geometric forces reaching a third of the linear ones.
+#[test]
+fn coupled_geometric_element_matches_its_written_out_equations() {
+    let model = geometric_2dof();
+    let red = reduced(&model, 2);
+    let sys = ModalSystem::new(&red).unwrap();
+    let plant = Plant::from_model(&model, &sys).unwrap();
+    assert_eq!(plant.elements.len(), 2, "one entry per coordinate");
+    assert_eq!(
+        nlsim_kernel::Parameterized::parameters(&plant).len(),
+        10,
+        "the coupled element's ten coefficients, listed once"
+    );
+    // Near the first mode, 15 s (2.6 periods) from rest.
+    let (amp, omega) = (0.03, 1.1);
+    let sig = Signal::Sine {
+        amplitude: amp,
+        freq_hz: omega / (2.0 * PI),
+        phase: 0.0,
+    };
+    let case = LoadCase::new("sine", vec![sig.clone(), sig]);
+    let (dt, n) = (0.05, 300);
+    let reference = geometric_rk4(amp, omega, dt / 64.0, 64 * n, 64);
+    let scale = peak(&reference[0]).max(peak(&reference[1]));
+    let err = |h: &TimeHistory, stride: usize| {
+        (0..2)
+            .map(|c| max_diff(&every(h, &format!("q{}", c + 1), stride), &reference[c]))
+            .fold(0.0, f64::max)
+            / scale
+    };
+    let errs: Vec<f64> = [1usize, 2, 4, 8]
+        .iter()
+        .map(|&d| {
+            let sim = Simulator::new(&plant, &FohConfig::new(dt / d as f64)).unwrap();
+            err(&sim.run(&case, n * d).unwrap(), d)
+        })
+        .collect();
+    eprintln!("coupled geometric 2-DOF, FOH errors at dt/1, /2, /4, /8: {errs:?}");
+    assert_second_order(&errs, "coupled geometric 2-DOF");
+    assert!(errs[3] < 1e-4, "finest error {:e}", errs[3]);
+    // The nonlinearity matters: the geometric forces reach a third of the linear restoring
+    // force (0.35 at q1 = 0.16).
+    let h = Simulator::new(&plant, &FohConfig::new(dt / 8.0))
+        .unwrap()
+        .run(&case, 8 * n)
+        .unwrap();
+    assert_eq!(h.element_names, ["geometry[1]", "geometry[2]"]);
+    let (q1, q2) = (&h.element_displacements[0], &h.element_displacements[1]);
+    let g_peak = peak(&h.element_forces[0]);
+    let lin_peak = 1.13f64 * 1.13 * peak(q1);
+    assert!(g_peak > 0.3 * lin_peak, "g1 {g_peak:e}, a1 q1 {lin_peak:e}");
+    // Each recorded force is the law at the recorded coordinates.
+    for k in 0..q1.len() {
+        let g = geometric_forces(q1[k], q2[k]);
+        for c in 0..2 {
+            let x = h.element_forces[c][k];
+            assert!(
+                (x - g[c]).abs() <= 1e-10 * g_peak,
+                "sample {k}, force {}: {x:e} vs {:e}",
+                c + 1,
+                g[c]
+            );
+        }
+    }
+    // RK45 on the same plant, tight, agrees with the written-out equations too.
+    let r = rk45(&plant, &case, dt, n, &tight()).unwrap();
+    assert!(err(&r, 1) < 1e-8, "RK45 {:e}", err(&r, 1));
+}
+
+/// A coupled element whose terms do not mix its coordinates is its scalar elements: the
+/// 2-DOF chain's two cubic springs (one to ground, one between the masses) as one element
+/// on two coordinates gives their time histories, by FOH and by RK45.
+#[test]
+fn a_separable_coupled_element_equals_its_scalar_elements() {
+    use nlsim_kernel::{Law, MonomialTerm, NonlinearElement};
+    let fx = nlsim_fixtures::build("chain_2dof", &[]).unwrap();
+    let scalar = fx.model;
+    let mut coupled = scalar.clone();
+    let (ground, link) = (&scalar.elements()[0], &scalar.elements()[1]);
+    let k3 = |e: &NonlinearElement| match e.law() {
+        Law::Cubic { k3 } => *k3,
+        other => panic!("the fixture's springs are cubic, not {}", other.kind()),
+    };
+    let terms = vec![
+        MonomialTerm::new(0, &[3, 0], k3(ground)),
+        MonomialTerm::new(1, &[0, 3], k3(link)),
+    ];
+    let both = NonlinearElement::coupled(
+        "springs",
+        Law::CoupledPolynomial { inputs: 2, terms },
+        vec![ground.coupling().clone(), link.coupling().clone()],
+    )
+    .unwrap();
+    coupled.clear_elements();
+    coupled.add_element(both).unwrap();
+    let plant = |m: &Model| {
+        let red = reduced(m, 2);
+        Plant::from_model(m, &ModalSystem::new(&red).unwrap()).unwrap()
+    };
+    let (ps, pc) = (plant(&scalar), plant(&coupled));
+    // Near the first mode, hard enough for both springs to stiffen the response.
+    let case = LoadCase::new("sine", vec![Signal::sine(30.0, 10.0)]);
+    let dt = 1.0 / 2000.0;
+    let runs = |p: &Plant| {
+        [
+            Simulator::new(p, &FohConfig::new(dt))
+                .unwrap()
+                .run(&case, 2000)
+                .unwrap(),
+            rk45(p, &case, dt, 2000, &tight()).unwrap(),
+        ]
+    };
+    for (s, c) in runs(&ps).iter().zip(&runs(&pc)) {
+        for name in ["mass1", "mass2"] {
+            let (a, b) = (every(s, name, 1), every(c, name, 1));
+            let d = max_diff(&a, &b) / peak(&a);
+            assert!(d < 1e-10, "{} {name}: {d:e}", s.method);
+        }
+        for e in 0..2 {
+            let (a, b) = (&s.element_forces[e], &c.element_forces[e]);
+            let d = max_diff(a, b) / peak(a);
+            assert!(d < 1e-10, "{} force {e}: {d:e}", s.method);
+            assert!(peak(a) > 0.1 * 30.0, "spring {e} is active: {:e}", peak(a));
+        }
+    }
+}
+
+/// Element entries that do not form whole groups are refused, naming the element.
+#[test]
+fn a_coupled_element_needs_all_its_ports() {
+    let model = geometric_2dof();
+    let red = reduced(&model, 2);
+    let sys = ModalSystem::new(&red).unwrap();
+    let full = Plant::from_model(&model, &sys).unwrap();
+    let el = full.elements[0].element.clone();
+    let (p0, p1) = (full.elements[0].port, full.elements[1].port);
+    let err = |b: nlsim_sim::PlantBuilder| b.build().unwrap_err().to_string();
+    let one = err(Plant::builder(sys.clone()).coupled_element(el.clone(), &[p0]));
+    assert!(
+        one.contains("'geometry'") && one.contains("2 coordinates"),
+        "{one}"
+    );
+    let scalar = err(Plant::builder(sys.clone()).element(el.clone(), p0));
+    assert!(scalar.contains("'geometry'"), "{scalar}");
+    let ok = Plant::builder(sys)
+        .coupled_element(el, &[p0, p1])
+        .input("f1", full.inputs[0].1)
+        .input("f2", full.inputs[1].1)
+        .build()
+        .unwrap();
+    assert_eq!(ok.elements.len(), 2);
+}

@@ -205,6 +205,11 @@ int main(void) {
       NLSIM_CODE_ERR_INPUT);
   bad("unknown_dof", nlsim_model_add_sensor(model, "s", "9:u", 0), NLSIM_CODE_ERR_INPUT);
   bad("bad_quantity", nlsim_model_add_sensor(model, "s", "1:u", 7), NLSIM_CODE_ERR_INPUT);
+  const char *one_dof[] = {"1:u"};
+  bad("coupled_dofs",
+      nlsim_model_add_coupled_element(model, "g", "coupled_polynomial k1_1_1=1 k2_2_0=2",
+                                      one_dof, 1),
+      NLSIM_CODE_ERR_INPUT);
   bad("bad_law", nlsim_model_add_element(model, "e", "cubic k9=1", "1:u", NULL),
       NLSIM_CODE_ERR_INPUT);
   bad("unknown_param", nlsim_get_param(hb, "tip.k4", &k3), NLSIM_CODE_ERR_INPUT);

@@ -64,6 +64,8 @@ signatures = {
     "nlsim_model_set_rayleigh": ([handle, C.c_double, C.c_double], code),
     "nlsim_model_add_element": ([handle, C.c_char_p, C.c_char_p, C.c_char_p, C.c_char_p],
                                 code),
+    "nlsim_model_add_coupled_element": ([handle, C.c_char_p, C.c_char_p,
+                                         C.POINTER(C.c_char_p), C.c_size_t], code),
     "nlsim_model_add_excitation": ([handle, C.c_char_p, C.c_char_p, C.c_double], code),
     "nlsim_model_add_sensor": ([handle, C.c_char_p, C.c_char_p, C.c_int32], code),
     "nlsim_model_info": ([handle, C.POINTER(ModelInfo)], code),
@@ -189,6 +191,9 @@ bad("null_out", lib.nlsim_model_new(b"x", 2, labels, C.byref(m), C.byref(k), Non
 bad("unknown_dof", lib.nlsim_model_add_sensor(model, b"s", b"9:u", 0), ERR_INPUT)
 bad("bad_law", lib.nlsim_model_add_element(model, b"e", b"cubic k9=1", b"1:u", None),
     ERR_INPUT)
+one_dof = (C.c_char_p * 1)(b"1:u")
+bad("coupled_dofs", lib.nlsim_model_add_coupled_element(
+    model, b"g", b"coupled_polynomial k1_1_1=1 k2_2_0=2", one_dof, 1), ERR_INPUT)
 bad("unknown_param", lib.nlsim_get_param(hb, b"tip.k4", C.byref(k3)), ERR_INPUT)
 bad("wrong_size", lib.nlsim_hb_point(hb, 12.0, 1.0, 0, y, per - 1, None), ERR_SIZE)
 bad("null_buffer", lib.nlsim_hb_point(hb, 12.0, 1.0, 0, None, per, None), ERR_NULL)
