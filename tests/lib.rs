@@ -2842,7 +2842,8 @@ NONE
                     .collect(),
             })
             .collect();
-        let p = scratch("uff-frf").join("ecl.uff");
+        let dir = scratch("uff-frf");
+        let p = dir.join("ecl.uff");
         uff::write(&p, &recs, true).unwrap();
         let data =
             uff::to_test_data(&uff::read(&p).unwrap(), "shaker", Noise::relative(0.01)).unwrap();
