@@ -5617,8 +5617,7 @@ fn nnm_follows_the_ecl_beams_first_bending_mode() {
 /// its coordinates and coefficients, `frf` finds the two folds and two period doublings the
 /// library test checks against shooting (1.087926618, 1.122991807, 1.094506527,
 /// 1.098891783 rad/s at H = 11), `nnm` follows the softening mode, `simulate` integrates it
-/// (Newmark on the unreduced model refuses it by name), and malformed coefficients are errors
-/// at their line.
+/// (FOH and Newmark agree), and malformed coefficients are errors at their line.
 #[test]
 fn coupled_polynomial_element_from_a_model_file() {
     let model = concat!(
@@ -5685,28 +5684,37 @@ fn coupled_polynomial_element_from_a_model_file() {
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("extended periodic motion"), "{out}");
     // Time integration feeds the law back at both coordinates (checked against the equations
-    // written out in sim/tests/nonlinear.rs); the unreduced Newmark reference refuses it by
-    // name.
-    let (code, out, err) = nlsim(&["simulate", model, "--duration", "20", "--rate", "20"]);
-    assert_eq!(code, 0, "{err}");
+    // written out in sim/tests/nonlinear.rs), FOH on the reduced model and Newmark on the
+    // unreduced one alike: their peaks of q1 agree to their discretisation errors at
+    // Δt = T1/111 (3e-4 and 3e-3 of the peak).
+    let q1_peak = |method: &str| -> f64 {
+        let args = [
+            "simulate",
+            model,
+            "--duration",
+            "20",
+            "--rate",
+            "20",
+            "--method",
+            method,
+        ];
+        let (code, out, err) = nlsim(&args);
+        assert_eq!(code, 0, "{args:?}: {err}");
+        assert!(
+            out.contains("geometry[1]") && out.contains("geometry[2]"),
+            "{out}"
+        );
+        out.lines()
+            .find_map(|l| l.trim().strip_prefix("q1 "))
+            .and_then(|l| l.split_whitespace().nth(1))
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("no peak of q1 in\n{out}"))
+    };
+    let (foh, newmark) = (q1_peak("foh"), q1_peak("newmark"));
+    assert!(foh > 0.01, "{foh}");
     assert!(
-        out.contains("geometry[1]") && out.contains("geometry[2]"),
-        "{out}"
-    );
-    let (code, _, err) = nlsim(&[
-        "simulate",
-        model,
-        "--duration",
-        "1",
-        "--rate",
-        "100",
-        "--method",
-        "newmark",
-    ]);
-    assert_ne!(code, 0);
-    assert!(
-        err.contains("element 'geometry'") && err.contains("couples 2 coordinates"),
-        "{err}"
+        (foh - newmark).abs() < 5e-3 * foh,
+        "FOH {foh}, Newmark {newmark}"
     );
     // A coefficient with one power per coordinate missing, and one of degree 0: the file,
     // line and key are named.

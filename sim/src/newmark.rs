@@ -63,13 +63,15 @@ pub struct Newmark {
     k: SparseSym,
     damping: DampingOp,
     elements: Vec<NonlinearElement>,
+    /// `(element, coordinate)` of every loop coordinate (one per coordinate of each law).
+    channels: Vec<(usize, usize)>,
     inputs: Vec<(String, usize)>,
     outputs: Vec<(String, usize, Quantity)>,
     cfg: NewmarkConfig,
     gamma: f64,
     beta: f64,
     keff: Llt<usize, f64>,
-    /// `K_eff⁻¹ W` (n × n_NL).
+    /// `K_eff⁻¹ W` (n × n_NL), one column of `W` per element coordinate.
     y: Mat<f64>,
     /// `Wᵀ K_eff⁻¹ W` (n_NL × n_NL).
     wty: Mat<f64>,
@@ -102,9 +104,6 @@ impl Newmark {
                 "HHT alpha",
                 format!("{} is outside [-1/3, 0]", cfg.alpha),
             ));
-        }
-        for e in model.elements() {
-            refuse_coupled(e)?;
         }
         let damping = match model.damping() {
             Damping::None => DampingOp::None,
@@ -161,10 +160,16 @@ impl Newmark {
         })?;
         let n = model.n_dofs();
         let elements: Vec<NonlinearElement> = model.elements().to_vec();
-        let nn = elements.len();
+        let channels: Vec<(usize, usize)> = elements
+            .iter()
+            .enumerate()
+            .flat_map(|(e, el)| (0..el.couplings().len()).map(move |c| (e, c)))
+            .collect();
+        let coupling = |j: usize| &elements[channels[j].0].couplings()[channels[j].1];
+        let nn = channels.len();
         let mut y = Mat::<f64>::zeros(n, nn);
-        for (j, e) in elements.iter().enumerate() {
-            let c = e.coupling();
+        for j in 0..nn {
+            let c = coupling(j);
             for (&d, &w) in c.dofs().iter().zip(c.weights()) {
                 y[(d, j)] += w;
             }
@@ -172,7 +177,7 @@ impl Newmark {
         llt.solve_in_place(y.as_mut());
         let wty = Mat::from_fn(nn, nn, |i, j| {
             coupling_dot(
-                elements[i].coupling(),
+                coupling(i),
                 y.col(j).try_as_col_major().expect("contiguous").as_slice(),
             )
         });
@@ -197,6 +202,7 @@ impl Newmark {
             k: k.clone(),
             damping,
             elements,
+            channels,
             inputs,
             outputs,
             cfg: *cfg,
@@ -270,7 +276,9 @@ impl Newmark {
             nlsim_kernel::param::set_element_param(&mut elements, p, *v)?;
         }
         let n = self.m.n();
-        let nn = elements.len();
+        let channels = &self.channels[..];
+        let nn = channels.len();
+        let coupling = |j: usize| &self.elements[channels[j].0].couplings()[channels[j].1];
         let alpha = self.cfg.alpha;
         let h = self.cfg.dt / self.cfg.substeps as f64;
         let (gamma, beta) = (self.gamma, self.beta);
@@ -318,14 +326,28 @@ impl Newmark {
         }
         // p at rest is zero (elements at u = 0 may carry force only if g(0) ≠ 0).
         let mut g = vec![0.0; nn];
-        let mut kappa = vec![0.0; nn];
+        // Per coordinate: the rows of (1+α)(∂g/∂u + cv ∂g/∂u̇) over its element's coordinates.
+        let mut tangent = vec![
+            0.0;
+            channels
+                .iter()
+                .map(|&(e, _)| elements[e].couplings().len())
+                .sum()
+        ];
         let mut wtx = vec![0.0; nn];
+        let mut xw = vec![0.0; nn];
         let mut small = Mat::<f64>::zeros(nn, nn);
-        for (j, e) in elements.iter().enumerate() {
-            let ev = e.law().eval(0.0, 0.0, &states[j]);
-            g[j] = ev.force;
-            e.coupling().scatter_add(ev.force, &mut p_old);
-        }
+        let mut scratch = Scratch::new(&elements);
+        eval_elements(
+            &elements,
+            &states,
+            &d,
+            &v,
+            &mut g,
+            None,
+            &mut p_old,
+            &mut scratch,
+        );
         let mut rec_out = vec![vec![0.0; ns]; self.outputs.len()];
         let mut rec_in = vec![vec![0.0; ns]; self.inputs.len()];
         let mut rec_d = vec![vec![0.0; ns]; nn];
@@ -343,9 +365,9 @@ impl Newmark {
             for (i, s) in case.forces.iter().enumerate() {
                 rec_in[i][k] = s.eval(t);
             }
-            for (j, e) in elements.iter().enumerate() {
-                rec_d[j][k] = e.coupling().coordinate(d);
-                rec_v[j][k] = e.coupling().coordinate(v);
+            for j in 0..nn {
+                rec_d[j][k] = coupling(j).coordinate(d);
+                rec_v[j][k] = coupling(j).coordinate(v);
                 rec_f[j][k] = g[j];
             }
         };
@@ -363,10 +385,9 @@ impl Newmark {
         // c0 and cv) carried through `M` and `V`.
         let inf = |x: &[f64]| x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         let [norm_m, norm_k, norm_v] = self.norms;
-        let wmax: Vec<f64> = elements
-            .iter()
-            .map(|e| {
-                e.coupling()
+        let wmax: Vec<f64> = (0..nn)
+            .map(|j| {
+                coupling(j)
                     .weights()
                     .iter()
                     .fold(0.0f64, |m, w| m.max(w.abs()))
@@ -409,13 +430,16 @@ impl Newmark {
                 for it in 0..self.cfg.newton.max_iterations {
                     kinematics(&d, &dn, &vn, &an, &mut a, &mut v);
                     self.linear_internal(&d, &v, &mut p_new, &mut tmp);
-                    for (j, e) in elements.iter().enumerate() {
-                        let c = e.coupling();
-                        let ev = e.law().eval(c.coordinate(&d), c.coordinate(&v), &states[j]);
-                        g[j] = ev.force;
-                        kappa[j] = (1.0 + alpha) * (ev.df_du + cv * ev.df_dv);
-                        c.scatter_add(ev.force, &mut p_new);
-                    }
+                    eval_elements(
+                        &elements,
+                        &states,
+                        &d,
+                        &v,
+                        &mut g,
+                        Some((&mut tangent, 1.0 + alpha, cv)),
+                        &mut p_new,
+                        &mut scratch,
+                    );
                     self.m.mul_vec(&a, &mut ma);
                     for i in 0..n {
                         r[i] = (1.0 + alpha) * f_next[i]
@@ -438,17 +462,31 @@ impl Newmark {
                     }
                     self.keff.solve_in_place(col.as_mut());
                     stats.evaluations += 1;
-                    if nn > 0 && kappa.iter().any(|&k| k != 0.0) {
+                    if nn > 0 && tangent.iter().any(|&k| k != 0.0) {
+                        // Woodbury with the block-diagonal element tangent G:
+                        // (K_eff + W G Wᵀ)⁻¹ r = x − Y (I + G Wᵀ Y)⁻¹ G Wᵀ x.
                         let xs = col
                             .col(0)
                             .try_as_col_major()
                             .expect("contiguous")
                             .as_slice();
+                        for (j, w) in xw.iter_mut().enumerate() {
+                            *w = coupling_dot(coupling(j), xs);
+                        }
+                        let mut at = 0;
                         for j in 0..nn {
-                            wtx[j] = kappa[j] * coupling_dot(elements[j].coupling(), xs);
+                            let (e, c) = channels[j];
+                            let first = j - c;
+                            let row = &tangent[at..at + elements[e].couplings().len()];
+                            at += row.len();
+                            wtx[j] = row.iter().zip(&xw[first..]).map(|(k, x)| k * x).sum();
                             for m in 0..nn {
-                                small[(j, m)] =
-                                    f64::from(u8::from(j == m)) + kappa[j] * self.wty[(j, m)];
+                                small[(j, m)] = f64::from(u8::from(j == m))
+                                    + row
+                                        .iter()
+                                        .enumerate()
+                                        .map(|(b, k)| k * self.wty[(first + b, m)])
+                                        .sum::<f64>();
                             }
                         }
                         let lu = small.partial_piv_lu();
@@ -498,12 +536,22 @@ impl Newmark {
                 // Final kinematics and internal force at the converged d.
                 kinematics(&d, &dn, &vn, &an, &mut a, &mut v);
                 self.linear_internal(&d, &v, &mut p_old, &mut tmp);
-                for (j, e) in elements.iter().enumerate() {
-                    let c = e.coupling();
-                    let (u, ud) = (c.coordinate(&d), c.coordinate(&v));
-                    g[j] = e.law().eval(u, ud, &states[j]).force;
-                    e.law().commit_state(u, ud, &mut states[j]);
-                    c.scatter_add(g[j], &mut p_old);
+                eval_elements(
+                    &elements,
+                    &states,
+                    &d,
+                    &v,
+                    &mut g,
+                    None,
+                    &mut p_old,
+                    &mut scratch,
+                );
+                for (e, el) in elements.iter().enumerate() {
+                    if !el.is_coupled() {
+                        let c = el.coupling();
+                        let (u, ud) = (c.coordinate(&d), c.coordinate(&v));
+                        el.law().commit_state(u, ud, &mut states[e]);
+                    }
                 }
                 stats.steps += 1;
             }
@@ -546,7 +594,10 @@ impl Newmark {
                 .map(|(n, _)| n.clone())
                 .zip(rec_in)
                 .collect(),
-            element_names: elements.iter().map(|e| e.name().to_string()).collect(),
+            element_names: channels
+                .iter()
+                .map(|&(e, c)| nlsim_reduction::modal::element_port_name(&elements[e], c))
+                .collect(),
             element_displacements: rec_d,
             element_velocities: rec_v,
             element_forces: rec_f,
@@ -566,20 +617,72 @@ fn coupling_dot(c: &Coupling, x: &[f64]) -> f64 {
         .sum()
 }
 
-/// The unreduced Newmark reference acts on scalar element coordinates: a law on several
-/// coordinates ([`nlsim_kernel::Law::CoupledPolynomial`]) is refused with a message that names
-/// it and the integrators that take it.
-fn refuse_coupled(e: &nlsim_kernel::NonlinearElement) -> Result<()> {
-    if e.is_coupled() {
-        return Err(Error::invalid(
-            format!("element '{}'", e.name()),
-            format!(
-                "its {} law couples {} coordinates; the unreduced Newmark reference takes \
-                 one-coordinate laws only (the FOH and RK45 integrators take it)",
-                e.law().kind(),
-                e.couplings().len()
-            ),
-        ));
+/// Work buffers of [`eval_elements`] for the largest law.
+struct Scratch {
+    u: Vec<f64>,
+    f: Vec<f64>,
+    jac: Vec<f64>,
+}
+
+impl Scratch {
+    fn new(elements: &[NonlinearElement]) -> Self {
+        let m = elements
+            .iter()
+            .map(|e| e.couplings().len())
+            .max()
+            .unwrap_or(1);
+        Scratch {
+            u: vec![0.0; m],
+            f: vec![0.0; m],
+            jac: vec![0.0; m * m],
+        }
     }
-    Ok(())
+}
+
+/// Evaluates every element at displacements `d` and velocities `v`: the force of each
+/// coordinate into `g` (one entry per coordinate, elements in order), scattered along its
+/// coupling into `p`. With `tangent = (buf, s, cv)`, also each coordinate's row of
+/// `s (∂g/∂u + cv ∂g/∂u̇)` over its element's coordinates, rows in order, into `buf`.
+#[allow(clippy::too_many_arguments)]
+fn eval_elements(
+    elements: &[NonlinearElement],
+    states: &[Vec<f64>],
+    d: &[f64],
+    v: &[f64],
+    g: &mut [f64],
+    mut tangent: Option<(&mut [f64], f64, f64)>,
+    p: &mut [f64],
+    w: &mut Scratch,
+) {
+    let (mut j, mut at) = (0, 0);
+    for (e, el) in elements.iter().enumerate() {
+        let cs = el.couplings();
+        let m = cs.len();
+        if el.is_coupled() {
+            for (u, c) in w.u[..m].iter_mut().zip(cs) {
+                *u = c.coordinate(d);
+            }
+            el.law()
+                .eval_coupled(&w.u[..m], &mut w.f[..m], &mut w.jac[..m * m]);
+            for (a, c) in cs.iter().enumerate() {
+                g[j + a] = w.f[a];
+                c.scatter_add(w.f[a], p);
+            }
+            if let Some((buf, s, _)) = tangent.as_mut() {
+                for (t, k) in buf[at..at + m * m].iter_mut().zip(&w.jac[..m * m]) {
+                    *t = *s * k;
+                }
+            }
+        } else {
+            let c = el.coupling();
+            let ev = el.law().eval(c.coordinate(d), c.coordinate(v), &states[e]);
+            g[j] = ev.force;
+            c.scatter_add(ev.force, p);
+            if let Some((buf, s, cv)) = tangent.as_mut() {
+                buf[at] = *s * (ev.df_du + *cv * ev.df_dv);
+            }
+        }
+        j += m;
+        at += m * m;
+    }
 }
