@@ -7,7 +7,7 @@
 //! test instead of the machine). The seed is fixed and printed; `NLSIM_FUZZ_SEED` and
 //! `NLSIM_FUZZ_SCALE` (a factor on the iteration counts) explore further by hand.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 /// splitmix64: a small, seeded generator (the fuzzer's only source of randomness).
@@ -163,37 +163,12 @@ fn scale() -> usize {
         .unwrap_or(1)
 }
 
-/// A scratch directory for one test, removed when the test passes. A failing test (a
-/// panic while it is alive) leaves it in place for inspection; its path is in the message.
-struct Scratch(PathBuf);
-
-impl std::ops::Deref for Scratch {
-    type Target = Path;
-    fn deref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl AsRef<Path> for Scratch {
-    fn as_ref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        if std::thread::panicking() {
-            eprintln!("scratch directory kept: {}", self.0.display());
-        } else {
-            let _ = std::fs::remove_dir_all(&self.0);
-        }
-    }
-}
+#[path = "common/scratch.rs"]
+mod scratch_dir;
+use scratch_dir::Scratch;
 
 fn scratch() -> Scratch {
-    let d = std::env::temp_dir().join(format!("nlsim-fuzz-{}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    Scratch(d)
+    Scratch::new("fuzz")
 }
 
 fn root() -> &'static Path {

@@ -4,37 +4,12 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// A scratch directory for one test, removed when the test passes. A failing test (a
-/// panic while it is alive) leaves it in place for inspection; its path is in the message.
-struct Scratch(PathBuf);
-
-impl std::ops::Deref for Scratch {
-    type Target = Path;
-    fn deref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl AsRef<Path> for Scratch {
-    fn as_ref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        if std::thread::panicking() {
-            eprintln!("scratch directory kept: {}", self.0.display());
-        } else {
-            let _ = std::fs::remove_dir_all(&self.0);
-        }
-    }
-}
+#[path = "common/scratch.rs"]
+mod scratch_dir;
+use scratch_dir::Scratch;
 
 fn scratch(name: &str) -> Scratch {
-    let d = std::env::temp_dir().join(format!("nlsim-e2e-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    Scratch(d)
+    Scratch::new(&format!("e2e-{name}"))
 }
 
 /// Gives an HDF5 file this process wrote a new inode (a copy renamed over it), before a

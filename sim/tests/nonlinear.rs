@@ -552,6 +552,52 @@ fn geometric_rk4(amp: f64, omega: f64, h: f64, steps: usize, every: usize) -> [V
     out
 }
 
+/// The case of the coupled-element checks: `0.03 sin(1.1 t)` on both coordinates of
+/// [`geometric_2dof`], near its first mode, 300 samples of 0.05 s (15 s, 2.6 periods) from
+/// rest, with its RK4 reference at a 64 times finer step.
+struct GeometricCase {
+    case: LoadCase,
+    dt: f64,
+    n: usize,
+    reference: [Vec<f64>; 2],
+    scale: f64,
+}
+
+impl GeometricCase {
+    fn new() -> Self {
+        let (amp, omega) = (0.03, 1.1);
+        let sig = Signal::Sine {
+            amplitude: amp,
+            freq_hz: omega / (2.0 * PI),
+            phase: 0.0,
+        };
+        let (dt, n) = (0.05, 300);
+        let reference = geometric_rk4(amp, omega, dt / 64.0, 64 * n, 64);
+        let scale = peak(&reference[0]).max(peak(&reference[1]));
+        GeometricCase {
+            case: LoadCase::new("sine", vec![sig.clone(), sig]),
+            dt,
+            n,
+            reference,
+            scale,
+        }
+    }
+
+    /// The largest deviation of `h`'s `q1`, `q2` (every `stride`-th sample) from the
+    /// reference, relative to its peak.
+    fn error(&self, h: &TimeHistory, stride: usize) -> f64 {
+        (0..2)
+            .map(|c| {
+                max_diff(
+                    &every(h, &format!("q{}", c + 1), stride),
+                    &self.reference[c],
+                )
+            })
+            .fold(0.0, f64::max)
+            / self.scale
+    }
+}
+
 /// A law on two coordinates in the time domain: FOH (and RK45) on the reduced plant against
 /// RK4 on the equations of motion written out independently of the element, with the
 /// geometric forces reaching a third of the linear ones.
@@ -567,28 +613,14 @@ fn coupled_geometric_element_matches_its_written_out_equations() {
         10,
         "the coupled element's ten coefficients, listed once"
     );
-    // Near the first mode, 15 s (2.6 periods) from rest.
-    let (amp, omega) = (0.03, 1.1);
-    let sig = Signal::Sine {
-        amplitude: amp,
-        freq_hz: omega / (2.0 * PI),
-        phase: 0.0,
-    };
-    let case = LoadCase::new("sine", vec![sig.clone(), sig]);
-    let (dt, n) = (0.05, 300);
-    let reference = geometric_rk4(amp, omega, dt / 64.0, 64 * n, 64);
-    let scale = peak(&reference[0]).max(peak(&reference[1]));
-    let err = |h: &TimeHistory, stride: usize| {
-        (0..2)
-            .map(|c| max_diff(&every(h, &format!("q{}", c + 1), stride), &reference[c]))
-            .fold(0.0, f64::max)
-            / scale
-    };
+    let g = GeometricCase::new();
+    let (case, dt, n) = (&g.case, g.dt, g.n);
+    let err = |h: &TimeHistory, stride: usize| g.error(h, stride);
     let errs: Vec<f64> = [1usize, 2, 4, 8]
         .iter()
         .map(|&d| {
             let sim = Simulator::new(&plant, &FohConfig::new(dt / d as f64)).unwrap();
-            err(&sim.run(&case, n * d).unwrap(), d)
+            err(&sim.run(case, n * d).unwrap(), d)
         })
         .collect();
     eprintln!("coupled geometric 2-DOF, FOH errors at dt/1, /2, /4, /8: {errs:?}");
@@ -598,7 +630,7 @@ fn coupled_geometric_element_matches_its_written_out_equations() {
     // force (0.35 at q1 = 0.16).
     let h = Simulator::new(&plant, &FohConfig::new(dt / 8.0))
         .unwrap()
-        .run(&case, 8 * n)
+        .run(case, 8 * n)
         .unwrap();
     assert_eq!(h.element_names, ["geometry[1]", "geometry[2]"]);
     let (q1, q2) = (&h.element_displacements[0], &h.element_displacements[1]);
@@ -619,7 +651,7 @@ fn coupled_geometric_element_matches_its_written_out_equations() {
         }
     }
     // RK45 on the same plant, tight, agrees with the written-out equations too.
-    let r = rk45(&plant, &case, dt, n, &tight()).unwrap();
+    let r = rk45(&plant, case, dt, n, &tight()).unwrap();
     assert!(err(&r, 1) < 1e-8, "RK45 {:e}", err(&r, 1));
 }
 
@@ -714,16 +746,8 @@ fn a_coupled_element_needs_all_its_ports() {
 fn newmark_takes_a_coupled_element() {
     use nlsim_sim::{Newmark, NewmarkConfig};
     let model = geometric_2dof();
-    let (amp, omega) = (0.03, 1.1);
-    let sig = Signal::Sine {
-        amplitude: amp,
-        freq_hz: omega / (2.0 * PI),
-        phase: 0.0,
-    };
-    let case = LoadCase::new("sine", vec![sig.clone(), sig]);
-    let (dt, n) = (0.05, 300);
-    let reference = geometric_rk4(amp, omega, dt / 64.0, 64 * n, 64);
-    let scale = peak(&reference[0]).max(peak(&reference[1]));
+    let g = GeometricCase::new();
+    let (case, dt, n) = (&g.case, g.dt, g.n);
     let mut last = None;
     let errs: Vec<f64> = [1usize, 2, 4, 8]
         .iter()
@@ -732,11 +756,8 @@ fn newmark_takes_a_coupled_element() {
                 substeps,
                 ..NewmarkConfig::new(dt)
             };
-            let h = Newmark::new(&model, &cfg).unwrap().run(&case, n).unwrap();
-            let e = (0..2)
-                .map(|c| max_diff(&every(&h, &format!("q{}", c + 1), 1), &reference[c]))
-                .fold(0.0, f64::max)
-                / scale;
+            let h = Newmark::new(&model, &cfg).unwrap().run(case, n).unwrap();
+            let e = g.error(&h, 1);
             last = Some(h);
             e
         })
