@@ -53,10 +53,8 @@ pub(crate) struct Feedback {
     pub last_v: Vec<f64>,
     /// Static stiffness of each element's port (N/m), for the absolute force tolerance.
     stiffness: Vec<f64>,
-    /// Per port: the first port of its element's group and the group's size (1 for a
-    /// one-coordinate law).
-    group: Vec<(usize, usize)>,
-    /// Per port of a coupled group: the offset of its row of `∂g/∂u` in `gjac`.
+    /// Per port of a coupled group (its entries in coordinate order,
+    /// [`ElementPort::coordinate`]): the offset of its row of `∂g/∂u` in `gjac`.
     row_at: Vec<usize>,
     /// `∂g_a/∂u_b` of every coupled group, row-major blocks.
     gjac: Vec<f64>,
@@ -78,26 +76,17 @@ impl Feedback {
                 }
             })
             .collect();
-        let mut group = Vec::with_capacity(n);
         let mut row_at = vec![0; n];
         let mut blocks = 0;
-        let mut i = 0;
-        while i < n {
-            let m = plant.elements[i].element.law().arity().max(1);
-            for a in 0..m {
-                group.push((i, m));
-                if m > 1 {
-                    row_at[i + a] = blocks + a * m;
-                }
-            }
+        for (r, e) in row_at.iter_mut().zip(&plant.elements) {
+            let m = e.element.law().arity();
             if m > 1 {
-                blocks += m * m;
+                *r = blocks;
+                blocks += m;
             }
-            i += m;
         }
         Feedback {
             stiffness,
-            group,
             row_at,
             gjac: vec![0.0; blocks],
             n,
@@ -143,8 +132,8 @@ impl Feedback {
         let mut ok = true;
         let mut i = 0;
         while i < n {
-            let m = self.group[i].1;
             let law = elements[i].element.law();
+            let m = law.arity().max(1);
             if m == 1 {
                 let e = law.eval(self.d[i], self.v[i], &states[i]);
                 self.g[i] = e.force;
@@ -215,14 +204,15 @@ impl Feedback {
             // J = I + G_u S_d + G_v S_v (G diagonal but for the blocks of coupled laws, whose
             // velocity tangent is zero); solve J Δ = −r.
             for i in 0..n {
-                let (s0, m) = self.group[i];
-                if m == 1 {
+                let m = elements[i].element.law().arity();
+                if m <= 1 {
                     for j in 0..n {
                         self.jac[i * n + j] = f64::from(u8::from(i == j))
                             + self.gu[i] * sd[i * n + j]
                             + self.gv[i] * sv[i * n + j];
                     }
                 } else {
+                    let s0 = i - elements[i].coordinate;
                     let row = &self.gjac[self.row_at[i]..self.row_at[i] + m];
                     for j in 0..n {
                         let mut x = f64::from(u8::from(i == j));
