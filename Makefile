@@ -16,6 +16,11 @@ test:
 	@# The computation alone (no `io`): builds, and pulls in no HDF5 or plotting crate.
 	cargo build -p nlsim --no-default-features --quiet
 	@! cargo tree -p nlsim --no-default-features -e normal | grep -E 'hdf5|plotters|png '
+	@# The file formats alone (`formats`): builds without plotting, clap or the command layer.
+	cargo build -p nlsim --no-default-features --features formats --quiet
+	@! cargo tree -p nlsim --no-default-features --features formats -e normal | grep -E 'plotters|png |clap'
+	@# The layout: no import circle between files, layers pointing down, file sizes.
+	python3 scripts/layers.py
 	cargo test --workspace
 	@# The matrix adapters (optional features of the kernel).
 	cargo clippy -p nlsim-kernel --all-targets --features nalgebra-sparse,sprs,test-util -- -D warnings

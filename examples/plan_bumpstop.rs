@@ -16,10 +16,14 @@
 //! test files, data and calibration reports go to DIR, by default a folder in the system's
 //! temporary directory).
 
-use nlsim::calibration::{CalibrationRequest, run_calibration};
+use nlsim::commands::calibrate::request::CalibrationRequest;
+
+use nlsim::commands::calibrate::run::run_calibration;
+use nlsim::commands::plan::request::PlanRequest;
+use nlsim::commands::plan::run::run_plan;
+use nlsim::commands::test::request::TestRequest;
+use nlsim::commands::test::run::run_test;
 use nlsim::prelude::*;
-use nlsim::pretest::{PlanRequest, run_plan};
-use nlsim::vtest::{TestRequest, run_test};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -73,7 +77,7 @@ fn run(dir: &Path) -> nlsim::Result<Vec<Row>> {
     let mut plan = PlanRequest::parse(PLAN, &plan_path, MODEL)?;
     plan.report = Some(dir.join("plan-report"));
     let planned = run_plan(&plan, &|_, _| {})?;
-    nlsim::pretest::write_plan_report(&dir.join("plan-report"), &planned)?;
+    nlsim::commands::plan::report::write_plan_report(&dir.join("plan-report"), &planned)?;
     let n = planned.ranked.len();
     let identifiable: Vec<usize> = (0..n)
         .filter(|&i| planned.ranked[i].summary.rank == plan.params.len())
@@ -127,7 +131,11 @@ fn run(dir: &Path) -> nlsim::Result<Vec<Row>> {
         rows.push(Row {
             what,
             rank: i + 1,
-            design: nlsim::pretest::describe_design(&planned.candidates, &planned.sweeps, r)[1..]
+            design: nlsim::commands::plan::run::describe_design(
+                &planned.candidates,
+                &planned.sweeps,
+                r,
+            )[1..]
                 .join(", "),
             planned: r.summary.std.clone(),
             estimate: c.estimate.clone(),

@@ -3,10 +3,21 @@
 //! Simulation and calibration of large linear structures with local nonlinearities, after
 //! Y. Chen, *Model calibration methods for mechanical systems with local nonlinearities*
 //! (Linnaeus University, 2016). This crate is the facade: it re-exports the numeric crates
-//! and holds what touches files — model files, Matrix Market, HDF5 results, plots, batches
-//! (feature `io`) — and the `nlsim` command line (feature `cli`, which implies `io`; both on by
-//! default). Link with `default-features = false` for the computation alone: no libhdf5, no
-//! plotting, no file formats. [`prelude`] holds the names a workflow in code needs:
+//! ([`kernel`], [`reduction`], [`sim`], [`hb`], [`calib`], [`fixtures`]) and adds, in layers
+//! whose dependencies point down:
+//!
+//! | layer | holds | feature |
+//! |---|---|---|
+//! | [`formats`] | file formats in and out: model files, matrices, test data, universal files, result files | `formats` |
+//! | [`present`] | summaries, plots, the HTML report, the terminal | `io` (summaries always) |
+//! | [`commands`] | one request, one run, one report writer per `nlsim` command | `io` |
+//! | [`batch`] | jobs files, shards, merge, SLURM job arrays | `io` |
+//! | `src/bin/nlsim/` | the `nlsim` binary: argument parsing and dispatch only | `cli` |
+//!
+//! `cli` implies `io`, which implies `formats`; `cli` is on by default. Link with
+//! `default-features = false` for the computation alone (no libhdf5, no plotting, no file
+//! formats), or with `features = ["formats"]` to read and write nlsim's files without the
+//! plotting and command layers. [`prelude`] holds the names a workflow in code needs:
 //!
 //! ```
 //! use nlsim::prelude::*;
@@ -31,62 +42,26 @@
 //! # #[cfg(feature = "io")] {
 //! let loaded = nlsim::load_model("ecl_beam").unwrap();
 //! let report = loaded.model.validate(&nlsim::kernel::ValidationConfig::default()).unwrap();
-//! println!("{}", nlsim::summary::model_summary(&loaded.model, &loaded.source, Some(&report)));
+//! println!("{}", nlsim::present::summary::model_summary(&loaded.model, &loaded.source, Some(&report)));
 //! # }
 //! ```
 
 #[cfg(feature = "io")]
 pub mod batch;
 #[cfg(feature = "io")]
-pub mod cache;
-#[cfg(feature = "io")]
-pub mod calibration;
-#[cfg(feature = "io")]
-pub mod demo;
+pub mod commands;
 pub mod error;
-#[cfg(feature = "io")]
-pub mod frf;
-#[cfg(feature = "io")]
-pub mod modal_calibration;
-#[cfg(feature = "io")]
-pub mod modaldata;
-#[cfg(feature = "io")]
-pub mod modes;
-#[cfg(feature = "io")]
-pub mod mtx;
-#[cfg(feature = "io")]
-pub mod nnm;
-#[cfg(feature = "io")]
-pub mod output;
-#[cfg(feature = "io")]
-pub mod planning;
-#[cfg(feature = "io")]
-pub mod plot;
+#[cfg(feature = "formats")]
+pub mod formats;
 pub mod prelude;
-#[cfg(feature = "io")]
-pub mod pretest;
-#[cfg(feature = "io")]
-pub mod report;
-#[cfg(feature = "io")]
-pub mod run;
-#[cfg(feature = "io")]
-pub mod simulate;
-#[cfg(feature = "io")]
-pub mod spec;
-pub mod summary;
-#[cfg(feature = "io")]
-pub mod testdata;
-#[cfg(feature = "io")]
-pub mod uff;
-#[cfg(feature = "io")]
-pub mod vtest;
+pub mod present;
 
 pub use error::{Error, Result};
+#[cfg(feature = "formats")]
+pub use formats::model_file::{LoadedModel, load_model, parse_model_file};
 pub use nlsim_calib as calib;
 pub use nlsim_fixtures as fixtures;
 pub use nlsim_hb as hb;
 pub use nlsim_kernel as kernel;
 pub use nlsim_reduction as reduction;
 pub use nlsim_sim as sim;
-#[cfg(feature = "io")]
-pub use spec::{LoadedModel, load_model, parse_model_file};

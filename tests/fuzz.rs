@@ -222,7 +222,7 @@ fn fuzz_inner() {
     ];
     panics.extend(survive("matrix market", 10000 * scale(), |_| {
         let text = mutate(rng.pick(&mtx).clone().as_str(), &mut rng);
-        nlsim::mtx::parse_matrix_market(&text, Path::new("K.mtx"), "stiffness matrix")
+        nlsim::formats::matrices::parse_matrix_market(&text, Path::new("K.mtx"), "stiffness matrix")
             .err()
             .map(|e| e.to_string())
     }));
@@ -246,10 +246,10 @@ fn fuzz_inner() {
     // The binary cache: a valid cache with bytes flipped, cut or extended.
     let src = dir.join("K.mtx");
     std::fs::copy(root().join("examples/models/spring_mass.mtx"), &src).unwrap();
-    let want = nlsim::cache::load_matrix_market(&src, "K")
+    let want = nlsim::formats::cache::load_matrix_market(&src, "K")
         .unwrap()
         .to_dense();
-    let cache = nlsim::cache::cache_path(&src);
+    let cache = nlsim::formats::cache::cache_path(&src);
     let good = std::fs::read(&cache).unwrap();
     panics.extend(survive("matrix cache", 3000 * scale(), |_| {
         let mut b = good.clone();
@@ -269,7 +269,7 @@ fn fuzz_inner() {
         }
         std::fs::write(&cache, &b).unwrap();
         // Whatever the cache holds, the matrix is the source's.
-        let m = nlsim::cache::load_matrix_market(&src, "K")
+        let m = nlsim::formats::cache::load_matrix_market(&src, "K")
             .unwrap()
             .to_dense();
         assert_eq!(m, want, "a damaged cache was trusted");
@@ -344,7 +344,7 @@ fn fuzz_inner() {
         if write(&mut rng).is_err() {
             return Some("not written".into());
         }
-        nlsim::mtx::read_hdf5_matrix(&h5, "/obj", "K")
+        nlsim::formats::matrices::read_hdf5_matrix(&h5, "/obj", "K")
             .err()
             .map(|e| e.to_string())
     }));

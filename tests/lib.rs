@@ -25,7 +25,7 @@ fn fresh_inode(path: &Path) {
 
 /// Writes test data as HDF5 for a child `nlsim` to read ([`fresh_inode`]).
 fn write_test_h5(path: &Path, data: &nlsim::calib::TestData) {
-    nlsim::testdata::write_h5(path, data).unwrap();
+    nlsim::formats::test_data::write_h5(path, data).unwrap();
     fresh_inode(path);
 }
 
@@ -610,7 +610,8 @@ k3 = 1e9
 
 mod matrix_market {
     use super::*;
-    use nlsim::mtx::{parse_matrix_market, to_matrix_market};
+    use nlsim::formats::matrices::parse_matrix_market;
+    use nlsim::formats::matrices::to_matrix_market;
 
     #[test]
     fn round_trip_and_errors_with_lines() {
@@ -1192,7 +1193,8 @@ mod modes {
         assert_eq!(rc, 0, "{err}");
         let k = std::fs::read_to_string(d.join("K.mtx")).unwrap();
         let back =
-            nlsim::mtx::parse_matrix_market(&k, &d.join("K.mtx"), "stiffness matrix").unwrap();
+            nlsim::formats::matrices::parse_matrix_market(&k, &d.join("K.mtx"), "stiffness matrix")
+                .unwrap();
         assert_eq!(back.get(0, 0), 2e4);
         assert_eq!(back.get(1, 0), -1e4);
         assert_eq!(
@@ -1356,9 +1358,11 @@ mod simulate {
 
     #[test]
     fn typed_drives_equal_the_parsed_specs() {
-        use nlsim::run::{Drive, SimRequest, run_simulation};
+        use nlsim::commands::simulate::request::Drive;
+        use nlsim::commands::simulate::request::SimRequest;
+        use nlsim::commands::simulate::run::run_simulation;
         use nlsim::sim::Signal;
-        let model = nlsim::run::load_for_run("ecl_beam", &[]).unwrap();
+        let model = nlsim::commands::setup::load_for_run("ecl_beam", &[]).unwrap();
         let point = model.excitation()[0].name.clone();
         let nominal = model.excitation()[0].amplitude;
         let run = |drives: Vec<Drive>| {
@@ -2603,8 +2607,9 @@ mod uff58 {
     use super::*;
     use faer::c64;
     use nlsim::calib::{Noise, SweepPlan, synthesize};
+    use nlsim::formats::uff;
+    use nlsim::formats::uff::Uff58;
     use nlsim::prelude::*;
-    use nlsim::uff::{self, Uff58};
     use std::sync::Arc;
 
     fn record(id: &str, dir: i64) -> Uff58 {
@@ -2878,7 +2883,7 @@ mod test_data_hdf5 {
         let dir = scratch("testdata-h5");
         let p = dir.join("test.h5");
         write_test_h5(&p, &d);
-        let back = nlsim::testdata::read_h5(&p).unwrap();
+        let back = nlsim::formats::test_data::read_h5(&p).unwrap();
         assert_eq!(back.input, d.input);
         assert_eq!(back.harmonics, 3);
         assert_eq!(back.channels, d.channels);
@@ -2928,7 +2933,9 @@ mod test_data_hdf5 {
                 .write_raw(&vec![c64::new(0.0, 0.0); 44])
                 .unwrap();
         }
-        let e = nlsim::testdata::read_h5(&bad).unwrap_err().to_string();
+        let e = nlsim::formats::test_data::read_h5(&bad)
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("bad.h5")
                 && e.contains("sweeps/sweep1/response")
@@ -2951,7 +2958,9 @@ mod test_data_hdf5 {
                 .unwrap();
         }
         assert!(std::fs::metadata(&huge).unwrap().len() < 1 << 20);
-        let e = nlsim::testdata::read_h5(&huge).unwrap_err().to_string();
+        let e = nlsim::formats::test_data::read_h5(&huge)
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("huge.h5") && e.contains("exceed the budget"),
             "{e}"
@@ -2959,7 +2968,9 @@ mod test_data_hdf5 {
         // Not test data at all.
         let other = dir.join("other.h5");
         hdf5::File::create(&other).unwrap();
-        let e = nlsim::testdata::read_h5(&other).unwrap_err().to_string();
+        let e = nlsim::formats::test_data::read_h5(&other)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("other.h5") && e.contains("format"), "{e}");
         // An unknown extension is a usage error that lists the formats.
         let (rc, _, err) = nlsim(&[
@@ -2994,7 +3005,7 @@ mod calibration_files {
         ];
         let d = synthesize(&sys, "shaker", &plans, 3, Noise::relative(0.02), 11).unwrap();
         let p = dir.join("test.csv");
-        nlsim::testdata::write_csv(&p, &d).unwrap();
+        nlsim::formats::test_data::write_csv(&p, &d).unwrap();
         (p, Param::ModalDamping(driven).to_string())
     }
 
@@ -3451,7 +3462,7 @@ seed = 9
         for c in &mut d.channels {
             c.noise = Noise::relative(0.01);
         }
-        nlsim::testdata::write_csv(&dir.join("test.csv"), &d).unwrap();
+        nlsim::formats::test_data::write_csv(&dir.join("test.csv"), &d).unwrap();
         let est = dir.join("est.csv");
         let (rc, out, err) = nlsim(&[
             "calibrate",
@@ -3499,7 +3510,9 @@ seed = 9
     #[test]
     fn modal_data_calibrates_fe_level_parameters() {
         use nlsim::calib::{MeasuredMode, ModalData};
-        use nlsim::modaldata::{ModalFile, modal_csv, parse_modal_csv};
+        use nlsim::formats::modal_data::ModalFile;
+        use nlsim::formats::modal_data::modal_csv;
+        use nlsim::formats::modal_data::parse_modal_csv;
         use nlsim::reduction::EigenSolver;
         let dir = scratch("calibration-modal");
         let model_file =
@@ -3899,7 +3912,8 @@ force = 0.2
     /// report's `best_test.toml`, which `nlsim test` runs as written.
     #[test]
     fn the_best_planned_test_calibrates_tighter_than_a_poor_one() {
-        use nlsim::calibration::{CalibrationRequest, run_calibration};
+        use nlsim::commands::calibrate::request::CalibrationRequest;
+        use nlsim::commands::calibrate::run::run_calibration;
         use nlsim::prelude::*;
         let dir = scratch("plan-bumpstop");
         let plan_path = dir.join("plan.toml");
@@ -3929,8 +3943,10 @@ steps = 25
         assert_eq!(rc, 0, "{out}\n{err}");
         assert!(dir.join("plan-report/virtual_test.csv").is_file());
 
-        let req = nlsim::pretest::PlanRequest::load(&plan_path, "bumpstop_cantilever").unwrap();
-        let run = nlsim::pretest::run_plan(&req, &|_, _| {}).unwrap();
+        let req =
+            nlsim::commands::plan::request::PlanRequest::load(&plan_path, "bumpstop_cantilever")
+                .unwrap();
+        let run = nlsim::commands::plan::run::run_plan(&req, &|_, _| {}).unwrap();
         assert_eq!(
             run.test_file(&run.ranked[0]),
             std::fs::read_to_string(&best_file).unwrap()
@@ -3951,10 +3967,12 @@ steps = 25
             let r = &run.ranked[i];
             let file = dir.join(format!("{name}.toml"));
             std::fs::write(&file, run.test_file(r)).unwrap();
-            let mut test = nlsim::vtest::TestRequest::load(&file, "bumpstop_cantilever").unwrap();
+            let mut test =
+                nlsim::commands::test::request::TestRequest::load(&file, "bumpstop_cantilever")
+                    .unwrap();
             test.compare_open_loop = false;
             test.out = dir.join(format!("{name}.csv"));
-            nlsim::vtest::run_test(&test, &mut |_, _| {}).unwrap();
+            nlsim::commands::test::run::run_test(&test, &mut |_, _| {}).unwrap();
             let sw = &run.sweeps[r.design.sweep];
             let mut cal = CalibrationRequest::new("bumpstop_cantilever", &test.out, specs.clone());
             cal.compare = sw.harmonic_numbers(&r.design);
@@ -4016,7 +4034,7 @@ steps = 25
             .map(f1)
             .fold(f64::INFINITY, f64::min);
         assert!(open < 0.5 * 0.2, "open-loop minimum {open} N");
-        let data = nlsim::testdata::read_csv(&dir.join("virtual_test.csv")).unwrap();
+        let data = nlsim::formats::test_data::read_csv(&dir.join("virtual_test.csv")).unwrap();
         assert_eq!(data.sweeps.len(), 1);
         assert_eq!(data.sweeps[0].steps.len(), 19);
         assert_eq!(data.input, "shaker");
@@ -4032,7 +4050,7 @@ steps = 25
         ]);
         assert_eq!(rc, 0, "{out}\n{err}");
         assert!(out.contains("voltage-driven"), "{out}");
-        let open = nlsim::testdata::read_h5(&h5).unwrap();
+        let open = nlsim::formats::test_data::read_h5(&h5).unwrap();
         let min = open.sweeps[0]
             .steps
             .iter()
@@ -4062,7 +4080,7 @@ steps = 25
             one.to_str().unwrap(),
         ]);
         assert_eq!(rc, 0, "{out}\n{err}");
-        let data = nlsim::testdata::read_csv(&one).unwrap();
+        let data = nlsim::formats::test_data::read_csv(&one).unwrap();
         let names: Vec<&str> = data.channels.iter().map(|c| c.name.as_str()).collect();
         assert_eq!(names, ["n7"]);
 

@@ -970,13 +970,13 @@ impl NonlinearElement {
     /// [`Law::arity`], in the order of the law's coordinates).
     pub fn coupled(name: impl Into<String>, law: Law, couplings: Vec<Coupling>) -> Result<Self> {
         let name = name.into();
-        if !crate::param::is_valid_name(&name) {
+        if !crate::names::is_valid_name(&name) {
             return Err(Error::invalid(
                 format!("element name '{name}'"),
                 "use letters, digits, '_' and '-' only (it prefixes parameter names, e.g. tip.k3)",
             ));
         }
-        if crate::param::mode_number(&name).is_some() || name == "stiffness_scale" {
+        if crate::names::mode_number(&name).is_some() || name == "stiffness_scale" {
             return Err(Error::invalid(
                 format!("element name '{name}'"),
                 "is reserved for the modal parameters (modeN.f, modeN.zeta, stiffness_scale)",

@@ -25,6 +25,7 @@ pub mod element;
 pub mod error;
 pub mod linalg;
 pub mod model;
+pub mod names;
 pub mod param;
 pub mod sparse;
 #[cfg(any(test, feature = "test-util"))]

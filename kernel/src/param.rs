@@ -21,6 +21,8 @@
 use crate::dof::DofLabel;
 use crate::element::NonlinearElement;
 use crate::error::{Error, Result};
+pub use crate::names::is_valid_name;
+use crate::names::mode_number;
 use std::fmt;
 use std::str::FromStr;
 
@@ -111,22 +113,6 @@ impl fmt::Display for Param {
             Param::BoundarySpring(d) => write!(f, "spring:{d}.k"),
         }
     }
-}
-
-/// Whether `s` is a valid element or group name: ASCII letters, digits, `_` and `-`.
-pub fn is_valid_name(s: &str) -> bool {
-    !s.is_empty()
-        && s.chars()
-            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
-}
-
-/// `Some(r)` (0-based) when `s` is `modeN` with `N ≥ 1`.
-pub(crate) fn mode_number(s: &str) -> Option<usize> {
-    let digits = s.strip_prefix("mode")?;
-    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) || digits.len() > 9 {
-        return None;
-    }
-    digits.parse::<usize>().ok()?.checked_sub(1)
 }
 
 impl FromStr for Param {

@@ -603,6 +603,13 @@ impl EigenSolver {
             t0.elapsed().as_secs_f64()
         };
 
+        // A basis the caller sized is reserved once before the factorisations: out of memory
+        // is then refused before the (long) factorisation instead of after it, and before
+        // its own per-thread workspaces take what is left.
+        if let Some(b) = cfg.basis_size {
+            drop(basis_zeros_reserved(n, b.min(n), b)?);
+        }
+
         // Shift and operator factor.
         let t1 = Instant::now();
         let mut factor = Some(factor_below_spectrum(pencil, k, m, cfg.shift)?);
@@ -1068,6 +1075,14 @@ fn ritz_vectors(mut basis: Mat<f64>, coefficients: &Mat<f64>, par: Par) -> Mat<f
 /// error naming the basis size, not an abort (a `--basis` near the model's order asks for an
 /// `n × n` basis).
 fn basis_zeros(rows: usize, cols: usize, basis: usize) -> Result<Mat<f64>> {
+    let mut a = basis_zeros_reserved(rows, cols, basis)?;
+    a.resize_with(rows, cols, |_, _| 0.0);
+    Ok(a)
+}
+
+/// An empty matrix with room for `rows × cols` (nothing written, so no page is touched); the
+/// error of [`basis_zeros`] when the room cannot be had.
+fn basis_zeros_reserved(rows: usize, cols: usize, basis: usize) -> Result<Mat<f64>> {
     let mut a = Mat::<f64>::new();
     a.try_reserve(rows, cols).map_err(|_| Error::Numerical {
         what: "shift-invert Lanczos".into(),
@@ -1077,7 +1092,6 @@ fn basis_zeros(rows: usize, cols: usize, basis: usize) -> Result<Mat<f64>> {
             (rows as f64) * (cols as f64) * 8e-9
         ),
     })?;
-    a.resize_with(rows, cols, |_, _| 0.0);
     Ok(a)
 }
 

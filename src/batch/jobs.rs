@@ -1,7 +1,12 @@
 //! The jobs file: its TOML tables, parsed and checked into a [`Batch`].
 
+use crate::commands::frf::request::FrfRequest;
+use crate::commands::frf::request::FrfStart;
+use crate::commands::frf::request::SweepMode;
+use crate::commands::simulate::request::Drive;
+use crate::commands::simulate::request::Method;
+use crate::commands::simulate::request::SimRequest;
 use crate::error::{Error, Result};
-use crate::run::{Drive, FrfRequest, FrfStart, Method, SimRequest, SweepMode};
 use nlsim_kernel::Parameterized;
 use nlsim_kernel::param::parse_known;
 use serde::Deserialize;
@@ -9,7 +14,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use super::{Assignment, Batch, BatchCommand, Job, latin_hypercube};
-use crate::output::line_of;
+use crate::formats::files::line_of;
 
 /// Most samples of a jobs file's `[lhs]` table.
 pub const MAX_LHS_SAMPLES: usize = 1_000_000;
@@ -65,8 +70,8 @@ fn lanczos_keys(
     restarts: Option<usize>,
     ordering: Option<&str>,
     memory_budget_gb: Option<f64>,
-) -> std::result::Result<crate::run::Lanczos, (&'static str, String)> {
-    let d = crate::run::Lanczos::default();
+) -> std::result::Result<crate::commands::setup::Lanczos, (&'static str, String)> {
+    let d = crate::commands::setup::Lanczos::default();
     let ordering = match ordering {
         None => d.ordering,
         Some(o) => nlsim_reduction::Ordering::parse(o)
@@ -85,7 +90,7 @@ fn lanczos_keys(
     if restarts == Some(0) {
         return Err(("restarts", "0: give at least 1".into()));
     }
-    Ok(crate::run::Lanczos {
+    Ok(crate::commands::setup::Lanczos {
         basis: basis.or(d.basis),
         restarts: restarts.unwrap_or(d.restarts),
         ordering,
@@ -133,9 +138,9 @@ struct JobsFile {
     #[serde(default)]
     sweep: Vec<SweepTable>,
     lhs: Option<LhsTable>,
-    calibrate: Option<crate::calibration::CalibrationTable>,
+    calibrate: Option<crate::commands::calibrate::request::CalibrationTable>,
     estimate: Option<BTreeMap<String, f64>>,
-    plan: Option<crate::pretest::PlanTable>,
+    plan: Option<crate::commands::plan::request::PlanTable>,
 }
 
 /// FNV-1a, 64 bit: a hash that is the same on every machine and Rust version.
@@ -148,7 +153,7 @@ pub(super) fn fnv1a(bytes: &[u8]) -> u64 {
 impl Batch {
     /// Reads and checks a jobs file.
     pub fn load(path: &Path) -> Result<Self> {
-        let text = crate::output::read_text(path)?;
+        let text = crate::formats::files::read_text(path)?;
         Self::parse(&text, path)
     }
 
@@ -162,7 +167,11 @@ impl Batch {
         };
         let f: JobsFile = toml::from_str(text).map_err(|e| {
             let line = e.span().map_or(1, |s| line_of(text, s.start));
-            err(line, "", crate::spec::toml_message(e.message()))
+            err(
+                line,
+                "",
+                crate::formats::model_file::toml_message(e.message()),
+            )
         })?;
         // Line of the first occurrence of `key` (for errors found after parsing).
         let at = |key: &str| {
@@ -456,7 +465,7 @@ impl Batch {
                 let req = t.into_request(f.model.clone(), text, path)?;
                 // The jobs are the candidate sweeps, which depend on the model's drive
                 // points and force: load it (no reduction) to count them.
-                let (_, c) = crate::pretest::plan_candidates(&req)
+                let (_, c) = crate::commands::plan::run::plan_candidates(&req)
                     .map_err(|e| err(at("[plan]"), "plan", e.to_string()))?;
                 axes.push(
                     (0..c.sweeps.len())
@@ -715,7 +724,8 @@ impl Batch {
             message: e.to_string(),
         };
         for m in &models {
-            let model = crate::run::load_for_run(m, &self.sets).map_err(|e| err(m, "model", e))?;
+            let model = crate::commands::setup::load_for_run(m, &self.sets)
+                .map_err(|e| err(m, "model", e))?;
             for n in &names {
                 parse_known(n, &model.parameters())
                     .and_then(|p| model.param(&p))

@@ -1,7 +1,8 @@
 //! Joining the complete shard files of one split into `merged.h5`.
 
 use crate::error::{Error, Result};
-use crate::output::{h5err, str_attr};
+use crate::formats::files::h5err;
+use crate::formats::files::str_attr;
 use hdf5_metno as hdf5;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -104,7 +105,7 @@ pub fn merge(b: &Batch) -> Result<MergeOutcome> {
     let mut failed = 0;
     let mut summary = Vec::new();
     let mut plan_groups: Vec<hdf5::Group> = Vec::new();
-    crate::output::write_atomically(&path, ".h5", |tmp, _| {
+    crate::formats::files::write_atomically(&path, ".h5", |tmp, _| {
         let err = h5err(tmp);
         let out = hdf5::File::create(tmp).map_err(&err)?;
         let root = out.as_group().map_err(&err)?;
@@ -138,11 +139,11 @@ pub fn merge(b: &Batch) -> Result<MergeOutcome> {
             }
         }
         if let BatchCommand::PlanCandidates(req) = &b.command {
-            match crate::pretest::merged_plan(req, &plan_groups) {
+            match crate::commands::plan::report::merged_plan(req, &plan_groups) {
                 Ok(run) => {
-                    crate::pretest::write_ranking(&root, &run).map_err(&err)?;
+                    crate::commands::plan::report::write_ranking(&root, &run).map_err(&err)?;
                     let dir = b.output.join("plan-report");
-                    crate::pretest::write_plan_report(&dir, &run)?;
+                    crate::commands::plan::report::write_plan_report(&dir, &run)?;
                     summary = run.summary();
                     summary.push(format!(
                         "every design: {} (and group /ranking of the merged file); plots in {}",

@@ -27,14 +27,14 @@
 //! ```
 //!
 //! A calibration spreads over a cluster in two batches of the same `[calibrate]` table (the
-//! keys of a calibration file, [`crate::calibration`], without `model`):
+//! keys of a calibration file, [`crate::commands::calibrate`], without `model`):
 //! `calibrate-candidates` evaluates candidate `i` (0: the model's values, then the Latin
 //! hypercube) in job `i`, and `nlsim calibrate --candidates merged.h5` goes on from them;
 //! `calibrate-folds` runs fold `f` of the cross validation in job `f`, from the top-level
 //! `estimate = { "tip.k3" = 1.2e9 }`, and the merge adds the fold statistics.
 //!
 //! A plan spreads the same way: `plan-candidates` with a `[plan]` table (the keys of a plan
-//! file, [`crate::pretest`]) predicts candidate sweep `i` and its Fisher information in job
+//! file, [`crate::commands::plan`]) predicts candidate sweep `i` and its Fisher information in job
 //! `i`; the merge ranks every design (sweeps × sensor sets × harmonic sets) and writes the
 //! ranking beside the jobs.
 //!
@@ -50,19 +50,23 @@
 //! `slurm.rs` writes the job-array script ([`sbatch_script`]).
 
 mod calib;
+pub mod command;
 mod jobs;
 mod merge;
 mod shard;
 mod slurm;
 
-pub use calib::read_candidates;
+pub use crate::formats::candidates::read_candidates;
+use crate::formats::files::{job_group_name, u64_attr};
 pub use merge::{MergeOutcome, merge};
 pub use shard::{ShardEvent, ShardOutcome, run_shard};
 pub use slurm::{SbatchOptions, sbatch_script};
 
-use crate::calibration::CalibrationRequest;
-use crate::output::{provenance, str_attr};
-use crate::run::{FrfRequest, SimRequest};
+use crate::commands::calibrate::request::CalibrationRequest;
+use crate::commands::frf::request::FrfRequest;
+use crate::commands::simulate::request::SimRequest;
+use crate::formats::files::provenance;
+use crate::formats::files::str_attr;
 use hdf5_metno as hdf5;
 use std::path::{Path, PathBuf};
 
@@ -80,7 +84,7 @@ pub enum BatchCommand {
     CalibrateFolds(Box<CalibrationRequest>, Vec<f64>),
     /// The candidate sweeps of a plan: job `i` predicts sweep `i` and its Fisher
     /// information; the merge ranks every design.
-    PlanCandidates(Box<crate::pretest::PlanRequest>),
+    PlanCandidates(Box<crate::commands::plan::request::PlanRequest>),
 }
 
 impl BatchCommand {
@@ -163,11 +167,6 @@ pub struct Batch {
 
 pub use nlsim_calib::latin_hypercube;
 
-/// Reads a `u64` root attribute, if present.
-fn u64_attr(file: &hdf5::File, name: &str) -> Option<u64> {
-    file.attr(name).ok()?.read_scalar::<u64>().ok()
-}
-
 /// What a shard or merged file on disk is.
 #[derive(Debug, Clone, PartialEq, Eq)]
 enum OnDisk {
@@ -195,7 +194,7 @@ fn on_disk(path: &Path, hash: u64, n_jobs: usize) -> OnDisk {
             let why = if len == 0 {
                 "it is empty".to_string()
             } else {
-                crate::output::one_line(&e.to_string())
+                crate::formats::files::one_line(&e.to_string())
             };
             return OnDisk::Damaged(why);
         }
@@ -226,11 +225,6 @@ fn write_root_attrs(root: &hdf5::Group, b: &Batch) -> hdf5::Result<()> {
     str_attr(root, "batch", &b.name)?;
     u64_attr_write(root, "jobs_hash", b.hash)?;
     u64_attr_write(root, "n_jobs", b.jobs.len() as u64)
-}
-
-/// Name of job `index`'s group in shard and merged files.
-pub(crate) fn job_group_name(index: usize) -> String {
-    format!("job-{index:08}")
 }
 
 #[cfg(test)]
@@ -366,7 +360,7 @@ params = [{ set = "spring.c", min = 0.1, max = 10.0, log = true }]
         else {
             panic!("a simulate batch");
         };
-        let d = crate::run::Lanczos::default();
+        let d = crate::commands::setup::Lanczos::default();
         assert_eq!(r.lanczos.ordering, nlsim_reduction::Ordering::Amd);
         assert_eq!(
             (r.lanczos.basis, r.lanczos.restarts, r.lanczos.memory_budget),

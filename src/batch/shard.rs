@@ -1,10 +1,13 @@
 //! Running a shard: its jobs in parallel, each written to a temporary file that is renamed
 //! into place when complete.
 
-use crate::calibration::Prepared;
+use crate::commands::calibrate::run::Prepared;
+use crate::commands::frf::run::run_frf_shared;
+use crate::commands::setup::Reductions;
+use crate::commands::simulate::run::run_simulation_shared;
 use crate::error::{Error, Result};
-use crate::output::{h5err, str_attr};
-use crate::run::{Reductions, run_frf_shared, run_simulation_shared};
+use crate::formats::files::h5err;
+use crate::formats::files::str_attr;
 use hdf5_metno as hdf5;
 use rayon::prelude::*;
 use std::path::PathBuf;
@@ -53,8 +56,8 @@ pub enum ShardEvent {
 
 /// The result of one job, ready to be written.
 enum JobResult {
-    Frf(Box<crate::run::FrfRun>),
-    Simulate(Box<crate::run::SimRun>),
+    Frf(Box<crate::commands::frf::run::FrfRun>),
+    Simulate(Box<crate::commands::simulate::run::SimRun>),
     /// A calibration candidate: its values and cost.
     Candidate(Vec<f64>, f64),
     /// A fold of a calibration's cross validation.
@@ -71,9 +74,11 @@ struct CalibContext {
 }
 
 /// The planner a plan batch's jobs share (`None` for other batches).
-fn plan_context(b: &Batch) -> Result<Option<crate::pretest::PlanSetup>> {
+fn plan_context(b: &Batch) -> Result<Option<crate::commands::plan::run::PlanSetup>> {
     match &b.command {
-        BatchCommand::PlanCandidates(req) => Ok(Some(crate::pretest::prepare_plan(req)?)),
+        BatchCommand::PlanCandidates(req) => {
+            Ok(Some(crate::commands::plan::run::prepare_plan(req)?))
+        }
         _ => Ok(None),
     }
 }
@@ -84,7 +89,7 @@ fn calib_context(b: &Batch) -> Result<Option<CalibContext>> {
         BatchCommand::CalibrateCandidates(r) | BatchCommand::CalibrateFolds(r, _) => r,
         _ => return Ok(None),
     };
-    let prepared = crate::calibration::prepare(req)?;
+    let prepared = crate::commands::calibrate::run::prepare(req)?;
     let candidates = match &b.command {
         BatchCommand::CalibrateCandidates(_) => {
             nlsim_calib::candidate_points(&prepared.objective, &req.config)?
@@ -101,7 +106,7 @@ fn run_job(
     b: &Batch,
     job: &Job,
     ctx: Option<&CalibContext>,
-    plan: Option<&crate::pretest::PlanSetup>,
+    plan: Option<&crate::commands::plan::run::PlanSetup>,
     reductions: &Reductions,
 ) -> Result<JobResult> {
     let mut spec = b.model.clone();
@@ -137,7 +142,7 @@ fn run_job(
                 let (Some(setup), BatchCommand::PlanCandidates(req)) = (plan, &b.command) else {
                     return Err(Error::Failed("no planning context".into()));
                 };
-                let info = crate::pretest::sweep_information(setup, i, req.noise)?;
+                let info = crate::commands::plan::run::sweep_information(setup, i, req.noise)?;
                 return Ok(JobResult::PlanSweep(
                     Box::new(info),
                     setup.planner.nominal().to_vec(),
@@ -145,7 +150,7 @@ fn run_job(
             }
         }
     }
-    let model = crate::run::load_for_run(&spec, &sets)?;
+    let model = crate::commands::setup::load_for_run(&spec, &sets)?;
     match &b.command {
         BatchCommand::Frf(req) => {
             let mut req = req.clone();
@@ -162,7 +167,11 @@ fn run_job(
         BatchCommand::Simulate(req) => {
             let mut req = req.clone();
             if let Some(e) = excitation {
-                req.excitation = vec![crate::run::Drive::parse(&e, req.duration, req.rate)?];
+                req.excitation = vec![crate::commands::simulate::request::Drive::parse(
+                    &e,
+                    req.duration,
+                    req.rate,
+                )?];
             }
             Ok(JobResult::Simulate(Box::new(run_simulation_shared(
                 &model,
@@ -214,8 +223,13 @@ fn write_job(
             g.new_attr::<u8>().create("ok")?.write_scalar(&1u8)?;
             match r {
                 JobResult::Frf(run) => {
-                    crate::frf::write_group(&g, &run.system, &run.branch, &run.responses)?;
-                    crate::frf::write_peaks(&g, &run.system, &run.peaks)?;
+                    crate::formats::frf_file::write_group(
+                        &g,
+                        &run.system,
+                        &run.branch,
+                        &run.responses,
+                    )?;
+                    crate::formats::frf_file::write_peaks(&g, &run.system, &run.peaks)?;
                     // A branch that stopped short is kept, and says so.
                     str_attr(&g, "status", run.status.as_str())?;
                     if !run.detail.is_empty() {
@@ -239,10 +253,10 @@ fn write_job(
                     Ok(())
                 }
                 JobResult::PlanSweep(info, nominal) => {
-                    crate::pretest::write_sweep_group(&g, info, nominal)
+                    crate::commands::plan::report::write_sweep_group(&g, info, nominal)
                 }
                 JobResult::Simulate(run) => {
-                    let info = crate::simulate::RunInfo {
+                    let info = crate::formats::history_file::RunInfo {
                         model_spec: b.model.clone(),
                         method: match &b.command {
                             BatchCommand::Simulate(r) => r.method.as_str().into(),
@@ -253,7 +267,7 @@ fn write_job(
                         // Shards are intermediate: `batch merge` compresses the merged file.
                         compress: false,
                     };
-                    crate::simulate::write_group(&g, &run.history, &info)
+                    crate::formats::history_file::write_group(&g, &run.history, &info)
                 }
             }
         }
@@ -294,7 +308,7 @@ pub fn run_shard(
         path: b.output.clone(),
         source,
     })?;
-    for p in crate::output::remove_temporaries(&path, false) {
+    for p in crate::formats::files::remove_temporaries(&path, false) {
         event(ShardEvent::Note(format!(
             "removed {} (left by a run that was killed)",
             p.display()
@@ -308,7 +322,7 @@ pub fn run_shard(
     let reductions = Reductions::default();
     let total = mine.len();
     let mut failed = Vec::new();
-    crate::output::write_atomically(&path, ".h5", |tmp, _| {
+    crate::formats::files::write_atomically(&path, ".h5", |tmp, _| {
         let err = h5err(tmp);
         let file = hdf5::File::create(tmp).map_err(&err)?;
         let root = file.as_group().map_err(&err)?;

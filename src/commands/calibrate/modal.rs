@@ -1,0 +1,266 @@
+//! `nlsim calibrate` on measured modal data (the linear stage, thesis §4.5): FE-level
+//! parameters — group stiffness and mass scales, boundary springs — from natural frequencies
+//! and mode shapes ([`crate::formats::modal_data`]), with analytic eigen-sensitivities
+//! ([`nlsim_calib::ModalObjective`]).
+//!
+//! The request is the same [`CalibrationRequest`] as for stepped-sine data; `data` names a
+//! modal CSV, `shape_noise` is the standard deviation of one component of a unit-normalised
+//! measured shape, `modes` the computed modes the pairing chooses from. The harmonic balance
+//! settings (`harmonics`, `compare`, `form`) and the folds do not apply.
+
+use crate::commands::calibrate::request::CalibrationRequest;
+
+use crate::commands::calibrate::report::candidates_table;
+
+use crate::commands::calibrate::report::convergence_plot;
+
+use crate::commands::calibrate::report::convergence_table;
+use crate::error::{Error, Result};
+use crate::formats::modal_data::ModalFile;
+use crate::formats::modal_data::read_modal_csv;
+use nlsim_calib::{ModalCalibration, ModalObjective};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// A finished modal calibration with what it ran on.
+pub struct ModalRun {
+    /// The request.
+    pub request: CalibrationRequest,
+    /// The model's name.
+    pub model_name: String,
+    /// The measured modes.
+    pub file: ModalFile,
+    /// Computed modes the pairing chose from.
+    pub modes: usize,
+    /// The result.
+    pub calibration: ModalCalibration,
+    /// Wall time of loading the model and the data (s).
+    pub setup_seconds: f64,
+    /// Wall time of the candidates and the optimisations (s).
+    pub seconds: f64,
+}
+
+/// Runs `req` on modal data: Latin-hypercube candidates, Levenberg–Marquardt from the best,
+/// the Cramér–Rao bound at the estimate. Every parameter must be FE-level.
+pub fn run_modal_calibration(req: &CalibrationRequest) -> Result<ModalRun> {
+    req.check()?;
+    let t = Instant::now();
+    let model = crate::commands::setup::load_for_run(&req.model, &req.set)?;
+    let file = read_modal_csv(&req.data, &model, req.shape_noise)?;
+    let measured = file.data.modes.len();
+    if measured > model.n_dofs() {
+        return Err(Error::Usage(format!(
+            "{}: {measured} measured modes, but the model has {} DOFs",
+            req.data.display(),
+            model.n_dofs()
+        )));
+    }
+    let modes = req.modes.clamp(measured, model.n_dofs());
+    let model_name = model.name().to_string();
+    let objective = ModalObjective::new(
+        model,
+        Arc::new(file.data.clone()),
+        req.params.clone(),
+        modes,
+        faer::Par::Seq,
+    )?;
+    let setup_seconds = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let calibration = nlsim_calib::calibrate_modal(&objective, &req.config)?;
+    Ok(ModalRun {
+        request: req.clone(),
+        model_name,
+        file,
+        modes,
+        calibration,
+        setup_seconds,
+        seconds: t.elapsed().as_secs_f64(),
+    })
+}
+
+impl ModalRun {
+    /// The readable summary: what was calibrated on what, how the optimisation went, per
+    /// parameter the estimate and its Cramér–Rao bound, per measured mode the calibrated
+    /// frequency and MAC.
+    pub fn summary(&self) -> Vec<String> {
+        let c = &self.calibration;
+        let d = &self.file.data;
+        let best = &c.runs[0].report;
+        let with_shape = d.modes.iter().filter(|m| m.shape.is_some()).count();
+        let mut v = vec![
+            format!(
+                "calibrating {} FE-level parameters of '{}' on {} ({} modes, {with_shape} with \
+                 shapes at {} DOFs; pairing among {} computed modes); setup {:.2} s",
+                c.params.len(),
+                self.model_name,
+                self.request.data.display(),
+                d.modes.len(),
+                d.dofs.len(),
+                self.modes,
+                self.setup_seconds
+            ),
+            format!(
+                "{} in {} LM iterations ({} evaluations, {} rejected, {} failed) from the best \
+                 of {} candidates; {:.2} s",
+                c.status,
+                best.iterations,
+                best.evaluations,
+                best.rejected,
+                best.failed_evaluations,
+                c.candidates.len(),
+                self.seconds
+            ),
+            format!(
+                "cost {:.6e}, reduced chi2 {:.3} (1 when the noise model fits), collinearity \
+                 index {:.2}",
+                c.cost, c.cramer_rao.reduced_chi2, c.cramer_rao.collinearity
+            ),
+            format!(
+                "{:<22} {:>14} {:>14}  flags",
+                "parameter", "estimate", "Cramér–Rao"
+            ),
+        ];
+        for (j, p) in c.params.iter().enumerate() {
+            v.push(format!(
+                "{:<22} {:>14.6e} {:>14.3e}  {}",
+                p.to_string(),
+                c.estimate[j],
+                c.cramer_rao.std[j],
+                if c.at_bound[j] { "at bound" } else { "" }
+            ));
+        }
+        v.push(format!(
+            "{:>6} {:>14} {:>14} {:>9} {:>9} {:>8}",
+            "mode", "measured Hz", "calibrated Hz", "error %", "computed", "MAC"
+        ));
+        for (i, m) in d.modes.iter().enumerate() {
+            let f = c.fit.frequencies_hz[i];
+            v.push(format!(
+                "{:>6} {:>14.6} {:>14.6} {:>9.4} {:>9} {:>8}",
+                self.file.labels[i],
+                m.frequency_hz,
+                f,
+                100.0 * (f - m.frequency_hz) / m.frequency_hz,
+                c.fit.pairing[i] + 1,
+                if c.fit.mac[i].is_nan() {
+                    "-".to_string()
+                } else {
+                    format!("{:.5}", c.fit.mac[i])
+                }
+            ));
+        }
+        v
+    }
+
+    /// Estimates and statistics, one row per parameter.
+    pub fn estimates_csv(&self) -> String {
+        let c = &self.calibration;
+        let mut csv = String::from("param,estimate,cramer_rao_std,at_bound\n");
+        for (j, p) in c.params.iter().enumerate() {
+            let _ = writeln!(
+                csv,
+                "{p},{:?},{:?},{}",
+                c.estimate[j], c.cramer_rao.std[j], c.at_bound[j]
+            );
+        }
+        csv
+    }
+
+    /// Measured against calibrated modes: frequencies, the paired computed mode and the MAC
+    /// (empty where the shape was not measured).
+    pub fn modes_csv(&self) -> String {
+        let c = &self.calibration;
+        let mut csv =
+            String::from("mode,measured_hz,measured_std_hz,calibrated_hz,computed_mode,mac\n");
+        for (i, m) in self.file.data.modes.iter().enumerate() {
+            let _ = writeln!(
+                csv,
+                "{},{:?},{:?},{:?},{},{}",
+                self.file.labels[i],
+                m.frequency_hz,
+                m.frequency_std_hz,
+                c.fit.frequencies_hz[i],
+                c.fit.pairing[i] + 1,
+                if c.fit.mac[i].is_nan() {
+                    String::new()
+                } else {
+                    format!("{:?}", c.fit.mac[i])
+                }
+            );
+        }
+        csv
+    }
+}
+
+/// Writes the report of a modal calibration into `dir`: `summary.txt`, `estimates.csv`,
+/// `modes.csv`, `candidates.csv`, `convergence.csv` and the convergence plot (SVG and PNG).
+/// Returns the files written.
+pub fn write_modal_report(dir: &Path, run: &ModalRun) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir).map_err(|source| Error::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let c = &run.calibration;
+    let mut written = Vec::new();
+    let mut summary = run.summary().join("\n");
+    summary.push('\n');
+    for (name, text) in [
+        ("summary.txt", summary),
+        ("estimates.csv", run.estimates_csv()),
+        ("modes.csv", run.modes_csv()),
+        ("candidates.csv", candidates_table(&c.params, &c.candidates)),
+        (
+            "convergence.csv",
+            convergence_table(&run.request.params, &c.runs),
+        ),
+    ] {
+        let p = dir.join(name);
+        crate::formats::files::write_text_atomically(&p, &text)?;
+        written.push(p);
+    }
+    let report = crate::present::report::Report::create(
+        dir,
+        &format!("nlsim calibrate (modal): {}", run.model_name),
+        &crate::present::report::command_line(),
+        &run.request.model,
+    )?;
+    report.seed("Latin hypercube", run.request.config.seed)?;
+    report.section_with("Summary", &run.summary());
+    report.table(
+        "estimates",
+        crate::present::report::Table::from_csv(
+            "Estimates and uncertainties",
+            &run.estimates_csv(),
+        ),
+    )?;
+    report.table(
+        "modes",
+        crate::present::report::Table::from_csv("Measured and computed modes", &run.modes_csv()),
+    )?;
+    report.section("Optimisation");
+    written.extend(convergence_plot(&report, &run.model_name, &c.runs)?);
+    written.push(report.finish()?);
+    written.push(dir.join(crate::present::report::DATA));
+    Ok(written)
+}
+
+/// Prints the summary of a modal calibration and writes the estimates CSV and the report
+/// folder that `req` asks for.
+pub fn write_modal_outputs(
+    req: &CalibrationRequest,
+    run: &ModalRun,
+    console: &crate::present::console::Console,
+) -> Result<()> {
+    let report = |dir: &Path| write_modal_report(dir, run);
+    let contents = "summary.txt, tables, convergence plot";
+    let (summary, csv) = (run.summary(), run.estimates_csv());
+    crate::commands::calibrate::report::write_calibration_outputs(
+        req,
+        &summary,
+        &csv,
+        (&report, contents),
+        console,
+    )
+}

@@ -1,0 +1,302 @@
+//! The request of `nlsim calibrate`, from the command line or a calibration file (TOML,
+//! `docs/calibration.md`), checked before the run.
+use crate::error::{Error, Result};
+use crate::formats::settings::SettingsFile;
+use nlsim_calib::{BranchChoice, CalibrationConfig, Form, LmConfig, ParamSpec, Spacing};
+use nlsim_kernel::Param;
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// Everything a calibration needs: model, data, parameters with bounds, what is compared
+/// and the search settings. Paths are as given (relative to the working directory).
+#[derive(Debug, Clone)]
+pub struct CalibrationRequest {
+    /// Model file or built-in model.
+    pub model: String,
+    /// Fixed overrides `NAME=VALUE` applied before calibrating.
+    pub set: Vec<String>,
+    /// Test data: CSV, HDF5 (`docs/file-formats.md`) or UFF dataset 58.
+    pub data: PathBuf,
+    /// The calibrated parameters and their bounds.
+    pub params: Vec<ParamSpec>,
+    /// Harmonics compared with the data (1 = fundamental).
+    pub compare: Vec<usize>,
+    /// Residual form.
+    pub form: Form,
+    /// The branch the model is compared on where the response is multi-valued.
+    pub branch: BranchChoice,
+    /// Harmonics `H` kept by the harmonic balance.
+    pub harmonics: usize,
+    /// Retained modes of the reduced model.
+    pub modes: usize,
+    /// Relative noise assumed for linear FRFs read from UFF 58 (which carry none).
+    pub uff_noise: f64,
+    /// Standard deviation of one component of a unit-normalised measured mode shape, for
+    /// modal data ([`crate::commands::calibrate::modal`]).
+    pub shape_noise: f64,
+    /// The search: candidates, starts, folds, seed, Levenberg–Marquardt settings.
+    pub config: CalibrationConfig,
+    /// Estimates and statistics as CSV.
+    pub out: Option<PathBuf>,
+    /// Report folder: tables, plots and the summary.
+    pub report: Option<PathBuf>,
+}
+
+impl CalibrationRequest {
+    /// A request with the default settings: compare the fundamental as complex
+    /// differences, H = 3, 20 modes, 1 % UFF noise, shape noise 0.02,
+    /// [`CalibrationConfig::default`].
+    pub fn new(model: impl Into<String>, data: impl Into<PathBuf>, params: Vec<ParamSpec>) -> Self {
+        Self {
+            model: model.into(),
+            set: Vec::new(),
+            data: data.into(),
+            params,
+            compare: vec![1],
+            form: Form::Complex,
+            branch: BranchChoice::NearestToData,
+            harmonics: 3,
+            modes: 20,
+            uff_noise: 0.01,
+            shape_noise: 0.02,
+            config: CalibrationConfig::default(),
+            out: None,
+            report: None,
+        }
+    }
+
+    /// Checks what can be checked without the model and the data: at least one parameter,
+    /// bounds, harmonics, modes, noise and the output names.
+    pub fn check(&self) -> Result<()> {
+        let bad =
+            |field: &str, why: String| Err(Error::Usage(format!("calibration {field}: {why}")));
+        if self.params.is_empty() {
+            return bad(
+                "param",
+                "name at least one parameter with its bounds".into(),
+            );
+        }
+        for p in &self.params {
+            if let Err(e) = p.check() {
+                return bad("param", e.to_string());
+            }
+        }
+        for (i, p) in self.params.iter().enumerate() {
+            if self.params[..i].iter().any(|q| q.param == p.param) {
+                return bad("param", format!("{} is named twice", p.param));
+            }
+        }
+        if self.harmonics == 0 || self.harmonics > 64 {
+            return bad("harmonics", format!("{} is not in 1..=64", self.harmonics));
+        }
+        if self.compare.is_empty() || self.compare.iter().any(|&k| k == 0 || k > self.harmonics) {
+            return bad(
+                "compare",
+                format!(
+                    "{:?}: compare harmonics between 1 and the harmonic balance's {}",
+                    self.compare, self.harmonics
+                ),
+            );
+        }
+        if self.modes == 0 {
+            return bad("modes", "retain at least one mode".into());
+        }
+        if !(self.uff_noise.is_finite() && self.uff_noise > 0.0) {
+            return bad("uff_noise", format!("{} must be positive", self.uff_noise));
+        }
+        if !(self.shape_noise.is_finite() && self.shape_noise > 0.0) {
+            return bad(
+                "shape_noise",
+                format!("{} must be positive", self.shape_noise),
+            );
+        }
+        if let Some(o) = &self.out
+            && o.extension().is_none_or(|e| e != "csv")
+        {
+            return bad("out", format!("{}: name a .csv file", o.display()));
+        }
+        Ok(())
+    }
+
+    /// Reads a calibration file (the module docs show one).
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = crate::formats::files::read_text(path)?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses calibration-file text; `path` names it in errors, and relative paths in it
+    /// are taken from its folder.
+    pub fn parse(text: &str, path: &Path) -> Result<Self> {
+        let f: CalibrationTable = SettingsFile::parse(text, path)?;
+        let dir = path.parent().unwrap_or(Path::new(""));
+        let Some(model) = f.model.clone() else {
+            return Err(Error::Spec {
+                file: path.to_path_buf(),
+                line: 1,
+                key: "model".into(),
+                message: "name the model (a model file or a built-in model)".into(),
+            });
+        };
+        let model = if dir.join(&model).is_file() {
+            dir.join(&model).display().to_string()
+        } else {
+            model
+        };
+        f.into_request(model, text, path)
+    }
+}
+
+/// A `[[param]]` entry.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct ParamTable {
+    name: String,
+    lower: f64,
+    upper: f64,
+    spacing: Option<String>,
+}
+
+/// The `[lm]` table.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct LmTable {
+    max_iterations: Option<usize>,
+    ftol: Option<f64>,
+    xtol: Option<f64>,
+    gtol: Option<f64>,
+    initial_radius_factor: Option<f64>,
+}
+
+/// A calibration file, or the `[calibrate]` table of a jobs file (which takes the model
+/// from the jobs file).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct CalibrationTable {
+    pub(crate) model: Option<String>,
+    data: String,
+    #[serde(default)]
+    set: BTreeMap<String, f64>,
+    #[serde(default)]
+    param: Vec<ParamTable>,
+    compare: Option<Vec<usize>>,
+    form: Option<String>,
+    branch: Option<String>,
+    harmonics: Option<usize>,
+    modes: Option<usize>,
+    uff_noise: Option<f64>,
+    shape_noise: Option<f64>,
+    lhs: Option<usize>,
+    starts: Option<usize>,
+    folds: Option<usize>,
+    seed: Option<u64>,
+    maximin_swaps: Option<usize>,
+    lm: Option<LmTable>,
+    out: Option<String>,
+    report: Option<String>,
+}
+
+impl CalibrationTable {
+    /// The request, with `model` and relative paths taken from `path`'s folder; errors
+    /// name `path`, the line and the key.
+    pub(crate) fn into_request(
+        self,
+        model: String,
+        text: &str,
+        path: &Path,
+    ) -> Result<CalibrationRequest> {
+        let file = SettingsFile { text, path };
+        let err = |key: &str, message: String| file.err(key, message);
+        let rel = |p: &str| file.rel(p);
+        let mut params = Vec::with_capacity(self.param.len());
+        for t in &self.param {
+            let param: Param = t
+                .name
+                .parse()
+                .map_err(|e: nlsim_kernel::Error| err("param.name", e.to_string()))?;
+            let mut spec = ParamSpec::new(param, t.lower, t.upper);
+            match t.spacing.as_deref() {
+                None => {}
+                Some("log") => spec.spacing = Spacing::Log,
+                Some("linear") => spec.spacing = Spacing::Linear,
+                Some(s) => {
+                    return Err(err("param.spacing", format!("'{s}': use log or linear")));
+                }
+            }
+            params.push(spec);
+        }
+        let form = match self.form.as_deref() {
+            None | Some("complex") => Form::Complex,
+            Some("log-magnitude") => Form::LogMagnitudePhase,
+            Some(s) => return Err(err("form", format!("'{s}': use complex or log-magnitude"))),
+        };
+        let d = CalibrationRequest::new("", "", Vec::new());
+        let branch = match self.branch.as_deref() {
+            None => d.branch,
+            Some(s) => parse_branch(s).map_err(|m| err("branch", m))?,
+        };
+        let dl = LmConfig::default();
+        let lm = match &self.lm {
+            None => dl,
+            Some(t) => LmConfig {
+                max_iterations: t.max_iterations.unwrap_or(dl.max_iterations),
+                ftol: t.ftol.unwrap_or(dl.ftol),
+                xtol: t.xtol.unwrap_or(dl.xtol),
+                gtol: t.gtol.unwrap_or(dl.gtol),
+                initial_radius_factor: t.initial_radius_factor.unwrap_or(dl.initial_radius_factor),
+            },
+        };
+        lm.validate().map_err(|e| err("lm", e.to_string()))?;
+        let dc = CalibrationConfig::default();
+        let req = CalibrationRequest {
+            model,
+            set: self.set.iter().map(|(k, v)| format!("{k}={v:e}")).collect(),
+            data: rel(&self.data),
+            params,
+            compare: self.compare.unwrap_or(d.compare),
+            form,
+            branch,
+            harmonics: self.harmonics.unwrap_or(d.harmonics),
+            modes: self.modes.unwrap_or(d.modes),
+            uff_noise: self.uff_noise.unwrap_or(d.uff_noise),
+            shape_noise: self.shape_noise.unwrap_or(d.shape_noise),
+            config: CalibrationConfig {
+                lhs_samples: self.lhs.unwrap_or(dc.lhs_samples),
+                seed: self.seed.unwrap_or(dc.seed),
+                maximin_swaps: self.maximin_swaps.unwrap_or(dc.maximin_swaps),
+                starts: self.starts.unwrap_or(dc.starts),
+                lm,
+                folds: self.folds.unwrap_or(dc.folds),
+            },
+            out: self.out.as_deref().map(rel),
+            report: self.report.as_deref().map(rel),
+        };
+        req.check().map_err(|e| file.located("calibration", e))?;
+        Ok(req)
+    }
+}
+
+/// Parses `NAME=LOWER:UPPER` (e.g. `tip.k3=1e8:1e11`) into a parameter with bounds.
+pub fn parse_param_bounds(text: &str) -> Result<ParamSpec> {
+    let bad = || {
+        Error::Usage(format!(
+            "parameter '{text}': expected NAME=LOWER:UPPER, e.g. tip_spring.k3=1e8:1e11"
+        ))
+    };
+    let (name, range) = text.split_once('=').ok_or_else(bad)?;
+    let (lo, hi) = range.split_once(':').ok_or_else(bad)?;
+    let lo: f64 = lo.trim().parse().map_err(|_| bad())?;
+    let hi: f64 = hi.trim().parse().map_err(|_| bad())?;
+    let param: Param = name.trim().parse()?;
+    Ok(ParamSpec::new(param, lo, hi))
+}
+
+/// The branch choice named `s` (`nearest` or `continuation`, as in a calibration file and
+/// `--branch`); the message says what is accepted.
+pub fn parse_branch(s: &str) -> std::result::Result<BranchChoice, String> {
+    match s {
+        "nearest" => Ok(BranchChoice::NearestToData),
+        "continuation" => Ok(BranchChoice::Continuation),
+        _ => Err(format!("'{s}': use nearest or continuation")),
+    }
+}

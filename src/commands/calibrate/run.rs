@@ -1,0 +1,156 @@
+//! The run of `nlsim calibrate` on stepped-sine data: the test data read and matched to the
+//! model, the objective prepared, candidates → Levenberg–Marquardt → statistics → k-fold.
+use crate::commands::calibrate::request::CalibrationRequest;
+use crate::error::{Error, Result};
+use nlsim_calib::{
+    Calibration, Candidate, FrfObjective, Noise, ObjectiveConfig, Progress, TestData,
+};
+use nlsim_hb::{HarmonicSet, HbConfig};
+use nlsim_kernel::Model;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// Test data by file extension: CSV, HDF5 (`.h5`, `.hdf5`) or linear FRFs in universal
+/// file dataset 58 (`.uff`, `.unv`, `.uf`; ASCII or binary), whose drive point is the
+/// model's single excitation and whose noise is `uff_noise` of each value.
+pub fn read_test_data(path: &Path, model: &Model, uff_noise: f64) -> Result<TestData> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    match ext.as_str() {
+        "csv" if crate::formats::modal_data::is_modal_csv(path)? => Err(Error::Usage(format!(
+            "{}: this is modal data (mode,frequency_hz,...), not a stepped-sine test: \
+             `nlsim calibrate` runs it on its own (the modal calibration); it has no \
+             batch kinds and no harmonic balance",
+            path.display()
+        ))),
+        "csv" => crate::formats::test_data::read_csv(path),
+        "h5" | "hdf5" => crate::formats::test_data::read_h5(path),
+        "uff" | "unv" | "uf" => {
+            let records = crate::formats::uff::read(path)?;
+            let inputs: Vec<&str> = model.excitation().iter().map(|e| e.name.as_str()).collect();
+            let [input] = inputs.as_slice() else {
+                return Err(Error::Usage(format!(
+                    "{}: FRFs name no drive point in the model's terms, so the model needs \
+                     exactly one excitation (it has: {})",
+                    path.display(),
+                    inputs.join(", ")
+                )));
+            };
+            crate::formats::uff::to_test_data(&records, input, Noise::relative(uff_noise))
+        }
+        _ => Err(Error::Usage(format!(
+            "{}: test data must be .csv, .h5/.hdf5 or universal file dataset 58 \
+             (.uff/.unv/.uf)",
+            path.display()
+        ))),
+    }
+}
+
+/// The objective of a request: the model loaded with its overrides, reduced, turned into a
+/// harmonic balance system and compared with the data.
+pub struct Prepared {
+    /// The model's name.
+    pub model_name: String,
+    /// The objective.
+    pub objective: FrfObjective,
+    /// Wall time of loading and reduction (s).
+    pub seconds: f64,
+}
+
+/// Loads the model and the data of `req` and builds the objective.
+pub fn prepare(req: &CalibrationRequest) -> Result<Prepared> {
+    req.check()?;
+    let t = Instant::now();
+    let model = crate::commands::setup::load_for_run(&req.model, &req.set)?;
+    let data = Arc::new(read_test_data(&req.data, &model, req.uff_noise)?);
+    let cfg = nlsim_reduction::ReductionConfig::lowest(req.modes.min(model.n_dofs()));
+    let objective = FrfObjective::from_model(
+        &model,
+        &cfg,
+        HarmonicSet::new(req.harmonics, 1)?,
+        HbConfig::default(),
+        data,
+        req.params.clone(),
+        ObjectiveConfig {
+            harmonics: req.compare.clone(),
+            form: req.form,
+            branch: req.branch,
+        },
+    )?;
+    Ok(Prepared {
+        model_name: model.name().to_string(),
+        objective,
+        seconds: t.elapsed().as_secs_f64(),
+    })
+}
+
+/// A finished calibration with what it ran on.
+pub struct CalibrationRun {
+    /// The request.
+    pub request: CalibrationRequest,
+    /// Model, data and objective.
+    pub prepared: Prepared,
+    /// The result.
+    pub calibration: Calibration,
+    /// Wall time of the search, optimisation and cross validation (s).
+    pub seconds: f64,
+    /// Where the candidates came from, when not computed here (a merged batch file).
+    pub candidates_from: Option<PathBuf>,
+}
+
+/// Runs `req`: candidates, Levenberg–Marquardt, Cramér–Rao, k-fold. With `candidates`
+/// (evaluated elsewhere, e.g. by a `calibrate-candidates` batch, [`crate::batch`]) the
+/// candidate phase is skipped; they must be the request's own candidate points.
+pub fn run_calibration(
+    req: &CalibrationRequest,
+    candidates: Option<(PathBuf, Vec<Candidate>)>,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<CalibrationRun> {
+    let prepared = prepare(req)?;
+    let t = Instant::now();
+    let (calibration, candidates_from) = match candidates {
+        None => (
+            nlsim_calib::calibrate_with_progress(&prepared.objective, &req.config, progress)?,
+            None,
+        ),
+        Some((path, c)) => {
+            let expected = nlsim_calib::candidate_points(&prepared.objective, &req.config)?;
+            let same = expected.len() == c.len()
+                && expected.iter().zip(&c).all(|(e, c)| {
+                    e.len() == c.values.len()
+                        && e.iter()
+                            .zip(&c.values)
+                            .all(|(a, b)| a.to_bits() == b.to_bits())
+                });
+            if !same {
+                return Err(Error::Usage(format!(
+                    "{}: its {} candidates are not the {} of this calibration (parameters, \
+                     bounds, lhs, seed and the model's values must match the batch's)",
+                    path.display(),
+                    c.len(),
+                    expected.len()
+                )));
+            }
+            (
+                nlsim_calib::calibrate_from_candidates(
+                    &prepared.objective,
+                    c,
+                    &req.config,
+                    progress,
+                )?,
+                Some(path),
+            )
+        }
+    };
+    Ok(CalibrationRun {
+        request: req.clone(),
+        prepared,
+        calibration,
+        seconds: t.elapsed().as_secs_f64(),
+        candidates_from,
+    })
+}

@@ -1,0 +1,35 @@
+//! The typed command layer: one folder or file per `nlsim` command, each with one request
+//! type (validated by `check`), one run function returning a value, and one writer of what the
+//! command shows and writes. The binary only parses arguments into requests and dispatches;
+//! library callers (the C ABI, a Python package, other programs) call the same functions.
+//!
+//! | command | request | run | report |
+//! |---|---|---|---|
+//! | `check`, `export` | [`check`] | | |
+//! | `modes` | [`modes`] | | |
+//! | `simulate` | [`simulate::request`], [`simulate::excitation`] | [`simulate::run`] | [`simulate::report`] |
+//! | `frf` | [`frf::request`], [`frf::start`] | [`frf::run`] | [`frf::report`] |
+//! | `nnm` | [`nnm`] | | |
+//! | `calibrate` | [`calibrate::request`] | [`calibrate::run`], [`calibrate::modal`] | [`calibrate::report`] |
+//! | `plan` | [`plan::request`] | [`plan::run`] | [`plan::report`] |
+//! | `test` | [`test::request`] | [`test::run`] | [`test::report`] |
+//! | `demo` | [`demo`] | [`demo::stages`], [`demo::planning`] | |
+//!
+//! [`setup`] holds what several commands share to set up a run (model loading with `--set`,
+//! Lanczos settings, shared reductions).
+//!
+//! Belongs here: turning a request into a result and a result into lines, files and reports.
+//! Does not: argument parsing (the binary), file formats (`crate::formats`), drawing and
+//! HTML (`crate::present`), numerics (the numeric crates). Dependencies point down: commands
+//! use formats, present and the numeric crates, never the binary or `crate::batch`.
+
+pub mod calibrate;
+pub mod check;
+pub mod demo;
+pub mod frf;
+pub mod modes;
+pub mod nnm;
+pub mod plan;
+pub mod setup;
+pub mod simulate;
+pub mod test;

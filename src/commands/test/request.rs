@@ -1,0 +1,324 @@
+//! The request of `nlsim test` and its test file (TOML, `docs/planning.md`): sweeps, sensors,
+//! shaker, force control, noise, seed, where the data go.
+use crate::commands::plan::request::PointSpec;
+use crate::commands::plan::request::PointTable;
+use crate::error::{Error, Result};
+use crate::formats::settings::SettingsFile;
+use nlsim_calib::{ControlConfig, Noise, Shaker, SweepPlan};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// Most steps of one virtual test (all sweeps).
+pub const MAX_TEST_STEPS: usize = 1_000_000;
+
+/// Everything a virtual test needs. Paths are as given (relative to the working directory).
+#[derive(Debug, Clone)]
+pub struct TestRequest {
+    /// Model file or built-in model.
+    pub model: String,
+    /// Fixed overrides `NAME=VALUE` applied first.
+    pub set: Vec<String>,
+    /// The model's excitation the shaker drives (`None`: its first, or `drive_dof`).
+    pub drive: Option<String>,
+    /// A DOF label where the shaker is attached instead (an input `shaker` is added there).
+    pub drive_dof: Option<String>,
+    /// The stepped sines.
+    pub sweeps: Vec<SweepPlan>,
+    /// Measured harmonics `1..=harmonics` (also the harmonic balance's `H`).
+    pub harmonics: usize,
+    /// Retained modes.
+    pub modes: usize,
+    /// The shaker.
+    pub shaker: Shaker,
+    /// The force controller.
+    pub control: ControlConfig,
+    /// Also run the test voltage-driven (the voltage of each sweep's first step held) to
+    /// show the force drop-out beside the controlled test.
+    pub compare_open_loop: bool,
+    /// Response measurement noise.
+    pub noise: Noise,
+    /// Force measurement noise.
+    pub force_noise: Noise,
+    /// Seed of the noise.
+    pub seed: u64,
+    /// The test data (`.csv` or `.h5`).
+    pub out: PathBuf,
+    /// Report folder.
+    pub report: Option<PathBuf>,
+    /// Sensors added to the model's (by DOF label) before the test.
+    pub sensors: Vec<PointSpec>,
+    /// The sensors recorded in the data, by name; empty: every sensor.
+    pub channels: Vec<String>,
+}
+
+impl TestRequest {
+    /// A test of `model` along `sweeps` with the defaults: the model's first excitation, 3
+    /// harmonics, 20 modes, [`Shaker::default`], force control at 1 %, the open loop run
+    /// too, 2 % response noise, no force noise, seed 1, data to `virtual_test.csv`.
+    pub fn new(model: impl Into<String>, sweeps: Vec<SweepPlan>) -> Self {
+        Self {
+            model: model.into(),
+            set: Vec::new(),
+            drive: None,
+            drive_dof: None,
+            sweeps,
+            harmonics: 3,
+            modes: 20,
+            shaker: Shaker::default(),
+            control: ControlConfig::default(),
+            compare_open_loop: true,
+            noise: Noise::relative(0.02),
+            force_noise: Noise::relative(0.0),
+            seed: 1,
+            out: PathBuf::from("virtual_test.csv"),
+            report: None,
+            sensors: Vec::new(),
+            channels: Vec::new(),
+        }
+    }
+
+    /// Checks what can be checked without the model.
+    pub fn check(&self) -> Result<()> {
+        let bad = |field: &str, why: String| Err(Error::Usage(format!("test {field}: {why}")));
+        if self.sweeps.is_empty() {
+            return bad("sweep", "give at least one [[sweep]]".into());
+        }
+        let mut steps = 0usize;
+        for s in &self.sweeps {
+            let ok_f = s.frequencies_hz.iter().all(|f| f.is_finite() && *f > 0.0);
+            if !ok_f || s.frequencies_hz.len() < 2 || !(s.force.is_finite() && s.force > 0.0) {
+                return bad(
+                    "sweep",
+                    format!(
+                        "'{}': needs positive frequencies, at least 2 steps and a positive force \
+                         (got {} steps, {} N)",
+                        s.label,
+                        s.frequencies_hz.len(),
+                        s.force
+                    ),
+                );
+            }
+            steps = steps.saturating_add(s.frequencies_hz.len());
+        }
+        if steps > MAX_TEST_STEPS {
+            return bad(
+                "sweep",
+                format!("{steps} steps in all, more than {MAX_TEST_STEPS}"),
+            );
+        }
+        if self.harmonics == 0 || self.harmonics > 64 {
+            return bad("harmonics", format!("{} is not in 1..=64", self.harmonics));
+        }
+        if self.modes == 0 {
+            return bad("modes", "retain at least one mode".into());
+        }
+        if self.drive.is_some() && self.drive_dof.is_some() {
+            return bad(
+                "drive",
+                "give `drive` (an excitation) or `drive_dof` (a DOF), not both".into(),
+            );
+        }
+        if let Err(e) = self.shaker.check() {
+            return bad("shaker", e.to_string());
+        }
+        let c = &self.control;
+        if !(c.tolerance.is_finite() && c.tolerance > 0.0) || c.max_iterations == 0 {
+            return bad(
+                "control",
+                format!(
+                    "needs a positive tolerance and max_iterations >= 1 (got {} and {})",
+                    c.tolerance, c.max_iterations
+                ),
+            );
+        }
+        for (name, n) in [("noise", self.noise), ("force_noise", self.force_noise)] {
+            if !(n.absolute.is_finite()
+                && n.relative.is_finite()
+                && n.absolute >= 0.0
+                && n.relative >= 0.0)
+            {
+                return bad(
+                    name,
+                    format!(
+                        "absolute {} and relative {} must be non-negative",
+                        n.absolute, n.relative
+                    ),
+                );
+            }
+        }
+        let ext = self.out.extension().and_then(|e| e.to_str()).unwrap_or("");
+        if !matches!(ext, "csv" | "h5" | "hdf5") {
+            return bad(
+                "out",
+                format!("{}: name a .csv or .h5 file", self.out.display()),
+            );
+        }
+        Ok(())
+    }
+
+    /// Reads a test file for `model` (the module docs show one).
+    pub fn load(path: &Path, model: &str) -> Result<Self> {
+        let text = crate::formats::files::read_text_bounded(
+            path,
+            crate::commands::plan::request::MAX_SETTINGS_BYTES,
+        )?;
+        Self::parse(&text, path, model)
+    }
+
+    /// Parses test-file text for `model`; `path` names it in errors, and relative paths in
+    /// it are taken from its folder.
+    pub fn parse(text: &str, path: &Path, model: &str) -> Result<Self> {
+        let t: TestTable = SettingsFile::parse(text, path)?;
+        t.into_request(model.to_string(), text, path)
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct NoiseTable {
+    relative: Option<f64>,
+    absolute: Option<f64>,
+}
+
+impl NoiseTable {
+    fn get(t: &Option<NoiseTable>, d: Noise) -> Noise {
+        t.as_ref().map_or(d, |n| Noise {
+            absolute: n.absolute.unwrap_or(0.0),
+            relative: n.relative.unwrap_or(0.0),
+        })
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SweepTable {
+    label: Option<String>,
+    from: f64,
+    to: f64,
+    steps: usize,
+    force: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ShakerTable {
+    armature_mass: Option<f64>,
+    suspension_stiffness: Option<f64>,
+    suspension_damping: Option<f64>,
+    resistance: Option<f64>,
+    inductance: Option<f64>,
+    force_constant: Option<f64>,
+    stinger_stiffness: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ControlTable {
+    enabled: Option<bool>,
+    tolerance: Option<f64>,
+    max_iterations: Option<usize>,
+    static_force: Option<bool>,
+    compare_open_loop: Option<bool>,
+}
+
+/// A test file.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TestTable {
+    #[serde(default)]
+    set: BTreeMap<String, f64>,
+    drive: Option<String>,
+    drive_dof: Option<String>,
+    harmonics: Option<usize>,
+    modes: Option<usize>,
+    seed: Option<u64>,
+    noise: Option<NoiseTable>,
+    force_noise: Option<NoiseTable>,
+    out: Option<String>,
+    report: Option<String>,
+    shaker: Option<ShakerTable>,
+    control: Option<ControlTable>,
+    #[serde(default)]
+    sweep: Vec<SweepTable>,
+    #[serde(default)]
+    sensor: Vec<PointTable>,
+    #[serde(default)]
+    channels: Vec<String>,
+}
+
+impl TestTable {
+    fn into_request(self, model: String, text: &str, path: &Path) -> Result<TestRequest> {
+        let file = SettingsFile { text, path };
+        let err = |key: &str, message: String| file.err(key, message);
+        let rel = |p: &str| file.rel(p);
+        let d = TestRequest::new("", Vec::new());
+        let ds = Shaker::default();
+        let shaker = match &self.shaker {
+            None => ds,
+            Some(s) => Shaker {
+                armature_mass: s.armature_mass.unwrap_or(ds.armature_mass),
+                suspension_stiffness: s.suspension_stiffness.unwrap_or(ds.suspension_stiffness),
+                suspension_damping: s.suspension_damping.unwrap_or(ds.suspension_damping),
+                resistance: s.resistance.unwrap_or(ds.resistance),
+                inductance: s.inductance.unwrap_or(ds.inductance),
+                force_constant: s.force_constant.unwrap_or(ds.force_constant),
+                stinger_stiffness: s.stinger_stiffness.unwrap_or(ds.stinger_stiffness),
+            },
+        };
+        let dc = ControlConfig::default();
+        let (control, compare) = match &self.control {
+            None => (dc, d.compare_open_loop),
+            Some(c) => (
+                ControlConfig {
+                    enabled: c.enabled.unwrap_or(dc.enabled),
+                    tolerance: c.tolerance.unwrap_or(dc.tolerance),
+                    max_iterations: c.max_iterations.unwrap_or(dc.max_iterations),
+                    static_force: c.static_force.unwrap_or(dc.static_force),
+                },
+                c.compare_open_loop.unwrap_or(d.compare_open_loop),
+            ),
+        };
+        let enabled = control.enabled;
+        let sensors = self
+            .sensor
+            .iter()
+            .map(|p| p.spec(&file, "sensor"))
+            .collect::<Result<Vec<_>>>()?;
+        let mut sweeps = Vec::with_capacity(self.sweep.len());
+        for (i, s) in self.sweep.iter().enumerate() {
+            if !(2..=100_000).contains(&s.steps) {
+                return Err(err(
+                    "steps",
+                    format!("sweep {}: {} steps, expected 2 to 100000", i + 1, s.steps),
+                ));
+            }
+            let label = s
+                .label
+                .clone()
+                .unwrap_or_else(|| format!("{} N {:.6}-{:.6} Hz", s.force, s.from, s.to));
+            sweeps.push(SweepPlan::linear(label, s.from, s.to, s.steps, s.force));
+        }
+        let req = TestRequest {
+            model,
+            set: self.set.iter().map(|(k, v)| format!("{k}={v:e}")).collect(),
+            drive: self.drive,
+            drive_dof: self.drive_dof,
+            sweeps,
+            harmonics: self.harmonics.unwrap_or(d.harmonics),
+            modes: self.modes.unwrap_or(d.modes),
+            shaker,
+            control,
+            compare_open_loop: compare && enabled,
+            noise: NoiseTable::get(&self.noise, d.noise),
+            force_noise: NoiseTable::get(&self.force_noise, d.force_noise),
+            seed: self.seed.unwrap_or(d.seed),
+            out: rel(self.out.as_deref().unwrap_or("virtual_test.csv")),
+            report: self.report.as_deref().map(rel),
+            sensors,
+            channels: self.channels,
+        };
+        req.check().map_err(|e| file.located("test", e))?;
+        Ok(req)
+    }
+}

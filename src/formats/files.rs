@@ -1,0 +1,296 @@
+//! What every result writer shares: the format chosen by the file extension, and atomic
+//! writes (a temporary file beside the destination, renamed into place when complete, so a
+//! failed or killed run leaves no partial file and an existing one untouched).
+
+use crate::error::{Error, Result};
+use hdf5_metno as hdf5;
+use std::path::{Path, PathBuf};
+
+/// Result file format, from the extension.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    /// `.csv`
+    Csv,
+    /// `.h5` or `.hdf5`
+    Hdf5,
+}
+
+impl Format {
+    /// The format of `path`, or a usage error naming it with `hint` (what each format holds).
+    pub fn of(path: &Path, hint: &str) -> Result<Self> {
+        match path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .as_deref()
+        {
+            Some("csv") => Ok(Format::Csv),
+            Some("h5" | "hdf5") => Ok(Format::Hdf5),
+            _ => Err(Error::Usage(format!(
+                "{}: unknown output format; name the file {hint}",
+                path.display()
+            ))),
+        }
+    }
+}
+
+/// Writes `path` through `write(temporary path, format)`, flushes it to the disk and
+/// renames it into place, so that the final name never holds a partial file, even after a
+/// crash of the machine; the temporary file is removed on failure, and those of killed runs
+/// of the same destination first.
+pub fn write_atomically(
+    path: &Path,
+    hint: &str,
+    write: impl FnOnce(&Path, Format) -> Result<()>,
+) -> Result<()> {
+    let format = Format::of(path, hint)?;
+    replace_atomically(path, |tmp| write(tmp, format))
+}
+
+/// Writes `text` to `path` the way [`write_atomically`] writes a result.
+pub fn write_text_atomically(path: &Path, text: &str) -> Result<()> {
+    replace_atomically(path, |tmp| {
+        std::fs::write(tmp, text).map_err(|source| Error::Io {
+            path: tmp.to_path_buf(),
+            source,
+        })
+    })
+}
+
+/// Writes `path` through `write(temporary path)`, flushes the temporary file to the disk
+/// and renames it into place, so that the final name never holds a partial file, even after
+/// a crash of the machine (a killed run or a full disk leaves the previous file, or none);
+/// the temporary file is removed on failure. Temporary files of the same destination left
+/// by runs that no longer exist are removed first.
+pub fn replace_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    remove_temporaries(path, true);
+    let tmp = temp_path(path);
+    let io = |source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let written = write(&tmp).and_then(|()| {
+        std::fs::File::open(&tmp)
+            .and_then(|f| f.sync_all())
+            .map_err(io)
+    });
+    if let Err(e) = written {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e);
+    }
+    std::fs::rename(&tmp, path).map_err(io)?;
+    // The rename itself reaches the disk with the folder's entry.
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        let _ = std::fs::File::open(dir).and_then(|d| d.sync_all());
+    }
+    Ok(())
+}
+
+/// Removes the `NAME.tmp-PID` files beside `path` ([`temp_path`]): with `orphans_only`,
+/// those whose process `PID` no longer runs (where `/proc` tells; nothing otherwise), so
+/// that a concurrent run's file is kept; else all of them (a batch shard, which one task
+/// owns at a time). Returns what was removed.
+pub fn remove_temporaries(path: &Path, orphans_only: bool) -> Vec<PathBuf> {
+    let mut removed = Vec::new();
+    if orphans_only && !Path::new("/proc/self").exists() {
+        return removed;
+    }
+    let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
+        return removed;
+    };
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let prefix = format!("{name}.tmp-");
+    let Ok(rd) = std::fs::read_dir(&dir) else {
+        return removed;
+    };
+    for e in rd.flatten() {
+        let file = e.file_name();
+        let Some(suffix) = file.to_str().and_then(|n| n.strip_prefix(&prefix)) else {
+            continue;
+        };
+        let orphan = || {
+            suffix
+                .parse::<u32>()
+                .is_ok_and(|pid| !Path::new("/proc").join(pid.to_string()).exists())
+        };
+        if (!orphans_only || orphan()) && std::fs::remove_file(e.path()).is_ok() {
+            removed.push(e.path());
+        }
+    }
+    removed
+}
+
+/// 1-based line of byte `offset` in `text` (where a TOML parser's error span starts).
+pub fn line_of(text: &str, offset: usize) -> usize {
+    text[..offset.min(text.len())].matches('\n').count() + 1
+}
+
+/// Reads a text file; the error names it.
+pub fn read_text(path: &Path) -> Result<String> {
+    String::from_utf8(read_bytes(path)?).map_err(|e| {
+        Error::Usage(format!(
+            "{}: not UTF-8 text (byte {} is not valid); is this the right file?",
+            path.display(),
+            e.utf8_error().valid_up_to()
+        ))
+    })
+}
+
+/// Reads the bytes of the regular file `path` (no device, pipe or directory), at most the size
+/// it had when opened.
+pub fn read_bytes(path: &Path) -> Result<Vec<u8>> {
+    use std::io::Read as _;
+    let io = |source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let file = std::fs::File::open(path).map_err(io)?;
+    let meta = file.metadata().map_err(io)?;
+    // A device or a pipe (`/dev/zero`, a FIFO) has no size and may never end.
+    if !meta.is_file() {
+        return Err(Error::Usage(format!(
+            "{}: not a regular file (a directory, a device or a pipe); give a file",
+            path.display()
+        )));
+    }
+    let len = meta.len();
+    let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0).min(1 << 30));
+    // At most the size it had when opened: a file that grows meanwhile cannot fill the memory.
+    file.take(len).read_to_end(&mut bytes).map_err(io)?;
+    Ok(bytes)
+}
+
+/// Reads a settings file (plan, test, prior) of at most `max_bytes`; the error names it and
+/// says how large it is, so that a wrong path to a huge file does not fill the memory.
+pub fn read_text_bounded(path: &Path, max_bytes: u64) -> Result<String> {
+    let io = |source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let len = std::fs::metadata(path).map_err(io)?.len();
+    if len > max_bytes {
+        return Err(Error::Usage(format!(
+            "{}: {len} bytes; a settings file holds at most {max_bytes} (is this the right file?)",
+            path.display()
+        )));
+    }
+    read_text(path)
+}
+
+/// The temporary name `path` is written under first: `NAME.tmp-PID`, beside it.
+pub fn temp_path(path: &Path) -> PathBuf {
+    let mut name = path
+        .file_name()
+        .map(|n| n.to_os_string())
+        .unwrap_or_default();
+    name.push(format!(".tmp-{}", std::process::id()));
+    path.with_file_name(name)
+}
+
+/// SI unit of a response quantity, as written in file headers and attributes.
+pub fn unit(q: nlsim_kernel::Quantity) -> &'static str {
+    match q {
+        nlsim_kernel::Quantity::Displacement => "m",
+        nlsim_kernel::Quantity::Velocity => "m/s",
+        nlsim_kernel::Quantity::Acceleration => "m/s^2",
+    }
+}
+
+/// Writes a string attribute (non-ASCII-safe text; `?` if it cannot be stored).
+pub fn str_attr(loc: &hdf5::Location, name: &str, v: &str) -> hdf5::Result<()> {
+    let s: hdf5::types::VarLenUnicode = v.parse().unwrap_or_else(|_| "?".parse().expect("ascii"));
+    loc.new_attr::<hdf5::types::VarLenUnicode>()
+        .create(name)?
+        .write_scalar(&s)
+}
+
+/// Writes a scalar `f64` attribute.
+pub fn f64_attr(loc: &hdf5::Location, name: &str, v: f64) -> hdf5::Result<()> {
+    loc.new_attr::<f64>().create(name)?.write_scalar(&v)
+}
+
+/// `text` as one printable line: its lines trimmed and joined by `; `, and any other control
+/// character (an escape sequence read from a file name or a file, a tab) written as an
+/// escape, so that an error never spans lines or drives the terminal.
+pub fn one_line(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for line in text.lines().map(str::trim).filter(|l| !l.is_empty()) {
+        if !out.is_empty() {
+            out.push_str("; ");
+        }
+        for c in line.chars() {
+            if c.is_control() {
+                out.extend(c.escape_default());
+            } else {
+                out.push(c);
+            }
+        }
+    }
+    out
+}
+
+/// Maps an HDF5 error to [`Error::Hdf5`] naming `path`.
+pub fn h5err(path: &Path) -> impl Fn(hdf5::Error) -> Error + '_ {
+    move |e| Error::Hdf5 {
+        path: path.to_path_buf(),
+        message: one_line(&e.to_string()),
+    }
+}
+
+/// Writes what every nlsim HDF5 file carries at its root (`docs/file-formats.md`): the nlsim
+/// version, the command, the model spec as given, the model's name, the seed of any random
+/// draws, and — when the spec is a model file — that file's text, so the data can be traced
+/// back without the file.
+pub fn provenance(
+    root: &hdf5::Group,
+    command: &str,
+    model_spec: &str,
+    model_name: &str,
+    seed: Option<u64>,
+) -> hdf5::Result<()> {
+    str_attr(root, "nlsim_version", env!("CARGO_PKG_VERSION"))?;
+    str_attr(root, "command", command)?;
+    str_attr(root, "model", model_spec)?;
+    str_attr(root, "model_name", model_name)?;
+    if let Some(s) = seed {
+        root.new_attr::<u64>().create("seed")?.write_scalar(&s)?;
+    }
+    let p = Path::new(model_spec);
+    if p.is_file()
+        && let Ok(text) = std::fs::read_to_string(p)
+    {
+        str_attr(root, "model_file_text", &text)?;
+    }
+    Ok(())
+}
+
+/// Reads a `u64` root attribute, if present.
+pub fn u64_attr(file: &hdf5::File, name: &str) -> Option<u64> {
+    file.attr(name).ok()?.read_scalar::<u64>().ok()
+}
+
+/// Name of job `index`'s group in shard and merged files.
+pub fn job_group_name(index: usize) -> String {
+    format!("job-{index:08}")
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn an_error_text_becomes_one_printable_line() {
+        // HDF5's multi-line messages, a file name with an escape sequence, a tab.
+        let text = "H5Dwrite(): can't write data\n    major: Dataset\n\n  minor: Write failed\n";
+        assert_eq!(
+            super::one_line(text),
+            "H5Dwrite(): can't write data; major: Dataset; minor: Write failed"
+        );
+        assert_eq!(
+            super::one_line("model '\u{1b}[2Jx\tbeam.toml': not found"),
+            "model '\\u{1b}[2Jx\\tbeam.toml': not found"
+        );
+        assert_eq!(super::one_line("plain é ∂"), "plain é ∂");
+    }
+}

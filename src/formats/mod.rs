@@ -1,0 +1,37 @@
+//! File formats in and out (feature `formats`): everything nlsim reads — model files, Matrix
+//! Market and HDF5 matrices with their binary cache, stepped-sine test data, measured modes,
+//! universal files, settings files — and the result files it writes (modes, time histories,
+//! FRFs), with the atomic writes and bounded reads they share.
+//!
+//! Belongs here: parsing and writing bytes, with errors that name the file, line (or HDF5
+//! object) and key, and bounds checked before anything is allocated. Does not: plotting, HTML,
+//! argument parsing, or running anything (no reduction, no solve) — so the C ABI, a Python
+//! package or another program can read and write nlsim's files without `clap`, `plotters`
+//! or the command layer (`cargo build -p nlsim --no-default-features --features formats`
+//! checks it in `make test`). Depends only on the numeric crates.
+//!
+//! | file | format |
+//! |---|---|
+//! | [`model_file`] | model files (TOML) and the `MODEL` argument (file or built-in name) |
+//! | [`matrices`] | Matrix Market and HDF5 (scipy-style CSC) matrices |
+//! | [`cache`] | the memory-mapped binary cache of parsed Matrix Market matrices |
+//! | [`test_data`] | stepped-sine test data (CSV and HDF5) |
+//! | [`modal_data`] | measured modes (CSV) |
+//! | [`uff`] | universal file dataset 58 (FRFs) |
+//! | [`settings`] | what the calibration, plan and test files (TOML) share |
+//! | [`modes_file`], [`history_file`], [`frf_file`] | result files of `modes`, `simulate`, `frf` |
+//! | [`candidates`] | the candidates file of a merged calibration batch |
+//! | [`files`] | atomic writes, bounded reads, provenance attributes, one-line messages |
+
+pub mod cache;
+pub mod candidates;
+pub mod files;
+pub mod frf_file;
+pub mod history_file;
+pub mod matrices;
+pub mod modal_data;
+pub mod model_file;
+pub mod modes_file;
+pub mod settings;
+pub mod test_data;
+pub mod uff;

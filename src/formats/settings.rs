@@ -1,0 +1,83 @@
+//! What the settings files (calibration, plan and test files, TOML) share: a parsed document
+//! whose errors name the file, the line and the key, and the line of a key in its text.
+use crate::error::{Error, Result};
+use std::path::{Path, PathBuf};
+
+/// The key a TOML error is about (the field in backticks of "unknown field `x`" or
+/// "missing field `x`"), else `toml`.
+pub fn toml_key(message: &str) -> String {
+    message
+        .strip_prefix("unknown field `")
+        .or_else(|| message.strip_prefix("missing field `"))
+        .and_then(|r| r.split('`').next())
+        .unwrap_or("toml")
+        .to_string()
+}
+
+/// A settings file being read (calibration, plan, test): errors name the file, the line of
+/// the key and the key; relative paths in it are taken from its folder.
+pub struct SettingsFile<'a> {
+    /// The file's text.
+    pub text: &'a str,
+    /// The file.
+    pub path: &'a Path,
+}
+
+impl<'a> SettingsFile<'a> {
+    /// Parses `text` as `T`, a TOML error located at its line and key.
+    pub fn parse<T: serde::de::DeserializeOwned>(text: &'a str, path: &'a Path) -> Result<T> {
+        toml::from_str(text).map_err(|e| Error::Spec {
+            file: path.to_path_buf(),
+            line: e
+                .span()
+                .map_or(1, |s| crate::formats::files::line_of(text, s.start)),
+            key: toml_key(e.message()),
+            message: e.message().to_string(),
+        })
+    }
+
+    /// An error about `key` (dotted: the line of its last part).
+    pub fn err(&self, key: &str, message: String) -> Error {
+        Error::Spec {
+            file: self.path.to_path_buf(),
+            line: line_of_key(self.text, key.rsplit('.').next().unwrap_or(key)),
+            key: key.to_string(),
+            message,
+        }
+    }
+
+    /// `p` relative to the file's folder (absolute paths as they are).
+    pub fn rel(&self, p: &str) -> PathBuf {
+        let p = Path::new(p);
+        if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            self.path.parent().unwrap_or(Path::new("")).join(p)
+        }
+    }
+
+    /// A request's `check` error `"{prefix} KEY: ..."` located at `KEY`.
+    pub fn located(&self, prefix: &str, e: Error) -> Error {
+        let msg = e.to_string();
+        let key = msg
+            .strip_prefix(prefix)
+            .and_then(|m| m.strip_prefix(' '))
+            .and_then(|m| m.split(':').next())
+            .unwrap_or("")
+            .to_string();
+        self.err(&key, msg)
+    }
+}
+
+/// Line of the first `key = ` (or `[key]`) in `text`, for errors found after parsing.
+pub fn line_of_key(text: &str, key: &str) -> usize {
+    text.lines()
+        .position(|l| {
+            let l = l.trim_start();
+            l.strip_prefix(key)
+                .is_some_and(|rest| rest.trim_start().starts_with('='))
+                || l.starts_with(&format!("[{key}]"))
+                || l.starts_with(&format!("[[{key}]]"))
+        })
+        .map_or(1, |i| i + 1)
+}

@@ -1,0 +1,451 @@
+//! The figure of a multi-harmonic FRF: one panel per harmonic (magnitude, optionally phase),
+//! stable and unstable points of every branch, folds and bifurcations marked; used by
+//! `nlsim frf --plot`, the FRF report and the demo.
+use crate::error::{Error, Result};
+use crate::formats::files::unit;
+use crate::formats::frf_file::harmonic_label;
+use faer::{Mat, c64};
+use nlsim_hb::{Branch, HbSystem, PointKind};
+use std::path::Path;
+
+/// How an FRF plot's magnitude axis reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Magnitude {
+    /// `|Y|` in the sensor's unit on a linear axis.
+    #[default]
+    Linear,
+    /// `|Y|` on a logarithmic axis.
+    Log,
+    /// `20 log₁₀(|Y| / 1 unit)`, dB re 1 m (or m/s, m/s²).
+    Db,
+}
+
+impl Magnitude {
+    /// The name used on the command line: `linear`, `log` or `db`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Magnitude::Linear => "linear",
+            Magnitude::Log => "log",
+            Magnitude::Db => "db",
+        }
+    }
+}
+
+impl std::str::FromStr for Magnitude {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "linear" => Ok(Magnitude::Linear),
+            "log" => Ok(Magnitude::Log),
+            "db" | "dB" => Ok(Magnitude::Db),
+            _ => Err(Error::Usage(format!(
+                "magnitude axis '{s}': use linear, log or db"
+            ))),
+        }
+    }
+}
+
+/// Plots the FRF of sensor `sensor` (responses `y` from `commands::frf::responses`) as SVG or PNG by the
+/// extension of `path`: one panel per harmonic carrying response, each on its own scale,
+/// magnitude read as `magnitude`, with a phase panel beside each when `phase`; stable parts
+/// in the harmonic's colour, unstable parts red, folds and jumps marked. Written atomically.
+#[allow(clippy::too_many_arguments)]
+pub fn plot_frf(
+    path: &Path,
+    sys: &HbSystem,
+    branch: &Branch,
+    y: &[Mat<c64>],
+    sensor: usize,
+    title: &str,
+    magnitude: Magnitude,
+    phase: bool,
+) -> Result<()> {
+    crate::present::plot::write(
+        path,
+        &FrfPlot {
+            sys,
+            branch,
+            y,
+            sensor,
+            title,
+            magnitude,
+            phase,
+        },
+    )
+}
+
+/// The FRF plot of [`plot_frf`], as a [`crate::present::plot::Figure`].
+pub struct FrfPlot<'a> {
+    /// The system the branch belongs to.
+    pub sys: &'a HbSystem,
+    /// The solution points.
+    pub branch: &'a Branch,
+    /// Sensor responses per point, from `commands::frf::responses`.
+    pub y: &'a [Mat<c64>],
+    /// Sensor plotted.
+    pub sensor: usize,
+    /// Title above the plot.
+    pub title: &'a str,
+    /// How the magnitude axes read.
+    pub magnitude: Magnitude,
+    /// Whether a phase panel goes beside each magnitude panel.
+    pub phase: bool,
+}
+
+/// At most this many harmonic panels: the fundamental and the largest others.
+const MAX_PANELS: usize = 5;
+
+impl FrfPlot<'_> {
+    fn hz(&self) -> Vec<f64> {
+        self.branch
+            .points
+            .iter()
+            .map(|p| p.omega / (2.0 * std::f64::consts::PI))
+            .collect()
+    }
+
+    fn amp(&self, i: usize, k: usize) -> f64 {
+        self.y[i][(self.sensor, k)].norm()
+    }
+
+    /// The harmonics drawn, in increasing order: the fundamental (`k = ν`) and those whose
+    /// largest amplitude reaches 1e-9 of the largest harmonic's, the largest first when more
+    /// than [`MAX_PANELS`] qualify. Each has its own scale, so side harmonics 1e-4 of the
+    /// fundamental are read as easily.
+    fn shown(&self) -> Vec<usize> {
+        let nk = self.sys.harmonics().h + 1;
+        let nu = self.sys.harmonics().nu;
+        let peak: Vec<f64> = (0..nk)
+            .map(|k| (0..self.y.len()).fold(0.0f64, |m, i| m.max(self.amp(i, k))))
+            .collect();
+        let top = peak.iter().fold(0.0f64, |m, v| m.max(*v));
+        let mut cands: Vec<usize> = (0..nk)
+            .filter(|&k| k != nu && peak[k] > 1e-9 * top && peak[k] > 0.0)
+            .collect();
+        cands.sort_by(|&a, &b| peak[b].total_cmp(&peak[a]));
+        cands.truncate(MAX_PANELS - 1);
+        if nu < nk {
+            cands.push(nu);
+        }
+        cands.sort_unstable();
+        cands
+    }
+
+    /// The plotted magnitude of a response amplitude `a` (dB values for [`Magnitude::Db`]).
+    fn mag(&self, a: f64, floor: f64) -> f64 {
+        match self.magnitude {
+            Magnitude::Linear => a,
+            Magnitude::Log => a.max(floor),
+            Magnitude::Db => 20.0 * a.max(floor).log10(),
+        }
+    }
+
+    fn mag_label(&self) -> String {
+        let sen = &self.sys.sensors()[self.sensor];
+        let u = unit(sen.quantity);
+        match self.magnitude {
+            Magnitude::Linear | Magnitude::Log => format!("|{}| ({u})", sen.name),
+            Magnitude::Db => format!("|{}| (dB re 1 {u})", sen.name),
+        }
+    }
+
+    fn panel_name(&self, k: usize) -> String {
+        let nu = self.sys.harmonics().nu;
+        format!(
+            "harmonic {}{}",
+            harmonic_label(k, nu),
+            if k == nu { " (fundamental)" } else { "" }
+        )
+    }
+
+    /// Phase of harmonic `k` at point `i` in degrees, `(−180, 180]`, in the convention
+    /// `q(t) = Re(Σ Q_k e^{i k Ω t / ν})`.
+    fn phase_deg(&self, i: usize, k: usize) -> f64 {
+        self.y[i][(self.sensor, k)].arg().to_degrees()
+    }
+}
+
+impl crate::present::plot::Figure for FrfPlot<'_> {
+    fn size(&self) -> (u32, u32) {
+        let rows = self.shown().len().max(1) as u32;
+        (if self.phase { 1280 } else { 960 }, 60 + 260 * rows)
+    }
+
+    fn title(&self) -> String {
+        self.title.to_string()
+    }
+
+    fn data(&self) -> Vec<crate::present::plot::SeriesData> {
+        let hz = self.hz();
+        let floor = self.floor();
+        let mut out = Vec::new();
+        let x_label = "frequency (Hz)".to_string();
+        for k in self.shown() {
+            let panel = self.panel_name(k);
+            out.push(crate::present::plot::SeriesData {
+                panel: panel.clone(),
+                label: "magnitude".into(),
+                x_label: x_label.clone(),
+                y_label: self.mag_label(),
+                x: hz.clone(),
+                y: (0..hz.len())
+                    .map(|i| self.mag(self.amp(i, k), floor))
+                    .collect(),
+            });
+            if self.phase {
+                out.push(crate::present::plot::SeriesData {
+                    panel: panel.clone(),
+                    label: "phase".into(),
+                    x_label: x_label.clone(),
+                    y_label: "phase (deg)".into(),
+                    x: hz.clone(),
+                    y: (0..hz.len()).map(|i| self.phase_deg(i, k)).collect(),
+                });
+            }
+            for (kind, label) in [(PointKind::Fold, "fold"), (PointKind::Jump, "jump")] {
+                let idx: Vec<usize> = (0..hz.len())
+                    .filter(|&i| self.branch.points[i].kind == kind)
+                    .collect();
+                if !idx.is_empty() {
+                    out.push(crate::present::plot::SeriesData {
+                        panel: panel.clone(),
+                        label: label.into(),
+                        x_label: x_label.clone(),
+                        y_label: self.mag_label(),
+                        x: idx.iter().map(|&i| hz[i]).collect(),
+                        y: idx
+                            .iter()
+                            .map(|&i| self.mag(self.amp(i, k), floor))
+                            .collect(),
+                    });
+                }
+            }
+        }
+        out
+    }
+
+    fn draw<DB: plotters::prelude::DrawingBackend>(
+        &self,
+        root: &plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
+    ) -> crate::present::plot::DrawResult
+    where
+        DB::ErrorType: 'static,
+    {
+        use plotters::prelude::*;
+        root.fill(&WHITE)?;
+        let root = root.titled(self.title, ("sans-serif", 20))?;
+        let shown = self.shown();
+        let cols = if self.phase { 2 } else { 1 };
+        let areas = root.split_evenly((shown.len().max(1), cols));
+        let palette = [BLUE, GREEN, MAGENTA, CYAN, BLACK, RGBColor(150, 100, 0)];
+        for (row, &k) in shown.iter().enumerate() {
+            let colour = if k == self.sys.harmonics().nu {
+                BLUE
+            } else {
+                palette[1 + row % (palette.len() - 1)]
+            };
+            let legend = row == 0;
+            self.draw_panel(&areas[row * cols], k, colour, false, legend)?;
+            if self.phase {
+                self.draw_panel(&areas[row * cols + 1], k, colour, true, false)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+impl FrfPlot<'_> {
+    /// The smallest magnitude drawn on a log or dB axis: 1e-12 of the largest.
+    fn floor(&self) -> f64 {
+        let top = self
+            .y
+            .iter()
+            .flat_map(|m| (0..m.ncols()).map(move |k| m[(self.sensor, k)].norm()))
+            .fold(0.0f64, f64::max);
+        (1e-12 * top).max(f64::MIN_POSITIVE)
+    }
+
+    /// One panel: the magnitude (or phase) of harmonic `k`, stable stretches in `colour`,
+    /// unstable red, folds and jumps marked and named in the legend.
+    fn draw_panel<DB: plotters::prelude::DrawingBackend>(
+        &self,
+        area: &plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
+        k: usize,
+        colour: plotters::style::RGBColor,
+        phase: bool,
+        legend: bool,
+    ) -> crate::present::plot::DrawResult
+    where
+        DB::ErrorType: 'static,
+    {
+        use crate::present::plot::tick_label;
+        use crate::present::plot::tick_step;
+        use plotters::prelude::*;
+        let hz = self.hz();
+        let n = hz.len();
+        let floor = self.floor();
+        let value = |i: usize| {
+            if phase {
+                self.phase_deg(i, k)
+            } else {
+                self.mag(self.amp(i, k), floor)
+            }
+        };
+        let vals: Vec<f64> = (0..n).map(value).collect();
+        let (x0, x1) = hz
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(*v), b.max(*v))
+            });
+        let x1 = x1.max(x0 * (1.0 + 1e-9) + 1e-9);
+        let (v0, v1) = vals
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(*v), b.max(*v))
+            });
+        let caption = format!(
+            "{}{}",
+            self.panel_name(k),
+            if phase { ": phase" } else { "" }
+        );
+        let y_desc = if phase {
+            "phase (deg)".to_string()
+        } else {
+            self.mag_label()
+        };
+        let mut builder = ChartBuilder::on(area);
+        builder
+            .caption(caption, ("sans-serif", 15))
+            .margin(8)
+            .x_label_area_size(40)
+            .y_label_area_size(76);
+        let xs = tick_step(x0, x1, 20);
+        let x_fmt = |v: &f64| tick_label(*v, xs, x1.abs());
+        // Segments of equal stability; a jump starts a new curve, and so does a phase wrap.
+        let segments = || {
+            let mut out: Vec<(bool, Vec<(f64, f64)>)> = Vec::new();
+            for i in 0..n {
+                let stable = self.branch.points[i].stable() != Some(false);
+                let jump = self.branch.points[i].kind == PointKind::Jump;
+                let wrap = phase && i > 0 && (vals[i] - vals[i - 1]).abs() > 180.0;
+                match out.last_mut() {
+                    Some((s, pts)) if !jump && !wrap => {
+                        pts.push((hz[i], vals[i]));
+                        if *s != stable {
+                            // The shared point ends one stretch and starts the next.
+                            out.push((stable, vec![(hz[i], vals[i])]));
+                        }
+                    }
+                    _ => out.push((stable, vec![(hz[i], vals[i])])),
+                }
+            }
+            out
+        };
+        let marks = |kind: PointKind| -> Vec<(f64, f64)> {
+            (0..n)
+                .filter(|&i| self.branch.points[i].kind == kind)
+                .map(|i| (hz[i], vals[i]))
+                .collect()
+        };
+        let any_unstable = self.branch.points.iter().any(|p| p.stable() == Some(false));
+        let width = if k == self.sys.harmonics().nu { 2 } else { 1 };
+        // The drawing is the same on a linear and a log axis; a macro keeps one copy.
+        macro_rules! finish {
+            ($chart:expr) => {{
+                let mut chart = $chart;
+                let mut labelled = false;
+                for (stable, pts) in segments() {
+                    let style = if stable {
+                        colour.stroke_width(width)
+                    } else {
+                        RED.stroke_width(width)
+                    };
+                    let s = chart.draw_series(LineSeries::new(pts, style))?;
+                    if legend && stable && !labelled {
+                        labelled = true;
+                        s.label("stable").legend(move |(x, y)| {
+                            PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
+                        });
+                    }
+                }
+                if legend && any_unstable {
+                    chart
+                        .draw_series(std::iter::empty::<PathElement<(f64, f64)>>())?
+                        .label("unstable")
+                        .legend(|(x, y)| {
+                            PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2))
+                        });
+                }
+                let folds = marks(PointKind::Fold);
+                if !folds.is_empty() {
+                    let s = chart
+                        .draw_series(folds.iter().map(|&p| Circle::new(p, 5, BLACK.filled())))?;
+                    if legend {
+                        s.label("fold")
+                            .legend(|(x, y)| Circle::new((x + 10, y), 4, BLACK.filled()));
+                    }
+                }
+                let jumps = marks(PointKind::Jump);
+                if !jumps.is_empty() {
+                    let s = chart.draw_series(
+                        jumps
+                            .iter()
+                            .map(|&p| TriangleMarker::new(p, 6, BLACK.filled())),
+                    )?;
+                    if legend {
+                        s.label("jump (stepped sine)")
+                            .legend(|(x, y)| TriangleMarker::new((x + 10, y), 5, BLACK.filled()));
+                    }
+                }
+                if legend {
+                    crate::present::plot::draw_legend(&mut chart, SeriesLabelPosition::UpperRight)?;
+                }
+            }};
+        }
+        if phase {
+            let chart = builder.build_cartesian_2d(x0..x1, -180.0..180.0)?;
+            let mut chart = chart;
+            chart
+                .configure_mesh()
+                .x_desc("frequency (Hz)")
+                .y_desc(&y_desc)
+                .x_label_formatter(&x_fmt)
+                .y_labels(9)
+                .y_label_formatter(&|v| format!("{v:.0}"))
+                .draw()?;
+            finish!(chart);
+        } else if self.magnitude == Magnitude::Log {
+            let lo = v0.max(floor) / 1.2;
+            // The legend's panel keeps a band above the curves for it.
+            let hi = v1.max(floor) * if legend { 6.0 } else { 1.2 };
+            let mut chart = builder.build_cartesian_2d(x0..x1, (lo..hi).log_scale())?;
+            chart
+                .configure_mesh()
+                .x_desc("frequency (Hz)")
+                .y_desc(&y_desc)
+                .x_label_formatter(&x_fmt)
+                .y_label_formatter(&|v| tick_label(*v, 0.0, hi))
+                .draw()?;
+            finish!(chart);
+        } else {
+            let head = if legend { 0.35 } else { 0.05 };
+            let (lo, hi) = if self.magnitude == Magnitude::Db {
+                let span = (v1 - v0).max(1.0);
+                (v0 - 0.05 * span, v1 + head * span)
+            } else {
+                (0.0, v1 * (1.03 + head) + 1e-300)
+            };
+            let ys = tick_step(lo, hi, 20);
+            let mut chart = builder.build_cartesian_2d(x0..x1, lo..hi)?;
+            chart
+                .configure_mesh()
+                .x_desc("frequency (Hz)")
+                .y_desc(&y_desc)
+                .x_label_formatter(&x_fmt)
+                .y_label_formatter(&|v| tick_label(*v, ys, lo.abs().max(hi.abs())))
+                .draw()?;
+            finish!(chart);
+        }
+        Ok(())
+    }
+}
