@@ -390,7 +390,7 @@ impl FrfOutputs {
         console: &crate::present::console::Console,
     ) -> Result<()> {
         use std::f64::consts::PI;
-        let set = req.check()?;
+        let set = *run.system.harmonics();
         let summary = run.summary(model, req, console.verbose());
         for line in &summary {
             console.say(line);
