@@ -12,7 +12,8 @@
 //! | [`present`] | summaries, plots, the HTML report, the terminal | `io` (summaries always) |
 //! | [`commands`] | one request, one run, one report writer per `nlsim` command | `io` |
 //! | [`batch`] | jobs files, shards, merge, SLURM job arrays | `io` |
-//! | `src/bin/nlsim/` | the `nlsim` binary: argument parsing and dispatch only | `cli` |
+//! | [`cli`] | the command line: options and help texts, arguments into requests, dispatch | `cli` |
+//! | `src/bin/nlsim/` | the `nlsim` binary: parse, thread pool, dispatch, exit code | `cli` |
 //!
 //! `cli` implies `io`, which implies `formats`; `cli` is on by default. Link with
 //! `default-features = false` for the computation alone (no libhdf5, no plotting, no file
@@ -48,6 +49,8 @@
 
 #[cfg(feature = "io")]
 pub mod batch;
+#[cfg(feature = "cli")]
+pub mod cli;
 #[cfg(feature = "io")]
 pub mod commands;
 pub mod error;

@@ -1,0 +1,259 @@
+//! The arguments of the calibration and test-planning commands (`calibrate`, `plan`,
+//! `test`) and their requests: options given on the command line override the files.
+
+use crate::commands;
+use crate::present::console::Console;
+use clap::Args;
+
+/// The arguments of `nlsim calibrate`.
+#[derive(Args, Debug)]
+pub struct CalibrateArgs {
+    /// Model file (.toml) or built-in model, e.g. `ecl_beam`.
+    #[arg(required_unless_present = "config", conflicts_with = "config")]
+    model: Option<String>,
+    /// Test data: stepped-sine CSV or HDF5 (docs/file-formats.md), linear FRFs in
+    /// universal file dataset 58 (.uff/.unv, ASCII or binary; 1 % noise assumed), or
+    /// measured modes as CSV (mode,frequency_hz,frequency_std_hz,DOF...: FE-level
+    /// parameters from frequencies and shapes).
+    #[arg(required_unless_present = "config", conflicts_with = "config")]
+    data: Option<std::path::PathBuf>,
+    /// Calibration file (TOML): model, data, parameters, bounds and every setting.
+    #[arg(long)]
+    config: Option<std::path::PathBuf>,
+    /// A parameter and its bounds, `NAME=LOWER:UPPER` (repeatable), e.g.
+    /// `--param tip_spring.k3=1e8:1e11 --param mode2.zeta=0.002:0.05`.
+    #[arg(
+        long = "param",
+        required_unless_present = "config",
+        conflicts_with = "config"
+    )]
+    params: Vec<String>,
+    /// Fixed overrides `element.param=value` applied before calibrating (repeatable).
+    #[arg(long, conflicts_with = "config")]
+    set: Vec<String>,
+    /// Harmonics compared (1 = fundamental only), e.g. `1,3` [default: 1].
+    #[arg(long, value_delimiter = ',')]
+    compare: Option<Vec<usize>>,
+    /// Residual form: complex differences or log-magnitude and phase [default: complex].
+    #[arg(long, value_enum)]
+    form: Option<CalibForm>,
+    /// Branch of a multi-valued response the model is compared on: `nearest` repeats a
+    /// step from the linear response where the continued solution is far (5σ) from
+    /// the measurement and keeps the nearer solution (the test jumped elsewhere than
+    /// the model); `continuation` follows the model's own branch [default: nearest].
+    #[arg(long, value_enum)]
+    branch: Option<CalibBranch>,
+    /// Harmonics H kept by the harmonic balance [default: 3].
+    #[arg(long)]
+    harmonics: Option<usize>,
+    /// Retained modes of the reduced model (modal data: the computed modes paired with
+    /// the measured ones) [default: 20, at most the model's DOFs].
+    #[arg(long)]
+    modes: Option<usize>,
+    /// Modal data: standard deviation of one component of a unit-normalised measured
+    /// shape [default: 0.02].
+    #[arg(long)]
+    shape_noise: Option<f64>,
+    /// Latin-hypercube candidates [default: 64].
+    #[arg(long)]
+    lhs: Option<usize>,
+    /// Levenberg–Marquardt runs from the best candidates [default: 3].
+    #[arg(long)]
+    starts: Option<usize>,
+    /// Folds of the cross validation (0: none) [default: 10].
+    #[arg(long)]
+    folds: Option<usize>,
+    /// Seed of the Latin hypercube and of the folds [default: 1].
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Candidates already evaluated: the merged file of a `calibrate-candidates` batch
+    /// of this calibration (docs/batch.md).
+    #[arg(long)]
+    candidates: Option<std::path::PathBuf>,
+    /// Estimates and statistics as CSV.
+    #[arg(long)]
+    out: Option<std::path::PathBuf>,
+    /// Report folder: summary, tables (estimates, candidates, convergence, folds, fit)
+    /// and plots as SVG and PNG (per-harmonic FRFs, k-fold bars, convergence).
+    #[arg(long)]
+    report: Option<std::path::PathBuf>,
+}
+
+/// The arguments of `nlsim plan`.
+#[derive(Args, Debug)]
+pub struct PlanArgs {
+    /// Model file (.toml) or built-in model, e.g. `ecl_beam`.
+    model: String,
+    /// Plan file (TOML): parameters and candidates.
+    plan: std::path::PathBuf,
+    /// Ranking criterion: D, T, A, E or max-variance [default: the file's, else D].
+    #[arg(long)]
+    criterion: Option<String>,
+    /// Rows of the printed table [default: the file's, else 10].
+    #[arg(long)]
+    top: Option<usize>,
+    /// Report folder: summary, ranking.csv, fim_best.csv and plots [default: the file's,
+    /// else PLAN's name with `-report`, beside it].
+    #[arg(long)]
+    report: Option<std::path::PathBuf>,
+}
+
+/// The arguments of `nlsim test`.
+#[derive(Args, Debug)]
+pub struct TestArgs {
+    /// Model file (.toml) or built-in model, e.g. `ecl_beam`.
+    model: String,
+    /// Test file (TOML): drive point, shaker, controller, sweeps, noise.
+    test: std::path::PathBuf,
+    /// Test data, .csv or .h5 [default: the file's `out`, else virtual_test.csv beside
+    /// it].
+    #[arg(long)]
+    out: Option<std::path::PathBuf>,
+    /// Seed of the measurement noise [default: the file's, else 1].
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Run voltage-driven only (no force control).
+    #[arg(long)]
+    open_loop: bool,
+    /// Report folder: summary, control.csv and force/response plots [default: the
+    /// file's, else TEST's name with `-report`, beside it].
+    #[arg(long)]
+    report: Option<std::path::PathBuf>,
+}
+
+impl CalibrateArgs {
+    /// The request of `nlsim calibrate`: the calibration file's with the options given beside
+    /// it, or one built from MODEL, DATA and `--param`; `Err` for a parameter that does not
+    /// parse or a calibration file that does not load.
+    pub fn request(&self) -> crate::Result<commands::calibrate::CalibrationRequest> {
+        use commands::calibrate::{CalibrationRequest, parse_param_bounds};
+        let mut req = match (&self.config, &self.model, &self.data) {
+            (Some(path), _, _) => CalibrationRequest::load(path)?,
+            (None, Some(model), Some(data)) => {
+                let specs = self
+                    .params
+                    .iter()
+                    .map(|p| parse_param_bounds(p))
+                    .collect::<crate::Result<Vec<_>>>()?;
+                let mut r = CalibrationRequest::new(model.clone(), data.clone(), specs);
+                r.set = self.set.clone();
+                r
+            }
+            _ => {
+                return Err(crate::Error::Usage(
+                    "nlsim calibrate needs MODEL DATA --param ... or --config FILE".into(),
+                ));
+            }
+        };
+        if let Some(v) = &self.compare {
+            req.compare = v.clone();
+        }
+        if let Some(f) = self.form {
+            req.form = match f {
+                CalibForm::Complex => crate::calib::Form::Complex,
+                CalibForm::LogMagnitude => crate::calib::Form::LogMagnitudePhase,
+            };
+        }
+        if let Some(b) = self.branch {
+            req.branch = match b {
+                CalibBranch::Nearest => crate::calib::BranchChoice::NearestToData,
+                CalibBranch::Continuation => crate::calib::BranchChoice::Continuation,
+            };
+        }
+        let c = &mut req.config;
+        for (dst, src) in [
+            (&mut req.harmonics, self.harmonics),
+            (&mut req.modes, self.modes),
+            (&mut c.lhs_samples, self.lhs),
+            (&mut c.starts, self.starts),
+            (&mut c.folds, self.folds),
+        ] {
+            if let Some(v) = src {
+                *dst = v;
+            }
+        }
+        if let Some(s) = self.seed {
+            c.seed = s;
+        }
+        if let Some(s) = self.shape_noise {
+            req.shape_noise = s;
+        }
+        if self.out.is_some() {
+            req.out = self.out.clone();
+        }
+        if self.report.is_some() {
+            req.report = self.report.clone();
+        }
+        Ok(req)
+    }
+
+    /// `nlsim calibrate`.
+    pub fn execute(&self, console: &Console) -> crate::Result<()> {
+        commands::calibrate::execute(&self.request()?, self.candidates.as_deref(), console)
+    }
+}
+
+impl PlanArgs {
+    /// The request of `nlsim plan`: the plan file's, with `--criterion`, `--top` and
+    /// `--report` overriding it.
+    pub fn request(&self) -> crate::Result<commands::plan::PlanRequest> {
+        let mut req = commands::plan::PlanRequest::load(&self.plan, &self.model)?;
+        if let Some(c) = &self.criterion {
+            req.criterion = crate::calib::Criterion::parse(c)
+                .map_err(|e| crate::Error::Usage(format!("--criterion: {e}")))?;
+        }
+        if let Some(t) = self.top {
+            req.top = t;
+        }
+        req.report = Some(
+            self.report
+                .clone()
+                .or(req.report)
+                .unwrap_or_else(|| commands::setup::default_report(&self.plan)),
+        );
+        Ok(req)
+    }
+}
+
+impl TestArgs {
+    /// The request of `nlsim test`: the test file's, with `--out`, `--seed`, `--open-loop`
+    /// and `--report` overriding it.
+    pub fn request(&self) -> crate::Result<commands::test::TestRequest> {
+        let mut req = commands::test::TestRequest::load(&self.test, &self.model)?;
+        if let Some(o) = &self.out {
+            req.out = o.clone();
+        }
+        if let Some(s) = self.seed {
+            req.seed = s;
+        }
+        if self.open_loop {
+            req.control.enabled = false;
+            req.compare_open_loop = false;
+        }
+        req.report = Some(
+            self.report
+                .clone()
+                .or(req.report)
+                .unwrap_or_else(|| commands::setup::default_report(&self.test)),
+        );
+        Ok(req)
+    }
+}
+
+/// Residual form of `nlsim calibrate`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum CalibForm {
+    /// Real and imaginary parts of the complex difference.
+    Complex,
+    /// Log-magnitude and phase differences.
+    LogMagnitude,
+}
+
+/// Branch choice of `nlsim calibrate`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum CalibBranch {
+    /// The solution nearer to the measurement where the continued one is far from it.
+    Nearest,
+    /// The model's own continuation from the previous step.
+    Continuation,
+}
