@@ -2738,6 +2738,68 @@ NONE
         assert!(e.to_string().contains("no dataset 58"), "{e}");
     }
 
+    /// The byte count of a 58b header: pyuff 2.5.8 declares points × 8 even for complex,
+    /// uneven data (read as record 7 says, since the closing -1 follows there); a count
+    /// larger than the data does not swallow the next dataset; a count beyond the file is
+    /// refused.
+    #[test]
+    fn binary_byte_counts_that_lie() {
+        let dir = scratch("uff-count");
+        let recs = vec![record("tip", 3), record("mid", 2)];
+        let p = dir.join("b.uff");
+        uff::write(&p, &recs, true).unwrap();
+        let good = std::fs::read(&p).unwrap();
+        // The header lines `58b 1 2 11 COUNT ...` with COUNT replaced.
+        let with_count = |count: &dyn Fn(usize, usize) -> String| -> Vec<u8> {
+            let mut out = Vec::new();
+            let mut rest = &good[..];
+            let mut index = 0;
+            while let Some(i) = rest.windows(5).position(|w| w == b" 58b ") {
+                let line_end = i + rest[i..].iter().position(|&b| b == b'\n').unwrap();
+                let line = String::from_utf8(rest[i..line_end].to_vec()).unwrap();
+                let mut f: Vec<String> = line.split_whitespace().map(String::from).collect();
+                let declared: usize = f[4].parse().unwrap();
+                f[4] = count(index, declared);
+                index += 1;
+                out.extend(&rest[..i]);
+                out.extend(format!(" {}", f.join("  ")).as_bytes());
+                rest = &rest[line_end..];
+            }
+            out.extend(rest);
+            out
+        };
+        // 7 points × 3 doubles = 168 bytes; pyuff declares 7 × 8 = 56.
+        for (name, bytes) in [
+            ("pyuff", with_count(&|_, d| (d / 24 * 8).to_string())),
+            // The first dataset's count reaches into the second.
+            (
+                "larger",
+                with_count(&|i, d| (if i == 0 { d + 100 } else { d }).to_string()),
+            ),
+        ] {
+            let back = uff::parse(&bytes, Path::new("b.uff")).unwrap();
+            assert_eq!(back.len(), 2, "{name}");
+            for (a, b) in recs.iter().zip(&back) {
+                assert_eq!(a.id, b.id, "{name}");
+                assert_eq!(a.values, b.values, "{name}");
+            }
+        }
+        let beyond = with_count(&|_, _| (1u64 << 40).to_string());
+        let e = uff::parse(&beyond, Path::new("b.uff")).unwrap_err();
+        assert!(
+            e.to_string().contains("declares 1099511627776") && e.to_string().contains("b.uff:"),
+            "{e}"
+        );
+        // A count that lands nowhere near a closing -1 either: refused, naming both counts.
+        let mut cut = good.clone();
+        let last = cut.len() - 7;
+        cut.truncate(last);
+        cut.extend(b"xx\n    -1\n");
+        let e = uff::parse(&cut, Path::new("b.uff")).unwrap_err();
+        assert!(e.to_string().contains("closing -1"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     /// Big-endian binary, real double precision, even grid, written byte by byte here.
     #[test]
     fn reads_big_endian_binary_real_data() {

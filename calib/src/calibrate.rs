@@ -48,23 +48,61 @@ impl Default for CalibrationConfig {
     }
 }
 
+/// Most Latin-hypercube candidates of one calibration (each costs a harmonic-balance sweep
+/// over the data; the command line, calibration files and batch kinds share it).
+pub const MAX_LHS_SAMPLES: usize = 1_000_000;
+
+/// Most pair swaps of the maximin improvement of the Latin hypercube (each costs one
+/// distance update over the candidates; the default 2000 is plenty).
+pub const MAX_MAXIMIN_SWAPS: usize = 10_000_000;
+
+/// Most folds of a cross validation (at most the data points as well).
+pub const MAX_FOLDS: usize = 100_000;
+
+/// Most Levenberg–Marquardt starts (at most the candidates as well).
+pub const MAX_STARTS: usize = 10_000;
+
 impl CalibrationConfig {
+    /// Checks the settings that do not depend on the data: the limits above, at least one
+    /// start, and the Levenberg–Marquardt settings. What a batch kind checks before it
+    /// makes its jobs.
+    pub fn validate_settings(&self) -> Result<()> {
+        self.lm.validate()?;
+        let bad = |what: String| Err(Error::invalid("calibration settings", what));
+        if self.lhs_samples > MAX_LHS_SAMPLES {
+            return bad(format!(
+                "{} Latin-hypercube samples is beyond any budget (at most {MAX_LHS_SAMPLES})",
+                self.lhs_samples
+            ));
+        }
+        if self.maximin_swaps > MAX_MAXIMIN_SWAPS {
+            return bad(format!(
+                "maximin_swaps {} is beyond any budget (at most {MAX_MAXIMIN_SWAPS}; the default 2000 is plenty)",
+                self.maximin_swaps
+            ));
+        }
+        if self.folds > MAX_FOLDS {
+            return bad(format!(
+                "folds {} is beyond any budget (at most {MAX_FOLDS}, and at most the data points)",
+                self.folds
+            ));
+        }
+        if self.starts > MAX_STARTS {
+            return bad(format!(
+                "starts {} is beyond any budget (at most {MAX_STARTS})",
+                self.starts
+            ));
+        }
+        Ok(())
+    }
+
     /// Checks the settings against `n_points` data points.
     pub fn validate(&self, n_points: usize) -> Result<()> {
-        self.lm.validate()?;
+        self.validate_settings()?;
         if self.starts == 0 {
             return Err(Error::invalid(
                 "calibration settings",
                 "starts must be at least 1",
-            ));
-        }
-        if self.lhs_samples > 1_000_000 {
-            return Err(Error::invalid(
-                "calibration settings",
-                format!(
-                    "{} Latin-hypercube samples is beyond any budget (at most 10⁶)",
-                    self.lhs_samples
-                ),
             ));
         }
         if self.folds == 1 || self.folds > n_points {

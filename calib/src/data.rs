@@ -105,6 +105,41 @@ pub struct TestData {
     pub sweeps: Vec<Sweep>,
 }
 
+/// Largest step frequency test data may hold (Hz): far above any structural test, and low
+/// enough that `Ω` and its harmonics stay finite in every product the residuals form.
+pub const MAX_FREQUENCY_HZ: f64 = 1e9;
+
+/// Largest force or response amplitude test data may hold (SI units: N, m, m/s, m/s²):
+/// no measurement comes near it, and the noise model squares amplitudes
+/// (`σ² = σ_abs² + (ε |Y|)²`), which overflows above about 1e154.
+pub const MAX_AMPLITUDE: f64 = 1e100;
+
+/// Why a sweep label or channel name cannot be written into test data and read back, if it
+/// cannot: empty, or holding a comma, a quote, a `#` or a control character (the CSV
+/// layout splits cells at commas and reads `#` lines as header), or longer than 200 bytes.
+pub fn label_fault(label: &str) -> Option<String> {
+    if label.trim().is_empty() {
+        return Some("is empty".into());
+    }
+    if label.trim() != label {
+        return Some(format!("'{label}' starts or ends with a space"));
+    }
+    if label.len() > 200 {
+        return Some(format!("is {} bytes long (at most 200)", label.len()));
+    }
+    if let Some(c) = label
+        .chars()
+        .find(|&c| c == ',' || c == '"' || c == '#' || c.is_control())
+    {
+        return Some(format!(
+            "'{}' holds {:?}, which the CSV layout of test data cannot hold",
+            label.escape_default(),
+            c
+        ));
+    }
+    None
+}
+
 /// A point of the data: sweep index and step index within it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct PointId {
@@ -127,7 +162,25 @@ impl TestData {
                 "needs at least one channel, one sweep and one harmonic".into(),
             );
         }
-        for c in &self.channels {
+        if let Some(why) = label_fault(&self.input) {
+            return bad("test data input".into(), format!("name {why}"));
+        }
+        for (i, c) in self.channels.iter().enumerate() {
+            if let Some(j) = self.channels[..i].iter().position(|d| d.name == c.name) {
+                return bad(
+                    format!("test data channel {} ('{}')", i + 1, c.name),
+                    format!(
+                        "has the name of channel {}: each channel is named once",
+                        j + 1
+                    ),
+                );
+            }
+            if let Some(why) = label_fault(&c.name) {
+                return bad(
+                    format!("test data channel {}", i + 1),
+                    format!("name {why}"),
+                );
+            }
             let n = c.noise;
             let ok = |v: f64| v.is_finite() && v >= 0.0;
             if !ok(n.absolute) || !ok(n.relative) {
@@ -141,6 +194,18 @@ impl TestData {
             }
         }
         for (s, sw) in self.sweeps.iter().enumerate() {
+            if let Some(why) = label_fault(&sw.label) {
+                return bad(format!("test data sweep {}", s + 1), format!("label {why}"));
+            }
+            if let Some(t) = self.sweeps[..s].iter().position(|o| o.label == sw.label) {
+                return bad(
+                    format!("test data sweep {} ('{}')", s + 1, sw.label),
+                    format!(
+                        "has the label of sweep {}: each sweep (level, run) is labelled once",
+                        t + 1
+                    ),
+                );
+            }
             let at =
                 |i: usize| format!("test data sweep {} ('{}') step {}", s + 1, sw.label, i + 1);
             if sw.steps.is_empty() {
@@ -153,7 +218,16 @@ impl TestData {
                 if !(st.frequency_hz.is_finite() && st.frequency_hz > 0.0) {
                     return bad(
                         at(i),
-                        format!("frequency {} Hz is not positive", st.frequency_hz),
+                        format!("frequency {:e} Hz is not positive", st.frequency_hz),
+                    );
+                }
+                if st.frequency_hz > MAX_FREQUENCY_HZ {
+                    return bad(
+                        at(i),
+                        format!(
+                            "frequency {:e} Hz is above {MAX_FREQUENCY_HZ:e} Hz (is the column in Hz?)",
+                            st.frequency_hz
+                        ),
                     );
                 }
                 if st.force.len() != self.harmonics
@@ -179,6 +253,16 @@ impl TestData {
                 {
                     return bad(at(i), "force is not finite".into());
                 }
+                if let Some(k) = st.force.iter().position(|f| f.norm() > MAX_AMPLITUDE) {
+                    return bad(
+                        at(i),
+                        format!(
+                            "force harmonic {} of {:e} N is above {MAX_AMPLITUDE:e} (no measured force is; is the unit right?)",
+                            k + 1,
+                            st.force[k].norm()
+                        ),
+                    );
+                }
                 if st.force[0].norm() == 0.0 {
                     return bad(at(i), "the fundamental force is zero".into());
                 }
@@ -192,6 +276,20 @@ impl TestData {
                             return bad(
                                 format!("{}, channel '{}', harmonic {}", at(i), self.channels[c].name, k + 1),
                                 "response is not finite (use NaN + NaN i for a harmonic not measured)".into(),
+                            );
+                        }
+                        if y.norm() > MAX_AMPLITUDE {
+                            return bad(
+                                format!(
+                                    "{}, channel '{}', harmonic {}",
+                                    at(i),
+                                    self.channels[c].name,
+                                    k + 1
+                                ),
+                                format!(
+                                    "response of {:e} is above {MAX_AMPLITUDE:e} (no measured response is in SI units; is the unit right?)",
+                                    y.norm()
+                                ),
                             );
                         }
                     }
@@ -217,6 +315,27 @@ impl TestData {
             }
         }
         Ok(())
+    }
+
+    /// [`validate`](Self::validate), and at least one response harmonic measured (not NaN):
+    /// what a file of test data must hold (the readers and writers check it; a prediction
+    /// template, all NaN, passes `validate` alone).
+    pub fn validate_measured(&self) -> Result<()> {
+        self.validate()?;
+        let measured = self.sweeps.iter().any(|sw| {
+            sw.steps.iter().any(|st| {
+                (0..st.response.nrows())
+                    .any(|c| (0..st.response.ncols()).any(|k| !st.response[(c, k)].re.is_nan()))
+            })
+        });
+        if measured {
+            Ok(())
+        } else {
+            Err(Error::invalid(
+                "test data",
+                "holds no measured response (every response cell is empty or NaN)",
+            ))
+        }
     }
 
     /// Every point, sweep by sweep in measured order.

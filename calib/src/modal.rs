@@ -79,10 +79,14 @@ impl ModalData {
         }
         for (i, m) in self.modes.iter().enumerate() {
             let what = || format!("measured mode {}", i + 1);
-            if !(m.frequency_hz > 0.0 && m.frequency_hz.is_finite()) {
+            if !(m.frequency_hz > 0.0 && m.frequency_hz <= crate::data::MAX_FREQUENCY_HZ) {
                 return Err(Error::invalid(
                     what(),
-                    format!("frequency must be positive, not {} Hz", m.frequency_hz),
+                    format!(
+                        "frequency must be positive and at most {:e} Hz, not {:e} Hz",
+                        crate::data::MAX_FREQUENCY_HZ,
+                        m.frequency_hz
+                    ),
                 ));
             }
             if !(m.frequency_std_hz > 0.0 && m.frequency_std_hz.is_finite()) {
@@ -106,6 +110,17 @@ impl ModalData {
                     return Err(Error::invalid(
                         what(),
                         "shape must be finite and not all zero",
+                    ));
+                }
+                // Shapes are normalised and correlated through sums of squares: components
+                // beyond 1e100 (or all below 1e-100) would overflow or underflow them.
+                let largest = s.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+                if !(1e-100..=1e100).contains(&largest) {
+                    return Err(Error::invalid(
+                        what(),
+                        format!(
+                            "the largest shape component {largest:e} is outside 1e-100..1e100; scale the shape"
+                        ),
                     ));
                 }
             }

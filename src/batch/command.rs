@@ -41,6 +41,13 @@ pub fn run(b: &Batch, index: Option<usize>, count: usize, console: &Console) -> 
     if count == 0 {
         return Err(Error::Usage("--task-count must be at least 1".into()));
     }
+    if count > super::MAX_TASKS {
+        return Err(Error::Usage(format!(
+            "--task-count {count}: at most {} shards (this batch has {} jobs)",
+            super::MAX_TASKS,
+            b.jobs.len()
+        )));
+    }
     if let Some(i) = index
         && i >= count
     {

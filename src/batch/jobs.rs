@@ -17,7 +17,7 @@ use super::{Assignment, Batch, BatchCommand, Job, latin_hypercube};
 use crate::formats::files::line_of;
 
 /// Most samples of a jobs file's `[lhs]` table.
-pub const MAX_LHS_SAMPLES: usize = 1_000_000;
+pub const MAX_LHS_SAMPLES: usize = nlsim_calib::MAX_LHS_SAMPLES;
 
 /// The `[frf]` table: the options of `nlsim frf`.
 #[derive(Debug, Deserialize)]
@@ -713,7 +713,7 @@ impl Batch {
             }
         }
         // Errors point at the first line of the jobs file that names the culprit.
-        let text = std::fs::read_to_string(&self.file).unwrap_or_default();
+        let text = crate::formats::files::read_text(&self.file).unwrap_or_default();
         let err = |needle: &str, key: &str, e: Error| Error::Spec {
             file: self.file.clone(),
             line: text

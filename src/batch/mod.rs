@@ -70,6 +70,9 @@ use crate::formats::files::str_attr;
 use hdf5_metno as hdf5;
 use std::path::{Path, PathBuf};
 
+/// Most shards of a batch (`--task-count`, `$SLURM_ARRAY_TASK_COUNT`, `sbatch --tasks`): as
+/// many as the most jobs a jobs file may make.
+pub const MAX_TASKS: usize = jobs::MAX_LHS_SAMPLES;
 /// The command every job of a batch runs, with its base options.
 #[derive(Debug, Clone)]
 pub enum BatchCommand {
@@ -186,6 +189,9 @@ enum OnDisk {
 fn on_disk(path: &Path, hash: u64, n_jobs: usize) -> OnDisk {
     if !path.exists() {
         return OnDisk::Missing;
+    }
+    if let Err(e) = crate::formats::files::regular_file(path) {
+        return OnDisk::Damaged(e.to_string());
     }
     let file = match hdf5::File::open(path) {
         Ok(f) => f,

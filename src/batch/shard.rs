@@ -90,6 +90,10 @@ fn calib_context(b: &Batch) -> Result<Option<CalibContext>> {
         _ => return Ok(None),
     };
     let prepared = crate::commands::calibrate::run::prepare(req)?;
+    // Folds against the data points, once for the shard rather than once per job.
+    req.config
+        .validate(prepared.objective.data().n_points())
+        .map_err(|e| Error::Usage(format!("{}: {e}", req.data.display())))?;
     let candidates = match &b.command {
         BatchCommand::CalibrateCandidates(_) => {
             nlsim_calib::candidate_points(&prepared.objective, &req.config)?
@@ -304,6 +308,10 @@ pub fn run_shard(
             path.display()
         ))),
     }
+    let start = Instant::now();
+    // What the jobs share is loaded (and checked) before anything is written.
+    let ctx = calib_context(b)?;
+    let plan = plan_context(b)?;
     std::fs::create_dir_all(&b.output).map_err(|source| Error::Io {
         path: b.output.clone(),
         source,
@@ -314,9 +322,6 @@ pub fn run_shard(
             p.display()
         )));
     }
-    let start = Instant::now();
-    let ctx = calib_context(b)?;
-    let plan = plan_context(b)?;
     let mine: Vec<&Job> = b.shard_jobs(task, count).collect();
     // Jobs that differ only in excitation, force or element parameters share one reduction.
     let reductions = Reductions::default();

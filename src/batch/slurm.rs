@@ -26,6 +26,13 @@ pub fn sbatch_script(b: &Batch, exe: &Path, o: &SbatchOptions) -> Result<String>
     if o.tasks == 0 {
         return Err(Error::Usage("--tasks must be at least 1".into()));
     }
+    if o.tasks > super::MAX_TASKS {
+        return Err(Error::Usage(format!(
+            "--tasks {}: at most {} array tasks",
+            o.tasks,
+            super::MAX_TASKS
+        )));
+    }
     let abs = |p: &Path| -> Result<PathBuf> {
         std::path::absolute(p).map_err(|source| Error::Io {
             path: p.to_path_buf(),

@@ -253,6 +253,11 @@ pub fn execute(req: &ModesRequest, console: &crate::present::console::Console) -
         // Refuse an unknown format before the (possibly long) solve.
         crate::formats::files::Format::of(path, crate::formats::modes_file::HINT)?;
     }
+    crate::formats::files::check_outputs(
+        &[std::path::Path::new(&req.model)],
+        &req.out.as_deref().into_iter().collect::<Vec<_>>(),
+        &req.report.as_deref().into_iter().collect::<Vec<_>>(),
+    )?;
     let loaded = crate::load_model(&req.model)?;
     let selection = match (req.count, req.fmax_hz) {
         (_, Some(f)) => nlsim_reduction::ModeSelection::Below { f_max_hz: f },

@@ -19,8 +19,9 @@ use std::time::Instant;
 /// Output formats of `nlsim nnm --out`.
 pub const HINT: &str = ".h5 (HDF5, complex harmonics) or .csv (one row per amplitude)";
 
-/// Most amplitudes of one nonlinear mode.
-pub const MAX_NNM_POINTS: usize = 100_000;
+/// Most amplitudes of one nonlinear mode: a backbone needs tens to hundreds; 10⁴ is about a
+/// minute and a half on the ECL beam (7 ms a point), where 10⁵ would be a quarter of an hour.
+pub const MAX_NNM_POINTS: usize = 10_000;
 
 /// Most unknowns `modes · (2H + 1)` of the modal harmonic balance behind a nonlinear mode:
 /// its Newton matrix is dense, and a handful of them are alive at once (4 000 unknowns:
@@ -465,6 +466,14 @@ pub fn execute(
     if let Some(p) = &plot_path {
         crate::present::plot::check_path(p)?;
     }
+    crate::formats::files::check_outputs(
+        &[Path::new(spec)],
+        &[out, plot_path.as_deref()]
+            .into_iter()
+            .flatten()
+            .collect::<Vec<_>>(),
+        &[],
+    )?;
     let model = crate::commands::setup::load_for_run(spec, sets)?;
     let mut count = 0usize;
     let mut progress = |p: &NnmPoint| {

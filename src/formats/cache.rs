@@ -149,6 +149,10 @@ fn u64_at(b: &[u8], i: usize) -> u64 {
 
 /// Reads a current, well-formed cache; `None` otherwise.
 fn read_cache(path: &Path, (len, hash): (u64, u64), name: &str) -> Option<SparseSym> {
+    // A FIFO under the cache's name would block the open: only a regular file is a cache.
+    if !std::fs::metadata(path).ok()?.is_file() {
+        return None;
+    }
     let file = std::fs::File::open(path).ok()?;
     // SAFETY: the map is read-only and only read while `file` is open. Cache files are
     // written under a temporary name and renamed into place, never modified in place, so

@@ -78,7 +78,10 @@ pub fn replace_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) 
         let _ = std::fs::remove_file(&tmp);
         return Err(e);
     }
-    std::fs::rename(&tmp, path).map_err(io)?;
+    if let Err(e) = std::fs::rename(&tmp, path) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(io(e));
+    }
     // The rename itself reaches the disk with the folder's entry.
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         let _ = std::fs::File::open(dir).and_then(|d| d.sync_all());
@@ -123,6 +126,86 @@ pub fn remove_temporaries(path: &Path, orphans_only: bool) -> Vec<PathBuf> {
     removed
 }
 
+/// The path `p` names after resolving links: the file itself when it exists, else its
+/// resolved folder joined with its name (`None` when the folder does not exist either).
+fn resolved(p: &Path) -> Option<PathBuf> {
+    if let Ok(c) = std::fs::canonicalize(p) {
+        return Some(c);
+    }
+    let name = p.file_name()?;
+    let parent = match p.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    std::fs::canonicalize(parent).ok().map(|d| d.join(name))
+}
+
+/// Checks a run's outputs before anything is computed or written: no output (a result
+/// file in `files`, a report folder in `folders`) names one of the run's `inputs` or
+/// another output (compared after resolving links); a result file is not an existing
+/// folder nor a symbolic link (the atomic rename would replace the link, not its target);
+/// a report folder is not an existing file. Inputs that do not exist (a built-in model's
+/// name) are skipped.
+pub fn check_outputs(inputs: &[&Path], files: &[&Path], folders: &[&Path]) -> Result<()> {
+    let usage = |m: String| Err(Error::Usage(m));
+    for f in files {
+        if let Ok(meta) = std::fs::symlink_metadata(f) {
+            if meta.is_dir() {
+                return usage(format!(
+                    "{}: is a folder; name the file to write",
+                    f.display()
+                ));
+            }
+            if meta.file_type().is_symlink() {
+                let target = std::fs::read_link(f)
+                    .map(|t| t.display().to_string())
+                    .unwrap_or_default();
+                let into_dir = std::fs::metadata(f).is_ok_and(|m| m.is_dir());
+                return usage(format!(
+                    "{}: is a symbolic link to {target}{}; writing would replace the link, \
+                     not its target: name the target itself or remove the link",
+                    f.display(),
+                    if into_dir { " (a folder)" } else { "" }
+                ));
+            }
+        }
+    }
+    for d in folders {
+        if std::fs::metadata(d).is_ok_and(|m| !m.is_dir()) {
+            return usage(format!(
+                "{}: is a file; the report is a folder, name another",
+                d.display()
+            ));
+        }
+    }
+    let ins: Vec<(PathBuf, &Path)> = inputs
+        .iter()
+        .filter(|p| p.exists())
+        .filter_map(|p| resolved(p).map(|r| (r, *p)))
+        .collect();
+    let mut outs: Vec<(PathBuf, &Path)> = Vec::new();
+    for o in files.iter().chain(folders) {
+        let Some(r) = resolved(o) else { continue };
+        if let Some((_, i)) = ins.iter().find(|(ri, _)| *ri == r) {
+            return usage(format!(
+                "{}: is where the input {} is; writing there would replace it — name \
+                 another output",
+                o.display(),
+                i.display()
+            ));
+        }
+        if let Some((_, other)) = outs.iter().find(|(ro, _)| *ro == r) {
+            return usage(format!(
+                "{} and {} are the same file; name two outputs",
+                other.display(),
+                o.display()
+            ));
+        }
+        outs.push((r, o));
+    }
+    Ok(())
+}
+
 /// 1-based line of byte `offset` in `text` (where a TOML parser's error span starts).
 pub fn line_of(text: &str, offset: usize) -> usize {
     text[..offset.min(text.len())].matches('\n').count() + 1
@@ -147,20 +230,41 @@ pub fn read_bytes(path: &Path) -> Result<Vec<u8>> {
         path: path.to_path_buf(),
         source,
     };
+    // Checked before opening: opening a FIFO blocks until somebody writes into it.
+    regular_file(path)?;
     let file = std::fs::File::open(path).map_err(io)?;
     let meta = file.metadata().map_err(io)?;
-    // A device or a pipe (`/dev/zero`, a FIFO) has no size and may never end.
+    // Checked again on what was opened (the name may have been replaced meanwhile).
     if !meta.is_file() {
-        return Err(Error::Usage(format!(
-            "{}: not a regular file (a directory, a device or a pipe); give a file",
-            path.display()
-        )));
+        return Err(not_regular(path));
     }
     let len = meta.len();
     let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0).min(1 << 30));
     // At most the size it had when opened: a file that grows meanwhile cannot fill the memory.
     file.take(len).read_to_end(&mut bytes).map_err(io)?;
     Ok(bytes)
+}
+
+/// Refuses a path that is not a regular file (after following links): a directory, a
+/// device such as `/dev/zero` (no end) or a FIFO (opening it blocks until a writer comes).
+/// Every reader of a user's file calls it before opening, HDF5 files included.
+pub fn regular_file(path: &Path) -> Result<()> {
+    let meta = std::fs::metadata(path).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    if meta.is_file() {
+        Ok(())
+    } else {
+        Err(not_regular(path))
+    }
+}
+
+fn not_regular(path: &Path) -> Error {
+    Error::Usage(format!(
+        "{}: not a regular file (a directory, a device or a pipe); give a file",
+        path.display()
+    ))
 }
 
 /// Reads a settings file (plan, test, prior) of at most `max_bytes`; the error names it and
@@ -170,6 +274,7 @@ pub fn read_text_bounded(path: &Path, max_bytes: u64) -> Result<String> {
         path: path.to_path_buf(),
         source,
     };
+    regular_file(path)?;
     let len = std::fs::metadata(path).map_err(io)?.len();
     if len > max_bytes {
         return Err(Error::Usage(format!(
@@ -188,6 +293,69 @@ pub fn temp_path(path: &Path) -> PathBuf {
         .unwrap_or_default();
     name.push(format!(".tmp-{}", std::process::id()));
     path.with_file_name(name)
+}
+
+/// Checks that an HDF5 dataset holds complex numbers the way nlsim and h5py write them: a
+/// compound of two floating-point members named `r` and `i`. HDF5 converts compounds by
+/// member name, so `{re, im}` or `{real, imag}` would read as zeros; `Err` says what the
+/// dataset holds instead.
+pub fn complex_layout(ds: &hdf5::Dataset) -> std::result::Result<(), String> {
+    use hdf5::types::{TypeDescriptor, TypeDescriptor::Compound};
+    let td = ds
+        .dtype()
+        .and_then(|t| t.to_descriptor())
+        .map_err(|e| format!("type not readable: {e}"))?;
+    let ok = match &td {
+        Compound(c) => {
+            let names: Vec<&str> = c.fields.iter().map(|f| f.name.as_str()).collect();
+            names == ["r", "i"]
+                && c.fields
+                    .iter()
+                    .all(|f| matches!(f.ty, TypeDescriptor::Float(_)))
+        }
+        _ => false,
+    };
+    if ok {
+        Ok(())
+    } else {
+        let what = match &td {
+            Compound(c) => format!(
+                "a compound of {}",
+                c.fields
+                    .iter()
+                    .map(|f| format!("'{}'", f.name))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            other => format!("{other}"),
+        };
+        Err(format!(
+            "holds {what}; complex values are a compound of two floats named 'r' and 'i' (as h5py writes them)"
+        ))
+    }
+}
+
+/// Longest part of a user's value quoted in an error message (characters).
+pub const QUOTE_MAX: usize = 60;
+
+/// A user's value quoted for an error message: `'VALUE'`, cut after [`QUOTE_MAX`]
+/// characters (with `…` and its length in bytes) and with control characters escaped, so a
+/// huge or binary value keeps the message one readable line.
+pub fn quoted(value: &str) -> String {
+    let mut out = String::from("'");
+    for (i, c) in value.chars().enumerate() {
+        if i == QUOTE_MAX {
+            out.push_str(&format!("…' ({} bytes)", value.len()));
+            return out;
+        }
+        if c.is_control() {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    out.push('\'');
+    out
 }
 
 /// SI unit of a response quantity, as written in file headers and attributes.

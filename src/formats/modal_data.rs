@@ -181,12 +181,24 @@ pub fn parse_modal_csv(
         if shape.as_ref().is_some_and(|s| s.iter().all(|v| *v == 0.0)) {
             return Err(err(ln, format!("the shape of mode {label} is all zero")));
         }
-        labels.push(label);
-        modes.push(MeasuredMode {
+        let mode = MeasuredMode {
             frequency_hz,
             frequency_std_hz,
             shape,
-        });
+        };
+        // Each mode checked on its own line (ranges, sizes), the whole data after the rows.
+        let one = ModalData {
+            dofs: dofs.clone().unwrap_or_default(),
+            shape_std,
+            modes: vec![mode],
+        };
+        one.validate(model.n_dofs()).map_err(|e| {
+            let e = e.to_string();
+            let why = e.strip_prefix("invalid measured mode 1: ").unwrap_or(&e);
+            err(ln, format!("mode {label}: {why}"))
+        })?;
+        labels.push(label);
+        modes.extend(one.modes);
     }
     let Some(dofs) = dofs else {
         return Err(err(

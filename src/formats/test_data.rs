@@ -22,6 +22,18 @@ use nlsim_kernel::Quantity;
 use std::fmt::Write as _;
 use std::path::Path;
 
+/// `1st`, `2nd`, `3rd`, `4th`, …
+fn ordinal(n: usize) -> String {
+    let suffix = match (n % 10, n % 100) {
+        (_, 11..=13) => "th",
+        (1, _) => "st",
+        (2, _) => "nd",
+        (3, _) => "rd",
+        _ => "th",
+    };
+    format!("{n}{suffix}")
+}
+
 fn quantity(s: &str) -> Option<Quantity> {
     match s {
         "displacement" => Some(Quantity::Displacement),
@@ -60,9 +72,27 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
         }
         if let Some(meta) = line.strip_prefix('#') {
             let meta = meta.trim();
+            let key = ["input", "harmonics", "channel"]
+                .into_iter()
+                .find(|k| meta.strip_prefix(k).is_some_and(|r| r.starts_with(':')));
+            if let (Some(k), Some((hl, _))) = (key, &header) {
+                return Err(err(
+                    ln,
+                    format!(
+                        "'# {k}:' after the column header (line {hl}): the '#' lines that \
+                         describe the data come before it"
+                    ),
+                ));
+            }
             if let Some(v) = meta.strip_prefix("input:") {
+                if input.is_some() {
+                    return Err(err(ln, "a second '# input:' line".into()));
+                }
                 input = Some(v.trim().to_string());
             } else if let Some(v) = meta.strip_prefix("harmonics:") {
+                if harmonics.is_some() {
+                    return Err(err(ln, "a second '# harmonics:' line".into()));
+                }
                 let h: usize = v
                     .trim()
                     .parse()
@@ -115,6 +145,19 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
                             ));
                         }
                     }
+                }
+                if f[0].is_empty() {
+                    return Err(err(ln, "channel: the name is empty".into()));
+                }
+                if let Some(c) = channels.iter().position(|c| c.name == f[0]) {
+                    return Err(err(
+                        ln,
+                        format!(
+                            "channel {} is declared twice (the {} '# channel:' line too)",
+                            crate::formats::files::quoted(f[0]),
+                            ordinal(c + 1)
+                        ),
+                    ));
                 }
                 channels.push(Channel {
                     name: f[0].to_string(),
@@ -310,13 +353,16 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
         harmonics: harmonics.ok_or_else(|| err(1, "no '# harmonics:' line".into()))?,
         sweeps,
     };
-    data.validate()
+    data.validate_measured()
         .map_err(|e| err(header.map_or(1, |h| h.0), e.to_string()))?;
     Ok(data)
 }
 
 /// Writes `data` in the CSV layout above (atomically: a temporary file, then a rename).
 pub fn write_csv(path: &Path, data: &TestData) -> Result<()> {
+    // What the readers would refuse is not written.
+    data.validate_measured()
+        .map_err(|e| Error::Usage(format!("{}: test data not written: {e}", path.display())))?;
     let mut s = String::new();
     let _ = writeln!(s, "# nlsim stepped-sine test data");
     let _ = writeln!(s, "# input: {}", data.input);
@@ -381,6 +427,9 @@ const H5_MAX_VALUES: usize = 1 << 26;
 /// `direction` and datasets `frequency_hz` (steps), `force` (steps × H, complex) and
 /// `response` (steps × channels × H, complex; NaN = not measured). Written atomically.
 pub fn write_h5(path: &Path, data: &TestData) -> Result<()> {
+    // What the readers would refuse is not written.
+    data.validate_measured()
+        .map_err(|e| Error::Usage(format!("{}: test data not written: {e}", path.display())))?;
     use crate::formats::files::h5err;
     use crate::formats::files::str_attr;
     use hdf5::types::VarLenUnicode;
@@ -464,6 +513,7 @@ pub fn read_h5(path: &Path) -> Result<TestData> {
         path: path.to_path_buf(),
         message: format!("{object}: {message}"),
     };
+    crate::formats::files::regular_file(path)?;
     let f = hdf5::File::open(path).map_err(|e| err("file", e.to_string()))?;
     let str_attr = |loc: &hdf5::Location, object: &str, name: &str| -> Result<String> {
         loc.attr(name)
@@ -492,6 +542,11 @@ pub fn read_h5(path: &Path) -> Result<TestData> {
         if found != shape {
             return Err(err(name, format!("shape {found:?}, expected {shape:?}")));
         }
+        Ok(d)
+    };
+    let complex_dataset = |name: &str, shape: &[usize]| -> Result<hdf5::Dataset> {
+        let d = dataset(name, shape)?;
+        crate::formats::files::complex_layout(&d).map_err(|m| err(name, m))?;
         Ok(d)
     };
     let nc = f
@@ -581,11 +636,11 @@ pub fn read_h5(path: &Path) -> Result<TestData> {
             .read_raw::<f64>()
             .map_err(|e| err(&fname, e.to_string()))?;
         let force_name = format!("{gname}/force");
-        let force = dataset(&force_name, &[n, harmonics])?
+        let force = complex_dataset(&force_name, &[n, harmonics])?
             .read_raw::<c64>()
             .map_err(|e| err(&force_name, e.to_string()))?;
         let resp_name = format!("{gname}/response");
-        let resp = dataset(&resp_name, &[n, nc, harmonics])?
+        let resp = complex_dataset(&resp_name, &[n, nc, harmonics])?
             .read_raw::<c64>()
             .map_err(|e| err(&resp_name, e.to_string()))?;
         let steps = (0..n)
@@ -607,6 +662,7 @@ pub fn read_h5(path: &Path) -> Result<TestData> {
         harmonics,
         sweeps,
     };
-    data.validate().map_err(|e| err("/", e.to_string()))?;
+    data.validate_measured()
+        .map_err(|e| err("/", e.to_string()))?;
     Ok(data)
 }

@@ -277,18 +277,36 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Vec<Uff58>> {
                 let size = if ord_type == 2 || ord_type == 5 { 4 } else { 8 };
                 let start = lines.pos;
                 let need = count * size;
-                if n_bytes < need || start + need > bytes.len() {
+                let held = bytes.len() - start;
+                if need > held || n_bytes > held {
                     return Err(err(
                         lines.line + 1,
                         format!(
                             "dataset 58b: {need} data bytes needed for {n} values, the header \
-                             declares {n_bytes} and the file holds {} after byte {start}",
-                            bytes.len() - start
+                             declares {n_bytes} and the file holds {held} after byte {start}"
                         ),
                     ));
                 }
+                // The data end where record 7's count says when the dataset's closing -1
+                // follows there: the header's count may be wrong (pyuff 2.5.8 declares
+                // points × 8 bytes even for complex or uneven data). Else where the header's
+                // count says (data padded), if the -1 follows there.
+                let end = if closes_at(bytes, start + need) {
+                    start + need
+                } else if closes_at(bytes, start + n_bytes) {
+                    start + n_bytes
+                } else {
+                    return Err(err(
+                        lines.line + 1,
+                        format!(
+                            "dataset 58b: neither the header's {n_bytes} data bytes nor the \
+                             {need} of record 7 ({n} values of {size} bytes) end at the \
+                             dataset's closing -1 (after byte {start})"
+                        ),
+                    ));
+                };
                 let data = &bytes[start..start + need];
-                lines.pos = start + n_bytes.min(bytes.len() - start);
+                lines.pos = end;
                 data.chunks_exact(size)
                     .map(|c| match (size, little) {
                         (4, true) => f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64,
@@ -372,6 +390,27 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Vec<Uff58>> {
         ));
     }
     Ok(out)
+}
+
+/// True when `bytes` from `at` hold, after blanks and line ends, a line `-1` (a dataset's
+/// closing delimiter).
+fn closes_at(bytes: &[u8], at: usize) -> bool {
+    let Some(rest) = bytes.get(at..) else {
+        return false;
+    };
+    let rest = match rest
+        .iter()
+        .position(|b| !matches!(b, b' ' | b'\t' | b'\r' | b'\n'))
+    {
+        Some(i) => &rest[i..],
+        None => return false,
+    };
+    rest.starts_with(b"-1")
+        && rest.get(2..).is_none_or(|r| {
+            r.iter()
+                .take_while(|b| **b != b'\n')
+                .all(|b| b.is_ascii_whitespace())
+        })
 }
 
 fn skip_dataset(lines: &mut Lines<'_>, fields: &[&str]) {
@@ -560,7 +599,12 @@ pub fn to_test_data(records: &[Uff58], input: &str, noise: Noise) -> Result<Test
                 ),
             )
         })?;
-        let name = if r.id.is_empty() || r.id.eq_ignore_ascii_case("none") {
+        // The ID line names the sensor; one that no channel name can be (a comma, a
+        // control character) falls back to the response's node and direction.
+        let name = if r.id.is_empty()
+            || r.id.eq_ignore_ascii_case("none")
+            || nlsim_calib::data::label_fault(&r.id).is_some()
+        {
             r.response_label()
         } else {
             r.id.clone()
@@ -596,6 +640,7 @@ pub fn to_test_data(records: &[Uff58], input: &str, noise: Noise) -> Result<Test
             steps,
         }],
     };
-    data.validate().map_err(|e| bad(0, e.to_string()))?;
+    data.validate_measured()
+        .map_err(|e| bad(0, e.to_string()))?;
     Ok(data)
 }

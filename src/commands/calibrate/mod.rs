@@ -51,6 +51,16 @@ pub fn execute(
 ) -> crate::Result<()> {
     use nlsim_calib::Progress;
     req.check()?;
+    crate::formats::files::check_outputs(
+        &[
+            std::path::Path::new(&req.model),
+            req.data.as_path(),
+            req.source.as_deref().unwrap_or(std::path::Path::new("")),
+            candidates.unwrap_or(std::path::Path::new("")),
+        ],
+        &req.out.as_deref().into_iter().collect::<Vec<_>>(),
+        &req.report.as_deref().into_iter().collect::<Vec<_>>(),
+    )?;
     let candidates = match candidates {
         None => None,
         Some(p) => Some((

@@ -41,6 +41,9 @@ pub struct CalibrationRequest {
     pub out: Option<PathBuf>,
     /// Report folder: tables, plots and the summary.
     pub report: Option<PathBuf>,
+    /// The calibration (or jobs) file this request was read from, if any: an input no output
+    /// may name.
+    pub source: Option<PathBuf>,
 }
 
 impl CalibrationRequest {
@@ -63,6 +66,7 @@ impl CalibrationRequest {
             config: CalibrationConfig::default(),
             out: None,
             report: None,
+            source: None,
         }
     }
 
@@ -110,6 +114,24 @@ impl CalibrationRequest {
                 "shape_noise",
                 format!("{} must be positive", self.shape_noise),
             );
+        }
+        let c = &self.config;
+        for (key, value, max) in [
+            ("lhs", c.lhs_samples, nlsim_calib::MAX_LHS_SAMPLES),
+            (
+                "maximin_swaps",
+                c.maximin_swaps,
+                nlsim_calib::MAX_MAXIMIN_SWAPS,
+            ),
+            ("folds", c.folds, nlsim_calib::MAX_FOLDS),
+            ("starts", c.starts, nlsim_calib::MAX_STARTS),
+        ] {
+            if value > max {
+                return bad(key, format!("{value} is beyond any budget (at most {max})"));
+            }
+        }
+        if c.starts == 0 {
+            return bad("starts", "give at least 1".into());
         }
         if let Some(o) = &self.out
             && o.extension().is_none_or(|e| e != "csv")
@@ -270,6 +292,7 @@ impl CalibrationTable {
             },
             out: self.out.as_deref().map(rel),
             report: self.report.as_deref().map(rel),
+            source: Some(path.to_path_buf()),
         };
         req.check().map_err(|e| file.located("calibration", e))?;
         Ok(req)

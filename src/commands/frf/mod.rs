@@ -23,6 +23,20 @@ pub fn execute(
     // Refuse bad options and output names before the (possibly long) solve.
     req.check()?;
     outputs.check()?;
+    let plot = outputs.plot_path();
+    crate::formats::files::check_outputs(
+        &[
+            std::path::Path::new(spec),
+            req.start_file
+                .as_ref()
+                .map_or(std::path::Path::new(""), |s| &s.path),
+        ],
+        &[outputs.out.as_deref(), plot.as_deref()]
+            .into_iter()
+            .flatten()
+            .collect::<Vec<_>>(),
+        &outputs.report.as_deref().into_iter().collect::<Vec<_>>(),
+    )?;
     let model = crate::commands::setup::load_for_run(spec, sets)?;
     let t1 = std::time::Instant::now();
     let mut count = 0usize;

@@ -40,6 +40,7 @@ pub(crate) fn read_start(
         path: path.to_path_buf(),
         message: format!("start file, {object}: {message}"),
     };
+    crate::formats::files::regular_file(path)?;
     let f = hdf5::File::open(path).map_err(|e| err("file", e.to_string()))?;
     let attr = |name: &str| -> Result<f64> {
         f.attr(name)

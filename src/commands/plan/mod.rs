@@ -38,6 +38,15 @@ pub use run::*;
 /// line, the ranked summary printed and the report folder written.
 pub fn execute(req: &PlanRequest, console: &crate::present::console::Console) -> crate::Result<()> {
     req.check()?;
+    crate::formats::files::check_outputs(
+        &[
+            std::path::Path::new(&req.model),
+            req.source.as_deref().unwrap_or(std::path::Path::new("")),
+            req.prior.as_deref().unwrap_or(std::path::Path::new("")),
+        ],
+        &[],
+        &req.report.as_deref().into_iter().collect::<Vec<_>>(),
+    )?;
     let progress = std::sync::Mutex::new(console.counter("candidate sweeps"));
     let run = run_plan(req, &|d, n| {
         if let Ok(mut p) = progress.lock() {

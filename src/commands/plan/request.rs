@@ -76,6 +76,9 @@ pub struct PlanRequest {
     pub top: usize,
     /// Report folder.
     pub report: Option<PathBuf>,
+    /// The plan (or jobs) file this request was read from, if any: an input no output
+    /// may name.
+    pub source: Option<PathBuf>,
 }
 
 impl PlanRequest {
@@ -104,6 +107,7 @@ impl PlanRequest {
             prior: None,
             top: 10,
             report: None,
+            source: None,
         }
     }
 
@@ -395,6 +399,7 @@ impl PlanTable {
             prior: self.prior.as_deref().map(rel),
             top: self.top.unwrap_or(d.top),
             report: self.report.as_deref().map(rel),
+            source: Some(path.to_path_buf()),
         };
         req.check().map_err(|e| file.located("plan", e))?;
         Ok(req)

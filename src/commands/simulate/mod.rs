@@ -23,6 +23,11 @@ pub fn execute(
 ) -> crate::Result<()> {
     req.check()?;
     outputs.check()?;
+    crate::formats::files::check_outputs(
+        &[std::path::Path::new(spec)],
+        &outputs.out.as_deref().into_iter().collect::<Vec<_>>(),
+        &outputs.report.as_deref().into_iter().collect::<Vec<_>>(),
+    )?;
     let model = crate::commands::setup::load_for_run(spec, sets)?;
     let run = run_simulation(&model, req, &mut console.counter("simulate"))?;
     outputs.write(spec, &model, req, &run, console)

@@ -9,6 +9,9 @@ use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+/// Largest relative measurement noise of a virtual test (standard deviation over amplitude).
+pub const MAX_RELATIVE_NOISE: f64 = 10.0;
+
 /// Most steps of one virtual test (all sweeps).
 pub const MAX_TEST_STEPS: usize = 1_000_000;
 
@@ -50,6 +53,8 @@ pub struct TestRequest {
     pub sensors: Vec<PointSpec>,
     /// The sensors recorded in the data, by name; empty: every sensor.
     pub channels: Vec<String>,
+    /// The test file this request was read from, if any: an input no output may name.
+    pub source: Option<PathBuf>,
 }
 
 impl TestRequest {
@@ -75,6 +80,7 @@ impl TestRequest {
             report: None,
             sensors: Vec::new(),
             channels: Vec::new(),
+            source: None,
         }
     }
 
@@ -85,7 +91,42 @@ impl TestRequest {
             return bad("sweep", "give at least one [[sweep]]".into());
         }
         let mut steps = 0usize;
-        for s in &self.sweeps {
+        for (i, s) in self.sweeps.iter().enumerate() {
+            if let Some(why) = nlsim_calib::data::label_fault(&s.label) {
+                return bad("sweep", format!("{}: label {why}", i + 1));
+            }
+            if self.sweeps[..i].iter().any(|o| o.label == s.label) {
+                return bad(
+                    "sweep",
+                    format!(
+                        "'{}' is the label of two sweeps; label each once (the data name sweeps by it)",
+                        s.label
+                    ),
+                );
+            }
+            if let Some(w) = s.frequencies_hz.windows(2).find(|w| w[0] == w[1]) {
+                return bad(
+                    "sweep",
+                    format!(
+                        "'{}': two steps at {} Hz; a sweep goes up or down (from != to)",
+                        s.label, w[0]
+                    ),
+                );
+            }
+            if let Some(f) = s
+                .frequencies_hz
+                .iter()
+                .find(|f| **f > nlsim_calib::data::MAX_FREQUENCY_HZ)
+            {
+                return bad(
+                    "sweep",
+                    format!(
+                        "'{}': {f:e} Hz is above {:e} Hz",
+                        s.label,
+                        nlsim_calib::data::MAX_FREQUENCY_HZ
+                    ),
+                );
+            }
             let ok_f = s.frequencies_hz.iter().all(|f| f.is_finite() && *f > 0.0);
             if !ok_f || s.frequencies_hz.len() < 2 || !(s.force.is_finite() && s.force > 0.0) {
                 return bad(
@@ -143,6 +184,18 @@ impl TestRequest {
                     format!(
                         "absolute {} and relative {} must be non-negative",
                         n.absolute, n.relative
+                    ),
+                );
+            }
+            // Noise larger than this is no measurement (and would overflow the data).
+            if n.relative > MAX_RELATIVE_NOISE || n.absolute > nlsim_calib::data::MAX_AMPLITUDE {
+                return bad(
+                    name,
+                    format!(
+                        "absolute {:e} and relative {:e}: at most {:e} and {MAX_RELATIVE_NOISE} (a standard deviation {MAX_RELATIVE_NOISE} times the amplitude)",
+                        n.absolute,
+                        n.relative,
+                        nlsim_calib::data::MAX_AMPLITUDE
                     ),
                 );
             }
@@ -317,6 +370,7 @@ impl TestTable {
             report: self.report.as_deref().map(rel),
             sensors,
             channels: self.channels,
+            source: Some(path.to_path_buf()),
         };
         req.check().map_err(|e| file.located("test", e))?;
         Ok(req)
