@@ -134,7 +134,14 @@ impl LuInPlace {
 
 /// Largest absolute entry.
 pub(crate) fn norm_inf(v: &[f64]) -> f64 {
-    v.iter().fold(0.0f64, |m, x| m.max(x.abs()))
+    // NaN propagates (`f64::max` would drop it): a residual holding NaN is not small.
+    v.iter().fold(0.0f64, |m, x| {
+        if x.is_nan() || m.is_nan() {
+            f64::NAN
+        } else {
+            m.max(x.abs())
+        }
+    })
 }
 
 /// Helpers of this crate's unit tests.

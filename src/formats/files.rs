@@ -335,6 +335,16 @@ pub fn complex_layout(ds: &hdf5::Dataset) -> std::result::Result<(), String> {
     }
 }
 
+/// A number for a message or a table: as written (`0.2`, `21.5`, `1500`) between 1e-4 and
+/// 1e7, in exponent form (`1e-320`, `1.5e12`) beyond, so an extreme value stays short.
+pub fn number(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() || (1e-4..1e7).contains(&v.abs()) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
+
 /// Longest part of a user's value quoted in an error message (characters).
 pub const QUOTE_MAX: usize = 60;
 

@@ -297,12 +297,14 @@ impl FrfPlot<'_> {
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
                 (a.min(*v), b.max(*v))
             });
-        let x1 = x1.max(x0 * (1.0 + 1e-9) + 1e-9);
+        let (x0, x1) = crate::present::plot::axis_range(x0, x1.max(x0 * (1.0 + 1e-9) + 1e-9));
         let (v0, v1) = vals
             .iter()
+            .filter(|v| v.is_finite())
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
                 (a.min(*v), b.max(*v))
             });
+        let (v0, v1) = crate::present::plot::axis_range(v0, v1);
         let caption = format!(
             "{}{}",
             self.panel_name(k),
@@ -415,9 +417,11 @@ impl FrfPlot<'_> {
                 .draw()?;
             finish!(chart);
         } else if self.magnitude == Magnitude::Log {
-            let lo = v0.max(floor) / 1.2;
             // The legend's panel keeps a band above the curves for it.
-            let hi = v1.max(floor) * if legend { 6.0 } else { 1.2 };
+            let (lo, hi) = crate::present::plot::log_axis_range(
+                v0.max(floor) / 1.2,
+                v1.max(floor) * if legend { 6.0 } else { 1.2 },
+            );
             let mut chart = builder.build_cartesian_2d(x0..x1, (lo..hi).log_scale())?;
             chart
                 .configure_mesh()
@@ -435,6 +439,7 @@ impl FrfPlot<'_> {
             } else {
                 (0.0, v1 * (1.03 + head) + 1e-300)
             };
+            let (lo, hi) = crate::present::plot::axis_range(lo, hi);
             let ys = tick_step(lo, hi, 20);
             let mut chart = builder.build_cartesian_2d(x0..x1, lo..hi)?;
             chart

@@ -221,6 +221,44 @@ pub(crate) fn tick_step(lo: f64, hi: f64, n: usize) -> f64 {
         .unwrap_or(p)
 }
 
+/// Largest magnitude an axis shows (values beyond are drawn at the edge).
+pub const AXIS_MAX: f64 = 1e300;
+
+/// A range plotters can put ticks on in bounded time, from any data range: NaN and
+/// infinite ends dropped (`0..1` when nothing finite is left), ends clamped to ±[`AXIS_MAX`],
+/// and a span of at least 1e-9 of the larger end (or 1e-300) centred on the data. plotters
+/// 0.3.7 searches tick spacings in a loop that never ends on an infinite span or one
+/// narrower than the rounding of its ends.
+pub fn axis_range(lo: f64, hi: f64) -> (f64, f64) {
+    let (lo, hi) = match (lo.is_finite(), hi.is_finite()) {
+        (true, true) => (lo.min(hi), lo.max(hi)),
+        (true, false) => (lo, lo),
+        (false, true) => (hi, hi),
+        (false, false) => return (0.0, 1.0),
+    };
+    let (lo, hi) = (lo.clamp(-AXIS_MAX, AXIS_MAX), hi.clamp(-AXIS_MAX, AXIS_MAX));
+    let min_span = (1e-9 * lo.abs().max(hi.abs())).max(1e-300);
+    if hi - lo >= min_span {
+        return (lo, hi);
+    }
+    let centre = 0.5 * lo + 0.5 * hi;
+    (centre - 0.5 * min_span, centre + 0.5 * min_span)
+}
+
+/// [`axis_range`] for a logarithmic axis: ends within `[1e-300, 1e300]`, the upper at least
+/// `1 + 1e-9` times the lower.
+pub fn log_axis_range(lo: f64, hi: f64) -> (f64, f64) {
+    let ok = |v: f64| v.is_finite() && v > 0.0;
+    let (lo, hi) = match (ok(lo), ok(hi)) {
+        (true, true) => (lo.min(hi), lo.max(hi)),
+        (true, false) => (lo, lo),
+        (false, true) => (hi, hi),
+        (false, false) => return (1e-3, 1.0),
+    };
+    let (lo, hi) = (lo.clamp(1e-300, AXIS_MAX), hi.clamp(1e-300, AXIS_MAX));
+    (lo, hi.max(lo * (1.0 + 1e-9)))
+}
+
 /// Checks that `path` names a plot format, before a long run.
 pub fn check_path(path: &Path) -> Result<()> {
     match path.extension().and_then(|e| e.to_str()) {
@@ -333,7 +371,11 @@ impl Figure for Lines {
         DB::ErrorType: 'static,
     {
         root.fill(&WHITE)?;
-        let pts = self.series.iter().flat_map(|(_, p)| p.iter());
+        let pts = self
+            .series
+            .iter()
+            .flat_map(|(_, p)| p.iter())
+            .filter(|(x, y)| x.is_finite() && y.is_finite());
         let (x0, x1, y0, y1) = pts.fold(
             (
                 f64::INFINITY,
@@ -343,22 +385,25 @@ impl Figure for Lines {
             ),
             |(a, b, c, d), &(x, y)| (a.min(x), b.max(x), c.min(y), d.max(y)),
         );
-        let pad = 0.05 * (y1 - y0).abs().max(1e-300);
+        let (x0, x1) = axis_range(x0, x1);
+        let (y0, y1) = axis_range(y0, y1);
+        let pad = 0.05 * (y1 - y0);
+        let (y0, y1) = axis_range(y0 - pad, y1 + pad);
         let mut chart = ChartBuilder::on(root)
             .caption(&self.title, ("sans-serif", 20))
             .margin(12)
             .x_label_area_size(44)
             .y_label_area_size(80)
-            .build_cartesian_2d(x0..x1.max(x0 + 1e-12), (y0 - pad)..(y1 + pad))?;
+            .build_cartesian_2d(x0..x1, y0..y1)?;
         // Engineering labels (50, 500m, 2µ) with the decimals the spacing needs; the
         // spacing is estimated from the span as plotters' 10 labels would divide it.
-        let (xs, ys) = (tick_step(x0, x1, 20), tick_step(y0 - pad, y1 + pad, 20));
+        let (xs, ys) = (tick_step(x0, x1, 20), tick_step(y0, y1, 20));
         chart
             .configure_mesh()
             .x_desc(&self.x_desc)
             .y_desc(&self.y_desc)
             .x_label_formatter(&|v| tick_label(*v, xs, x0.abs().max(x1.abs())))
-            .y_label_formatter(&|v| tick_label(*v, ys, (y0 - pad).abs().max((y1 + pad).abs())))
+            .y_label_formatter(&|v| tick_label(*v, ys, y0.abs().max(y1.abs())))
             .draw()?;
         let palette = [BLUE, RED, GREEN, MAGENTA, BLACK];
         for (i, (label, p)) in self.series.iter().enumerate() {
@@ -464,7 +509,9 @@ impl Figure for Bars {
                 y0 = y0.min(lo);
                 y1 = y1.max(hi);
             }
+            let (y0, y1) = axis_range(y0, y1);
             let pad = 0.08 * (y1 - y0);
+            let (y0, y1) = axis_range(y0 - pad, y1 + pad);
             let m = group.values.len().max(1) as f64;
             let caption = match band {
                 Some((_, _, true)) => format!("{} ({} clipped)", group.label, self.band_desc),
@@ -475,8 +522,8 @@ impl Figure for Bars {
                 .margin(8)
                 .x_label_area_size(36)
                 .y_label_area_size(70)
-                .build_cartesian_2d(0.5..m + 0.5, (y0 - pad)..(y1 + pad))?;
-            let ys = tick_step(y0 - pad, y1 + pad, 20);
+                .build_cartesian_2d(0.5..m + 0.5, y0..y1)?;
+            let ys = tick_step(y0, y1, 20);
             chart
                 .configure_mesh()
                 .disable_x_mesh()
@@ -490,7 +537,7 @@ impl Figure for Bars {
                 })
                 .x_desc(&self.bar_desc)
                 .y_desc(&self.y_desc)
-                .y_label_formatter(&|v| tick_label(*v, ys, (y0 - pad).abs().max((y1 + pad).abs())))
+                .y_label_formatter(&|v| tick_label(*v, ys, y0.abs().max(y1.abs())))
                 .draw()?;
             if let Some((lo, hi, _)) = band {
                 chart

@@ -173,6 +173,13 @@ impl PlanRequest {
         if let Some(l) = self.levels.iter().find(|l| !(l.is_finite() && **l > 0.0)) {
             return bad("levels", format!("{l} N is not a positive force"));
         }
+        let max = nlsim_calib::data::MAX_AMPLITUDE;
+        if let Some(l) = self.levels.iter().find(|l| !(1.0 / max..=max).contains(*l)) {
+            return bad(
+                "levels",
+                format!("{l:e} N is outside {:e} to {max:e} N", 1.0 / max),
+            );
+        }
         for s in &self.signals {
             for t in &s.side {
                 if t.harmonic < 2

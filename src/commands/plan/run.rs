@@ -367,9 +367,14 @@ pub fn describe_design(
         .collect();
     [
         c.exciter.input.clone(),
-        format!("{}", c.exciter.level),
+        crate::formats::files::number(c.exciter.level),
         c.signal.clone(),
-        format!("{} ({}-{} Hz)", c.band.label, c.band.from_hz, c.band.to_hz),
+        format!(
+            "{} ({}-{} Hz)",
+            c.band.label,
+            crate::formats::files::number(c.band.from_hz),
+            crate::formats::files::number(c.band.to_hz)
+        ),
         ch.join("+"),
         hk.join("+"),
     ]
