@@ -126,6 +126,23 @@ fn mutate(text: &str, rng: &mut Rng) -> String {
     lines.join("\n")
 }
 
+/// One random damage to the bytes `b`: a bit flipped, the end cut, random bytes appended, or
+/// `special` (a hostile value where the format declares a size).
+fn damage(b: &mut Vec<u8>, rng: &mut Rng, special: impl FnOnce(&mut Vec<u8>, &mut Rng)) {
+    match rng.below(4) {
+        0 => {
+            let i = rng.below(b.len());
+            b[i] ^= 1 << rng.below(8);
+        }
+        1 => b.truncate(rng.below(b.len())),
+        2 => special(b, rng),
+        _ => {
+            let n = rng.below(64);
+            b.extend((0..n).map(|_| rng.next() as u8));
+        }
+    }
+}
+
 /// Runs `f` on every input; returns the inputs that panicked (at most a few, escaped).
 fn survive(name: &str, inputs: usize, mut f: impl FnMut(usize) -> Option<String>) -> Vec<String> {
     let mut panics = Vec::new();
@@ -253,20 +270,12 @@ fn fuzz_inner() {
     let good = std::fs::read(&cache).unwrap();
     panics.extend(survive("matrix cache", 3000 * scale(), |_| {
         let mut b = good.clone();
-        match rng.below(4) {
-            0 => {
-                let i = rng.below(b.len());
-                b[i] ^= 1 << rng.below(8);
-            }
-            1 => b.truncate(rng.below(b.len())),
-            2 => {
-                // A header word set to a hostile size.
-                let w = 8 * (1 + rng.below(6));
-                let v = *rng.pick(&[0u64, 1, u64::MAX, 1 << 40, 1 << 62]);
-                b[w..w + 8].copy_from_slice(&v.to_le_bytes());
-            }
-            _ => b.extend((0..rng.below(64)).map(|_| rng.next() as u8)),
-        }
+        damage(&mut b, &mut rng, |b, rng| {
+            // A header word set to a hostile size.
+            let w = 8 * (1 + rng.below(6));
+            let v = *rng.pick(&[0u64, 1, u64::MAX, 1 << 40, 1 << 62]);
+            b[w..w + 8].copy_from_slice(&v.to_le_bytes());
+        });
         std::fs::write(&cache, &b).unwrap();
         // Whatever the cache holds, the matrix is the source's.
         let m = nlsim::formats::cache::load_matrix_market(&src, "K")
@@ -348,6 +357,163 @@ fn fuzz_inner() {
             .err()
             .map(|e| e.to_string())
     }));
+
+    // Stepped-sine test data (CSV), validated as the readers do.
+    let test_csv = [
+        "# nlsim stepped-sine test data\n# input: shaker\n# harmonics: 2\n\
+         # channel: tip, acceleration, relative=0.02, absolute=0\n\
+         # channel: mid, velocity, relative=0.01, absolute=1e-6\n\
+         sweep,direction,frequency_hz,harmonic,force_re,force_im,tip_re,tip_im,mid_re,mid_im\n\
+         low,up,22.0,1,0.05,0,-0.513,0.207,0.1,0.2\nlow,up,22.0,2,0.001,0,0.01,0.002,,\n\
+         low,up,23.5,1,0.05,0.001,-0.9,0.4,0.15,0.25\nlow,up,23.5,2,0,0,0.02,0.001,,\n\
+         high,down,23.0,1,0.2,0,-1.5,0.9,0.3,0.1\nhigh,down,23.0,2,0.01,0,0.1,0.05,0.01,0\n"
+            .to_string(),
+    ];
+    let csv_path = dir.join("test.csv");
+    panics.extend(survive("test data csv", 10000 * scale(), |_| {
+        let text = mutate(rng.pick(&test_csv).clone().as_str(), &mut rng);
+        match nlsim::formats::test_data::parse_csv(&text, &csv_path) {
+            // What was read is written back and read again: the writer refuses what the
+            // reader would.
+            Ok(d) => {
+                let back = dir.join("back.csv");
+                nlsim::formats::test_data::write_csv(&back, &d)
+                    .and_then(|()| nlsim::formats::test_data::read_csv(&back))
+                    .err()
+                    .map(|e| e.to_string())
+            }
+            Err(e) => Some(e.to_string()),
+        }
+    }));
+
+    // Measured modes (CSV) for a model with DOFs 2:ux..6:ux.
+    let chain = nlsim::load_model(
+        root()
+            .join("examples/models/grouped_chain6.toml")
+            .to_str()
+            .unwrap(),
+    )
+    .unwrap()
+    .model;
+    let modal = [
+        "# measured\nmode,frequency_hz,frequency_std_hz,2:ux,4:ux,6:ux\n\
+         1,5.0,0.01,0.1,0.2,0.3\n2,13.5,0.02,,,\n3,21.0,0.05,0.3,-0.1,0.2\n"
+            .to_string(),
+    ];
+    let modal_path = dir.join("modes.csv");
+    panics.extend(survive("modal csv", 10000 * scale(), |_| {
+        let text = mutate(rng.pick(&modal).clone().as_str(), &mut rng);
+        nlsim::formats::modal_data::parse_modal_csv(&text, &modal_path, &chain, 0.02)
+            .err()
+            .map(|e| e.to_string())
+    }));
+
+    // Universal files, dataset 58: ASCII as text, binary as bytes.
+    let rec = |id: &str, dir: i64| nlsim::formats::uff::Uff58 {
+        id: id.into(),
+        function_type: 4,
+        response_node: 21,
+        response_direction: dir,
+        reference_node: 21,
+        reference_direction: 3,
+        ordinate_type: 12,
+        denominator_type: 13,
+        frequencies_hz: vec![10.0, 10.5, 11.0, 11.5],
+        values: vec![
+            faer::c64::new(0.1, -0.2),
+            faer::c64::new(0.3, 0.1),
+            faer::c64::new(-0.2, 0.4),
+            faer::c64::new(0.05, -0.01),
+        ],
+    };
+    let recs = vec![rec("tip", 3), rec("NONE", -2)];
+    let uff_ascii = dir.join("a.uff");
+    let uff_binary = dir.join("b.uff");
+    nlsim::formats::uff::write(&uff_ascii, &recs, false).unwrap();
+    nlsim::formats::uff::write(&uff_binary, &recs, true).unwrap();
+    let ascii = [std::fs::read_to_string(&uff_ascii).unwrap()];
+    let binary = std::fs::read(&uff_binary).unwrap();
+    let to_data = |r: nlsim::Result<Vec<nlsim::formats::uff::Uff58>>| -> Option<String> {
+        match r.and_then(|v| {
+            nlsim::formats::uff::to_test_data(&v, "shaker", nlsim::calib::Noise::relative(0.01))
+        }) {
+            Ok(_) => None,
+            Err(e) => Some(e.to_string()),
+        }
+    };
+    panics.extend(survive("uff58 ascii", 10000 * scale(), |_| {
+        let text = mutate(rng.pick(&ascii).clone().as_str(), &mut rng);
+        to_data(nlsim::formats::uff::parse(
+            text.as_bytes(),
+            Path::new("a.uff"),
+        ))
+    }));
+    panics.extend(survive("uff58 binary", 10000 * scale(), |_| {
+        let mut b = binary.clone();
+        damage(&mut b, &mut rng, |b, rng| {
+            // A header field (byte order, format, line and byte counts) set to a hostile
+            // value.
+            if let Some(i) = b.windows(3).position(|w| w == b"58b") {
+                let v = rng.pick(HOSTILE).as_bytes();
+                let at = i + 4 + 6 * rng.below(4);
+                if at + v.len() < b.len() {
+                    b[at..at + v.len()].copy_from_slice(v);
+                }
+            }
+        });
+        to_data(nlsim::formats::uff::parse(&b, Path::new("b.uff")))
+    }));
+
+    // Calibration, plan and test files (parsed and checked; no model is loaded).
+    let calibration = [
+        "model = \"ecl_beam\"\ndata = \"test.csv\"\nset = { \"tip.c\" = 0.5 }\nharmonics = 3\n\
+         compare = [1, 3]\nform = \"complex\"\nbranch = \"nearest\"\nmodes = 20\nlhs = 64\n\
+         starts = 3\nfolds = 10\nseed = 1\nmaximin_swaps = 2000\nreport = \"cal\"\n\n\
+         [[param]]\nname = \"tip.k3\"\nlower = 1e8\nupper = 1e11\nspacing = \"log\"\n\n\
+         [lm]\nmax_iterations = 100\n"
+            .to_string(),
+    ];
+    let cal_path = dir.join("cal.toml");
+    panics.extend(survive("calibration file", 10000 * scale(), |_| {
+        let text = mutate(rng.pick(&calibration).clone().as_str(), &mut rng);
+        nlsim::commands::calibrate::CalibrationRequest::parse(&text, &cal_path)
+            .err()
+            .map(|e| e.to_string())
+    }));
+    let plans = [
+        "params = [\"tip_spring.k3\", \"mode2.zeta\"]\ncriterion = \"D\"\nlevels = [0.05, 0.1]\n\
+         measured = [[1], [1, 3]]\nsensor_counts = [1, 2]\n\
+         noise = { relative = 0.01, absolute = 1e-3 }\nharmonics = 3\nmodes = 20\ntop = 10\n\
+         report = \"plan-report\"\n\n[[actuator]]\nname = \"mid_drive\"\ndof = \"11:uz\"\n\n\
+         [[sensor]]\nname = \"n7\"\ndof = \"7:uz\"\nquantity = \"acceleration\"\n\n\
+         [[signal]]\nlabel = \"sine+3h\"\nside = [{ harmonic = 3, fraction = 0.05 }]\n\n\
+         [[band]]\nlabel = \"across\"\nfrom = 22.0\nto = 30.0\nsteps = 9\n"
+            .to_string(),
+    ];
+    let plan_path = dir.join("plan.toml");
+    panics.extend(survive("plan file", 10000 * scale(), |_| {
+        let text = mutate(rng.pick(&plans).clone().as_str(), &mut rng);
+        nlsim::commands::plan::PlanRequest::parse(&text, &plan_path, "ecl_beam")
+            .err()
+            .map(|e| e.to_string())
+    }));
+    let tests = [
+        "drive = \"shaker\"\nharmonics = 3\nmodes = 20\nseed = 1\nnoise = { relative = 0.02 }\n\
+         force_noise = { relative = 0.0 }\nout = \"virtual_test.csv\"\nreport = \"test-report\"\n\
+         channels = [\"tip\", \"mid\"]\n\n[shaker]\narmature_mass = 0.03\n\
+         suspension_stiffness = 3e3\nsuspension_damping = 2.0\nresistance = 1.5\n\
+         inductance = 2e-4\nforce_constant = 4.0\nstinger_stiffness = 2e5\n\n[control]\n\
+         enabled = true\ntolerance = 0.01\nmax_iterations = 20\n\n[[sweep]]\n\
+         label = \"0.2 N up\"\nfrom = 21.0\nto = 30.0\nsteps = 19\nforce = 0.2\n"
+            .to_string(),
+    ];
+    let test_path = dir.join("test.toml");
+    panics.extend(survive("test file", 10000 * scale(), |_| {
+        let text = mutate(rng.pick(&tests).clone().as_str(), &mut rng);
+        nlsim::commands::test::TestRequest::parse(&text, &test_path, "ecl_beam")
+            .err()
+            .map(|e| e.to_string())
+    }));
     std::fs::remove_dir_all(&dir).unwrap();
     assert!(panics.is_empty(), "panics: {panics:?}");
 }
@@ -381,6 +547,13 @@ fn readers_survive_mutated_inputs() {
         "jobs file",
         "matrix cache",
         "hdf5 matrix",
+        "test data csv",
+        "modal csv",
+        "uff58 ascii",
+        "uff58 binary",
+        "calibration file",
+        "plan file",
+        "test file",
     ] {
         assert!(
             text.contains(&format!("fuzz {reader}:")),

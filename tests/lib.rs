@@ -2937,6 +2937,44 @@ mod test_data_hdf5 {
         d
     }
 
+    /// Complex values stored as a compound of other member names (`{re, im}`) would read as
+    /// zeros through HDF5's by-name conversion: refused, naming the dataset and the members.
+    #[test]
+    fn complex_compounds_other_than_r_i_are_refused() {
+        #[derive(hdf5::H5Type, Clone, Copy)]
+        #[repr(C)]
+        struct ReIm {
+            re: f64,
+            im: f64,
+        }
+        let d = synthetic();
+        let dir = scratch("testdata-h5-reim");
+        let p = dir.join("test.h5");
+        write_test_h5(&p, &d);
+        {
+            let f = hdf5::File::open_rw(&p).unwrap();
+            let g = f.group("sweeps/sweep0").unwrap();
+            let shape = g.dataset("force").unwrap().shape();
+            g.unlink("force").unwrap();
+            let n: usize = shape.iter().product();
+            let v = vec![ReIm { re: 0.05, im: 0.0 }; n];
+            g.new_dataset::<ReIm>()
+                .shape(shape)
+                .create("force")
+                .unwrap()
+                .write_raw(&v)
+                .unwrap();
+        }
+        let e = nlsim::formats::test_data::read_h5(&p)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("sweeps/sweep0/force") && e.contains("'re', 'im'"),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     /// Written and read back bit for bit (a label with '/' is an attribute, not a name), and
     /// `nlsim calibrate` takes the file; a wrong shape names the dataset.
     #[test]
@@ -4496,6 +4534,309 @@ mod hardening {
             ),
             "{text}"
         );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Issue 50's classes, each run under a 3 GB address-space limit and a 60 s timeout:
+    /// exit 1 or 2, one line on stderr naming the cause, and no output file (nor a
+    /// temporary) left; the measured data is never replaced.
+    #[test]
+    fn round_two_inputs_are_refused_in_one_line_and_leave_nothing() {
+        let dir = scratch("hardening-two");
+        let d = |name: &str| dir.join(name).to_str().unwrap().to_string();
+        std::fs::write(
+            d("test.toml"),
+            "harmonics = 1\nmodes = 8\nnoise = { relative = 0.02 }\nout = \"vt.csv\"\n\
+             report = \"test-report\"\n[[sweep]]\nlabel = \"low\"\nfrom = 21.0\nto = 30.0\n\
+             steps = 5\nforce = 0.2\n",
+        )
+        .unwrap();
+        let (rc, _, err) = nlsim(&["test", "ecl_beam", &d("test.toml"), "-q"]);
+        assert_eq!(rc, 0, "{err}");
+        let data = std::fs::read_to_string(dir.join("vt.csv")).unwrap();
+        let lines: Vec<&str> = data.lines().collect();
+        let header = lines.iter().position(|l| l.starts_with("sweep,")).unwrap();
+        let write = |name: &str, text: &str| {
+            std::fs::write(dir.join(name), text).unwrap();
+            d(name)
+        };
+        // A `# channel:` line after the column header (was: index out of bounds).
+        let mut late = lines.clone();
+        late.insert(header + 1, "# channel: x, acceleration");
+        let late = write("late.csv", &late.join("\n"));
+        // One channel declared twice.
+        let dup = write(
+            "dup.csv",
+            &data
+                .replace("# channel: mid", "# channel: tip")
+                .replace("tip_re,tip_im,mid_re,mid_im", "tip_re,tip_im,tip_re,tip_im"),
+        );
+        // No response measured; every value 1e308.
+        let rows = |f: &dyn Fn(&str) -> String| -> String {
+            lines
+                .iter()
+                .enumerate()
+                .map(|(i, l)| if i > header { f(l) } else { l.to_string() })
+                .collect::<Vec<_>>()
+                .join("\n")
+        };
+        let cells = |l: &str, from: usize, v: &str| -> String {
+            l.split(',')
+                .enumerate()
+                .map(|(i, c)| if i >= from { v } else { c })
+                .collect::<Vec<_>>()
+                .join(",")
+        };
+        let empty = write("empty.csv", &rows(&|l| cells(l, 6, "")));
+        let huge = write("huge.csv", &rows(&|l| cells(l, 4, "1e308")));
+        let fifo = d("fifo.csv");
+        let made = Command::new("mkfifo").arg(&fifo).status().unwrap();
+        assert!(made.success());
+        let keep = std::fs::read(dir.join("vt.csv")).unwrap();
+        std::os::unix::fs::symlink(dir.join("vt.csv"), dir.join("link.csv")).unwrap();
+        std::fs::create_dir_all(dir.join("folder.csv")).unwrap();
+        let modal = write(
+            "modal.csv",
+            "mode,frequency_hz,frequency_std_hz,2:ux,4:ux,6:ux\n1,5.0,0.01,1.797e308,0.2,0.3\n",
+        );
+        let grouped =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/models/grouped_chain6.toml");
+        let grouped = grouped.to_str().unwrap();
+        let batch = |name: &str, kind: &str, extra: &str| {
+            write(
+                name,
+                &format!(
+                    "name = \"b\"\ncommand = \"{kind}\"\nmodel = \"ecl_beam\"\n{}\n[calibrate]\n\
+                     data = \"vt.csv\"\n{extra}\n[[calibrate.param]]\nname = \"tip_spring.k3\"\n\
+                     lower = 6e7\nupper = 6e11\n",
+                    if kind == "calibrate-folds" {
+                        "estimate = { \"tip_spring.k3\" = 6e9 }"
+                    } else {
+                        ""
+                    }
+                ),
+            )
+        };
+        let lhs = batch("lhs.toml", "calibrate-candidates", "lhs = 100000000000");
+        let swaps = batch(
+            "swaps.toml",
+            "calibrate-candidates",
+            "lhs = 4\nmaximin_swaps = 1000000000000",
+        );
+        let folds = batch("folds.toml", "calibrate-folds", "folds = 1000000000000");
+        let few = batch("few.toml", "calibrate-folds", "folds = 4000");
+        let test_with = |name: &str, from: &str, to: &str| {
+            let t = std::fs::read_to_string(dir.join("test.toml")).unwrap();
+            write(name, &t.replacen(from, to, 1))
+        };
+        let same_f = test_with("same_f.toml", "to = 30.0", "to = 21.0");
+        let comma = test_with("comma.toml", "label = \"low\"", "label = \"a,b\"");
+        let noisy = test_with(
+            "noisy.toml",
+            "noise = { relative = 0.02 }",
+            "noise = { relative = 0.02 }\nforce_noise = { relative = 1e308 }",
+        );
+        let tiny_mass = test_with(
+            "tiny_mass.toml",
+            "force = 0.2\n",
+            "force = 0.2\n[shaker]\narmature_mass = 1e-320\n",
+        );
+        let self_report = test_with(
+            "self_report.toml",
+            "report = \"test-report\"",
+            "report = \"self_report.toml\"",
+        );
+        let plan = write(
+            "plan.toml",
+            "params = [\"tip_spring.k3\", \"mode2.zeta\"]\nlevels = [1e-320]\nharmonics = 1\n\
+             modes = 8\n[[band]]\nlabel = \"b\"\nfrom = 22.0\nto = 30.0\nsteps = 5\n",
+        );
+        let cal = ["calibrate", "ecl_beam"];
+        let k3 = [
+            "--param",
+            "tip_spring.k3=6e7:6e11",
+            "--lhs",
+            "2",
+            "--folds",
+            "0",
+        ];
+        let with = |head: &[&str], tail: &[&str]| -> Vec<String> {
+            head.iter().chain(tail).map(|s| s.to_string()).collect()
+        };
+        let est = d("est.csv");
+        let cases: Vec<(Vec<String>, &str)> = vec![
+            (
+                with(&cal, &[&late, k3[0], k3[1]]),
+                "late.csv:7: '# channel:' after the column header",
+            ),
+            (
+                with(&cal, &[&dup, k3[0], k3[1]]),
+                "channel 'tip' is declared twice",
+            ),
+            (
+                with(&cal, &[&empty, k3[0], k3[1]]),
+                "holds no measured response",
+            ),
+            (with(&cal, &[&huge, k3[0], k3[1]]), "is above 1e100"),
+            (with(&cal, &[&fifo, k3[0], k3[1]]), "not a regular file"),
+            (with(&["check"], &[&fifo]), "not a regular file"),
+            (with(&["test", "ecl_beam"], &[&fifo]), "not a regular file"),
+            (with(&["plan", "ecl_beam"], &[&fifo]), "not a regular file"),
+            (
+                with(&["calibrate", "--config"], &[&fifo]),
+                "not a regular file",
+            ),
+            (with(&["batch"], &[&fifo]), "not a regular file"),
+            (
+                with(
+                    &[
+                        "frf",
+                        "duffing_fig3",
+                        "--from",
+                        "25",
+                        "--to",
+                        "35",
+                        "--start-file",
+                    ],
+                    &[&fifo],
+                ),
+                "not a regular file",
+            ),
+            (
+                with(
+                    &["batch", "--task-count", "18446744073709551615"],
+                    &[&Path::new(env!("CARGO_MANIFEST_DIR"))
+                        .join("examples/batch/duffing_k3.toml")
+                        .to_string_lossy()],
+                ),
+                "at most 1000000 shards",
+            ),
+            (
+                with(&["batch"], &[&lhs]),
+                "lhs: calibration lhs: 100000000000 is beyond any budget",
+            ),
+            (
+                with(&["batch"], &[&swaps]),
+                "maximin_swaps: calibration maximin_swaps",
+            ),
+            (
+                with(&["batch"], &[&folds]),
+                "folds: calibration folds: 1000000000000",
+            ),
+            (with(&["batch"], &[&few]), "folds must be 0 (none) or 2..=5"),
+            (
+                with(
+                    &["calibrate", grouped],
+                    &[&modal, "--param", "group:root.k_scale=0.5:2"],
+                ),
+                "modal.csv:2: mode 1: the largest shape component 1.797e308",
+            ),
+            (
+                with(&cal, &[&d("vt.csv"), k3[0], k3[1], "--out", &d("vt.csv")]),
+                "writing there would replace it",
+            ),
+            (
+                with(&cal, &[&d("link.csv"), k3[0], k3[1], "--out", &d("vt.csv")]),
+                "writing there would replace it",
+            ),
+            (
+                with(&cal, &[&d("vt.csv"), k3[0], k3[1], "--out", &d("link.csv")]),
+                "is a symbolic link",
+            ),
+            (
+                with(
+                    &cal,
+                    &[
+                        &d("vt.csv"),
+                        k3[0],
+                        k3[1],
+                        "--out",
+                        &est,
+                        "--report",
+                        &d("test.toml"),
+                    ],
+                ),
+                "is a file; the report is a folder",
+            ),
+            (
+                with(
+                    &["frf", "duffing_fig3", "--from", "25", "--to", "35", "--out"],
+                    &[&d("folder.csv")],
+                ),
+                "is a folder",
+            ),
+            (
+                with(&["test", "ecl_beam"], &[&same_f]),
+                "two steps at 21 Hz",
+            ),
+            (
+                with(&["test", "ecl_beam"], &[&comma]),
+                "which the CSV layout of test data cannot hold",
+            ),
+            (with(&["test", "ecl_beam"], &[&noisy]), "force_noise"),
+            (
+                with(&["test", "ecl_beam"], &[&tiny_mass]),
+                "'shaker.armature_mass' = 1e-320 is out of range",
+            ),
+            (
+                with(&["test", "ecl_beam"], &[&self_report]),
+                "is a file; the report is a folder",
+            ),
+            (
+                with(&["plan", "ecl_beam"], &[&plan]),
+                "1e-320 N is outside 1e-100 to 1e100 N",
+            ),
+            (
+                with(
+                    &[
+                        "nnm", "ecl_beam", "--from", "1e-6", "--to", "1e-3", "--points", "100000",
+                    ],
+                    &[],
+                ),
+                "points 100000 must be from 2 to 10000",
+            ),
+        ];
+        let listing = || {
+            let mut v: Vec<String> = std::fs::read_dir(&dir)
+                .unwrap()
+                .flatten()
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .collect();
+            v.sort();
+            v
+        };
+        let before = listing();
+        for (args, want) in &cases {
+            let args: Vec<&str> = args.iter().map(String::as_str).collect();
+            let (rc, _, err) = sh(
+                &format!(
+                    "cd '{}' && ulimit -v 3000000 && exec timeout 60",
+                    dir.display()
+                ),
+                &args,
+                "",
+            );
+            assert!(rc == 1 || rc == 2, "{args:?}: exit {rc}\n{err}");
+            assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+            assert!(err.contains(want), "{args:?}: want '{want}' in {err}");
+            assert_eq!(listing(), before, "{args:?} left a file");
+            assert_eq!(std::fs::read(dir.join("vt.csv")).unwrap(), keep, "{args:?}");
+        }
+        // Extreme but finite numbers draw in bounded time: a plan whose parameter is zero.
+        let zero = write(
+            "zero.toml",
+            "params = [\"tip_spring.k3\", \"mode2.zeta\"]\nset = { \"tip_spring.k3\" = 0 }\n\
+             harmonics = 1\nmodes = 8\nreport = \"zero-report\"\n[[band]]\nlabel = \"b\"\n\
+             from = 22.0\nto = 30.0\nsteps = 5\n",
+        );
+        let (rc, _, err) = sh(
+            "ulimit -v 3000000 && exec timeout 60",
+            &["plan", "ecl_beam", &zero, "-q"],
+            "",
+        );
+        assert_eq!(rc, 0, "{err}");
+        assert!(dir.join("zero-report/ranking.svg").is_file());
+        std::fs::remove_file(&fifo).unwrap();
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

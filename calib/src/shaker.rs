@@ -63,8 +63,13 @@ impl Default for Shaker {
     }
 }
 
+/// Smallest non-zero value of a shaker field (SI units).
+pub const SHAKER_MIN: f64 = 1e-12;
+/// Largest value of a shaker field (SI units).
+pub const SHAKER_MAX: f64 = 1e12;
+
 impl Shaker {
-    /// Checks that every value is finite, masses, resistance, force constant and stinger
+    /// Checks that every value is finite, 0 or within [`SHAKER_MIN`]..[`SHAKER_MAX`], masses, resistance, force constant and stinger
     /// stiffness positive, the others non-negative.
     pub fn check(&self) -> Result<()> {
         let fields = [
@@ -77,6 +82,17 @@ impl Shaker {
             ("stinger_stiffness", self.stinger_stiffness, true),
         ];
         for (name, v, positive) in fields {
+            // Beyond these the coupling's products (`Bl²`, `k_s²`, `s² m`) over- or
+            // underflow at structural frequencies: no shaker is built that way.
+            if v != 0.0 && !(SHAKER_MIN..=SHAKER_MAX).contains(&v) {
+                return Err(Error::InvalidParameter {
+                    name: format!("shaker.{name}"),
+                    value: v,
+                    reason: format!(
+                        "must be 0 or within {SHAKER_MIN:e}..{SHAKER_MAX:e} (SI units)"
+                    ),
+                });
+            }
             if !v.is_finite() || v < 0.0 || (positive && v == 0.0) {
                 return Err(Error::InvalidParameter {
                     name: format!("shaker.{name}"),
