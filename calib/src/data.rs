@@ -165,8 +165,10 @@ impl TestData {
         if let Some(why) = label_fault(&self.input) {
             return bad("test data input".into(), format!("name {why}"));
         }
+        // First index of each name: duplicates found in one pass (10⁴ channels are allowed).
+        let mut first: std::collections::HashMap<&str, usize> = std::collections::HashMap::new();
         for (i, c) in self.channels.iter().enumerate() {
-            if let Some(j) = self.channels[..i].iter().position(|d| d.name == c.name) {
+            if let Some(&j) = first.get(c.name.as_str()) {
                 return bad(
                     format!("test data channel {} ('{}')", i + 1, c.name),
                     format!(
@@ -181,6 +183,7 @@ impl TestData {
                     format!("name {why}"),
                 );
             }
+            first.insert(c.name.as_str(), i);
             let n = c.noise;
             let ok = |v: f64| v.is_finite() && v >= 0.0;
             if !ok(n.absolute) || !ok(n.relative) {
@@ -193,11 +196,12 @@ impl TestData {
                 );
             }
         }
+        let mut first: std::collections::HashMap<&str, usize> = std::collections::HashMap::new();
         for (s, sw) in self.sweeps.iter().enumerate() {
             if let Some(why) = label_fault(&sw.label) {
                 return bad(format!("test data sweep {}", s + 1), format!("label {why}"));
             }
-            if let Some(t) = self.sweeps[..s].iter().position(|o| o.label == sw.label) {
+            if let Some(&t) = first.get(sw.label.as_str()) {
                 return bad(
                     format!("test data sweep {} ('{}')", s + 1, sw.label),
                     format!(
@@ -206,6 +210,7 @@ impl TestData {
                     ),
                 );
             }
+            first.insert(sw.label.as_str(), s);
             let at =
                 |i: usize| format!("test data sweep {} ('{}') step {}", s + 1, sw.label, i + 1);
             if sw.steps.is_empty() {

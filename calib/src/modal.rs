@@ -44,6 +44,41 @@ pub struct MeasuredMode {
     pub shape: Option<Vec<f64>>,
 }
 
+impl MeasuredMode {
+    /// What is wrong with this mode's values, if anything: a frequency that is not positive or
+    /// above [`crate::data::MAX_FREQUENCY_HZ`], a standard deviation that is not positive and
+    /// finite, a shape that is not finite, all zero, or whose largest component is outside
+    /// 1e-100..1e100. (Its length against the sensor DOFs is [`ModalData::validate`]'s.)
+    pub fn fault(&self) -> Option<String> {
+        if !(self.frequency_hz > 0.0 && self.frequency_hz <= crate::data::MAX_FREQUENCY_HZ) {
+            return Some(format!(
+                "frequency must be positive and at most {:e} Hz, not {:e} Hz",
+                crate::data::MAX_FREQUENCY_HZ,
+                self.frequency_hz
+            ));
+        }
+        if !(self.frequency_std_hz > 0.0 && self.frequency_std_hz.is_finite()) {
+            return Some(format!(
+                "frequency standard deviation must be positive, not {} Hz",
+                self.frequency_std_hz
+            ));
+        }
+        let s = self.shape.as_ref()?;
+        if s.iter().any(|v| !v.is_finite()) || s.iter().all(|v| *v == 0.0) {
+            return Some("shape must be finite and not all zero".into());
+        }
+        // Shapes are normalised and correlated through sums of squares: components beyond
+        // 1e100 (or all below 1e-100) would overflow or underflow them.
+        let largest = s.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        if !(1e-100..=1e100).contains(&largest) {
+            return Some(format!(
+                "the largest shape component {largest:e} is outside 1e-100..1e100; scale the shape"
+            ));
+        }
+        None
+    }
+}
+
 /// Measured modal data: modes, the DOFs their shapes were measured at, and the shape noise.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ModalData {
@@ -79,50 +114,17 @@ impl ModalData {
         }
         for (i, m) in self.modes.iter().enumerate() {
             let what = || format!("measured mode {}", i + 1);
-            if !(m.frequency_hz > 0.0 && m.frequency_hz <= crate::data::MAX_FREQUENCY_HZ) {
-                return Err(Error::invalid(
-                    what(),
-                    format!(
-                        "frequency must be positive and at most {:e} Hz, not {:e} Hz",
-                        crate::data::MAX_FREQUENCY_HZ,
-                        m.frequency_hz
-                    ),
-                ));
+            if let Some(s) = &m.shape
+                && s.len() != self.dofs.len()
+            {
+                return Err(Error::DimensionMismatch {
+                    what: format!("{}: shape components (one per sensor DOF)", what()),
+                    expected: self.dofs.len(),
+                    found: s.len(),
+                });
             }
-            if !(m.frequency_std_hz > 0.0 && m.frequency_std_hz.is_finite()) {
-                return Err(Error::invalid(
-                    what(),
-                    format!(
-                        "frequency standard deviation must be positive, not {} Hz",
-                        m.frequency_std_hz
-                    ),
-                ));
-            }
-            if let Some(s) = &m.shape {
-                if s.len() != self.dofs.len() {
-                    return Err(Error::DimensionMismatch {
-                        what: format!("{}: shape components (one per sensor DOF)", what()),
-                        expected: self.dofs.len(),
-                        found: s.len(),
-                    });
-                }
-                if s.iter().any(|v| !v.is_finite()) || s.iter().all(|v| *v == 0.0) {
-                    return Err(Error::invalid(
-                        what(),
-                        "shape must be finite and not all zero",
-                    ));
-                }
-                // Shapes are normalised and correlated through sums of squares: components
-                // beyond 1e100 (or all below 1e-100) would overflow or underflow them.
-                let largest = s.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-                if !(1e-100..=1e100).contains(&largest) {
-                    return Err(Error::invalid(
-                        what(),
-                        format!(
-                            "the largest shape component {largest:e} is outside 1e-100..1e100; scale the shape"
-                        ),
-                    ));
-                }
+            if let Some(why) = m.fault() {
+                return Err(Error::invalid(what(), why));
             }
         }
         Ok(())

@@ -70,9 +70,9 @@ use crate::formats::files::str_attr;
 use hdf5_metno as hdf5;
 use std::path::{Path, PathBuf};
 
-/// Most shards of a batch (`--task-count`, `$SLURM_ARRAY_TASK_COUNT`, `sbatch --tasks`): as
-/// many as the most jobs a jobs file may make.
-pub const MAX_TASKS: usize = jobs::MAX_LHS_SAMPLES;
+/// Most shards of a batch (`--task-count`, `$SLURM_ARRAY_TASK_COUNT`, `sbatch --tasks`), as
+/// many as the most Latin-hypercube jobs a jobs file may make.
+pub const MAX_TASKS: usize = 1_000_000;
 /// The command every job of a batch runs, with its base options.
 #[derive(Debug, Clone)]
 pub enum BatchCommand {

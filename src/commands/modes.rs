@@ -254,9 +254,9 @@ pub fn execute(req: &ModesRequest, console: &crate::present::console::Console) -
         crate::formats::files::Format::of(path, crate::formats::modes_file::HINT)?;
     }
     crate::formats::files::check_outputs(
-        &[std::path::Path::new(&req.model)],
-        &req.out.as_deref().into_iter().collect::<Vec<_>>(),
-        &req.report.as_deref().into_iter().collect::<Vec<_>>(),
+        &[Some(std::path::Path::new(&req.model))],
+        &[req.out.as_deref()],
+        &[req.report.as_deref()],
     )?;
     let loaded = crate::load_model(&req.model)?;
     let selection = match (req.count, req.fmax_hz) {

@@ -467,11 +467,8 @@ pub fn execute(
         crate::present::plot::check_path(p)?;
     }
     crate::formats::files::check_outputs(
-        &[Path::new(spec)],
-        &[out, plot_path.as_deref()]
-            .into_iter()
-            .flatten()
-            .collect::<Vec<_>>(),
+        &[Some(Path::new(spec))],
+        &[out, plot_path.as_deref()],
         &[],
     )?;
     let model = crate::commands::setup::load_for_run(spec, sets)?;

@@ -144,11 +144,19 @@ fn resolved(p: &Path) -> Option<PathBuf> {
 /// file in `files`, a report folder in `folders`) names one of the run's `inputs` or
 /// another output (compared after resolving links); a result file is not an existing
 /// folder nor a symbolic link (the atomic rename would replace the link, not its target);
-/// a report folder is not an existing file. Inputs that do not exist (a built-in model's
-/// name) are skipped.
-pub fn check_outputs(inputs: &[&Path], files: &[&Path], folders: &[&Path]) -> Result<()> {
+/// a report folder is not an existing file. `None` entries (an option not given) and inputs
+/// that do not exist (a built-in model's name) are skipped.
+pub fn check_outputs(
+    inputs: &[Option<&Path>],
+    files: &[Option<&Path>],
+    folders: &[Option<&Path>],
+) -> Result<()> {
     let usage = |m: String| Err(Error::Usage(m));
-    for f in files {
+    let given = |v: &[Option<&Path>]| -> Vec<PathBuf> {
+        v.iter().flatten().map(|p| p.to_path_buf()).collect()
+    };
+    let (inputs, files, folders) = (given(inputs), given(files), given(folders));
+    for f in &files {
         if let Ok(meta) = std::fs::symlink_metadata(f) {
             if meta.is_dir() {
                 return usage(format!(
@@ -170,7 +178,7 @@ pub fn check_outputs(inputs: &[&Path], files: &[&Path], folders: &[&Path]) -> Re
             }
         }
     }
-    for d in folders {
+    for d in &folders {
         if std::fs::metadata(d).is_ok_and(|m| !m.is_dir()) {
             return usage(format!(
                 "{}: is a file; the report is a folder, name another",
@@ -178,13 +186,13 @@ pub fn check_outputs(inputs: &[&Path], files: &[&Path], folders: &[&Path]) -> Re
             ));
         }
     }
-    let ins: Vec<(PathBuf, &Path)> = inputs
+    let ins: Vec<(PathBuf, &PathBuf)> = inputs
         .iter()
         .filter(|p| p.exists())
-        .filter_map(|p| resolved(p).map(|r| (r, *p)))
+        .filter_map(|p| resolved(p).map(|r| (r, p)))
         .collect();
-    let mut outs: Vec<(PathBuf, &Path)> = Vec::new();
-    for o in files.iter().chain(folders) {
+    let mut outs: Vec<(PathBuf, &PathBuf)> = Vec::new();
+    for o in files.iter().chain(&folders) {
         let Some(r) = resolved(o) else { continue };
         if let Some((_, i)) = ins.iter().find(|(ri, _)| *ri == r) {
             return usage(format!(
@@ -213,7 +221,11 @@ pub fn line_of(text: &str, offset: usize) -> usize {
 
 /// Reads a text file; the error names it.
 pub fn read_text(path: &Path) -> Result<String> {
-    String::from_utf8(read_bytes(path)?).map_err(|e| {
+    utf8(path, read_bytes(path)?)
+}
+
+fn utf8(path: &Path, bytes: Vec<u8>) -> Result<String> {
+    String::from_utf8(bytes).map_err(|e| {
         Error::Usage(format!(
             "{}: not UTF-8 text (byte {} is not valid); is this the right file?",
             path.display(),
@@ -225,6 +237,12 @@ pub fn read_text(path: &Path) -> Result<String> {
 /// Reads the bytes of the regular file `path` (no device, pipe or directory), at most the size
 /// it had when opened.
 pub fn read_bytes(path: &Path) -> Result<Vec<u8>> {
+    read_bytes_up_to(path, None)
+}
+
+/// [`read_bytes`], refusing a file larger than `max_bytes` (named, with its size) before
+/// reading it.
+fn read_bytes_up_to(path: &Path, max_bytes: Option<u64>) -> Result<Vec<u8>> {
     use std::io::Read as _;
     let io = |source| Error::Io {
         path: path.to_path_buf(),
@@ -239,6 +257,12 @@ pub fn read_bytes(path: &Path) -> Result<Vec<u8>> {
         return Err(not_regular(path));
     }
     let len = meta.len();
+    if let Some(max) = max_bytes.filter(|&m| len > m) {
+        return Err(Error::Usage(format!(
+            "{}: {len} bytes; a settings file holds at most {max} (is this the right file?)",
+            path.display()
+        )));
+    }
     let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0).min(1 << 30));
     // At most the size it had when opened: a file that grows meanwhile cannot fill the memory.
     file.take(len).read_to_end(&mut bytes).map_err(io)?;
@@ -270,19 +294,7 @@ fn not_regular(path: &Path) -> Error {
 /// Reads a settings file (plan, test, prior) of at most `max_bytes`; the error names it and
 /// says how large it is, so that a wrong path to a huge file does not fill the memory.
 pub fn read_text_bounded(path: &Path, max_bytes: u64) -> Result<String> {
-    let io = |source| Error::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    regular_file(path)?;
-    let len = std::fs::metadata(path).map_err(io)?.len();
-    if len > max_bytes {
-        return Err(Error::Usage(format!(
-            "{}: {len} bytes; a settings file holds at most {max_bytes} (is this the right file?)",
-            path.display()
-        )));
-    }
-    read_text(path)
+    utf8(path, read_bytes_up_to(path, Some(max_bytes))?)
 }
 
 /// The temporary name `path` is written under first: `NAME.tmp-PID`, beside it.

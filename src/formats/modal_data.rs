@@ -186,19 +186,12 @@ pub fn parse_modal_csv(
             frequency_std_hz,
             shape,
         };
-        // Each mode checked on its own line (ranges, sizes), the whole data after the rows.
-        let one = ModalData {
-            dofs: dofs.clone().unwrap_or_default(),
-            shape_std,
-            modes: vec![mode],
-        };
-        one.validate(model.n_dofs()).map_err(|e| {
-            let e = e.to_string();
-            let why = e.strip_prefix("invalid measured mode 1: ").unwrap_or(&e);
-            err(ln, format!("mode {label}: {why}"))
-        })?;
+        // Each mode checked on its own line, the whole data after the rows.
+        if let Some(why) = mode.fault() {
+            return Err(err(ln, format!("mode {label}: {why}")));
+        }
         labels.push(label);
-        modes.extend(one.modes);
+        modes.push(mode);
     }
     let Some(dofs) = dofs else {
         return Err(err(

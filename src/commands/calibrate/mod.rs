@@ -53,13 +53,13 @@ pub fn execute(
     req.check()?;
     crate::formats::files::check_outputs(
         &[
-            std::path::Path::new(&req.model),
-            req.data.as_path(),
-            req.source.as_deref().unwrap_or(std::path::Path::new("")),
-            candidates.unwrap_or(std::path::Path::new("")),
+            Some(std::path::Path::new(&req.model)),
+            Some(req.data.as_path()),
+            req.source.as_deref(),
+            candidates,
         ],
-        &req.out.as_deref().into_iter().collect::<Vec<_>>(),
-        &req.report.as_deref().into_iter().collect::<Vec<_>>(),
+        &[req.out.as_deref()],
+        &[req.report.as_deref()],
     )?;
     let candidates = match candidates {
         None => None,

@@ -26,16 +26,11 @@ pub fn execute(
     let plot = outputs.plot_path();
     crate::formats::files::check_outputs(
         &[
-            std::path::Path::new(spec),
-            req.start_file
-                .as_ref()
-                .map_or(std::path::Path::new(""), |s| &s.path),
+            Some(std::path::Path::new(spec)),
+            req.start_file.as_ref().map(|s| s.path.as_path()),
         ],
-        &[outputs.out.as_deref(), plot.as_deref()]
-            .into_iter()
-            .flatten()
-            .collect::<Vec<_>>(),
-        &outputs.report.as_deref().into_iter().collect::<Vec<_>>(),
+        &[outputs.out.as_deref(), plot.as_deref()],
+        &[outputs.report.as_deref()],
     )?;
     let model = crate::commands::setup::load_for_run(spec, sets)?;
     let t1 = std::time::Instant::now();

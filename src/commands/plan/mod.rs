@@ -40,12 +40,12 @@ pub fn execute(req: &PlanRequest, console: &crate::present::console::Console) ->
     req.check()?;
     crate::formats::files::check_outputs(
         &[
-            std::path::Path::new(&req.model),
-            req.source.as_deref().unwrap_or(std::path::Path::new("")),
-            req.prior.as_deref().unwrap_or(std::path::Path::new("")),
+            Some(std::path::Path::new(&req.model)),
+            req.source.as_deref(),
+            req.prior.as_deref(),
         ],
         &[],
-        &req.report.as_deref().into_iter().collect::<Vec<_>>(),
+        &[req.report.as_deref()],
     )?;
     let progress = std::sync::Mutex::new(console.counter("candidate sweeps"));
     let run = run_plan(req, &|d, n| {

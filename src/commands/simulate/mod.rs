@@ -24,9 +24,9 @@ pub fn execute(
     req.check()?;
     outputs.check()?;
     crate::formats::files::check_outputs(
-        &[std::path::Path::new(spec)],
-        &outputs.out.as_deref().into_iter().collect::<Vec<_>>(),
-        &outputs.report.as_deref().into_iter().collect::<Vec<_>>(),
+        &[Some(std::path::Path::new(spec))],
+        &[outputs.out.as_deref()],
+        &[outputs.report.as_deref()],
     )?;
     let model = crate::commands::setup::load_for_run(spec, sets)?;
     let run = run_simulation(&model, req, &mut console.counter("simulate"))?;

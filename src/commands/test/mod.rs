@@ -46,14 +46,15 @@ pub use run::*;
 /// `nlsim test MODEL TEST`: the virtual test with a progress line per sweep, its summary,
 /// the test data (written by the run) and the report folder.
 pub fn execute(req: &TestRequest, console: &crate::present::console::Console) -> crate::Result<()> {
+    // The request's own errors first (run_test checks it again, as a library entry).
     req.check()?;
     crate::formats::files::check_outputs(
         &[
-            std::path::Path::new(&req.model),
-            req.source.as_deref().unwrap_or(std::path::Path::new("")),
+            Some(std::path::Path::new(&req.model)),
+            req.source.as_deref(),
         ],
-        &[req.out.as_path()],
-        &req.report.as_deref().into_iter().collect::<Vec<_>>(),
+        &[Some(req.out.as_path())],
+        &[req.report.as_deref()],
     )?;
     let mut progress = console.counter("sweeps");
     let run = run_test(req, &mut progress)?;
