@@ -192,6 +192,96 @@ fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// Creates `name` under `loc` as a dataset of a hostile type, shape and content: reals with
+/// NaN and huge values, integers, strings, complex numbers, or an unwritten dataset whose
+/// shape declares 2⁴⁰ values.
+fn hostile_dataset(loc: &hdf5_metno::Group, name: &str, rng: &mut Rng) -> hdf5_metno::Result<()> {
+    use hdf5_metno::types::VarLenUnicode;
+    let n = *rng.pick(&[0usize, 1, 2, 3, 4, 6]);
+    match rng.below(6) {
+        0 => {
+            let v: Vec<f64> = (0..n)
+                .map(|_| *rng.pick(&[f64::NAN, 1e308, -1.0, 0.0, 1e-320, 2.0]))
+                .collect();
+            loc.new_dataset_builder().with_data(&v).create(name)?;
+        }
+        1 => {
+            let v: Vec<i64> = (0..n)
+                .map(|_| *rng.pick(&[-1i64, 0, 3, i64::MAX]))
+                .collect();
+            loc.new_dataset_builder().with_data(&v).create(name)?;
+        }
+        2 => {
+            let v: Vec<VarLenUnicode> = (0..n)
+                .map(|_| {
+                    rng.pick(&["tip", "acceleration", "", "x\ny"])
+                        .parse()
+                        .unwrap()
+                })
+                .collect();
+            loc.new_dataset_builder().with_data(&v).create(name)?;
+        }
+        3 => {
+            let v: Vec<faer::c64> = (0..n * 2)
+                .map(|_| faer::c64::new(*rng.pick(&[1.0, f64::NAN, 1e308]), 0.0))
+                .collect();
+            loc.new_dataset::<faer::c64>()
+                .shape((n, 2))
+                .create(name)?
+                .write_raw(&v)?;
+        }
+        4 => {
+            // Declared, never written: a reader that trusts the shape allocates 8 TiB.
+            loc.new_dataset::<f64>()
+                .shape((1usize << 20, 1usize << 20))
+                .create(name)?;
+        }
+        _ => {
+            loc.create_group(name)?;
+        }
+    }
+    Ok(())
+}
+
+/// Creates attribute `name` on `loc` with a hostile type or value.
+fn hostile_attr(loc: &hdf5_metno::Group, name: &str, rng: &mut Rng) -> hdf5_metno::Result<()> {
+    use hdf5_metno::types::VarLenUnicode;
+    match rng.below(4) {
+        0 => loc
+            .new_attr::<u64>()
+            .create(name)?
+            .write_scalar(rng.pick(&[0u64, 1, 2, 1001, u64::MAX]))?,
+        1 => loc
+            .new_attr::<f64>()
+            .create(name)?
+            .write_scalar(rng.pick(&[f64::NAN, 2.5, -1.0, 1e308]))?,
+        2 => {
+            let long = "x".repeat(5000);
+            let s: VarLenUnicode = rng
+                .pick(&[
+                    "",
+                    "up",
+                    "down",
+                    "low",
+                    "nlsim test data",
+                    "a\u{1b}[2J",
+                    long.as_str(),
+                ])
+                .parse()
+                .unwrap();
+            loc.new_attr::<VarLenUnicode>()
+                .create(name)?
+                .write_scalar(&s)?;
+        }
+        _ => loc
+            .new_attr::<i32>()
+            .shape(3)
+            .create(name)?
+            .write(&[1, 2, 3])?,
+    }
+    Ok(())
+}
+
 /// The fuzzing itself; run by `readers_survive_mutated_inputs` in a memory-limited child.
 #[test]
 #[ignore = "run under a memory limit by readers_survive_mutated_inputs"]
@@ -514,6 +604,232 @@ fn fuzz_inner() {
             .err()
             .map(|e| e.to_string())
     }));
+
+    // Stepped-sine test data (HDF5): nlsim's layout written, then one to three objects or
+    // attributes deleted or replaced by hostile ones (wrong type, wrong or huge shape,
+    // hostile values); what is read is written back as CSV and read again.
+    let base = nlsim::formats::test_data::parse_csv(&test_csv[0], &csv_path).unwrap();
+    let td_h5 = dir.join("test.h5");
+    let objects = [
+        "channels/name",
+        "channels/quantity",
+        "channels/noise_relative",
+        "channels/noise_absolute",
+        "sweeps/sweep0/frequency_hz",
+        "sweeps/sweep0/force",
+        "sweeps/sweep1/response",
+        "sweeps/sweep1",
+        "sweeps",
+    ];
+    let attributes = [
+        ("", "format"),
+        ("", "input"),
+        ("", "harmonics"),
+        ("sweeps/sweep0", "label"),
+        ("sweeps/sweep1", "label"),
+        ("sweeps/sweep1", "direction"),
+    ];
+    panics.extend(survive("test data hdf5", 10000 * scale(), |_| {
+        let _ = std::fs::remove_file(&td_h5);
+        nlsim::formats::test_data::write_h5(&td_h5, &base).unwrap();
+        let edit = |rng: &mut Rng| -> hdf5_metno::Result<()> {
+            let f = hdf5_metno::File::open_rw(&td_h5)?;
+            for _ in 0..1 + rng.below(3) {
+                if rng.below(2) == 0 {
+                    let name = *rng.pick(&objects);
+                    let _ = f.unlink(name);
+                    if rng.below(4) != 0 {
+                        hostile_dataset(&f, name, rng)?;
+                    }
+                } else {
+                    let (at, name) = *rng.pick(&attributes);
+                    let loc: hdf5_metno::Group = if at.is_empty() {
+                        f.group("/")?
+                    } else {
+                        f.group(at)?
+                    };
+                    let _ = loc.delete_attr(name);
+                    hostile_attr(&loc, name, rng)?;
+                }
+            }
+            Ok(())
+        };
+        if edit(&mut rng).is_err() {
+            return Some("not edited".into());
+        }
+        match nlsim::formats::test_data::read_h5(&td_h5) {
+            Ok(d) => {
+                let back = dir.join("back_h5.csv");
+                nlsim::formats::test_data::write_csv(&back, &d)
+                    .and_then(|()| nlsim::formats::test_data::read_csv(&back))
+                    .err()
+                    .map(|e| e.to_string())
+            }
+            Err(e) => Some(e.to_string()),
+        }
+    }));
+
+    // The candidates file of a merged calibrate-candidates batch: its attributes and two
+    // tables with hostile types, shapes and values.
+    let cands = dir.join("candidates.h5");
+    panics.extend(survive("candidates file", 10000 * scale(), |_| {
+        let _ = std::fs::remove_file(&cands);
+        let write = |rng: &mut Rng| -> hdf5_metno::Result<()> {
+            let f = hdf5_metno::File::create(&cands)?;
+            let root = f.group("/")?;
+            if rng.below(6) != 0 {
+                let c = *rng.pick(&["calibrate-candidates", "calibrate-folds", ""]);
+                let v: hdf5_metno::types::VarLenUnicode = c.parse().unwrap();
+                root.new_attr::<hdf5_metno::types::VarLenUnicode>()
+                    .create("command")?
+                    .write_scalar(&v)?;
+            } else {
+                hostile_attr(&root, "command", rng)?;
+            }
+            if rng.below(4) != 0 {
+                root.new_attr::<u64>()
+                    .create("complete")?
+                    .write_scalar(rng.pick(&[1u64, 1, 1, 0, u64::MAX]))?;
+            } else {
+                hostile_attr(&root, "complete", rng)?;
+            }
+            let rows = *rng.pick(&[0usize, 1, 2, 3]);
+            let cols = *rng.pick(&[0usize, 1, 2]);
+            if rng.below(3) != 0 {
+                let v: Vec<f64> = (0..rows * cols)
+                    .map(|_| *rng.pick(&[1.0, 2.5e10, 0.0, -1.0, f64::NAN, 1e308, f64::INFINITY]))
+                    .collect();
+                f.new_dataset::<f64>()
+                    .shape((rows, cols))
+                    .create("parameters")?
+                    .write_raw(&v)?;
+            } else {
+                hostile_dataset(&f, "parameters", rng)?;
+            }
+            if rng.below(3) != 0 {
+                let v: Vec<f64> = (0..rows)
+                    .map(|_| *rng.pick(&[1.0, 0.0, f64::NAN, f64::INFINITY, -1.0]))
+                    .collect();
+                f.new_dataset_builder().with_data(&v).create("cost")?;
+            } else {
+                hostile_dataset(&f, "cost", rng)?;
+            }
+            Ok(())
+        };
+        if write(&mut rng).is_err() {
+            return Some("not written".into());
+        }
+        nlsim::formats::candidates::read_candidates(&cands)
+            .err()
+            .map(|e| e.to_string())
+    }));
+
+    // A start file (`frf --start-file`) for the Duffing oscillator's harmonic balance system:
+    // nlsim's layout with hostile attributes, shapes and values.
+    let duffing = nlsim::fixtures::duffing_fig3().model;
+    let reduced = nlsim::reduction::reduce(
+        &duffing,
+        &nlsim::reduction::ReductionConfig::lowest(duffing.n_dofs()),
+    )
+    .unwrap();
+    let system = nlsim::hb::HbSystem::from_model(
+        &duffing,
+        &reduced,
+        nlsim::hb::HarmonicSet::new(3, 1).unwrap(),
+        nlsim::hb::HbConfig::default(),
+    )
+    .unwrap();
+    let start = nlsim::commands::frf::StartFile {
+        path: dir.join("start.h5"),
+        at_hz: None,
+    };
+    panics.extend(survive("start file", 10000 * scale(), |_| {
+        let _ = std::fs::remove_file(&start.path);
+        let write = |rng: &mut Rng| -> hdf5_metno::Result<()> {
+            let f = hdf5_metno::File::create(&start.path)?;
+            let root = f.group("/")?;
+            let h = *rng.pick(&[3.0, 3.0, 1.0, 5.0, 0.0, 2.5, 1e308, f64::NAN]);
+            for (name, v) in [("harmonics", h), ("subharmonic_order", 1.0)] {
+                if rng.below(8) != 0 {
+                    root.new_attr::<f64>()
+                        .create(name)?
+                        .write_scalar(&if rng.below(8) == 0 { h } else { v })?;
+                } else {
+                    hostile_attr(&root, name, rng)?;
+                }
+            }
+            let n = *rng.pick(&[0usize, 1, 2, 5]);
+            if rng.below(6) != 0 {
+                let hz: Vec<f64> = (0..n)
+                    .map(|_| *rng.pick(&[30.0, 31.0, 1e308, f64::NAN, -1.0, 1e-320]))
+                    .collect();
+                f.new_dataset_builder().with_data(&hz).create("frequency")?;
+            } else {
+                hostile_dataset(&f, "frequency", rng)?;
+            }
+            let els = f.create_group("elements")?;
+            let hf = if h.is_finite() && (1.0..=5.0).contains(&h) {
+                h as usize
+            } else {
+                3
+            };
+            for (e, el) in system.elements().iter().enumerate() {
+                let m = system.coordinates(e).len();
+                let name = if rng.below(10) == 0 {
+                    "other"
+                } else {
+                    el.name()
+                };
+                if rng.below(5) != 0 {
+                    let cols = m * (2 * hf + 1) + usize::from(rng.below(6) == 0);
+                    let v: Vec<f64> = (0..n * cols)
+                        .map(|_| *rng.pick(&[0.01, -0.02, 0.0, 1e308, f64::NAN]))
+                        .collect();
+                    els.new_dataset::<f64>()
+                        .shape((n, cols))
+                        .create(name)?
+                        .write_raw(&v)?;
+                } else {
+                    hostile_dataset(&els, name, rng)?;
+                }
+            }
+            Ok(())
+        };
+        if write(&mut rng).is_err() {
+            return Some("not written".into());
+        }
+        match nlsim::commands::frf::start::read_start(&start, &system, 20.0, 40.0) {
+            Ok(p) => {
+                // What is accepted is usable: finite unknowns of this system's size.
+                assert_eq!(p.x.len(), system.n_unknowns());
+                assert!(p.x.iter().all(|v| v.is_finite()) && p.hz.is_finite());
+                None
+            }
+            Err(e) => Some(e.to_string()),
+        }
+    }));
+
+    // A prior information matrix (`plan`'s `prior = "fim_best.csv"`).
+    let params: Vec<nlsim::kernel::Param> = ["tip_spring.k3", "mode2.zeta"]
+        .iter()
+        .map(|p| p.parse().unwrap())
+        .collect();
+    let fim = faer::Mat::from_fn(2, 2, |i, j| if i == j { 4.0 } else { 1.5 });
+    let priors = [nlsim::commands::plan::fim_csv(&params, &fim)];
+    let prior_path = dir.join("fim_best.csv");
+    panics.extend(survive("prior csv", 10000 * scale(), |_| {
+        let text = mutate(rng.pick(&priors).clone().as_str(), &mut rng);
+        std::fs::write(&prior_path, text).unwrap();
+        match nlsim::commands::plan::read_fim_csv(&prior_path, &params) {
+            Ok(f) => {
+                // What is accepted is symmetric with a non-negative, finite diagonal.
+                assert!((0..2).all(|i| f[(i, i)] >= 0.0 && f[(i, i)].is_finite()));
+                None
+            }
+            Err(e) => Some(e.to_string()),
+        }
+    }));
+
     std::fs::remove_dir_all(&dir).unwrap();
     assert!(panics.is_empty(), "panics: {panics:?}");
 }
@@ -554,6 +870,10 @@ fn readers_survive_mutated_inputs() {
         "calibration file",
         "plan file",
         "test file",
+        "test data hdf5",
+        "candidates file",
+        "start file",
+        "prior csv",
     ] {
         assert!(
             text.contains(&format!("fuzz {reader}:")),

@@ -4651,6 +4651,46 @@ mod hardening {
             "params = [\"tip_spring.k3\", \"mode2.zeta\"]\nlevels = [1e-320]\nharmonics = 1\n\
              modes = 8\n[[band]]\nlabel = \"b\"\nfrom = 22.0\nto = 30.0\nsteps = 5\n",
         );
+        // Two sweeps under one label; plan noise of 1e308.
+        let two = test_with(
+            "two.toml",
+            "force = 0.2\n",
+            "force = 0.2\n[[sweep]]\nlabel = \"low\"\nfrom = 21.0\nto = 30.0\nsteps = 5\n\
+             force = 0.4\n",
+        );
+        let loud = write(
+            "loud.toml",
+            "params = [\"tip_spring.k3\", \"mode2.zeta\"]\nlevels = [0.1]\nharmonics = 1\n\
+             modes = 8\nnoise = { relative = 1e308 }\n[[band]]\nlabel = \"b\"\nfrom = 22.0\n\
+             to = 30.0\nsteps = 5\n",
+        );
+        // One channel named twice in HDF5 test data (written valid, then edited as any HDF5
+        // tool could) and in a universal file (two records of one response point).
+        let measured = nlsim::formats::test_data::read_csv(&dir.join("vt.csv")).unwrap();
+        let dup_h5 = d("dup.h5");
+        nlsim::formats::test_data::write_h5(Path::new(&dup_h5), &measured).unwrap();
+        {
+            let f = hdf5_metno::File::open_rw(&dup_h5).unwrap();
+            let names = f.dataset("channels/name").unwrap();
+            let mut v: Vec<hdf5_metno::types::VarLenUnicode> = names.read_raw().unwrap();
+            assert!(v.len() >= 2, "the virtual test has two channels");
+            v[1] = v[0].clone();
+            names.write_raw(&v).unwrap();
+        }
+        let record = |dir: i64| nlsim::formats::uff::Uff58 {
+            id: "tip".into(),
+            function_type: 4,
+            response_node: 21,
+            response_direction: dir,
+            reference_node: 21,
+            reference_direction: 3,
+            ordinate_type: 12,
+            denominator_type: 13,
+            frequencies_hz: vec![22.0, 23.0, 24.0],
+            values: vec![faer::c64::new(0.1, -0.2); 3],
+        };
+        let dup_uff = d("dup.uff");
+        nlsim::formats::uff::write(Path::new(&dup_uff), &[record(3), record(3)], false).unwrap();
         let cal = ["calibrate", "ecl_beam"];
         let k3 = [
             "--param",
@@ -4785,6 +4825,60 @@ mod hardening {
             (
                 with(&["plan", "ecl_beam"], &[&plan]),
                 "1e-320 N is outside 1e-100 to 1e100 N",
+            ),
+            (
+                with(&["test", "ecl_beam"], &[&two]),
+                "is the label of two sweeps",
+            ),
+            (
+                with(&["plan", "ecl_beam"], &[&loud]),
+                "relative 1e308 within 0..=10",
+            ),
+            (
+                with(&cal, &[&dup_h5, k3[0], k3[1]]),
+                "dup.h5: HDF5: /: invalid test data channel 2 ('tip'): has the name of channel 1",
+            ),
+            (
+                with(&cal, &[&dup_uff, k3[0], k3[1]]),
+                "dup.uff: invalid FRF dataset 58 number 1 (in file order): invalid test data channel 2 ('tip'): has the name of channel 1",
+            ),
+            (
+                with(
+                    &[
+                        "frf",
+                        "duffing_fig3",
+                        "--set",
+                        "spring.k3=1e300",
+                        "--from",
+                        "25",
+                    ],
+                    &["--to", "35", "--plot", "k3.svg", "--out", "k3.h5"],
+                ),
+                "FRF of 'duffing_fig3': iteration limit reached: no point converged, not even \
+                 the start point at 25 Hz",
+            ),
+            (
+                with(
+                    &[
+                        "frf",
+                        "bumpstop_cantilever",
+                        "--set",
+                        "stop.k1=1e300",
+                        "--from",
+                        "20",
+                    ],
+                    &[
+                        "--set",
+                        "stop.k2=1e300",
+                        "--to",
+                        "30",
+                        "--plot",
+                        "stop.svg",
+                        "--out",
+                        "stop.h5",
+                    ],
+                ),
+                "FRF of 'bumpstop_cantilever'",
             ),
             (
                 with(

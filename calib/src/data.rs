@@ -114,6 +114,11 @@ pub const MAX_FREQUENCY_HZ: f64 = 1e9;
 /// (`σ² = σ_abs² + (ε |Y|)²`), which overflows above about 1e154.
 pub const MAX_AMPLITUDE: f64 = 1e100;
 
+/// Largest relative noise of a channel (standard deviation over amplitude): beyond 10 a
+/// measurement carries no information, and a larger ε only hides a unit mistake. Shared by
+/// test data, virtual tests and planning.
+pub const MAX_RELATIVE_NOISE: f64 = 10.0;
+
 /// Why a sweep label or channel name cannot be written into test data and read back, if it
 /// cannot: empty, or holding a comma, a quote, a `#` or a control character (the CSV
 /// layout splits cells at commas and reads `#` lines as header), or longer than 200 bytes.
@@ -185,12 +190,14 @@ impl TestData {
             }
             first.insert(c.name.as_str(), i);
             let n = c.noise;
-            let ok = |v: f64| v.is_finite() && v >= 0.0;
-            if !ok(n.absolute) || !ok(n.relative) {
+            let ok = |v: f64, max: f64| v.is_finite() && v >= 0.0 && v <= max;
+            if !ok(n.absolute, MAX_AMPLITUDE) || !ok(n.relative, MAX_RELATIVE_NOISE) {
                 return bad(
                     format!("test data channel '{}'", c.name),
                     format!(
-                        "noise must be finite and non-negative (absolute {}, relative {})",
+                        "noise must be finite and non-negative, absolute at most \
+                         {MAX_AMPLITUDE:e} and relative at most {MAX_RELATIVE_NOISE} \
+                         (absolute {:e}, relative {:e})",
                         n.absolute, n.relative
                     ),
                 );

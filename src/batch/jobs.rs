@@ -74,8 +74,10 @@ fn lanczos_keys(
     let d = crate::commands::setup::Lanczos::default();
     let ordering = match ordering {
         None => d.ordering,
-        Some(o) => nlsim_reduction::Ordering::parse(o)
-            .ok_or(("ordering", format!("'{o}': use auto, amd or nd")))?,
+        Some(o) => nlsim_reduction::Ordering::parse(o).ok_or((
+            "ordering",
+            format!("{}: use auto, amd or nd", crate::formats::files::quoted(o)),
+        ))?,
     };
     let memory_budget = match memory_budget_gb {
         None => d.memory_budget,
@@ -193,8 +195,8 @@ impl Batch {
                 at("name"),
                 "name",
                 format!(
-                    "'{}' must be non-empty letters, digits, '-', '_' or '.'",
-                    f.name
+                    "{} must be non-empty letters, digits, '-', '_' or '.'",
+                    crate::formats::files::quoted(&f.name)
                 ),
             ));
         }
@@ -225,7 +227,10 @@ impl Batch {
                         err(
                             at("mode"),
                             "frf.mode",
-                            format!("'{m}': use continuation, step-up or step-down"),
+                            format!(
+                                "{}: use continuation, step-up or step-down",
+                                crate::formats::files::quoted(m)
+                            ),
                         )
                     })?,
                 };
@@ -235,7 +240,10 @@ impl Batch {
                         err(
                             at("start"),
                             "frf.start",
-                            format!("'{m}': use auto, rest or subharmonic"),
+                            format!(
+                                "{}: use auto, rest or subharmonic",
+                                crate::formats::files::quoted(m)
+                            ),
                         )
                     })?,
                 };
@@ -293,7 +301,10 @@ impl Batch {
                         err(
                             at("method"),
                             "simulate.method",
-                            format!("'{m}': use foh, zoh, lsoh, rk45, rk4, newmark or hht"),
+                            format!(
+                                "{}: use foh, zoh, lsoh, rk45, rk4, newmark or hht",
+                                crate::formats::files::quoted(m)
+                            ),
                         )
                     })?,
                 };
@@ -479,8 +490,9 @@ impl Batch {
                     at("command"),
                     "command",
                     format!(
-                        "unknown command '{other}'; a batch runs frf, simulate, \
-                         calibrate-candidates, calibrate-folds or plan-candidates"
+                        "unknown command {}; a batch runs frf, simulate, \
+                         calibrate-candidates, calibrate-folds or plan-candidates",
+                        crate::formats::files::quoted(other)
                     ),
                 ));
             }

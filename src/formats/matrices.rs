@@ -26,20 +26,27 @@ pub fn parse_matrix_market(text: &str, file: &Path, name: &str) -> Result<Sparse
         return Err(err(
             l0,
             format!(
-                "expected '%%MatrixMarket matrix coordinate real symmetric|general', found '{header}'"
+                "expected '%%MatrixMarket matrix coordinate real symmetric|general', found {}",
+                crate::formats::files::quoted(header)
             ),
         ));
     }
     if h[2] != "coordinate" {
         return Err(err(
             l0,
-            format!("only the coordinate format is supported, not '{}'", h[2]),
+            format!(
+                "only the coordinate format is supported, not {}",
+                crate::formats::files::quoted(&h[2])
+            ),
         ));
     }
     if h[3] != "real" && h[3] != "integer" {
         return Err(err(
             l0,
-            format!("field '{}' is not supported (use real or integer)", h[3]),
+            format!(
+                "field {} is not supported (use real or integer)",
+                crate::formats::files::quoted(&h[3])
+            ),
         ));
     }
     let symmetric = match h[4].as_str() {
@@ -48,7 +55,10 @@ pub fn parse_matrix_market(text: &str, file: &Path, name: &str) -> Result<Sparse
         other => {
             return Err(err(
                 l0,
-                format!("symmetry '{other}' is not supported (use symmetric or general)"),
+                format!(
+                    "symmetry {} is not supported (use symmetric or general)",
+                    crate::formats::files::quoted(other)
+                ),
             ));
         }
     };
@@ -66,12 +76,22 @@ pub fn parse_matrix_market(text: &str, file: &Path, name: &str) -> Result<Sparse
                 if f.len() != 3 {
                     return Err(err(
                         ln,
-                        format!("expected the size line 'ROWS COLS ENTRIES', found '{t}'"),
+                        format!(
+                            "expected the size line 'ROWS COLS ENTRIES', found {}",
+                            crate::formats::files::quoted(t)
+                        ),
                     ));
                 }
                 let p = |s: &str| {
-                    s.parse::<usize>()
-                        .map_err(|_| err(ln, format!("'{s}' is not a non-negative integer")))
+                    s.parse::<usize>().map_err(|_| {
+                        err(
+                            ln,
+                            format!(
+                                "{} is not a non-negative integer",
+                                crate::formats::files::quoted(s)
+                            ),
+                        )
+                    })
                 };
                 let (r, c, nz) = (p(f[0])?, p(f[1])?, p(f[2])?);
                 if r != c {
@@ -107,16 +127,34 @@ pub fn parse_matrix_market(text: &str, file: &Path, name: &str) -> Result<Sparse
             }
             Some(_) => {
                 if f.len() != 3 {
-                    return Err(err(ln, format!("expected 'ROW COL VALUE', found '{t}'")));
+                    return Err(err(
+                        ln,
+                        format!(
+                            "expected 'ROW COL VALUE', found {}",
+                            crate::formats::files::quoted(t)
+                        ),
+                    ));
                 }
                 let idx = |s: &str| match s.parse::<usize>() {
                     Ok(i) if i >= 1 && i <= n => Ok(i - 1),
-                    _ => Err(err(ln, format!("index '{s}' is outside 1..={n}"))),
+                    _ => Err(err(
+                        ln,
+                        format!(
+                            "index {} is outside 1..={n}",
+                            crate::formats::files::quoted(s)
+                        ),
+                    )),
                 };
                 let (i, j) = (idx(f[0])?, idx(f[1])?);
-                let v: f64 = f[2]
-                    .parse()
-                    .map_err(|_| err(ln, format!("value '{}' is not a number", f[2])))?;
+                let v: f64 = f[2].parse().map_err(|_| {
+                    err(
+                        ln,
+                        format!(
+                            "value {} is not a number",
+                            crate::formats::files::quoted(f[2])
+                        ),
+                    )
+                })?;
                 if !v.is_finite() {
                     return Err(err(ln, format!("value {v} is not finite")));
                 }

@@ -86,14 +86,24 @@ pub fn parse_modal_csv(
             }
             let mut found = Vec::with_capacity(cells.len() - 3);
             for (c, label) in cells.iter().enumerate().skip(3) {
-                let d = model
-                    .dofs()
-                    .find(label)
-                    .map_err(|e| err(ln, format!("column {} ('{label}'): {e}", c + 1)))?;
+                let d = model.dofs().find(label).map_err(|e| {
+                    err(
+                        ln,
+                        format!(
+                            "column {} ({}): {e}",
+                            c + 1,
+                            crate::formats::files::quoted(label)
+                        ),
+                    )
+                })?;
                 if found.contains(&d) {
                     return Err(err(
                         ln,
-                        format!("column {} ('{label}'): this DOF is named twice", c + 1),
+                        format!(
+                            "column {} ({}): this DOF is named twice",
+                            c + 1,
+                            crate::formats::files::quoted(label)
+                        ),
                     ));
                 }
                 found.push(d);
@@ -117,10 +127,10 @@ pub fn parse_modal_csv(
                 err(
                     ln,
                     format!(
-                        "column {} ({}): '{}' is not a number",
+                        "column {} ({}): {} is not a number",
                         c + 1,
-                        header[c],
-                        cells[c]
+                        crate::formats::files::quoted(&header[c]),
+                        crate::formats::files::quoted(cells[c])
                     ),
                 )
             })?;
@@ -137,8 +147,8 @@ pub fn parse_modal_csv(
             err(
                 ln,
                 format!(
-                    "column 1 (mode): '{}' is not a positive mode number",
-                    cells[0]
+                    "column 1 (mode): {} is not a positive mode number",
+                    crate::formats::files::quoted(cells[0])
                 ),
             )
         })?;

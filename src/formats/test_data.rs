@@ -93,10 +93,15 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
                 if harmonics.is_some() {
                     return Err(err(ln, "a second '# harmonics:' line".into()));
                 }
-                let h: usize = v
-                    .trim()
-                    .parse()
-                    .map_err(|_| err(ln, format!("harmonics: '{}' is not a count", v.trim())))?;
+                let h: usize = v.trim().parse().map_err(|_| {
+                    err(
+                        ln,
+                        format!(
+                            "harmonics: {} is not a count",
+                            crate::formats::files::quoted(v.trim())
+                        ),
+                    )
+                })?;
                 if h == 0 || h > 1000 {
                     return Err(err(ln, format!("harmonics: {h} is outside 1..=1000")));
                 }
@@ -109,14 +114,30 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
                         "channel: expected 'NAME, QUANTITY[, relative=R][, absolute=A]'".into(),
                     ));
                 }
-                let q = quantity(f[1]).ok_or_else(|| err(ln, format!("channel '{}': quantity '{}' is not displacement, velocity or acceleration", f[0], f[1])))?;
+                let q = quantity(f[1]).ok_or_else(|| {
+                    err(
+                        ln,
+                        format!(
+                            "channel {}: quantity {} is not displacement, velocity or acceleration",
+                            crate::formats::files::quoted(f[0]),
+                            crate::formats::files::quoted(f[1])
+                        ),
+                    )
+                })?;
                 let mut noise = Noise {
                     absolute: 0.0,
                     relative: 0.0,
                 };
                 for kv in &f[2..] {
                     let (k, v) = kv.split_once('=').ok_or_else(|| {
-                        err(ln, format!("channel '{}': '{kv}' is not KEY=VALUE", f[0]))
+                        err(
+                            ln,
+                            format!(
+                                "channel {}: {} is not KEY=VALUE",
+                                crate::formats::files::quoted(f[0]),
+                                crate::formats::files::quoted(kv)
+                            ),
+                        )
                     })?;
                     let v: f64 = v
                         .trim()
@@ -127,8 +148,10 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
                             err(
                                 ln,
                                 format!(
-                                    "channel '{}': {k} = '{v}' is not a non-negative number",
-                                    f[0]
+                                    "channel {}: {} = {} is not a non-negative number",
+                                    crate::formats::files::quoted(f[0]),
+                                    crate::formats::files::quoted(k),
+                                    crate::formats::files::quoted(v)
                                 ),
                             )
                         })?;
@@ -139,8 +162,9 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
                             return Err(err(
                                 ln,
                                 format!(
-                                    "channel '{}': unknown key '{other}' (relative, absolute)",
-                                    f[0]
+                                    "channel {}: unknown key {} (relative, absolute)",
+                                    crate::formats::files::quoted(f[0]),
+                                    crate::formats::files::quoted(other)
                                 ),
                             ));
                         }
@@ -216,10 +240,10 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
                     err(
                         ln,
                         format!(
-                            "column {} ({}): '{}' is not a finite number",
+                            "column {} ({}): {} is not a finite number",
                             c + 1,
                             names[c],
-                            cells[c]
+                            crate::formats::files::quoted(cells[c])
                         ),
                     )
                 })
@@ -230,7 +254,10 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
             d => {
                 return Err(err(
                     ln,
-                    format!("column 2 (direction): '{d}' is not up or down"),
+                    format!(
+                        "column 2 (direction): {} is not up or down",
+                        crate::formats::files::quoted(d)
+                    ),
                 ));
             }
         };
@@ -239,8 +266,8 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
             err(
                 ln,
                 format!(
-                    "column 4 (harmonic): '{}' is not a harmonic number",
-                    cells[3]
+                    "column 4 (harmonic): {} is not a harmonic number",
+                    crate::formats::files::quoted(cells[3])
                 ),
             )
         })?;
@@ -269,8 +296,8 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
                 return Err(err(
                     ln,
                     format!(
-                        "column 1 (sweep): rows of sweep '{}' are not contiguous",
-                        cells[0]
+                        "column 1 (sweep): rows of sweep {} are not contiguous",
+                        crate::formats::files::quoted(cells[0])
                     ),
                 ));
             }
@@ -525,7 +552,10 @@ pub fn read_h5(path: &Path) -> Result<TestData> {
     if format != "nlsim test data" {
         return Err(err(
             "/",
-            format!("format '{format}' is not 'nlsim test data'"),
+            format!(
+                "format {} is not 'nlsim test data'",
+                crate::formats::files::quoted(&format)
+            ),
         ));
     }
     let input = str_attr(&f, "/", "input")?;
@@ -582,8 +612,8 @@ pub fn read_h5(path: &Path) -> Result<TestData> {
                 err(
                     "channels/quantity",
                     format!(
-                        "entry {c}: '{}' is not displacement, velocity or acceleration",
-                        quantities[c]
+                        "entry {c}: {} is not displacement, velocity or acceleration",
+                        crate::formats::files::quoted(&quantities[c])
                     ),
                 )
             })?,
@@ -612,7 +642,15 @@ pub fn read_h5(path: &Path) -> Result<TestData> {
         let direction = match dir.as_str() {
             "up" => SweepDirection::Up,
             "down" => SweepDirection::Down,
-            _ => return Err(err(&gname, format!("direction '{dir}' is not up or down"))),
+            _ => {
+                return Err(err(
+                    &gname,
+                    format!(
+                        "direction {} is not up or down",
+                        crate::formats::files::quoted(&dir)
+                    ),
+                ));
+            }
         };
         let fname = format!("{gname}/frequency_hz");
         let n = f

@@ -208,7 +208,12 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Vec<Uff58>> {
                     f.parse::<i64>().map_err(|_| {
                         err(
                             *ln,
-                            format!("record {}: field {} is not an integer: '{f}'", r + 1, i + 1),
+                            format!(
+                                "record {}: field {} is not an integer: {}",
+                                r + 1,
+                                i + 1,
+                                crate::formats::files::quoted(f)
+                            ),
                         )
                     })
                 })
@@ -336,7 +341,11 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Vec<Uff58>> {
                         let x = tok.replace(['D', 'd'], "E").parse::<f64>().map_err(|_| {
                             err(
                                 lines.line,
-                                format!("value {} is not a number: '{tok}'", col + 1),
+                                format!(
+                                    "value {} is not a number: {}",
+                                    col + 1,
+                                    crate::formats::files::quoted(tok)
+                                ),
                             )
                         })?;
                         v.push(x);

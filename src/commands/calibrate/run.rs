@@ -40,7 +40,10 @@ pub fn read_test_data(path: &Path, model: &Model, uff_noise: f64) -> Result<Test
                     inputs.join(", ")
                 )));
             };
-            crate::formats::uff::to_test_data(&records, input, Noise::relative(uff_noise))
+            crate::formats::uff::to_test_data(&records, input, Noise::relative(uff_noise)).map_err(
+                // Invalid records are bad input; the line names the file.
+                |e| Error::Usage(format!("{}: {e}", path.display())),
+            )
         }
         _ => Err(Error::Usage(format!(
             "{}: test data must be .csv, .h5/.hdf5 or universal file dataset 58 \

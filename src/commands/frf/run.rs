@@ -228,7 +228,18 @@ pub fn run_frf_shared(
         // Nothing to return: the start point itself failed.
         return Err(match report.into_branch() {
             Err(e) => e.into(),
-            Ok(_) => Error::Failed(format!("{}: no point converged", status.as_str())),
+            Ok(_) => Error::Failed(format!(
+                "FRF of '{name}': {}: no point converged, not even the start point at {} \
+                 Hz{} (are the parameters physical? try --start rest, more --harmonics or a \
+                 smaller range)",
+                status.as_str(),
+                req.from_hz,
+                if detail.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({detail})")
+                }
+            )),
         });
     }
     let branch = report.branch;

@@ -9,15 +9,15 @@ use nlsim_hb::HbSystem;
 
 /// The point [`read_start`] took: its index in the file, fundamental (Hz) and the unknowns
 /// on this run's harmonics.
-pub(crate) struct StartPoint {
+pub struct StartPoint {
     /// The point's index in the file.
-    pub(crate) index: usize,
+    pub index: usize,
     /// Its fundamental frequency (Hz).
-    pub(crate) hz: f64,
+    pub hz: f64,
     /// Its unknowns in the request's harmonics (padded or cut).
-    pub(crate) x: Vec<f64>,
+    pub x: Vec<f64>,
     /// Harmonics of the file.
-    pub(crate) h_file: usize,
+    pub h_file: usize,
 }
 
 /// Most values a start file may make nlsim read (2²⁶, 512 MiB).
@@ -28,12 +28,7 @@ const START_FILE_BUDGET: usize = 1 << 26;
 /// its harmonics may differ (the coefficients are cut or padded with zeros). Sizes are checked
 /// against the datasets' shapes and a budget before anything is read; errors name the file
 /// and the object.
-pub(crate) fn read_start(
-    sf: &StartFile,
-    sys: &HbSystem,
-    from_hz: f64,
-    to_hz: f64,
-) -> Result<StartPoint> {
+pub fn read_start(sf: &StartFile, sys: &HbSystem, from_hz: f64, to_hz: f64) -> Result<StartPoint> {
     use hdf5_metno as hdf5;
     let path = &sf.path;
     let err = |object: &str, message: String| Error::Hdf5 {

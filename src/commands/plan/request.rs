@@ -201,14 +201,19 @@ impl PlanRequest {
         let n = &self.noise;
         if !(n.absolute.is_finite() && n.absolute > 0.0 && n.relative.is_finite())
             || n.relative < 0.0
+            || n.absolute > nlsim_calib::data::MAX_AMPLITUDE
+            || n.relative > nlsim_calib::data::MAX_RELATIVE_NOISE
         {
             return bad(
                 "noise",
                 format!(
-                    "absolute {} must be positive (a floor: without it a harmonic the model \
-                     predicts as nearly zero would weigh without bound) and relative {} \
-                     non-negative",
-                    n.absolute, n.relative
+                    "absolute {:e} must be positive (a floor: without it a harmonic the model \
+                     predicts as nearly zero would weigh without bound) and at most {:e}, and \
+                     relative {:e} within 0..={}",
+                    n.absolute,
+                    nlsim_calib::data::MAX_AMPLITUDE,
+                    n.relative,
+                    nlsim_calib::data::MAX_RELATIVE_NOISE
                 ),
             );
         }

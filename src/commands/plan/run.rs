@@ -400,7 +400,10 @@ pub fn read_fim_csv(path: &Path, params: &[Param]) -> Result<Mat<f64>> {
     if names.first() != Some(&"param") || names.len() < 2 {
         return Err(bad(
             1,
-            format!("header '{header}': expected `param,NAME,...`"),
+            format!(
+                "header {}: expected `param,NAME,...`",
+                crate::formats::files::quoted(header)
+            ),
         ));
     }
     let cols = &names[1..];
@@ -408,7 +411,15 @@ pub fn read_fim_csv(path: &Path, params: &[Param]) -> Result<Mat<f64>> {
         params
             .iter()
             .position(|p| p.to_string() == name)
-            .ok_or_else(|| bad(line, format!("{name} is not a planned parameter")))
+            .ok_or_else(|| {
+                bad(
+                    line,
+                    format!(
+                        "{} is not a planned parameter",
+                        crate::formats::files::quoted(name)
+                    ),
+                )
+            })
     };
     let col_idx: Vec<usize> = cols.iter().map(|c| index(c, 1)).collect::<Result<_>>()?;
     let n = params.len();
@@ -434,7 +445,15 @@ pub fn read_fim_csv(path: &Path, params: &[Param]) -> Result<Mat<f64>> {
                 .parse()
                 .ok()
                 .filter(|x: &f64| x.is_finite())
-                .ok_or_else(|| bad(i + 1, format!("'{v}' is not a finite number")))?;
+                .ok_or_else(|| {
+                    bad(
+                        i + 1,
+                        format!(
+                            "{} is not a finite number",
+                            crate::formats::files::quoted(v)
+                        ),
+                    )
+                })?;
             f[(r, col_idx[c])] = x;
         }
         rows += 1;

@@ -37,9 +37,12 @@ pub(crate) fn parse_signal(
     let mut kv: Vec<(String, String)> = Vec::new();
     if kind != "file" {
         for part in rest.split(',').filter(|p| !p.trim().is_empty()) {
-            let (k, v) = part
-                .split_once('=')
-                .ok_or_else(|| usage(format!("'{part}' is not key=value")))?;
+            let (k, v) = part.split_once('=').ok_or_else(|| {
+                usage(format!(
+                    "{} is not key=value",
+                    crate::formats::files::quoted(part)
+                ))
+            })?;
             kv.push((k.trim().to_string(), v.trim().to_string()));
         }
     }
@@ -217,9 +220,10 @@ fn read_force_file(path: &Path, rate_hz: f64) -> Result<Signal> {
             .filter(|x: &f64| x.is_finite())
             .ok_or_else(|| {
                 Error::Usage(format!(
-                    "{}:{}: '{l}' is not a finite force value (one number in N per line)",
+                    "{}:{}: {} is not a finite force value (one number in N per line)",
                     path.display(),
-                    i + 1
+                    i + 1,
+                    crate::formats::files::quoted(l)
                 ))
             })?;
         values.push(v);

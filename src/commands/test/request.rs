@@ -9,8 +9,9 @@ use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-/// Largest relative measurement noise of a virtual test (standard deviation over amplitude).
-pub const MAX_RELATIVE_NOISE: f64 = 10.0;
+/// Largest relative measurement noise of a virtual test (standard deviation over amplitude),
+/// the same as test data's.
+pub use nlsim_calib::data::MAX_RELATIVE_NOISE;
 
 /// Most steps of one virtual test (all sweeps).
 pub const MAX_TEST_STEPS: usize = 1_000_000;
