@@ -9,7 +9,7 @@ APT_PACKAGES=(gcc libc6-dev libhdf5-dev pkg-config fonts-dejavu-core)
 # `make test` also reads every result file with h5py, runs the batch tool on a real
 # single-node SLURM (scripts/slurm-e2e.sh) and opens the report page in headless chromium.
 if [ "${1:-}" = "--test" ]; then
-  APT_PACKAGES+=(python3-h5py slurm-wlm munge chromium)
+  APT_PACKAGES+=(python3-h5py python3-pip slurm-wlm munge chromium)
 fi
 
 say() { printf 'nlsim setup: %s\n' "$*" >&2; }
@@ -56,6 +56,18 @@ used_mb=0
 if [ -n "$have_mb" ] && [ $((have_mb + used_mb)) -lt "$need_mb" ]; then
   say "warning: $have_mb MB free on the disk of $target (which holds $used_mb MB); a cold build"
   say "  needs about $need_mb MB. Free space, or point CARGO_TARGET_DIR at a larger disk."
+fi
+
+# pyNastran (PyPI) for `make test`: the independent writer of the DMIG files the FE-matrix
+# readers are checked on, installed into the Python that has h5py.
+if [ "${1:-}" = "--test" ]; then
+  py="$(scripts/find-h5py.sh)"
+  if ! "$py" -c 'import pyNastran' 2>/dev/null; then
+    say "installing pyNastran 1.4.1 (PyPI) for $py"
+    "$py" -m pip install -q --break-system-packages 'pyNastran==1.4.1' 2>/dev/null \
+      || "$py" -m pip install -q 'pyNastran==1.4.1' \
+      || { say "could not install pyNastran. Run: $py -m pip install --break-system-packages pyNastran==1.4.1"; exit 1; }
+  fi
 fi
 
 # rustfmt and clippy for `make test`.

@@ -830,6 +830,42 @@ fn fuzz_inner() {
         }
     }));
 
+    // FE codes' matrices: Nastran DMIG (small, large and free field) and Abaqus coordinate
+    // files, read and placed on the DOFs they name.
+    let dmig = [
+        std::fs::read_to_string(root().join("examples/models/spring_mass_dmig.bdf")).unwrap(),
+        "DMIG    KAAX    0       6       2       0                       2\n\
+         DMIG    KAAX    1       3               1       3       2.0+6\n\
+         +       2       3       -1.0+6\n\
+         DMIG    KAAX    2       3               2       3       1.0+6\n"
+            .to_string(),
+        "DMIG,KAAX,0,6,2,0,,,2\nDMIG,KAAX,1,3,,1,3,2.0E6,,\n+,2,3,-1.0E6\n\
+         DMIG,KAAX,2,3,,2,3,1.0E6\n"
+            .to_string(),
+    ];
+    let fe_place = |m: nlsim::formats::fe_matrices::LabelledMatrix| -> Option<String> {
+        nlsim::formats::fe_matrices::union_dofs(&[&m])
+            .and_then(|d| m.onto(&d, "stiffness matrix"))
+            .err()
+            .map(|e| e.to_string())
+    };
+    panics.extend(survive("dmig", 10000 * scale(), |_| {
+        let text = mutate(rng.pick(&dmig).clone().as_str(), &mut rng);
+        match nlsim::formats::fe_matrices::parse_dmig(&text, Path::new("k.pch"), "KAAX") {
+            Ok(m) => fe_place(m),
+            Err(e) => Some(e.to_string()),
+        }
+    }));
+    let abaqus =
+        [std::fs::read_to_string(root().join("examples/models/spring_mass_K.abq.mtx")).unwrap()];
+    panics.extend(survive("abaqus mtx", 10000 * scale(), |_| {
+        let text = mutate(rng.pick(&abaqus).clone().as_str(), &mut rng);
+        match nlsim::formats::fe_matrices::parse_abaqus(&text, Path::new("k.mtx")) {
+            Ok(m) => fe_place(m),
+            Err(e) => Some(e.to_string()),
+        }
+    }));
+
     std::fs::remove_dir_all(&dir).unwrap();
     assert!(panics.is_empty(), "panics: {panics:?}");
 }
@@ -874,6 +910,8 @@ fn readers_survive_mutated_inputs() {
         "candidates file",
         "start file",
         "prior csv",
+        "dmig",
+        "abaqus mtx",
     ] {
         assert!(
             text.contains(&format!("fuzz {reader}:")),

@@ -6472,3 +6472,295 @@ fn newton_fd_vec(f: &dyn Fn(&[f64]) -> Vec<f64>, mut u: Vec<f64>, h: &[f64]) -> 
     }
     u
 }
+
+/// FE codes' matrices (Nastran DMIG, Abaqus `*MATRIX GENERATE`) read with their own labels:
+/// written from a native model by an independent writer (pyNastran for DMIG; Python after the
+/// documented layouts for free-field DMIG and Abaqus), loaded back, compared with the native
+/// matrices, labels and modes.
+mod fe_formats {
+    use super::*;
+    use nlsim::prelude::*;
+
+    /// A Python with h5py and pyNastran (scripts/ensure-deps.sh --test installs it).
+    fn python_pynastran() -> String {
+        let py = python_h5py();
+        let ok = Command::new(&py)
+            .args(["-c", "import pyNastran"])
+            .status()
+            .unwrap()
+            .success();
+        assert!(
+            ok,
+            "{py} has no pyNastran: run {py} -m pip install --break-system-packages \
+             pyNastran==1.4.1 (scripts/ensure-deps.sh --test does)"
+        );
+        py
+    }
+
+    /// Relative error of a value a 16-character large field carries: a sign, ten significant
+    /// digits and a four-character exponent (`-2.500000000D-05`) round to half a unit of the
+    /// tenth digit.
+    const LARGE_FIELD: f64 = 5e-10;
+
+    fn model_file(dir: &Path, name: &str, k: &str, m: &str) -> String {
+        let p = dir.join(format!("{name}.toml"));
+        std::fs::write(
+            &p,
+            format!("name = \"{name}\"\n[matrices]\nstiffness = \"{k}\"\nmass = \"{m}\"\n"),
+        )
+        .unwrap();
+        p.to_str().unwrap().to_string()
+    }
+
+    fn lowest_hz(model: &nlsim::kernel::Model, n: usize) -> Vec<f64> {
+        reduce(model, &ReductionConfig::lowest(n))
+            .unwrap()
+            .modes
+            .frequencies_hz()
+    }
+
+    #[test]
+    fn dmig_and_abaqus_files_give_the_native_matrices_labels_and_modes() {
+        let py = python_pynastran();
+        for spec in ["ecl_beam", "bracket:refinement=3"] {
+            let dir = scratch(&format!("fe-{}", spec.replace([':', '='], "-")));
+            let export = dir.join("export");
+            let (rc, _, err) = nlsim(&["export", spec, export.to_str().unwrap(), "-q"]);
+            assert_eq!(rc, 0, "{err}");
+            let out = Command::new(&py)
+                .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/fe_write.py"))
+                .args([export.to_str().unwrap(), dir.to_str().unwrap()])
+                .output()
+                .unwrap();
+            assert!(
+                out.status.success(),
+                "fe_write.py: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            // The native matrices as `nlsim export` wrote them (Matrix Market, shortest
+            // round-trip decimals) and the fixture's labels.
+            let labels = nlsim::load_model(spec)
+                .unwrap()
+                .model
+                .dofs()
+                .labels()
+                .to_vec();
+            std::fs::write(
+                dir.join("native.toml"),
+                "name = \"native\"\n[matrices]\nstiffness = \"export/K.mtx\"\n\
+                 mass = \"export/M.mtx\"\ndofs = \"export/dofs.txt\"\n",
+            )
+            .unwrap();
+            let native = nlsim::load_model(dir.join("native.toml").to_str().unwrap())
+                .unwrap()
+                .model;
+            assert_eq!(native.dofs().labels(), labels.as_slice());
+            let want_hz = lowest_hz(&native, 8);
+            // pyNastran's reading of its own DMIG file (rounded to the large field).
+            let pyn = nlsim::load_model(&model_file(&dir, "pyn", "K.pyn.mtx", "M.pyn.mtx"))
+                .unwrap()
+                .model;
+            let variants = [
+                (
+                    model_file(&dir, "free", "free.pch", "free.pch"),
+                    0.0,
+                    "free-field DMIG, K by its upper triangle",
+                ),
+                (
+                    model_file(&dir, "abaqus", "K.abq.mtx", "M.abq.mtx"),
+                    0.0,
+                    "Abaqus, K with both triangles",
+                ),
+                (
+                    model_file(&dir, "nastran", "pynastran.bdf:KAAX", "pynastran.bdf:MAAX"),
+                    LARGE_FIELD,
+                    "pyNastran's large-field DMIG",
+                ),
+            ];
+            for (file, tol, what) in variants {
+                let got = nlsim::load_model(&file)
+                    .unwrap_or_else(|e| panic!("{spec}, {what}: {e}"))
+                    .model;
+                assert_eq!(
+                    got.dofs().labels(),
+                    native.dofs().labels(),
+                    "{spec}, {what}"
+                );
+                for (a, b, name) in [
+                    (got.stiffness(), native.stiffness(), "K"),
+                    (got.mass(), native.mass(), "M"),
+                ] {
+                    assert_eq!(a.pattern(), b.pattern(), "{spec}, {what}: {name} pattern");
+                    for (x, y) in a.values().iter().zip(b.values()) {
+                        if tol == 0.0 {
+                            assert_eq!(x.to_bits(), y.to_bits(), "{spec}, {what}: {name}");
+                        } else {
+                            assert!((x - y).abs() <= tol * y.abs(), "{spec}, {what}: {x} {y}");
+                        }
+                    }
+                }
+                // From the rounded large field: the very values pyNastran reads there.
+                if tol > 0.0 {
+                    for (a, b) in [(got.stiffness(), pyn.stiffness()), (got.mass(), pyn.mass())] {
+                        assert_eq!(a.pattern(), b.pattern(), "{spec}, {what}");
+                        let same = a
+                            .values()
+                            .iter()
+                            .zip(b.values())
+                            .all(|(x, y)| x.to_bits() == y.to_bits());
+                        assert!(same, "{spec}, {what}: not pyNastran's values");
+                    }
+                }
+                // Modes to 1e-12 of the model with the same matrices (the native one, or
+                // pyNastran's reading of the rounded file).
+                let want = if tol == 0.0 {
+                    want_hz.clone()
+                } else {
+                    lowest_hz(&pyn, 8)
+                };
+                for (f, g) in lowest_hz(&got, 8).iter().zip(&want) {
+                    assert!((f - g).abs() <= 1e-12 * g, "{spec}, {what}: {f} vs {g} Hz");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_examples_load_with_the_labels_of_the_matrix_market_model() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/models");
+        let native = nlsim::load_model(dir.join("spring_mass.toml").to_str().unwrap())
+            .unwrap()
+            .model;
+        for f in ["spring_mass_dmig.toml", "spring_mass_abaqus.toml"] {
+            let m = nlsim::load_model(dir.join(f).to_str().unwrap())
+                .unwrap()
+                .model;
+            assert_eq!(m.dofs().labels(), native.dofs().labels(), "{f}");
+            assert_eq!(
+                m.stiffness().to_dense(),
+                native.stiffness().to_dense(),
+                "{f}"
+            );
+            assert_eq!(m.mass().to_dense(), native.mass().to_dense(), "{f}");
+        }
+    }
+
+    #[test]
+    fn bad_fe_files_are_one_line_naming_file_and_line() {
+        let dir = scratch("fe-bad");
+        let w = |name: &str, text: &str| {
+            std::fs::write(dir.join(name), text).unwrap();
+        };
+        w("m.abq.mtx", "1,1, 1,1, 1.0\n2,1, 2,1, 1.0\n");
+        let cases = [
+            (
+                "k1.abq.mtx",
+                "1,1, 1,1, 2.0\n1,1, 2,1\n",
+                "k1.abq.mtx:2: 4 fields",
+            ),
+            (
+                "k2.abq.mtx",
+                "1,1, 1,1, 2.0\n1,1, 2,1, -1.0\n2,1, 1,1, -1.5\n2,1, 2,1, 1.0\n",
+                "k2.abq.mtx:3: stiffness matrix k2.abq.mtx: entry (2:ux, 1:ux) = -1.5e0 and its \
+                 mirror on line 2 = -1e0 differ",
+            ),
+            (
+                "k3.abq.mtx",
+                "1,1, 1,1, 2.0\n1,1, 3,7, -1.0\n",
+                "k3.abq.mtx:2: component 7 of node 3",
+            ),
+            (
+                "k4.pch",
+                "DMIG,KAAX,0,6,2,0,,,1000000000000\nDMIG,KAAX,1,1,,1,1,2.0\n\
+                 DMIG,KAAX,1,1,,1,1,2.0\n",
+                "k4.pch:3: stiffness matrix KAAX: entry (1:ux, 1:ux) is given again (first on \
+                 line 2)",
+            ),
+            (
+                "k5.pch",
+                "DMIG,KAAX,0,6,2,0,,,2\nDMIG,KAAX,1,1,,1,1,2.0,1.5\n",
+                "k5.pch:2: DMIG 'KAAX': field 9 (B) holds '1.5': an imaginary part in a real \
+                 matrix",
+            ),
+        ];
+        for (name, text, want) in cases {
+            w(name, text);
+            let m = if name.ends_with(".pch") {
+                "m.pch"
+            } else {
+                "m.abq.mtx"
+            };
+            if m == "m.pch" {
+                w(
+                    "m.pch",
+                    "DMIG,MAAX,0,6,2,0,,,2\nDMIG,MAAX,1,1,,1,1,1.0\nDMIG,MAAX,2,1,,2,1,1.0\n",
+                );
+            }
+            let file = model_file(&dir, "t", name, m);
+            let out = Command::new("sh")
+                .args([
+                    "-c",
+                    "ulimit -v 3000000 && exec timeout 60 \"$0\" check \"$1\"",
+                    env!("CARGO_BIN_EXE_nlsim"),
+                    &file,
+                ])
+                .output()
+                .unwrap();
+            let (rc, err) = (
+                out.status.code().unwrap_or(-1),
+                String::from_utf8_lossy(&out.stderr).into_owned(),
+            );
+            assert!(rc == 1 || rc == 2, "{name}: exit {rc}: {err}");
+            assert_eq!(err.trim_end().lines().count(), 1, "{name}: {err}");
+            assert!(err.contains(want), "{name}: want '{want}' in {err}");
+        }
+    }
+}
+
+mod fe_formats_keys {
+    use super::*;
+
+    /// `format =` reads a file of any name; a group's share of K from an Abaqus file lands
+    /// on the model's DOFs by label.
+    #[test]
+    fn the_format_key_and_group_matrices_from_fe_files() {
+        let dir = scratch("fe-keys");
+        let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/models");
+        std::fs::copy(src.join("spring_mass_K.abq.mtx"), dir.join("k.txt")).unwrap();
+        std::fs::copy(src.join("spring_mass_M.abq.mtx"), dir.join("m.txt")).unwrap();
+        // The group: the spring between nodes 20 and 30 (1e4 N/m), by label.
+        std::fs::write(
+            dir.join("g.mtx"),
+            "** the 20-30 spring\n20,1, 20,1, 1e4\n30,1, 20,1, -1e4\n30,1, 30,1, 1e4\n",
+        )
+        .unwrap();
+        let file = dir.join("t.toml");
+        std::fs::write(
+            &file,
+            "name = \"t\"\n[matrices]\nformat = \"abaqus\"\nstiffness = \"k.txt\"\n\
+             mass = \"m.txt\"\n[[group]]\nname = \"tip\"\nstiffness = \"g.mtx\"\n",
+        )
+        .unwrap();
+        let m = nlsim::load_model(file.to_str().unwrap()).unwrap().model;
+        let labels: Vec<String> = m.dofs().labels().iter().map(|l| l.to_string()).collect();
+        assert_eq!(labels, ["10:ux", "20:ux", "30:ux"]);
+        // K_g on the model's DOFs: rows 20:ux and 30:ux (indices 1, 2).
+        let kg = m.groups()[0].stiffness().unwrap().to_dense();
+        assert_eq!(kg[(1, 1)], 1e4);
+        assert_eq!(kg[(2, 1)], -1e4);
+        assert_eq!(kg[(0, 0)], 0.0);
+        // An unknown format is named with the choices.
+        std::fs::write(
+            &file,
+            "name = \"t\"\n[matrices]\nformat = \"op2\"\nstiffness = \"k.txt\"\nmass = \"m.txt\"\n",
+        )
+        .unwrap();
+        let e = nlsim::load_model(file.to_str().unwrap())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("t.toml:3: matrices.format: unknown matrix format 'op2'"),
+            "{e}"
+        );
+    }
+}

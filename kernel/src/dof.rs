@@ -195,7 +195,12 @@ impl DofMap {
             .map(|l| l.component.as_str())
             .collect();
         if !comps.is_empty() {
-            return format!(" (node {} has components {})", label.node, comps.join(", "));
+            return format!(
+                " (node {} has components {}; a DOF constrained or condensed out of the FE \
+                 model's matrices is not in the model)",
+                label.node,
+                comps.join(", ")
+            );
         }
         let (lo, hi) = self.labels.iter().fold((u64::MAX, 0), |(lo, hi), l| {
             (lo.min(l.node), hi.max(l.node))

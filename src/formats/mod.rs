@@ -14,6 +14,7 @@
 //! |---|---|
 //! | [`model_file`] | model files (TOML) and the `MODEL` argument (file or built-in name) |
 //! | [`matrices`] | Matrix Market and HDF5 (scipy-style CSC) matrices |
+//! | [`fe_matrices`] | Nastran DMIG and Abaqus `*MATRIX GENERATE` matrices, labelled by node and DOF |
 //! | [`cache`] | the memory-mapped binary cache of parsed Matrix Market matrices |
 //! | [`test_data`] | stepped-sine test data (CSV and HDF5) |
 //! | [`modal_data`] | measured modes (CSV) |
@@ -25,6 +26,7 @@
 
 pub mod cache;
 pub mod candidates;
+pub mod fe_matrices;
 pub mod files;
 pub mod frf_file;
 pub mod history_file;

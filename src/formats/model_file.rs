@@ -5,6 +5,7 @@
 //! documented in `docs/model-files.md`; every error names the file, the line and the key.
 
 use crate::error::{Error, Result};
+use crate::formats::fe_matrices as fe;
 use crate::formats::matrices as mtx;
 use nlsim_kernel::{
     Coupling, Damping, DampingBand, DofLabel, DofMap, Excitation, Law, ModalDamping, Model,
@@ -267,7 +268,7 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
     })?;
     let (mut model, description, references, from_fixture) =
         read_matrices(&mut mats, &name, &base_dir)?;
-    mats.finish("[matrices] takes fixture and options, or mass, stiffness and dofs")?;
+    mats.finish("[matrices] takes fixture and options, or mass, stiffness, dofs and format")?;
 
     if let Some(mut d) = top.sub("damping")? {
         let damping = read_damping(&mut d, &base_dir, model.n_dofs())?;
@@ -290,7 +291,12 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
             let Some(v) = g.get(key) else {
                 return Ok(None);
             };
-            let m = read_matrix(&g, key, v, &format!("group '{gname}' {what}"), &base_dir)?;
+            let label = format!("group '{gname}' {what}");
+            let m = match fe_matrix(&g, key, v, &base_dir, None)? {
+                // An FE code's matrix lands on the model's DOFs by label.
+                Some(m) => m.onto(model.dofs(), &label)?,
+                None => read_matrix(&g, key, v, &label, &base_dir)?,
+            };
             if m.n() != n {
                 return Err(g.err(
                     v,
@@ -453,6 +459,53 @@ fn read_matrices(t: &mut Tab<'_, '_>, name: &str, base: &Path) -> Result<Matrice
             "the stiffness matrix (Matrix Market path or inline rows)",
         )
     })?;
+    let format = match t.str("format")? {
+        None => None,
+        Some((f, span)) => Some(match f.to_ascii_lowercase().as_str() {
+            "matrix-market" | "hdf5" => None,
+            other => Some(fe::FeFormat::parse(other).ok_or_else(|| {
+                t.doc.err(
+                    span,
+                    &t.key("format"),
+                    format!(
+                        "unknown matrix format {}; use matrix-market, hdf5, dmig or abaqus",
+                        crate::formats::files::quoted(&f)
+                    ),
+                )
+            })?),
+        }),
+    };
+    let mass_fe = fe_matrix(t, "mass", mass_v, base, format)?;
+    let stiff_fe = fe_matrix(t, "stiffness", stiff_v, base, format)?;
+    if let (Some(m), Some(k)) = (&mass_fe, &stiff_fe) {
+        // The labels come from the files: every DOF either matrix names.
+        if let Some(v) = t.get("dofs") {
+            return Err(t.err(
+                v,
+                "dofs",
+                "the DMIG or Abaqus matrices label their DOFs themselves: leave `dofs` out",
+            ));
+        }
+        let dofs = fe::union_dofs(&[k, m]).map_err(|e| {
+            t.doc
+                .err(t.span.clone(), &t.key("stiffness"), e.to_string())
+        })?;
+        let mass = m.onto(&dofs, "mass matrix")?;
+        let stiffness = k.onto(&dofs, "stiffness matrix")?;
+        let model = Model::new(name, dofs, mass, stiffness).map_err(|e| {
+            t.doc
+                .err(t.span.clone(), &t.key("stiffness"), e.to_string())
+        })?;
+        return Ok((model, None, vec![], false));
+    }
+    if mass_fe.is_some() != stiff_fe.is_some() {
+        return Err(t.err(
+            stiff_v,
+            "stiffness",
+            "give mass and stiffness both from FE-code files (DMIG, Abaqus), which label \
+             their DOFs, or both as Matrix Market, HDF5 or inline rows with `dofs`",
+        ));
+    }
     let mass = read_matrix(t, "mass", mass_v, "mass matrix", base)?;
     let stiffness = read_matrix(t, "stiffness", stiff_v, "stiffness matrix", base)?;
     let dofs = match t.get("dofs") {
@@ -481,6 +534,47 @@ fn read_matrices(t: &mut Tab<'_, '_>, name: &str, base: &Path) -> Result<Matrice
     let model = Model::new(name, dofs, mass, stiffness)
         .map_err(|e| t.doc.err(t.span.clone(), &t.key("dofs"), e.to_string()))?;
     Ok((model, None, vec![], false))
+}
+
+/// The matrix of `key` if it names an FE code's file (`FILE.pch[:NAME]`, `FILE.bdf[:NAME]`,
+/// an Abaqus `.mtx`, or any file with `format = "dmig"`/`"abaqus"`), read with its labels.
+/// A DMIG matrix's name defaults to `KAAX` for the stiffness and `MAAX` for the mass.
+fn fe_matrix(
+    t: &Tab<'_, '_>,
+    key: &str,
+    v: Val<'_, '_>,
+    base: &Path,
+    format: Option<Option<fe::FeFormat>>,
+) -> Result<Option<fe::LabelledMatrix>> {
+    let DeValue::String(p) = v.get_ref() else {
+        return Ok(None);
+    };
+    let p: &str = p.as_ref();
+    // `FILE:NAME` names one matrix of a DMIG file.
+    let (file, name) = match p.rsplit_once(':') {
+        Some((f, n))
+            if !n.contains(['/', '\\'])
+                && (format == Some(Some(fe::FeFormat::Dmig))
+                    || matches!(
+                        fe::detect(Path::new(f)).ok().flatten(),
+                        Some(fe::FeFormat::Dmig)
+                    )) =>
+        {
+            (f, Some(n))
+        }
+        _ => (p, None),
+    };
+    let path = base.join(file);
+    let format = match format {
+        Some(f) => f,
+        None => fe::detect(&path).map_err(|e| t.err(v, key, e.to_string()))?,
+    };
+    let Some(format) = format else {
+        return Ok(None);
+    };
+    let default = if key == "mass" { "MAAX" } else { "KAAX" };
+    let m = fe::read(&path, format, Some(name.unwrap_or(default)))?;
+    Ok(Some(m))
 }
 
 fn read_matrix(
