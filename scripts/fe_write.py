@@ -8,6 +8,8 @@ the FE codes, for nlsim's reader tests and the examples in docs/model-files.md:
   round-trip repr), K given by its upper triangle and M by its lower one;
 - `K.abq.mtx`, `M.abq.mtx`: Abaqus *MATRIX GENERATE coordinate output (NODE, DOF, NODE,
   DOF, VALUE), K with both triangles and M with its lower one, values to the bit;
+- `sparse.op4` (and `dense.op4` up to 2000 DOFs): Nastran OUTPUT4, ASCII, KAAX and MAAX
+  as full symmetric matrices, written by pyNastran;
 - `K.pyn.mtx`, `M.pyn.mtx`: pyNastran's own reading of `pynastran.bdf`, in the Abaqus
   layout (values to the bit): what nlsim's DMIG reader must find in that file.
 
@@ -95,6 +97,30 @@ def main():
             real = [v for _, _, v in entries]
             model.add_dmig(name, 6, 2, 2, 0, len(dofs), GCj=gcj, GCi=gci, Real=real)
         model.write_bdf(os.path.join(out, "pynastran.bdf"), size=16, is_double=True)
+        # OUTPUT4, ASCII, by pyNastran: sparse (strings) always, dense too for small models
+        # (a dense column runs from its first to its last nonzero row).
+        import numpy as np
+        from scipy.sparse import coo_matrix
+        from pyNastran.op4.op4 import OP4
+
+        n = len(dofs)
+        full = {}
+        for name, entries in (("KAAX", k), ("MAAX", m)):
+            rows = [i for i, j, _ in entries] + [j for i, j, _ in entries if i != j]
+            cols = [j for i, j, _ in entries] + [i for i, j, _ in entries if i != j]
+            vals = [v for _, _, v in entries] + [v for i, j, v in entries if i != j]
+            full[name] = coo_matrix((np.array(vals), (np.array(rows), np.array(cols))), shape=(n, n))
+        OP4(debug=False).write_op4(
+            os.path.join(out, "sparse.op4"),
+            {name: (6, a) for name, a in full.items()},
+            is_binary=False,
+        )
+        if n <= 2000:
+            OP4(debug=False).write_op4(
+                os.path.join(out, "dense.op4"),
+                {name: (6, a.toarray()) for name, a in full.items()},
+                is_binary=False,
+            )
         # pyNastran's own reading of what it wrote, as Abaqus coordinate files (values to
         # the bit): the oracle of nlsim's DMIG reader on this file.
         back = BDF(debug=None)

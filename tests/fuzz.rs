@@ -866,6 +866,23 @@ fn fuzz_inner() {
         }
     }));
 
+    // Nastran OUTPUT4 (ASCII, sparse strings) as pyNastran writes it.
+    let op4 = [std::fs::read_to_string(root().join("examples/models/spring_mass.op4")).unwrap()];
+    panics.extend(survive("op4 ascii", 10000 * scale(), |_| {
+        let text = mutate(rng.pick(&op4).clone().as_str(), &mut rng);
+        match nlsim::formats::op4::parse_op4(&text, Path::new("k.op4"), Some("KAAX")) {
+            Ok(m) => nlsim::formats::fe_matrices::symmetric_from_entries(
+                Path::new("k.op4"),
+                "K",
+                &nlsim::kernel::DofMap::scalar(m.n),
+                &m.entries,
+            )
+            .err()
+            .map(|e| e.to_string()),
+            Err(e) => Some(e.to_string()),
+        }
+    }));
+
     std::fs::remove_dir_all(&dir).unwrap();
     assert!(panics.is_empty(), "panics: {panics:?}");
 }
@@ -912,6 +929,7 @@ fn readers_survive_mutated_inputs() {
         "prior csv",
         "dmig",
         "abaqus mtx",
+        "op4 ascii",
     ] {
         assert!(
             text.contains(&format!("fuzz {reader}:")),

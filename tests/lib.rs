@@ -2455,7 +2455,10 @@ mod shipped_models {
         let bands = |name: &str| -> &[(&str, &str)] {
             match name {
                 "two_dof.toml" => &[("5", "30")],
-                "spring_mass.toml" => &[("2", "10"), ("20", "40")],
+                "spring_mass.toml"
+                | "spring_mass_dmig.toml"
+                | "spring_mass_abaqus.toml"
+                | "spring_mass_op4.toml" => &[("2", "10"), ("20", "40")],
                 "grouped_chain6.toml" => &[("2", "20")],
                 "ecl_from_fixture.toml" => &[("20", "30")],
                 "nlvib_ex6.toml" => &[("0.16", "0.19")],
@@ -6512,6 +6515,21 @@ mod fe_formats {
         p.to_str().unwrap().to_string()
     }
 
+    /// A model file reading KAAX and MAAX of `dir/NAME.op4`, labelled by the export's DOF list
+    /// (an OUTPUT4 file carries no labels).
+    fn op4_file(dir: &Path, name: &str) -> String {
+        let p = dir.join(format!("{name}_op4.toml"));
+        std::fs::write(
+            &p,
+            format!(
+                "name = \"{name}\"\n[matrices]\nstiffness = \"{name}.op4:KAAX\"\n\
+                 mass = \"{name}.op4:MAAX\"\ndofs = \"export/dofs.txt\"\n"
+            ),
+        )
+        .unwrap();
+        p.to_str().unwrap().to_string()
+    }
+
     fn lowest_hz(model: &nlsim::kernel::Model, n: usize) -> Vec<f64> {
         reduce(model, &ReductionConfig::lowest(n))
             .unwrap()
@@ -6576,7 +6594,23 @@ mod fe_formats {
                     LARGE_FIELD,
                     "pyNastran's large-field DMIG",
                 ),
+                (
+                    op4_file(&dir, "sparse"),
+                    0.0,
+                    "pyNastran's sparse ASCII OUTPUT4",
+                ),
             ];
+            // Dense OUTPUT4 for the small model only (a dense column spans its band).
+            let variants: Vec<_> = variants
+                .into_iter()
+                .chain(dir.join("dense.op4").is_file().then(|| {
+                    (
+                        op4_file(&dir, "dense"),
+                        0.0,
+                        "pyNastran's dense ASCII OUTPUT4",
+                    )
+                }))
+                .collect();
             for (file, tol, what) in variants {
                 let got = nlsim::load_model(&file)
                     .unwrap_or_else(|e| panic!("{spec}, {what}: {e}"))
@@ -6590,6 +6624,12 @@ mod fe_formats {
                     (got.stiffness(), native.stiffness(), "K"),
                     (got.mass(), native.mass(), "M"),
                 ] {
+                    if what.contains("dense") {
+                        // A dense column's zeros are fill: the matrix is the same, not its
+                        // stored pattern (the native one keeps some structural zeros).
+                        assert_eq!(a.to_dense(), b.to_dense(), "{spec}, {what}: {name}");
+                        continue;
+                    }
                     assert_eq!(a.pattern(), b.pattern(), "{spec}, {what}: {name} pattern");
                     for (x, y) in a.values().iter().zip(b.values()) {
                         if tol == 0.0 {
@@ -6631,7 +6671,11 @@ mod fe_formats {
         let native = nlsim::load_model(dir.join("spring_mass.toml").to_str().unwrap())
             .unwrap()
             .model;
-        for f in ["spring_mass_dmig.toml", "spring_mass_abaqus.toml"] {
+        for f in [
+            "spring_mass_dmig.toml",
+            "spring_mass_abaqus.toml",
+            "spring_mass_op4.toml",
+        ] {
             let m = nlsim::load_model(dir.join(f).to_str().unwrap())
                 .unwrap()
                 .model;

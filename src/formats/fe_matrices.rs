@@ -93,10 +93,7 @@ impl LabelledMatrix {
             line,
             message: format!("{what} {}: {m}", self.name),
         };
-        // (lower index, higher index) → (value, line, given as (row ≥ col))
-        let mut seen: HashMap<(usize, usize), (f64, usize, bool)> =
-            HashMap::with_capacity(self.entries.len());
-        let mut lower = Vec::with_capacity(self.entries.len());
+        let mut indexed = Vec::with_capacity(self.entries.len());
         for e in &self.entries {
             let index = |l: &DofLabel| {
                 dofs.index_of(l).map_err(|_| {
@@ -109,39 +106,60 @@ impl LabelledMatrix {
                     )
                 })
             };
-            let (i, j) = (index(&e.row)?, index(&e.col)?);
-            let key = (i.max(j), i.min(j));
-            let lower_side = i >= j;
-            match seen.get(&key) {
-                None => {
-                    seen.insert(key, (e.value, e.line, lower_side));
-                    lower.push((key.0, key.1, e.value));
+            indexed.push((index(&e.row)?, index(&e.col)?, e.value, e.line));
+        }
+        symmetric_from_entries(&self.path, &format!("{what} {}", self.name), dofs, &indexed)
+    }
+}
+
+/// A symmetric matrix on `dofs` from stored entries `(row, col, value, line)` of `path`
+/// (named `what` in errors): one triangle, or both when each entry and its mirror are equal to
+/// the bit; an entry given twice is refused with both lines.
+pub fn symmetric_from_entries(
+    path: &Path,
+    what: &str,
+    dofs: &DofMap,
+    entries: &[(usize, usize, f64, usize)],
+) -> Result<SparseSym> {
+    let err = |line: usize, m: String| Error::DataFile {
+        file: path.to_path_buf(),
+        line,
+        message: format!("{what}: {m}"),
+    };
+    // (higher index, lower index) → (value, line, given as (row ≥ col))
+    let mut seen: HashMap<(usize, usize), (f64, usize, bool)> =
+        HashMap::with_capacity(entries.len());
+    let mut lower = Vec::with_capacity(entries.len());
+    for &(i, j, value, line_here) in entries {
+        let key = (i.max(j), i.min(j));
+        let lower_side = i >= j;
+        let names = || (dofs.describe(i), dofs.describe(j));
+        match seen.get(&key) {
+            None => {
+                seen.insert(key, (value, line_here, lower_side));
+                lower.push((key.0, key.1, value));
+            }
+            Some(&(v, line, side)) => {
+                let (row, col) = names();
+                if side == lower_side || i == j {
+                    return Err(err(
+                        line_here,
+                        format!("entry ({row}, {col}) is given again (first on line {line})"),
+                    ));
                 }
-                Some(&(v, line, side)) => {
-                    if side == lower_side || i == j {
-                        return Err(err(
-                            e.line,
-                            format!(
-                                "entry ({}, {}) is given again (first on line {line})",
-                                e.row, e.col
-                            ),
-                        ));
-                    }
-                    if v.to_bits() != e.value.to_bits() {
-                        return Err(err(
-                            e.line,
-                            format!(
-                                "entry ({}, {}) = {:e} and its mirror on line {line} = {v:e} \
-                                 differ: the matrix is not symmetric",
-                                e.row, e.col, e.value
-                            ),
-                        ));
-                    }
+                if v.to_bits() != value.to_bits() {
+                    return Err(err(
+                        line_here,
+                        format!(
+                            "entry ({row}, {col}) = {value:e} and its mirror on line {line} = \
+                             {v:e} differ: the matrix is not symmetric"
+                        ),
+                    ));
                 }
             }
         }
-        Ok(SparseSym::from_lower_triplets(what, dofs.len(), &lower)?)
     }
+    Ok(SparseSym::from_lower_triplets(what, dofs.len(), &lower)?)
 }
 
 /// The format of an FE matrix file by extension and content: `.pch`, `.bdf`, `.dat`, `.nas`

@@ -242,7 +242,7 @@ pub fn read_bytes(path: &Path) -> Result<Vec<u8>> {
 
 /// [`read_bytes`], refusing a file larger than `max_bytes` (named, with its size) before
 /// reading it.
-fn read_bytes_up_to(path: &Path, max_bytes: Option<u64>) -> Result<Vec<u8>> {
+pub(crate) fn read_bytes_up_to(path: &Path, max_bytes: Option<u64>) -> Result<Vec<u8>> {
     use std::io::Read as _;
     let io = |source| Error::Io {
         path: path.to_path_buf(),

@@ -15,6 +15,7 @@
 //! | [`model_file`] | model files (TOML) and the `MODEL` argument (file or built-in name) |
 //! | [`matrices`] | Matrix Market and HDF5 (scipy-style CSC) matrices |
 //! | [`fe_matrices`] | Nastran DMIG and Abaqus `*MATRIX GENERATE` matrices, labelled by node and DOF |
+//! | [`op4`] | Nastran OUTPUT4 matrices (ASCII, dense and sparse) |
 //! | [`cache`] | the memory-mapped binary cache of parsed Matrix Market matrices |
 //! | [`test_data`] | stepped-sine test data (CSV and HDF5) |
 //! | [`modal_data`] | measured modes (CSV) |
@@ -34,6 +35,7 @@ pub mod matrices;
 pub mod modal_data;
 pub mod model_file;
 pub mod modes_file;
+pub mod op4;
 pub mod settings;
 pub mod test_data;
 pub mod uff;

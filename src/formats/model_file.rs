@@ -468,7 +468,8 @@ fn read_matrices(t: &mut Tab<'_, '_>, name: &str, base: &Path) -> Result<Matrice
                     span,
                     &t.key("format"),
                     format!(
-                        "unknown matrix format {}; use matrix-market, hdf5, dmig or abaqus",
+                        "unknown matrix format {}; use matrix-market, hdf5, dmig or abaqus (OUTPUT4 \
+                         is read from .op4 files)",
                         crate::formats::files::quoted(&f)
                     ),
                 )
@@ -599,6 +600,25 @@ fn read_matrix(
                         .map(|i| (&p[..i + ext.len()], &p[i + ext.len() + 1..]))
                 }
             });
+            // `FILE.op4[:NAME]`: a Nastran OUTPUT4 matrix (labels from `dofs`).
+            let op4 = if lower.ends_with(".op4") {
+                Some((p, None))
+            } else {
+                lower
+                    .find(".op4:")
+                    .map(|i| (&p[..i + 4], Some(&p[i + 5..])))
+            };
+            if let Some((file, object)) = op4 {
+                let path = base.join(file);
+                let m = crate::formats::op4::read_op4(&path, object)?;
+                let dofs = nlsim_kernel::DofMap::scalar(m.n);
+                return fe::symmetric_from_entries(
+                    &path,
+                    &format!("{name} {}", m.name),
+                    &dofs,
+                    &m.entries,
+                );
+            }
             match h5 {
                 Some((file, object)) => mtx::read_hdf5_matrix(&base.join(file), object, name),
                 None => crate::formats::cache::load_matrix_market(&base.join(p), name),
