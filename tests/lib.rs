@@ -2486,7 +2486,7 @@ mod shipped_models {
                 assert!(!out.contains("stopped"), "{args:?}: {out}");
             }
         }
-        assert_eq!(names.len(), 5, "{names:?}");
+        assert_eq!(names.len(), 8, "{names:?}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
