@@ -166,13 +166,15 @@ pub fn symmetric_from_entries(
 /// → DMIG; `.mtx` → Abaqus unless it starts with `%%MatrixMarket` (`None`: not an FE-code
 /// format, e.g. Matrix Market or HDF5).
 pub fn detect(path: &Path) -> Result<Option<FeFormat>> {
+    if dmig_extension(path) {
+        return Ok(Some(FeFormat::Dmig));
+    }
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
         .unwrap_or("")
         .to_ascii_lowercase();
     Ok(match ext.as_str() {
-        "pch" | "bdf" | "dat" | "nas" | "blk" => Some(FeFormat::Dmig),
         "mtx" => {
             use std::io::Read;
             crate::formats::files::regular_file(path)?;
@@ -193,6 +195,16 @@ pub fn detect(path: &Path) -> Result<Option<FeFormat>> {
             }
         }
         _ => None,
+    })
+}
+
+/// Whether `path` has an extension of Nastran bulk data or punch files (`.pch`, `.bdf`,
+/// `.dat`, `.nas`, `.blk`), whose DMIG entries [`detect`] takes it to hold (no file is read).
+pub fn dmig_extension(path: &Path) -> bool {
+    path.extension().and_then(|e| e.to_str()).is_some_and(|e| {
+        ["pch", "bdf", "dat", "nas", "blk"]
+            .iter()
+            .any(|d| e.eq_ignore_ascii_case(d))
     })
 }
 
@@ -297,13 +309,14 @@ fn split_line(raw: &str) -> (String, Vec<String>) {
         return (first, rest);
     }
     // Fields are columns of characters (bytes when the line is ASCII, as it nearly always is).
-    let chars: Vec<char> = if line.is_ascii() {
+    let ascii = line.is_ascii();
+    let chars: Vec<char> = if ascii {
         Vec::new()
     } else {
         line.chars().collect()
     };
     let field = |from: usize, width: usize| -> String {
-        if line.is_ascii() {
+        if ascii {
             let end = (from + width).min(line.len());
             line.get(from.min(end)..end)
                 .unwrap_or("")

@@ -556,10 +556,7 @@ fn fe_matrix(
         Some((f, n))
             if !n.contains(['/', '\\'])
                 && (format == Some(Some(fe::FeFormat::Dmig))
-                    || matches!(
-                        fe::detect(Path::new(f)).ok().flatten(),
-                        Some(fe::FeFormat::Dmig)
-                    )) =>
+                    || fe::dmig_extension(Path::new(f))) =>
         {
             (f, Some(n))
         }
