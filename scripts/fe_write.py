@@ -11,7 +11,19 @@ the FE codes, for nlsim's reader tests and the examples in docs/model-files.md:
 - `sparse.op4` (and `dense.op4` up to 2000 DOFs): Nastran OUTPUT4, ASCII, KAAX and MAAX
   as full symmetric matrices, written by pyNastran;
 - `K.pyn.mtx`, `M.pyn.mtx`: pyNastran's own reading of `pynastran.bdf`, in the Abaqus
-  layout (values to the bit): what nlsim's DMIG reader must find in that file.
+  layout (values to the bit): what nlsim's DMIG reader must find in that file;
+- `sparse_be.op4`, `bigmat_le.op4` (and `dense_le.op4` up to 2000 DOFs): Nastran OUTPUT4,
+  binary, double precision, written here after the documented record layout (pyNastran
+  1.4.1's binary writer fails on dense matrices and has no sparse form) and checked by
+  pyNastran's reader: sparse strings big-endian, bigmat strings (NROW < 0) and dense columns
+  little-endian;
+- `K.rua`: Harwell-Boeing, real unsymmetric assembled (both triangles), written by scipy;
+  `M.rsa`: Harwell-Boeing, real symmetric assembled (lower triangle), as Ansys HBMAT writes,
+  after the Harwell-Boeing layout; `K.mapping`, `M.mapping`: their equation-to-node/DOF maps
+  in the layout of HBMAT's mapping file.
+
+When the export folder holds `matrices.op4` (`nlsim export --op4 ...`), pyNastran reads it
+and the script stops with an error unless its KAAX and MAAX equal K.mtx and M.mtx to the bit.
 
 Usage: fe_write.py EXPORT_DIR OUT_DIR [--no-pynastran]
 """
@@ -73,6 +85,121 @@ def abaqus(entries, dofs, both):
     return "\n".join(lines) + "\n"
 
 
+def op4_binary(path, mats, endian, layout):
+    """OUTPUT4 binary records of the full symmetric scipy matrices `mats` (name -> csc):
+    `layout` 'dense' (a column from its first to its last nonzero row), 'sparse' (one-word
+    string headers IROW + 65536 (L + 1)) or 'bigmat' (NROW < 0, two-word headers L + 1, IROW);
+    form 6, type 2 (double precision: two words per value)."""
+    import struct
+
+    def record(f, payload):
+        f.write(struct.pack(endian + "i", len(payload)))
+        f.write(payload)
+        f.write(struct.pack(endian + "i", len(payload)))
+
+    with open(path, "wb") as f:
+        for name, a in mats.items():
+            a = a.tocsc()
+            a.sort_indices()
+            n = a.shape[0]
+            nrow = -n if layout == "bigmat" else n
+            record(f, struct.pack(endian + "4i8s", n, nrow, 6, 2, f"{name:<8}".encode()))
+            for j in range(n):
+                rows = a.indices[a.indptr[j]:a.indptr[j + 1]]
+                vals = a.data[a.indptr[j]:a.indptr[j + 1]]
+                if len(rows) == 0:
+                    continue
+                if layout == "dense":
+                    col = [0.0] * (rows[-1] - rows[0] + 1)
+                    for r, v in zip(rows, vals):
+                        col[r - rows[0]] = v
+                    body = struct.pack(endian + "3i", j + 1, rows[0] + 1, 2 * len(col))
+                    body += struct.pack(endian + f"{len(col)}d", *col)
+                    record(f, body)
+                    continue
+                strings = []
+                for r, v in zip(rows, vals):
+                    if strings and strings[-1][0] + len(strings[-1][1]) == r:
+                        strings[-1][1].append(v)
+                    else:
+                        strings.append((r, [v]))
+                words = b""
+                nw = 0
+                for r0, vs in strings:
+                    ell = 2 * len(vs)
+                    if layout == "bigmat":
+                        words += struct.pack(endian + "2i", ell + 1, r0 + 1)
+                        nw += 2
+                    else:
+                        words += struct.pack(endian + "i", (r0 + 1) + ((ell + 1) << 16))
+                        nw += 1
+                    words += struct.pack(endian + f"{len(vs)}d", *vs)
+                    nw += ell
+                record(f, struct.pack(endian + "3i", j + 1, 0, nw) + words)
+            record(f, struct.pack(endian + "3id", n + 1, 1, 2, 1.0))
+
+
+def same_as_pynastran(path, mats):
+    """Stops unless pyNastran reads `path` as the matrices `mats` (name -> sparse), to the bit."""
+    from scipy.sparse import coo_matrix
+    from pyNastran.op4.op4 import read_op4
+
+    got = read_op4(path, debug=False)
+    for name, a in mats.items():
+        b = coo_matrix(got[name].data).tocsr()
+        a = a.tocsr()
+        diff = (b != a).nnz
+        if b.shape != a.shape or diff:
+            sys.exit(f"{path}: pyNastran reads {name} with {diff} entries unlike the source")
+
+
+def harwell_boeing_rsa(path, a, title, key):
+    """The lower triangle of the symmetric scipy matrix `a` as a real symmetric assembled
+    Harwell-Boeing file (RSA): column pointers, row indices and values, 17 digits."""
+    from scipy.sparse import tril
+
+    low = tril(a).tocsc()
+    low.sort_indices()
+    n = low.shape[0]
+    ptr = [p + 1 for p in low.indptr]
+    ind = [i + 1 for i in low.indices]
+    vals = [float(v) for v in low.data]
+
+    def lines(items, per, fmt):
+        return [
+            "".join(fmt.format(x) for x in items[k:k + per]) for k in range(0, len(items), per)
+        ]
+
+    iw = len(str(max(ptr + ind))) + 1
+    ip = 80 // iw
+    ptr_l = lines(ptr, ip, "{:>%d}" % iw)
+    ind_l = lines(ind, ip, "{:>%d}" % iw)
+    val_l = lines(vals, 3, "{:>25.16E}")
+    with open(path, "w") as f:
+        f.write(f"{title:<72}{key:<8}\n")
+        f.write(
+            f"{len(ptr_l) + len(ind_l) + len(val_l):14}{len(ptr_l):14}{len(ind_l):14}"
+            f"{len(val_l):14}{0:14}\n"
+        )
+        f.write(f"{'RSA':<14}{n:14}{n:14}{len(vals):14}{0:14}\n")
+        fi = f"({ip}I{iw})"
+        f.write(f"{fi:<16}{fi:<16}{'(3E25.16)':<20}{'':<20}\n")
+        for l in ptr_l + ind_l + val_l:
+            f.write(l + "\n")
+
+
+ANSYS_DOF = {"ux": "UX", "uy": "UY", "uz": "UZ", "rx": "ROTX", "ry": "ROTY", "rz": "ROTZ"}
+
+
+def mapping(path, dofs):
+    """An HBMAT-style mapping file: a heading, then one `EQUATION NODE DOF` line per row."""
+    inv = {v: k for k, v in COMPONENTS.items()}
+    with open(path, "w") as f:
+        f.write(" Matrix Eqn   Node   DOF\n")
+        for k, (g, c) in enumerate(dofs):
+            f.write(f"{k + 1:11} {g:6} {ANSYS_DOF[inv[c]]:>5}\n")
+
+
 def main():
     src, out = sys.argv[1], sys.argv[2]
     os.makedirs(out, exist_ok=True)
@@ -121,6 +248,24 @@ def main():
                 {name: (6, a.toarray()) for name, a in full.items()},
                 is_binary=False,
             )
+        # OUTPUT4, binary, after the record layout, each read back by pyNastran.
+        layouts = [("sparse_be.op4", ">", "sparse"), ("bigmat_le.op4", "<", "bigmat")]
+        if n <= 2000:
+            layouts.append(("dense_le.op4", "<", "dense"))
+        for file, endian, layout in layouts:
+            op4_binary(os.path.join(out, file), full, endian, layout)
+            same_as_pynastran(os.path.join(out, file), full)
+        exported = os.path.join(src, "matrices.op4")
+        if os.path.isfile(exported):
+            same_as_pynastran(exported, full)
+        # Harwell-Boeing: scipy's writer (RUA, both triangles) for K, the RSA layout HBMAT
+        # writes for M, and the mapping files beside them.
+        import scipy.io
+
+        scipy.io.hb_write(os.path.join(out, "K.rua"), full["KAAX"].tocsc())
+        harwell_boeing_rsa(os.path.join(out, "M.rsa"), full["MAAX"], "nlsim mass", "MASS")
+        mapping(os.path.join(out, "K.mapping"), dofs)
+        mapping(os.path.join(out, "M.mapping"), dofs)
         # pyNastran's own reading of what it wrote, as Abaqus coordinate files (values to
         # the bit): the oracle of nlsim's DMIG reader on this file.
         back = BDF(debug=None)

@@ -876,9 +876,113 @@ fn fuzz_inner() {
                 "K",
                 &nlsim::kernel::DofMap::scalar(m.n),
                 &m.entries,
+                nlsim::formats::fe_matrices::Place::Line,
             )
             .err()
             .map(|e| e.to_string()),
+            Err(e) => Some(e.to_string()),
+        }
+    }));
+
+    // Nastran OUTPUT4, binary, as `nlsim export --op4` writes it (both byte orders; the
+    // spring-mass chain and a 120-DOF beam), words overwritten with hostile integers.
+    let sm = nlsim::load_model(
+        root()
+            .join("examples/models/spring_mass.toml")
+            .to_str()
+            .unwrap(),
+    )
+    .unwrap()
+    .model;
+    let beam = nlsim::load_model("ecl_beam").unwrap().model;
+    let op4_bin: Vec<Vec<u8>> = [
+        nlsim::formats::op4::Op4Layout::BinaryLittleEndian,
+        nlsim::formats::op4::Op4Layout::BinaryBigEndian,
+    ]
+    .into_iter()
+    .flat_map(|l| {
+        [&sm, &beam]
+            .map(|m| nlsim::formats::op4::to_op4(&[("KAAX", m.stiffness()), ("MAAX", m.mass())], l))
+    })
+    .collect();
+    panics.extend(survive("op4 binary", 10000 * scale(), |_| {
+        let mut b = rng.pick(&op4_bin).clone();
+        damage(&mut b, &mut rng, |b, rng| {
+            let words = b.len() / 4;
+            if words > 0 {
+                let at = 4 * rng.below(words);
+                let v: i32 = *rng.pick(&[
+                    0,
+                    -1,
+                    1,
+                    24,
+                    48,
+                    65_535,
+                    65_536,
+                    i32::MAX,
+                    i32::MIN,
+                    2_000_000_000,
+                    (3 << 16) + 2,
+                ]);
+                let bytes = if rng.below(2) == 0 {
+                    v.to_le_bytes()
+                } else {
+                    v.to_be_bytes()
+                };
+                b[at..at + 4].copy_from_slice(&bytes);
+            }
+        });
+        let name = *rng.pick(&["KAAX", "MAAX"]);
+        match nlsim::formats::op4::parse_op4_binary(&b, Path::new("k.op4"), Some(name)) {
+            Ok(m) => nlsim::formats::fe_matrices::symmetric_from_entries(
+                Path::new("k.op4"),
+                "K",
+                &nlsim::kernel::DofMap::scalar(m.n),
+                &m.entries,
+                nlsim::formats::fe_matrices::Place::Record,
+            )
+            .err()
+            .map(|e| e.to_string()),
+            Err(e) => Some(e.to_string()),
+        }
+    }));
+
+    // Ansys Harwell-Boeing (RSA as HBMAT writes it, RUA) and its mapping file.
+    let hb = [
+        std::fs::read_to_string(root().join("examples/models/spring_mass_K.rsa")).unwrap(),
+        std::fs::read_to_string(root().join("examples/models/spring_mass_M.rsa")).unwrap(),
+        "t                                                                       K\n\
+         \x20           4             1             1             2             0\n\
+         RUA                        2             2             4             0\n\
+         (3I3)           (3I3)           (2E24.16)\n\
+         \x20 1  3  5\n  1  2  1  2\n\
+         \x20 2.0000000000000000E+00 -1.0000000000000000E+00\n\
+         -1.0000000000000000E+00  1.0000000000000000E+00\n"
+            .to_string(),
+    ];
+    panics.extend(survive("harwell-boeing", 10000 * scale(), |_| {
+        let text = mutate(rng.pick(&hb).clone().as_str(), &mut rng);
+        match nlsim::formats::fe_matrices::parse_harwell_boeing(&text, Path::new("k.rsa")) {
+            Ok(m) => nlsim::formats::fe_matrices::symmetric_from_entries(
+                Path::new("k.rsa"),
+                "K",
+                &nlsim::kernel::DofMap::scalar(m.n),
+                &m.entries,
+                nlsim::formats::fe_matrices::Place::Line,
+            )
+            .err()
+            .map(|e| e.to_string()),
+            Err(e) => Some(e.to_string()),
+        }
+    }));
+    let mapping =
+        [std::fs::read_to_string(root().join("examples/models/spring_mass_K.mapping")).unwrap()];
+    panics.extend(survive("hb mapping", 10000 * scale(), |_| {
+        let text = mutate(rng.pick(&mapping).clone().as_str(), &mut rng);
+        match nlsim::formats::fe_matrices::parse_mapping(&text, Path::new("k.mapping")) {
+            Ok(labels) => nlsim::kernel::DofMap::new(labels)
+                .err()
+                .map(|e| e.to_string()),
             Err(e) => Some(e.to_string()),
         }
     }));
@@ -930,6 +1034,9 @@ fn readers_survive_mutated_inputs() {
         "dmig",
         "abaqus mtx",
         "op4 ascii",
+        "op4 binary",
+        "harwell-boeing",
+        "hb mapping",
     ] {
         assert!(
             text.contains(&format!("fuzz {reader}:")),

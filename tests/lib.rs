@@ -2458,7 +2458,8 @@ mod shipped_models {
                 "spring_mass.toml"
                 | "spring_mass_dmig.toml"
                 | "spring_mass_abaqus.toml"
-                | "spring_mass_op4.toml" => &[("2", "10"), ("20", "40")],
+                | "spring_mass_op4.toml"
+                | "spring_mass_hb.toml" => &[("2", "10"), ("20", "40")],
                 "grouped_chain6.toml" => &[("2", "20")],
                 "ecl_from_fixture.toml" => &[("20", "30")],
                 "nlvib_ex6.toml" => &[("0.16", "0.19")],
@@ -2486,7 +2487,7 @@ mod shipped_models {
                 assert!(!out.contains("stopped"), "{args:?}: {out}");
             }
         }
-        assert_eq!(names.len(), 8, "{names:?}");
+        assert_eq!(names.len(), 9, "{names:?}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
@@ -6518,7 +6519,7 @@ mod fe_formats {
     /// A model file reading KAAX and MAAX of `dir/NAME.op4`, labelled by the export's DOF list
     /// (an OUTPUT4 file carries no labels).
     fn op4_file(dir: &Path, name: &str) -> String {
-        let p = dir.join(format!("{name}_op4.toml"));
+        let p = dir.join(format!("{}_op4.toml", name.replace('/', "_")));
         std::fs::write(
             &p,
             format!(
@@ -6543,7 +6544,16 @@ mod fe_formats {
         for spec in ["ecl_beam", "bracket:refinement=3"] {
             let dir = scratch(&format!("fe-{}", spec.replace([':', '='], "-")));
             let export = dir.join("export");
-            let (rc, _, err) = nlsim(&["export", spec, export.to_str().unwrap(), "-q"]);
+            // With nlsim's own binary OUTPUT4, which fe_write.py has pyNastran read back
+            // (it stops unless KAAX and MAAX equal K.mtx and M.mtx to the bit).
+            let (rc, _, err) = nlsim(&[
+                "export",
+                spec,
+                export.to_str().unwrap(),
+                "--op4",
+                "binary",
+                "-q",
+            ]);
             assert_eq!(rc, 0, "{err}");
             let out = Command::new(&py)
                 .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/fe_write.py"))
@@ -6599,6 +6609,26 @@ mod fe_formats {
                     0.0,
                     "pyNastran's sparse ASCII OUTPUT4",
                 ),
+                (
+                    op4_file(&dir, "sparse_be"),
+                    0.0,
+                    "binary OUTPUT4, big-endian sparse strings",
+                ),
+                (
+                    op4_file(&dir, "bigmat_le"),
+                    0.0,
+                    "binary OUTPUT4, little-endian bigmat strings",
+                ),
+                (
+                    op4_file(&dir, "export/matrices"),
+                    0.0,
+                    "nlsim export's binary OUTPUT4",
+                ),
+                (
+                    model_file(&dir, "hb", "K.rua", "M.rsa"),
+                    0.0,
+                    "Harwell-Boeing: scipy's RUA K, HBMAT's RSA M, mapping files",
+                ),
             ];
             // Dense OUTPUT4 for the small model only (a dense column spans its band).
             let variants: Vec<_> = variants
@@ -6608,6 +6638,13 @@ mod fe_formats {
                         op4_file(&dir, "dense"),
                         0.0,
                         "pyNastran's dense ASCII OUTPUT4",
+                    )
+                }))
+                .chain(dir.join("dense_le.op4").is_file().then(|| {
+                    (
+                        op4_file(&dir, "dense_le"),
+                        0.0,
+                        "binary OUTPUT4, little-endian dense columns",
                     )
                 }))
                 .collect();
@@ -6675,6 +6712,7 @@ mod fe_formats {
             "spring_mass_dmig.toml",
             "spring_mass_abaqus.toml",
             "spring_mass_op4.toml",
+            "spring_mass_hb.toml",
         ] {
             let m = nlsim::load_model(dir.join(f).to_str().unwrap())
                 .unwrap()
@@ -6727,7 +6765,55 @@ mod fe_formats {
                  matrix",
             ),
         ];
-        for (name, text, want) in cases {
+        // Harwell-Boeing (RSA, K = [[2, -1], [-1, 1]]) with a mapping beside it.
+        let hb = "nlsim bad-file case                                                     KEY\n\
+                  \x20            4             1             1             1             0\n\
+                  RSA                        2             2             3             0\n\
+                  (3I8)           (3I8)           (3E25.16)\n\
+                  \x20      1       3       4\n\
+                  \x20      1       2       2\n\
+                  \x20  2.0000000000000000E+00  -1.0000000000000000E+00   1.0000000000000000E+00\n";
+        let hb_cases = [
+            (
+                "k6.rsa",
+                hb.replace(
+                    "2             2             3",
+                    "1000000000000 1000000000000 3",
+                ),
+                "k6.rsa:3: 1000000000000 rows, more than",
+            ),
+            (
+                "k7.rsa",
+                hb.replace("       1       2       2\n", "       1       2       1\n"),
+                "k7.rsa:7: entry (1, 2) is above the diagonal",
+            ),
+            (
+                "k8.rsa",
+                hb.lines().take(6).collect::<Vec<_>>().join("\n"),
+                "k8.rsa:6: the header announces 1 pointer, 1 index and 1 value lines",
+            ),
+            (
+                "k9.rsa",
+                hb.replace("       1       2       2\n", "       1       3       2\n"),
+                "k9.rsa:6: row index 3 of column 1 is outside 1..=2",
+            ),
+            ("k10.rsa", hb.to_string(), "k10.mapping, which is missing"),
+        ];
+        let mut all: Vec<(&str, String, &str)> = cases
+            .iter()
+            .map(|&(n, t, w)| (n, t.to_string(), w))
+            .collect();
+        for (name, text, want) in &hb_cases {
+            if *name != "k10.rsa" {
+                w(
+                    &name.replace(".rsa", ".mapping"),
+                    " Matrix Eqn   Node   DOF\n  1  1  UX\n  2  2  UX\n",
+                );
+            }
+            all.push((name, text.clone(), want));
+        }
+        for (name, text, want) in all {
+            let text = text.as_str();
             w(name, text);
             let m = if name.ends_with(".pch") {
                 "m.pch"

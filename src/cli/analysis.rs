@@ -25,6 +25,15 @@ pub struct ExportArgs {
     model: String,
     /// Directory to write K.mtx, M.mtx and dofs.txt into (created if missing).
     dir: std::path::PathBuf,
+    /// Also write K and M as Nastran OUTPUT4 `matrices.op4` (KAAX and MAAX, rows in the order
+    /// of dofs.txt): `ascii`, `binary` (little-endian) or `binary-be` (big-endian).
+    #[arg(long, value_name = "LAYOUT", value_parser = parse_op4_layout)]
+    op4: Option<crate::formats::op4::Op4Layout>,
+}
+
+fn parse_op4_layout(s: &str) -> Result<crate::formats::op4::Op4Layout, String> {
+    crate::formats::op4::Op4Layout::parse(s)
+        .ok_or_else(|| format!("unknown OUTPUT4 layout '{s}': use ascii, binary or binary-be"))
 }
 
 /// The arguments of `nlsim modes`.
@@ -265,7 +274,7 @@ impl CheckArgs {
 impl ExportArgs {
     /// `nlsim export`: writes the model's matrices and DOF labels.
     pub fn execute(&self, console: &Console) -> crate::Result<()> {
-        commands::check::export(&self.model, &self.dir, console)
+        commands::check::export(&self.model, &self.dir, self.op4, console)
     }
 }
 

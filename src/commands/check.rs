@@ -32,9 +32,15 @@ pub fn fixtures(console: &Console) {
     }
 }
 
-/// `nlsim export MODEL DIR`: `K.mtx`, `M.mtx` and `dofs.txt`, each written atomically (a
-/// killed export or a full disk leaves no truncated file under the final name).
-pub fn export(spec: &str, dir: &Path, console: &Console) -> Result<()> {
+/// `nlsim export MODEL DIR`: `K.mtx`, `M.mtx` and `dofs.txt`, and with `op4` also
+/// `matrices.op4` (KAAX and MAAX in that OUTPUT4 layout), each written atomically (a killed
+/// export or a full disk leaves no truncated file under the final name).
+pub fn export(
+    spec: &str,
+    dir: &Path,
+    op4: Option<crate::formats::op4::Op4Layout>,
+    console: &Console,
+) -> Result<()> {
     let loaded = crate::load_model(spec)?;
     std::fs::create_dir_all(dir).map_err(|source| Error::Io {
         path: dir.to_path_buf(),
@@ -57,8 +63,15 @@ pub fn export(spec: &str, dir: &Path, console: &Console) -> Result<()> {
     ] {
         crate::formats::files::write_text_atomically(&dir.join(name), &text)?;
     }
+    let mut wrote = "K.mtx, M.mtx, dofs.txt".to_string();
+    if let Some(layout) = op4 {
+        let bytes =
+            crate::formats::op4::to_op4(&[("KAAX", m.stiffness()), ("MAAX", m.mass())], layout);
+        crate::formats::files::write_bytes_atomically(&dir.join("matrices.op4"), &bytes)?;
+        wrote.push_str(", matrices.op4");
+    }
     console.say(&format!(
-        "wrote K.mtx, M.mtx, dofs.txt ({} DOFs) to {}",
+        "wrote {wrote} ({} DOFs) to {}",
         m.n_dofs(),
         dir.display()
     ));

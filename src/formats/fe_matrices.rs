@@ -19,6 +19,7 @@
 use crate::error::{Error, Result};
 use crate::formats::files::quoted;
 use nlsim_kernel::{Component, DofLabel, DofMap, SparseSym};
+use std::borrow::Cow;
 use std::collections::{BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 
@@ -32,6 +33,8 @@ pub enum FeFormat {
     Dmig,
     /// Abaqus `*MATRIX GENERATE` coordinate output.
     Abaqus,
+    /// Harwell–Boeing (Ansys `HBMAT`), labelled by the `.mapping` file beside it.
+    HarwellBoeing,
 }
 
 impl FeFormat {
@@ -40,6 +43,7 @@ impl FeFormat {
         match self {
             FeFormat::Dmig => "dmig",
             FeFormat::Abaqus => "abaqus",
+            FeFormat::HarwellBoeing => "harwell-boeing",
         }
     }
 
@@ -48,22 +52,59 @@ impl FeFormat {
         match s.to_ascii_lowercase().as_str() {
             "dmig" | "nastran-dmig" | "punch" => Some(FeFormat::Dmig),
             "abaqus" | "abaqus-mtx" => Some(FeFormat::Abaqus),
+            "harwell-boeing" | "hb" | "hbmat" | "ansys" => Some(FeFormat::HarwellBoeing),
             _ => None,
         }
     }
 }
 
-/// One stored entry of a [`LabelledMatrix`].
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LabelledEntry {
-    /// Row DOF.
-    pub row: DofLabel,
-    /// Column DOF.
-    pub col: DofLabel,
-    /// Value (SI units of the matrix: kg for mass, N/m for stiffness).
-    pub value: f64,
-    /// 1-based line of the file it was read from (the card's first line for DMIG).
-    pub line: usize,
+/// A fast hasher for DOF labels (a node number and a component): multiply–rotate mixing of
+/// the integers hashed (not DoS-resistant; the keys come from a file the user chose).
+#[derive(Default, Clone, Copy)]
+struct LabelHasher(u64);
+
+impl std::hash::Hasher for LabelHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(u64::from(b));
+        }
+    }
+    fn write_u64(&mut self, x: u64) {
+        self.0 = (self.0.rotate_left(5) ^ x).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+    fn write_u8(&mut self, x: u8) {
+        self.write_u64(u64::from(x));
+    }
+    fn write_u32(&mut self, x: u32) {
+        self.write_u64(u64::from(x));
+    }
+    fn write_usize(&mut self, x: usize) {
+        self.write_u64(x as u64);
+    }
+    fn write_isize(&mut self, x: isize) {
+        self.write_u64(x as u64);
+    }
+}
+
+/// The distinct labels of a file in the order first met, each with its index.
+#[derive(Default)]
+struct Interner {
+    index: HashMap<DofLabel, usize, std::hash::BuildHasherDefault<LabelHasher>>,
+    list: Vec<DofLabel>,
+}
+
+impl Interner {
+    fn id(&mut self, l: DofLabel) -> usize {
+        let next = self.list.len();
+        let id = *self.index.entry(l).or_insert(next);
+        if id == next {
+            self.list.push(l);
+        }
+        id
+    }
 }
 
 /// A square matrix read from an FE code's file, by node/DOF label.
@@ -71,16 +112,21 @@ pub struct LabelledEntry {
 pub struct LabelledMatrix {
     /// The file.
     pub path: PathBuf,
-    /// The matrix's name in the file (DMIG name; the file name for Abaqus).
+    /// The matrix's name in the file (DMIG name; the file name for Abaqus and Harwell–Boeing).
     pub name: String,
-    /// The entries as stored (one triangle or both).
-    pub entries: Vec<LabelledEntry>,
+    /// The distinct DOF labels the entries name (each once, in the order the file first
+    /// names them).
+    pub labels: Vec<DofLabel>,
+    /// The entries as stored (one triangle or both): `(row, col, value, line)` with `row` and
+    /// `col` indices into [`labels`](Self::labels), the value in SI units (kg for mass, N/m
+    /// for stiffness) and the 1-based line it was read from (the card's first line for DMIG).
+    pub entries: Vec<(usize, usize, f64, usize)>,
 }
 
 impl LabelledMatrix {
     /// Every DOF an entry names, in label order (node, then component).
     pub fn labels(&self) -> BTreeSet<DofLabel> {
-        self.entries.iter().flat_map(|e| [e.row, e.col]).collect()
+        self.labels.iter().copied().collect()
     }
 
     /// The matrix on the DOFs of `dofs` (named `what` in errors): symmetric storage resolved
@@ -93,12 +139,17 @@ impl LabelledMatrix {
             line,
             message: format!("{what} {}: {m}", self.name),
         };
+        let place: Vec<Option<usize>> = self.labels.iter().map(|l| dofs.index_of(l).ok()).collect();
         let mut indexed = Vec::with_capacity(self.entries.len());
-        for e in &self.entries {
-            let index = |l: &DofLabel| {
-                dofs.index_of(l).map_err(|_| {
+        for &(r, c, value, line) in &self.entries {
+            let index = |k: usize| {
+                place.get(k).copied().flatten().ok_or_else(|| {
+                    let l = self
+                        .labels
+                        .get(k)
+                        .map_or_else(|| format!("#{k}"), |l| l.to_string());
                     err(
-                        e.line,
+                        line,
                         format!(
                             "DOF {l} is not a DOF of the model (it is in none of its matrices' \
                              labels)"
@@ -106,65 +157,141 @@ impl LabelledMatrix {
                     )
                 })
             };
-            indexed.push((index(&e.row)?, index(&e.col)?, e.value, e.line));
+            indexed.push((index(r)?, index(c)?, value, line));
         }
-        symmetric_from_entries(&self.path, &format!("{what} {}", self.name), dofs, &indexed)
+        symmetric_from_entries(
+            &self.path,
+            &format!("{what} {}", self.name),
+            dofs,
+            &indexed,
+            Place::Line,
+        )
     }
 }
 
-/// A symmetric matrix on `dofs` from stored entries `(row, col, value, line)` of `path`
-/// (named `what` in errors): one triangle, or both when each entry and its mirror are equal to
-/// the bit; an entry given twice is refused with both lines.
+/// Where an entry of an FE file was read: a text line or a binary record.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Place {
+    /// 1-based line of a text file.
+    Line,
+    /// 1-based record of a binary file.
+    Record,
+}
+
+/// A symmetric matrix on `dofs` from stored entries `(row, col, value, place)` of `path`
+/// (named `what` in errors; `place` a line or record number as `unit` says): one triangle, or
+/// both when each entry and its mirror are equal to the bit; an entry given twice is refused
+/// with both places.
 pub fn symmetric_from_entries(
     path: &Path,
     what: &str,
     dofs: &DofMap,
     entries: &[(usize, usize, f64, usize)],
+    unit: Place,
 ) -> Result<SparseSym> {
-    let err = |line: usize, m: String| Error::DataFile {
-        file: path.to_path_buf(),
-        line,
-        message: format!("{what}: {m}"),
+    let err = |line: usize, m: String| match unit {
+        Place::Line => Error::DataFile {
+            file: path.to_path_buf(),
+            line,
+            message: format!("{what}: {m}"),
+        },
+        Place::Record => Error::Usage(format!("{}: record {line}: {what}: {m}", path.display())),
     };
-    // (higher index, lower index) → (value, line, given as (row ≥ col))
-    let mut seen: HashMap<(usize, usize), (f64, usize, bool)> =
-        HashMap::with_capacity(entries.len());
+    let at = match unit {
+        Place::Line => "line",
+        Place::Record => "record",
+    };
+    let n = dofs.len();
+    // The entries bucketed by their lower-triangle column min(i, j) (a counting sort), then
+    // each column's by row max(i, j) and file order: an entry and its mirror, or a repeat,
+    // become neighbours. O(entries) but for the short per-column sorts.
+    let mut start = vec![0usize; n + 1];
+    for &(i, j, _, line) in entries {
+        if i >= n || j >= n {
+            return Err(err(
+                line,
+                format!("entry ({}, {}) is outside the {n} DOFs", i + 1, j + 1),
+            ));
+        }
+        start[i.min(j) + 1] += 1;
+    }
+    for c in 0..n {
+        start[c + 1] += start[c];
+    }
+    let mut next = start.clone();
+    let mut order = vec![0usize; entries.len()];
+    for (k, &(i, j, _, _)) in entries.iter().enumerate() {
+        let c = i.min(j);
+        order[next[c]] = k;
+        next[c] += 1;
+    }
+    let hi = |k: usize| entries[k].0.max(entries[k].1);
+    let below = |k: usize| entries[k].0 >= entries[k].1;
     let mut lower = Vec::with_capacity(entries.len());
-    for &(i, j, value, line_here) in entries {
-        let key = (i.max(j), i.min(j));
-        let lower_side = i >= j;
-        let names = || (dofs.describe(i), dofs.describe(j));
-        match seen.get(&key) {
-            None => {
-                seen.insert(key, (value, line_here, lower_side));
-                lower.push((key.0, key.1, value));
+    for c in 0..n {
+        let col = &mut order[start[c]..start[c + 1]];
+        col.sort_unstable_by_key(|&k| (hi(k), k));
+        let mut g = 0;
+        while g < col.len() {
+            let h = hi(col[g]);
+            let mut e = g + 1;
+            while e < col.len() && hi(col[e]) == h {
+                e += 1;
             }
-            Some(&(v, line, side)) => {
-                let (row, col) = names();
-                if side == lower_side || i == j {
+            // In file order: the first, its mirror (the only other entry allowed), then repeats.
+            let f = col[g];
+            lower.push((h, c, entries[f].2));
+            if e - g >= 2 {
+                let k = col[g + 1];
+                let (i, j, value, here) = entries[k];
+                let (_, _, v, line) = entries[f];
+                let names = || (dofs.describe(i), dofs.describe(j));
+                if below(f) == below(k) || i == j {
+                    let (row, column) = names();
                     return Err(err(
-                        line_here,
-                        format!("entry ({row}, {col}) is given again (first on line {line})"),
+                        here,
+                        format!("entry ({row}, {column}) is given again (first on {at} {line})"),
                     ));
                 }
                 if v.to_bits() != value.to_bits() {
+                    let (row, column) = names();
                     return Err(err(
-                        line_here,
+                        here,
                         format!(
-                            "entry ({row}, {col}) = {value:e} and its mirror on line {line} = \
+                            "entry ({row}, {column}) = {value:e} and its mirror on {at} {line} = \
                              {v:e} differ: the matrix is not symmetric"
                         ),
                     ));
                 }
             }
+            if e - g >= 3 {
+                let k = col[g + 2];
+                let (i, j, _, here) = entries[k];
+                let same = if below(col[g]) == below(k) {
+                    col[g]
+                } else {
+                    col[g + 1]
+                };
+                return Err(err(
+                    here,
+                    format!(
+                        "entry ({}, {}) is given again (first on {at} {})",
+                        dofs.describe(i),
+                        dofs.describe(j),
+                        entries[same].3
+                    ),
+                ));
+            }
+            g = e;
         }
     }
     Ok(SparseSym::from_lower_triplets(what, dofs.len(), &lower)?)
 }
 
 /// The format of an FE matrix file by extension and content: `.pch`, `.bdf`, `.dat`, `.nas`
-/// → DMIG; `.mtx` → Abaqus unless it starts with `%%MatrixMarket` (`None`: not an FE-code
-/// format, e.g. Matrix Market or HDF5).
+/// → DMIG; `.mtx` → Abaqus unless it starts with `%%MatrixMarket`; `.rsa`, `.rua`, `.hb`,
+/// `.rb`, `.matrix` (HBMAT's default) → Harwell–Boeing (`None`: not an FE-code format, e.g.
+/// Matrix Market or HDF5).
 pub fn detect(path: &Path) -> Result<Option<FeFormat>> {
     if dmig_extension(path) {
         return Ok(Some(FeFormat::Dmig));
@@ -175,6 +302,7 @@ pub fn detect(path: &Path) -> Result<Option<FeFormat>> {
         .unwrap_or("")
         .to_ascii_lowercase();
     Ok(match ext.as_str() {
+        "rsa" | "rua" | "hb" | "rb" | "matrix" => Some(FeFormat::HarwellBoeing),
         "mtx" => {
             use std::io::Read;
             crate::formats::files::regular_file(path)?;
@@ -225,7 +353,411 @@ pub fn read(path: &Path, format: FeFormat, name: Option<&str>) -> Result<Labelle
             parse_dmig(&text, path, name)
         }
         FeFormat::Abaqus => parse_abaqus(&text, path),
+        FeFormat::HarwellBoeing => {
+            let map_path = mapping_path(path);
+            if !map_path.is_file() {
+                return Err(Error::Usage(format!(
+                    "{}: a Harwell-Boeing file carries no DOF labels: nlsim reads them from \
+                     {}, which is missing (write it with HBMAT, ..., Mapping = YES)",
+                    path.display(),
+                    map_path.display()
+                )));
+            }
+            let map_text = crate::formats::files::read_text_bounded(&map_path, MAX_FE_FILE_BYTES)?;
+            let labels = parse_mapping(&map_text, &map_path)?;
+            let hb = parse_harwell_boeing(&text, path)?;
+            if labels.len() != hb.n {
+                return Err(Error::Usage(format!(
+                    "{} maps {} equations, the matrix {} has {}",
+                    map_path.display(),
+                    labels.len(),
+                    path.display(),
+                    hb.n
+                )));
+            }
+            let name = path
+                .file_name()
+                .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+            Ok(LabelledMatrix {
+                path: path.to_path_buf(),
+                name,
+                labels,
+                entries: hb.entries,
+            })
+        }
     }
+}
+
+/// The mapping file of a Harwell–Boeing file: `NAME.mapping` beside `NAME.EXT` (HBMAT names it
+/// after the matrix file's base name).
+pub fn mapping_path(path: &Path) -> PathBuf {
+    path.with_extension("mapping")
+}
+
+/// A Harwell–Boeing matrix's order and stored entries `(row, col, value, line)`, 0-based.
+#[derive(Debug, Clone)]
+pub struct HarwellBoeing {
+    /// Order (rows = columns).
+    pub n: usize,
+    /// `RSA` (symmetric, one triangle stored) or `RUA` (both triangles).
+    pub kind: String,
+    /// The entries as stored, with the line of each value.
+    pub entries: Vec<(usize, usize, f64, usize)>,
+}
+
+/// Count and width of the fields of a Fortran format such as `(20I4)`, `(1P,3E25.16)` or
+/// `(4D20.12)`, for the letter `I` (integers) or `E`/`D` (reals).
+fn fortran_fields(f: &str, integer: bool) -> Option<(usize, usize)> {
+    let u = f
+        .trim()
+        .trim_start_matches('(')
+        .trim_end_matches(')')
+        .to_ascii_uppercase();
+    let spec = u.rsplit(',').next()?.trim();
+    let at = if integer {
+        spec.find('I')?
+    } else {
+        spec.find(['E', 'D'])?
+    };
+    let count: usize = if at == 0 { 1 } else { spec[..at].parse().ok()? };
+    let width: usize = spec[at + 1..].split('.').next()?.parse().ok()?;
+    ((1..=1_000).contains(&count) && (1..=64).contains(&width)).then_some((count, width))
+}
+
+/// A Harwell–Boeing file (Duff, Grimes and Lewis's layout; Ansys `HBMAT` writes it): four
+/// header lines (title and key; card counts; type `RSA`/`RUA` and sizes; formats), a fifth
+/// when right-hand sides follow, then the column pointers, row indices and values in the
+/// fixed-width fields the formats give. Real assembled matrices only; sizes checked against
+/// the file before allocating; errors name the file and line.
+pub fn parse_harwell_boeing(text: &str, path: &Path) -> Result<HarwellBoeing> {
+    let err = |line: usize, m: String| Error::DataFile {
+        file: path.to_path_buf(),
+        line,
+        message: m,
+    };
+    let lines: Vec<&str> = text.lines().map(|l| l.trim_end_matches('\r')).collect();
+    if lines.len() < 4 {
+        return Err(err(
+            lines.len().max(1),
+            "a Harwell-Boeing file starts with four header lines".into(),
+        ));
+    }
+    if let Some(k) = lines.iter().position(|l| !l.is_ascii()) {
+        return Err(err(k + 1, "a non-ASCII character".into()));
+    }
+    let ints = |ln: usize, t: &str, what: &str| -> Result<Vec<i64>> {
+        t.split_whitespace()
+            .map(|x| {
+                x.parse::<i64>()
+                    .map_err(|_| err(ln, format!("{what}: {} is not an integer", quoted(x))))
+            })
+            .collect()
+    };
+    let cards = ints(2, lines[1], "card counts")?;
+    if cards.len() < 4 || cards.iter().any(|&c| c < 0) {
+        return Err(err(
+            2,
+            format!(
+                "expected the card counts TOTCRD PTRCRD INDCRD VALCRD [RHSCRD], found {}",
+                quoted(lines[1])
+            ),
+        ));
+    }
+    let (ptrcrd, indcrd, valcrd) = (cards[1] as usize, cards[2] as usize, cards[3] as usize);
+    let rhscrd = cards.get(4).copied().unwrap_or(0);
+    let kind: String = lines[2]
+        .chars()
+        .take(3)
+        .collect::<String>()
+        .to_ascii_uppercase();
+    if kind.len() < 3 || !kind.starts_with('R') || !kind.ends_with('A') {
+        return Err(err(
+            3,
+            format!(
+                "matrix type {}: nlsim reads real assembled matrices (RSA, RUA); complex, \
+                 pattern-only and elemental ones are not stiffness or mass matrices",
+                quoted(&kind)
+            ),
+        ));
+    }
+    let symmetric = match &kind[1..2] {
+        "S" => true,
+        "U" => false,
+        _ => {
+            return Err(err(
+                3,
+                format!(
+                    "matrix type {}: a stiffness or mass matrix is symmetric (RSA) or stored \
+                     with both triangles (RUA)",
+                    quoted(&kind)
+                ),
+            ));
+        }
+    };
+    let sizes = ints(3, lines[2].get(3..).unwrap_or(""), "sizes")?;
+    if sizes.len() < 3 {
+        return Err(err(
+            3,
+            "expected the type, then NROW NCOL NNZERO [NELTVL]".into(),
+        ));
+    }
+    let (nrow, ncol, nnz) = (sizes[0], sizes[1], sizes[2]);
+    if nrow < 1 || nrow != ncol {
+        return Err(err(
+            3,
+            format!("the matrix is {nrow} × {ncol}: nlsim takes square matrices"),
+        ));
+    }
+    let n = nrow as usize;
+    if n > crate::formats::matrices::MAX_DIM {
+        return Err(err(
+            3,
+            format!(
+                "{n} rows, more than {} DOFs",
+                crate::formats::matrices::MAX_DIM
+            ),
+        ));
+    }
+    // Each pointer, index and value takes at least one character of the file.
+    if nnz < 1 || nnz as usize > text.len() || n + 1 > text.len() {
+        return Err(err(
+            3,
+            format!(
+                "NNZERO = {nnz} with {n} columns cannot fit in a file of {} bytes",
+                text.len()
+            ),
+        ));
+    }
+    let nnz = nnz as usize;
+    let fmt = lines[3];
+    let field = |a: usize, b: usize| fmt.get(a..b.min(fmt.len())).unwrap_or("").trim();
+    let (ptr_fmt, ind_fmt, val_fmt) = (field(0, 16), field(16, 32), field(32, 52));
+    let ptr_f = fortran_fields(ptr_fmt, true);
+    let ind_f = fortran_fields(ind_fmt, true);
+    let val_f = fortran_fields(val_fmt, false);
+    let (Some(ptr_f), Some(ind_f), Some(val_f)) = (ptr_f, ind_f, val_f) else {
+        return Err(err(
+            4,
+            format!(
+                "formats {}: expected an integer format such as (20I4) for the pointers and \
+                 indices, a real one such as (3E25.16) for the values",
+                quoted(fmt.trim())
+            ),
+        ));
+    };
+    let first = if rhscrd > 0 { 5 } else { 4 };
+    let need = [ptrcrd, indcrd, valcrd]
+        .iter()
+        .try_fold(first, |a: usize, &c| a.checked_add(c))
+        .unwrap_or(usize::MAX);
+    if lines.len() < need {
+        return Err(err(
+            lines.len(),
+            format!(
+                "the header announces {} pointer, {} index and {} value lines after line \
+                 {first}; the file ends at line {}: truncated",
+                ptrcrd,
+                indcrd,
+                valcrd,
+                lines.len()
+            ),
+        ));
+    }
+    // Fixed-width fields of `count` lines from `start` (0-based), with their line numbers.
+    // Reals separated by blanks are taken as they stand (some writers, scipy's among them,
+    // print narrower fields than their format declares); otherwise, and always for integers
+    // (whose fields may touch), the declared fixed widths.
+    let fields =
+        |start: usize, count: usize, (per, width): (usize, usize), want: usize, real: bool| {
+            let mut out: Vec<(&str, usize)> = Vec::with_capacity(want.min(text.len()));
+            for (k, l) in lines[start..start + count].iter().enumerate() {
+                let ln = start + k + 1;
+                if real {
+                    let tokens: Vec<&str> = l.split_whitespace().collect();
+                    if tokens.len() <= per
+                        && tokens.iter().all(|t| {
+                            t.contains(['E', 'e', 'D', 'd'])
+                                && t.replace(['D', 'd'], "E").parse::<f64>().is_ok()
+                        })
+                    {
+                        out.extend(tokens.into_iter().map(|t| (t, ln)));
+                        continue;
+                    }
+                }
+                let mut at = 0;
+                let mut here = 0;
+                while at < l.len() && here < per {
+                    let f = l[at..(at + width).min(l.len())].trim();
+                    at += width;
+                    here += 1;
+                    if !f.is_empty() {
+                        out.push((f, ln));
+                    }
+                }
+                if !l[at.min(l.len())..].trim().is_empty() {
+                    return Err(err(
+                        ln,
+                        format!("more than {per} fields of {width} characters on a line"),
+                    ));
+                }
+            }
+            if out.len() != want {
+                return Err(err(
+                    start + count,
+                    format!("{} values on these lines, {want} announced", out.len()),
+                ));
+            }
+            Ok(out)
+        };
+    let p0 = first;
+    let int_of = |(f, ln): (&str, usize), what: &str| -> Result<usize> {
+        f.parse::<usize>().map_err(|_| {
+            err(
+                ln,
+                format!("{what} {} is not a positive integer", quoted(f)),
+            )
+        })
+    };
+    let ptr: Vec<usize> = fields(p0, ptrcrd, ptr_f, n + 1, false)?
+        .into_iter()
+        .map(|x| int_of(x, "column pointer"))
+        .collect::<Result<_>>()?;
+    if ptr[0] != 1 || ptr[n] != nnz + 1 || ptr.windows(2).any(|w| w[1] < w[0]) {
+        return Err(err(
+            p0 + 1,
+            format!(
+                "the column pointers must rise from 1 to NNZERO + 1 = {}; they run from {} to {}",
+                nnz + 1,
+                ptr[0],
+                ptr[n]
+            ),
+        ));
+    }
+    let rows = fields(p0 + ptrcrd, indcrd, ind_f, nnz, false)?;
+    let vals = fields(p0 + ptrcrd + indcrd, valcrd, val_f, nnz, true)?;
+    let mut entries = Vec::with_capacity(nnz);
+    for j in 0..n {
+        for k in ptr[j] - 1..ptr[j + 1] - 1 {
+            let row = int_of(rows[k], "row index")?;
+            if row < 1 || row > n {
+                return Err(err(
+                    rows[k].1,
+                    format!("row index {row} of column {} is outside 1..={n}", j + 1),
+                ));
+            }
+            let (f, ln) = vals[k];
+            let v = nastran_real(f)
+                .ok_or_else(|| err(ln, format!("value {} is not a finite number", quoted(f))))?;
+            if symmetric && row - 1 < j {
+                return Err(err(
+                    ln,
+                    format!(
+                        "entry ({row}, {}) is above the diagonal: an RSA file stores the lower \
+                         triangle",
+                        j + 1
+                    ),
+                ));
+            }
+            entries.push((row - 1, j, v, ln));
+        }
+    }
+    Ok(HarwellBoeing { n, kind, entries })
+}
+
+/// The equation → DOF labels of an Ansys `HBMAT` mapping file: heading lines, then one line
+/// per equation with its number, node and DOF label (`UX`, `UY`, `UZ`, `ROTX`, `ROTY`,
+/// `ROTZ`). Every equation 1..=n must appear once.
+pub fn parse_mapping(text: &str, path: &Path) -> Result<Vec<DofLabel>> {
+    let err = |line: usize, m: String| Error::DataFile {
+        file: path.to_path_buf(),
+        line,
+        message: m,
+    };
+    let mut rows: Vec<(usize, DofLabel, usize)> = Vec::new();
+    for (i, raw) in text.lines().enumerate() {
+        let ln = i + 1;
+        let f: Vec<&str> = raw.split_whitespace().collect();
+        if f.is_empty() || f[0].parse::<i64>().is_err() {
+            if rows.is_empty() {
+                continue; // a heading
+            }
+            if f.is_empty() {
+                continue;
+            }
+            return Err(err(
+                ln,
+                format!("expected EQUATION NODE DOF, found {}", quoted(raw)),
+            ));
+        }
+        if f.len() != 3 {
+            return Err(err(
+                ln,
+                format!(
+                    "{} fields, expected EQUATION NODE DOF: {}",
+                    f.len(),
+                    quoted(raw)
+                ),
+            ));
+        }
+        let eq: usize = f[0]
+            .parse()
+            .ok()
+            .filter(|e| (1..=crate::formats::matrices::MAX_DIM).contains(e))
+            .ok_or_else(|| err(ln, format!("equation {} is not 1 or more", quoted(f[0]))))?;
+        let node: i64 = f[1]
+            .parse()
+            .map_err(|_| err(ln, format!("node {} is not an integer", quoted(f[1]))))?;
+        let c = match f[2].to_ascii_uppercase().as_str() {
+            "UX" => 1,
+            "UY" => 2,
+            "UZ" => 3,
+            "ROTX" => 4,
+            "ROTY" => 5,
+            "ROTZ" => 6,
+            other => {
+                return Err(err(
+                    ln,
+                    format!(
+                        "DOF {} of node {node}: nlsim takes the structural DOFs UX, UY, UZ, \
+                         ROTX, ROTY, ROTZ",
+                        quoted(other)
+                    ),
+                ));
+            }
+        };
+        rows.push((eq, label(node, c).map_err(|m| err(ln, m))?, ln));
+    }
+    if rows.is_empty() {
+        return Err(err(1, "no EQUATION NODE DOF line".into()));
+    }
+    let n = rows.len();
+    let mut out: Vec<Option<(DofLabel, usize)>> = vec![None; n];
+    let mut seen: HashMap<DofLabel, usize> = HashMap::with_capacity(n);
+    for (eq, l, ln) in rows {
+        let slot = out.get_mut(eq - 1).ok_or_else(|| {
+            err(
+                ln,
+                format!("equation {eq} is past the {n} equations the file maps"),
+            )
+        })?;
+        if let Some((_, first)) = slot {
+            return Err(err(
+                ln,
+                format!("equation {eq} is mapped again (first on line {first})"),
+            ));
+        }
+        if let Some(first) = seen.insert(l, ln) {
+            return Err(err(
+                ln,
+                format!("DOF {l} is mapped again (first on line {first})"),
+            ));
+        }
+        *slot = Some((l, ln));
+    }
+    Ok(out
+        .into_iter()
+        .map(|o| o.expect("every slot filled").0)
+        .collect())
 }
 
 /// A label from an FE code's node and component numbers (component 0: scalar point).
@@ -260,7 +792,12 @@ pub fn nastran_real(s: &str) -> Option<f64> {
     if t.is_empty() || t.len() > 40 {
         return None;
     }
-    let t = t.replace(['D', 'd'], "E");
+    // `D` exponents as `E`, on the stack (no allocation per value).
+    let mut buf = [0u8; 40];
+    for (k, &b) in t.as_bytes().iter().enumerate() {
+        buf[k] = if b == b'D' || b == b'd' { b'E' } else { b };
+    }
+    let t = std::str::from_utf8(&buf[..t.len()]).ok()?;
     if t.contains(['E', 'e']) {
         return t.parse().ok().filter(|v: &f64| v.is_finite());
     }
@@ -274,18 +811,11 @@ pub fn nastran_real(s: &str) -> Option<f64> {
     v.is_finite().then_some(v)
 }
 
-/// One logical bulk-data card of a kept name: its data fields (fields 2–9 of each physical
-/// line, in order, continuation markers dropped) and the line it starts on.
-struct Card {
-    fields: Vec<String>,
-    line: usize,
-}
-
-/// Splits a physical line into its first field and its data fields.
-fn split_line(raw: &str) -> (String, Vec<String>) {
-    // Tabs stop at multiples of 8, as Nastran reads them.
-    let expanded;
-    let line: &str = if raw.contains('\t') {
+/// Splits a physical line: its first field is returned, its data fields are appended to
+/// `out` (borrowed from the line unless tabs had to be expanded).
+fn split_line<'a>(raw: &'a str, out: &mut Vec<Cow<'a, str>>) -> Cow<'a, str> {
+    if raw.contains('\t') {
+        // Tabs stop at multiples of 8, as Nastran reads them.
         let mut l = String::with_capacity(raw.len() + 8);
         for c in raw.chars() {
             if c == '\t' {
@@ -295,85 +825,117 @@ fn split_line(raw: &str) -> (String, Vec<String>) {
                 l.push(c);
             }
         }
-        expanded = l;
-        &expanded
-    } else {
-        raw
-    };
+        let mut fields = Vec::new();
+        let first = split_expanded(&l, &mut fields).into_owned();
+        out.extend(fields.into_iter().map(|f| Cow::Owned(f.into_owned())));
+        return Cow::Owned(first);
+    }
+    split_expanded(raw, out)
+}
+
+/// [`split_line`] of a line without tabs.
+fn split_expanded<'a>(line: &'a str, out: &mut Vec<Cow<'a, str>>) -> Cow<'a, str> {
     if line.contains(',') {
-        let mut it = line.split(',').map(|s| s.trim().to_string());
+        let mut it = line.split(',').map(|s| Cow::Borrowed(s.trim()));
         let first = it.next().unwrap_or_default();
-        let mut rest: Vec<String> = it.collect();
         // A free-field card holds at most 8 data fields per line; a ninth is the marker.
-        rest.truncate(8);
-        return (first, rest);
+        out.extend(it.take(8));
+        return first;
     }
     // Fields are columns of characters (bytes when the line is ASCII, as it nearly always is).
     let ascii = line.is_ascii();
-    let chars: Vec<char> = if ascii {
-        Vec::new()
-    } else {
-        line.chars().collect()
-    };
-    let field = |from: usize, width: usize| -> String {
+    let field = |from: usize, width: usize| -> Cow<'a, str> {
         if ascii {
             let end = (from + width).min(line.len());
-            line.get(from.min(end)..end)
-                .unwrap_or("")
-                .trim()
-                .to_string()
+            Cow::Borrowed(line.get(from.min(end)..end).unwrap_or("").trim())
         } else {
-            chars
-                .iter()
-                .skip(from)
-                .take(width)
-                .collect::<String>()
-                .trim()
-                .to_string()
+            Cow::Owned(
+                line.chars()
+                    .skip(from)
+                    .take(width)
+                    .collect::<String>()
+                    .trim()
+                    .to_string(),
+            )
         }
     };
     let first = field(0, 8);
-    let large = first.ends_with('*');
-    let fields = if large {
-        (0..4).map(|k| field(8 + 16 * k, 16)).collect()
+    if first.ends_with('*') {
+        out.extend((0..4).map(|k| field(8 + 16 * k, 16)));
     } else {
-        (0..8).map(|k| field(8 + 8 * k, 8)).collect()
-    };
-    (first, fields)
+        out.extend((0..8).map(|k| field(8 + 8 * k, 8)));
+    }
+    first
 }
 
-/// The cards of a bulk-data text (comments `$` and blank lines skipped; cards after
-/// `ENDDATA` ignored), with `keep` deciding which card names are kept (others are skipped with
-/// their continuations).
-fn cards(text: &str, keep: impl Fn(&str) -> bool) -> Vec<Card> {
-    let mut out: Vec<Card> = Vec::new();
+/// One logical bulk-data card: its data fields (fields 2–9 of each physical line, in order,
+/// continuation markers dropped) and the line it starts on.
+struct Card<'c, 'a> {
+    fields: &'c [Cow<'a, str>],
+    line: usize,
+}
+
+/// Calls `f(fields, line)` for each card of a bulk-data text (its data fields, continuations
+/// appended, and the line it starts on), one card at a time; comments `$` and blank lines are
+/// skipped, cards after `ENDDATA` ignored; `keep(name, fields of the first line)` decides
+/// which cards are passed (others are skipped with their continuations, unsplit).
+fn each_card<'a>(
+    text: &'a str,
+    mut keep: impl FnMut(&str, &[Cow<'a, str>]) -> bool,
+    mut f: impl FnMut(&[Cow<'a, str>], usize) -> Result<()>,
+) -> Result<()> {
+    let mut cur: Vec<Cow<'a, str>> = Vec::new();
+    let mut cur_line = 0usize;
     let mut keeping = false;
     for (i, raw) in text.lines().enumerate() {
         let raw = raw.trim_end_matches('\r');
-        if raw.trim().is_empty() || raw.trim_start().starts_with('$') {
+        let t = raw.trim_start();
+        if t.is_empty() || t.starts_with('$') {
             continue;
         }
-        let (first, fields) = split_line(raw);
+        // A continuation of a card not kept is skipped unsplit: its first field (before a
+        // comma, or the first 8 columns) is blank or starts with `+` or `*`.
+        if !keeping && !raw.contains('\t') {
+            let first = match raw.find(',') {
+                Some(c) => raw[..c].trim(),
+                None => raw.get(..8.min(raw.len())).map_or("", str::trim),
+            };
+            if first.is_empty() || first.starts_with(['+', '*']) {
+                continue;
+            }
+        }
+        let at = cur.len();
+        let first = split_line(raw, &mut cur);
         let continuation = first.is_empty() || first.starts_with('+') || first.starts_with('*');
         if continuation {
-            if keeping && let Some(c) = out.last_mut() {
-                c.fields.extend(fields);
+            if !keeping {
+                cur.truncate(at);
             }
             continue;
         }
+        // A new card: the previous one is complete.
+        let fields: Vec<Cow<'a, str>> = cur.drain(at..).collect();
+        if keeping {
+            f(&cur, cur_line)?;
+        }
+        cur.clear();
+        cur.extend(fields);
         let name = first.trim_end_matches('*').to_ascii_uppercase();
         if name == "ENDDATA" {
+            cur.clear();
+            keeping = false;
             break;
         }
-        keeping = keep(&name);
-        if keeping {
-            out.push(Card {
-                fields,
-                line: i + 1,
-            });
+        keeping = keep(&name, &cur);
+        cur_line = i + 1;
+        if !keeping {
+            cur.clear();
         }
     }
-    out
+    if keeping {
+        f(&cur, cur_line)?;
+    }
+    Ok(())
 }
 
 /// Matrix `name` of the DMIG entries in `text` (read from `path`): a square real matrix, its
@@ -386,21 +948,28 @@ pub fn parse_dmig(text: &str, path: &Path, name: &str) -> Result<LabelledMatrix>
         message: format!("DMIG {}: {m}", quoted(name)),
     };
     let want = name.trim().to_ascii_uppercase();
-    let all = cards(text, |n| n == "DMIG");
+    // Only the wanted matrix's cards are kept; the names of all are noted for the error that
+    // names none.
     let mut names: BTreeSet<String> = BTreeSet::new();
     let mut header: Option<usize> = None;
     let mut entries = Vec::new();
-    for c in &all {
-        let card_name = c
-            .fields
-            .first()
-            .map(|s| s.to_ascii_uppercase())
-            .unwrap_or_default();
-        names.insert(card_name.clone());
-        if card_name != want {
-            continue;
+    let mut labels = Interner::default();
+    let keep = |n: &str, fields: &[Cow<'_, str>]| {
+        if n != "DMIG" {
+            return false;
         }
-        let field = |k: usize| c.fields.get(k).map(String::as_str).unwrap_or("");
+        let f = fields.first().map_or("", |f| f.as_ref());
+        if f.eq_ignore_ascii_case(&want) {
+            return true;
+        }
+        if !names.iter().any(|k| k.eq_ignore_ascii_case(f)) {
+            names.insert(f.to_ascii_uppercase());
+        }
+        false
+    };
+    each_card(text, keep, |fields, line| {
+        let c = Card { fields, line };
+        let field = |k: usize| c.fields.get(k).map_or("", |f| f.as_ref());
         let int = |k: usize, what: &str, blank: Option<i64>| -> Result<i64> {
             let f = field(k);
             if f.is_empty()
@@ -440,7 +1009,7 @@ pub fn parse_dmig(text: &str, path: &Path, name: &str) -> Result<LabelledMatrix>
                 ));
             }
             header = Some(c.line);
-            continue;
+            return Ok(());
         }
         if header.is_none() {
             return Err(err(
@@ -451,6 +1020,7 @@ pub fn parse_dmig(text: &str, path: &Path, name: &str) -> Result<LabelledMatrix>
         let gj = int(1, "GJ", None)?;
         let cj = int(2, "CJ", Some(0))?;
         let col = label(gj, cj).map_err(|m| err(c.line, m))?;
+        let col_id = labels.id(col);
         // Groups of four fields from field 6: G, C, A, B (B blank for real matrices).
         let data = &c.fields[4.min(c.fields.len())..];
         let mut k = 0;
@@ -458,7 +1028,7 @@ pub fn parse_dmig(text: &str, path: &Path, name: &str) -> Result<LabelledMatrix>
         while k < data.len() {
             if data[k..(k + 4).min(data.len())]
                 .iter()
-                .all(String::is_empty)
+                .all(|f| f.is_empty())
             {
                 k += 4;
                 continue;
@@ -489,19 +1059,15 @@ pub fn parse_dmig(text: &str, path: &Path, name: &str) -> Result<LabelledMatrix>
                     ),
                 ));
             }
-            entries.push(LabelledEntry {
-                row,
-                col,
-                value,
-                line: c.line,
-            });
+            entries.push((labels.id(row), col_id, value, c.line));
             any = true;
             k += 4;
         }
         if !any {
             return Err(err(c.line, format!("column {col} holds no entry")));
         }
-    }
+        Ok(())
+    })?;
     if header.is_none() {
         let known: Vec<&str> = names.iter().map(String::as_str).collect();
         return Err(Error::Usage(format!(
@@ -521,6 +1087,7 @@ pub fn parse_dmig(text: &str, path: &Path, name: &str) -> Result<LabelledMatrix>
     Ok(LabelledMatrix {
         path: path.to_path_buf(),
         name: want,
+        labels: labels.list,
         entries,
     })
 }
@@ -534,6 +1101,7 @@ pub fn parse_abaqus(text: &str, path: &Path) -> Result<LabelledMatrix> {
         message: m,
     };
     let mut entries = Vec::new();
+    let mut labels = Interner::default();
     for (i, raw) in text.lines().enumerate() {
         let ln = i + 1;
         let t = raw.trim();
@@ -586,12 +1154,7 @@ pub fn parse_abaqus(text: &str, path: &Path) -> Result<LabelledMatrix> {
             .ok()
             .filter(|v| v.is_finite())
             .ok_or_else(|| err(ln, format!("value {} is not a finite number", quoted(f[4]))))?;
-        entries.push(LabelledEntry {
-            row,
-            col,
-            value,
-            line: ln,
-        });
+        entries.push((labels.id(row), labels.id(col), value, ln));
     }
     if entries.is_empty() {
         return Err(err(1, "no matrix entry".into()));
@@ -602,6 +1165,7 @@ pub fn parse_abaqus(text: &str, path: &Path) -> Result<LabelledMatrix> {
     Ok(LabelledMatrix {
         path: path.to_path_buf(),
         name,
+        labels: labels.list,
         entries,
     })
 }
@@ -671,7 +1235,11 @@ mod tests {
         ];
         for text in [small, large, free] {
             let m = parse_dmig(text, p, "kaax").unwrap();
-            let got: Vec<_> = m.entries.iter().map(|e| (e.row, e.col, e.value)).collect();
+            let got: Vec<_> = m
+                .entries
+                .iter()
+                .map(|e| (m.labels[e.0], m.labels[e.1], e.2))
+                .collect();
             assert_eq!(got, want, "{text}");
             let dofs = union_dofs(&[&m]).unwrap();
             let k = m.onto(&dofs, "stiffness matrix").unwrap().to_dense();

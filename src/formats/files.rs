@@ -49,8 +49,13 @@ pub fn write_atomically(
 
 /// Writes `text` to `path` the way [`write_atomically`] writes a result.
 pub fn write_text_atomically(path: &Path, text: &str) -> Result<()> {
+    write_bytes_atomically(path, text.as_bytes())
+}
+
+/// Writes `bytes` to `path` the way [`write_atomically`] writes a result.
+pub fn write_bytes_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     replace_atomically(path, |tmp| {
-        std::fs::write(tmp, text).map_err(|source| Error::Io {
+        std::fs::write(tmp, bytes).map_err(|source| Error::Io {
             path: tmp.to_path_buf(),
             source,
         })

@@ -468,8 +468,8 @@ fn read_matrices(t: &mut Tab<'_, '_>, name: &str, base: &Path) -> Result<Matrice
                     span,
                     &t.key("format"),
                     format!(
-                        "unknown matrix format {}; use matrix-market, hdf5, dmig or abaqus (OUTPUT4 \
-                         is read from .op4 files)",
+                        "unknown matrix format {}; use matrix-market, hdf5, dmig, abaqus or \
+                         harwell-boeing (OUTPUT4 is read from .op4 files)",
                         crate::formats::files::quoted(&f)
                     ),
                 )
@@ -484,7 +484,7 @@ fn read_matrices(t: &mut Tab<'_, '_>, name: &str, base: &Path) -> Result<Matrice
             return Err(t.err(
                 v,
                 "dofs",
-                "the DMIG or Abaqus matrices label their DOFs themselves: leave `dofs` out",
+                "DMIG, Abaqus and Harwell-Boeing (with its mapping) matrices label their DOFs themselves: leave `dofs` out",
             ));
         }
         let dofs = fe::union_dofs(&[k, m]).map_err(|e| {
@@ -503,7 +503,7 @@ fn read_matrices(t: &mut Tab<'_, '_>, name: &str, base: &Path) -> Result<Matrice
         return Err(t.err(
             stiff_v,
             "stiffness",
-            "give mass and stiffness both from FE-code files (DMIG, Abaqus), which label \
+            "give mass and stiffness both from FE-code files (DMIG, Abaqus, Harwell-Boeing with mapping), which label \
              their DOFs, or both as Matrix Market, HDF5 or inline rows with `dofs`",
         ));
     }
@@ -538,7 +538,8 @@ fn read_matrices(t: &mut Tab<'_, '_>, name: &str, base: &Path) -> Result<Matrice
 }
 
 /// The matrix of `key` if it names an FE code's file (`FILE.pch[:NAME]`, `FILE.bdf[:NAME]`,
-/// an Abaqus `.mtx`, or any file with `format = "dmig"`/`"abaqus"`), read with its labels.
+/// an Abaqus `.mtx`, a Harwell-Boeing file with its `.mapping`, or any file with `format =
+/// "dmig"`/`"abaqus"`/`"harwell-boeing"`), read with its labels.
 /// A DMIG matrix's name defaults to `KAAX` for the stiffness and `MAAX` for the mass.
 fn fe_matrix(
     t: &Tab<'_, '_>,
@@ -614,6 +615,11 @@ fn read_matrix(
                     &format!("{name} {}", m.name),
                     &dofs,
                     &m.entries,
+                    if m.binary {
+                        fe::Place::Record
+                    } else {
+                        fe::Place::Line
+                    },
                 );
             }
             match h5 {

@@ -8,10 +8,19 @@
 //! strings each start with a line `IS` (row `IS mod 65536`) or, when `NROW < 0` (bigmat),
 //! `L IROW`. A record with `ICOL > NCOL` (and one value) ends the matrix. An OUTPUT4 file
 //! carries no DOF labels: they come from the model file's `dofs` (the USET/EQEXIN order of the
-//! matrix's rows). The binary form is not read yet.
+//! matrix's rows).
+//!
+//! The binary form (Fortran unformatted sequential records: a 4-byte length before and after
+//! each record, either byte order, told from the header record's length 24) carries the same
+//! records: the header (`NCOL NROW FORM TYPE` as 4-byte integers and the 8-byte name), then
+//! per column `ICOL IROW NW` and `NW` 4-byte words of values (single precision: one word per
+//! value; double: two). A sparse column's strings start with the word `IS = IROW + 65536·(L +
+//! 1)` (L: the string's words) or, for bigmat (`NROW < 0` or ≥ 65 536), the two words `L + 1`
+//! and `IROW`. [`to_op4`] writes this form (and the ASCII one) for `nlsim export`.
 
 use crate::error::{Error, Result};
 use crate::formats::files::quoted;
+use nlsim_kernel::SparseSym;
 use std::path::Path;
 
 /// Largest OUTPUT4 file read (bytes).
@@ -25,21 +34,341 @@ pub struct Op4Matrix {
     pub name: String,
     /// Order (rows = columns).
     pub n: usize,
-    /// Entries `(row, col, value, line)` as stored (both triangles for Nastran's own files).
+    /// Entries `(row, col, value, place)` as stored (both triangles for Nastran's own files);
+    /// `place` is the 1-based line (ASCII) or record (binary) it was read from.
     pub entries: Vec<(usize, usize, f64, usize)>,
+    /// Whether the file was binary (`place` counts records, not lines).
+    pub binary: bool,
 }
 
-/// Reads matrix `name` (the first of the file when `None`) of the ASCII OUTPUT4 file `path`.
+/// Reads matrix `name` (the first of the file when `None`) of the OUTPUT4 file `path`, ASCII
+/// or binary (told from the first record's length).
 pub fn read_op4(path: &Path, name: Option<&str>) -> Result<Op4Matrix> {
     let bytes = crate::formats::files::read_bytes_up_to(path, Some(MAX_OP4_BYTES))?;
+    if binary_order(&bytes).is_some() {
+        return parse_op4_binary(&bytes, path, name);
+    }
     let text = std::str::from_utf8(&bytes).map_err(|_| {
         Error::Usage(format!(
-            "{}: not an ASCII OUTPUT4 file (binary OUTPUT4 is not read yet: write it with \
-             OUTPUT4 ... /2 for ASCII, or convert it to Matrix Market)",
+            "{}: neither an ASCII OUTPUT4 file nor a binary one (whose first record is the \
+             24-byte header)",
             path.display()
         ))
     })?;
     parse_op4(text, path, name)
+}
+
+/// The byte order of a binary OUTPUT4 file (`Some(true)`: little-endian), from its first
+/// record's length (24 bytes; 48 for the 64-bit-word variant, refused by the parser with its
+/// own message), or `None` for text.
+fn binary_order(bytes: &[u8]) -> Option<bool> {
+    let head: [u8; 4] = bytes.get(..4)?.try_into().ok()?;
+    let (le, be) = (u32::from_le_bytes(head), u32::from_be_bytes(head));
+    if le == 24 || le == 48 {
+        Some(true)
+    } else if be == 24 || be == 48 {
+        Some(false)
+    } else {
+        None
+    }
+}
+
+/// Matrix `name` (or the first) of a binary OUTPUT4 file's bytes read from `path`. The entries'
+/// `line` is the 1-based record number; errors name the file, the record and its byte offset.
+pub fn parse_op4_binary(bytes: &[u8], path: &Path, name: Option<&str>) -> Result<Op4Matrix> {
+    let little = binary_order(bytes).ok_or_else(|| {
+        Error::Usage(format!(
+            "{}: not a binary OUTPUT4 file (its first record is not the 24-byte header)",
+            path.display()
+        ))
+    })?;
+    let word = |b: &[u8]| -> i32 {
+        let a: [u8; 4] = [b[0], b[1], b[2], b[3]];
+        if little {
+            i32::from_le_bytes(a)
+        } else {
+            i32::from_be_bytes(a)
+        }
+    };
+    let err = |record: usize, offset: usize, m: String| {
+        Error::Usage(format!(
+            "{}: record {record} (byte {offset}): {m}",
+            path.display()
+        ))
+    };
+    // The records: (1-based number, byte offset, payload).
+    let mut at = 0usize;
+    let mut record = 0usize;
+    let mut next = || -> Result<Option<(usize, usize, &[u8])>> {
+        if at == bytes.len() {
+            return Ok(None);
+        }
+        record += 1;
+        let start = at;
+        let len_of = |at: usize| -> Option<usize> {
+            bytes
+                .get(at..at + 4)
+                .map(&word)
+                .and_then(|l| usize::try_from(l).ok())
+        };
+        let len = len_of(at).ok_or_else(|| {
+            err(
+                record,
+                start,
+                "a record length that is cut off or negative".into(),
+            )
+        })?;
+        let end = at
+            .checked_add(4 + len)
+            .filter(|&e| e + 4 <= bytes.len())
+            .ok_or_else(|| {
+                err(
+                    record,
+                    start,
+                    format!(
+                        "the record declares {len} bytes, the file has {} left: truncated",
+                        bytes.len() - at - 4
+                    ),
+                )
+            })?;
+        if len_of(end) != Some(len) {
+            return Err(err(
+                record,
+                start,
+                format!("the record's closing length differs from its opening one ({len})"),
+            ));
+        }
+        at = end + 4;
+        Ok(Some((record, start, &bytes[start + 4..end])))
+    };
+    let mut names = Vec::new();
+    while let Some((hr, ho, h)) = next()? {
+        if h.len() == 48 {
+            return Err(err(
+                hr,
+                ho,
+                "a header of 64-bit words (written with 8-byte integers): nlsim reads the \
+                 usual 4-byte-word OUTPUT4; write it without the 64-bit option"
+                    .into(),
+            ));
+        }
+        if h.len() != 24 {
+            return Err(err(
+                hr,
+                ho,
+                format!(
+                    "expected a matrix header of 24 bytes (NCOL NROW FORM TYPE NAME), found {}",
+                    h.len()
+                ),
+            ));
+        }
+        let (ncol, nrow, ty) = (word(&h[0..]), word(&h[4..]), word(&h[12..]));
+        let mname = String::from_utf8_lossy(&h[16..24]).trim().to_string();
+        let n = nrow.unsigned_abs() as usize;
+        if ncol < 1 || nrow == 0 || ncol.unsigned_abs() as usize != n {
+            return Err(err(
+                hr,
+                ho,
+                format!(
+                    "matrix {} is {n} × {ncol}: nlsim takes square matrices",
+                    quoted(&mname)
+                ),
+            ));
+        }
+        if n > crate::formats::matrices::MAX_DIM {
+            return Err(err(
+                hr,
+                ho,
+                format!(
+                    "matrix {} declares {n} rows, more than {} DOFs",
+                    quoted(&mname),
+                    crate::formats::matrices::MAX_DIM
+                ),
+            ));
+        }
+        let wper = match ty {
+            1 => 1usize,
+            2 => 2,
+            _ => {
+                return Err(err(
+                    hr,
+                    ho,
+                    format!(
+                        "matrix {} has type {ty}: nlsim takes real matrices (1 single, 2 double \
+                         precision)",
+                        quoted(&mname)
+                    ),
+                ));
+            }
+        };
+        let bigmat = nrow < 0 || n >= 65536;
+        names.push(mname.clone());
+        let wanted = name.is_none_or(|w| w.eq_ignore_ascii_case(&mname));
+        let value = |w: &[u8]| -> f64 {
+            if wper == 1 {
+                f32::from_bits(word(w) as u32) as f64
+            } else {
+                let a: [u8; 8] = w[..8].try_into().expect("8 bytes");
+                if little {
+                    f64::from_le_bytes(a)
+                } else {
+                    f64::from_be_bytes(a)
+                }
+            }
+        };
+        let mut entries = Vec::new();
+        loop {
+            let Some((r, o, c)) = next()? else {
+                return Err(err(
+                    hr,
+                    ho,
+                    format!(
+                        "matrix {mname} (its header here) ends without its closing record \
+                         (ICOL > NCOL): truncated"
+                    ),
+                ));
+            };
+            if c.len() < 12 || c.len() % 4 != 0 {
+                return Err(err(
+                    r,
+                    o,
+                    format!(
+                        "a column record of {} bytes: expected ICOL IROW NW and NW words",
+                        c.len()
+                    ),
+                ));
+            }
+            let (icol, irow, nw) = (word(&c[0..]), word(&c[4..]), word(&c[8..]));
+            let words = &c[12..];
+            if nw < 0 || nw as usize != words.len() / 4 {
+                return Err(err(
+                    r,
+                    o,
+                    format!(
+                        "column record {icol}: NW = {nw} words announced, the record holds {}",
+                        words.len() / 4
+                    ),
+                ));
+            }
+            if icol > ncol {
+                break;
+            }
+            if icol < 1 || irow < 0 {
+                return Err(err(
+                    r,
+                    o,
+                    format!("column record {icol} {irow} {nw}: expected ICOL 1..={ncol}, IROW ≥ 0"),
+                ));
+            }
+            let col = (icol - 1) as usize;
+            let mut put = |row0: usize, vals: &[u8], keep_zeros: bool| -> Result<()> {
+                if !vals.len().is_multiple_of(4 * wper) {
+                    return Err(err(
+                        r,
+                        o,
+                        format!(
+                            "column {icol}: {} words do not make whole values of {wper} words",
+                            vals.len() / 4
+                        ),
+                    ));
+                }
+                for (k, w) in vals.chunks_exact(4 * wper).enumerate() {
+                    let row = row0 + k;
+                    if row >= n {
+                        return Err(err(
+                            r,
+                            o,
+                            format!(
+                                "column {icol}: row {} is past the matrix's {n} rows",
+                                row + 1
+                            ),
+                        ));
+                    }
+                    let v = value(w);
+                    if !v.is_finite() {
+                        return Err(err(
+                            r,
+                            o,
+                            format!("column {icol}, row {}: value {v} is not finite", row + 1),
+                        ));
+                    }
+                    if wanted && (keep_zeros || v != 0.0) {
+                        entries.push((row, col, v, r));
+                    }
+                }
+                Ok(())
+            };
+            if irow > 0 {
+                // Dense: the zeros between the first and last nonzero rows are fill.
+                put((irow - 1) as usize, words, false)?;
+                continue;
+            }
+            let mut k = 0usize;
+            while k < words.len() {
+                let head = if bigmat { 8 } else { 4 };
+                if k + head > words.len() {
+                    return Err(err(
+                        r,
+                        o,
+                        format!("column {icol}: a string header cut off by the record's end"),
+                    ));
+                }
+                let (l, row) = if bigmat {
+                    (
+                        i64::from(word(&words[k..])) - 1,
+                        i64::from(word(&words[k + 4..])),
+                    )
+                } else {
+                    let is = i64::from(word(&words[k..]));
+                    ((is >> 16) - 1, is & 0xffff)
+                };
+                if l < 1 || row < 1 {
+                    return Err(err(
+                        r,
+                        o,
+                        format!(
+                            "column {icol}: a string of {l} words at row {row} (expected at \
+                             least one word from row 1 on)"
+                        ),
+                    ));
+                }
+                k += head;
+                let end = k
+                    .checked_add(4 * l as usize)
+                    .filter(|&e| e <= words.len())
+                    .ok_or_else(|| {
+                        err(
+                            r,
+                            o,
+                            format!(
+                                "column {icol}: a string of {l} words runs past the record's \
+                                 end"
+                            ),
+                        )
+                    })?;
+                put((row - 1) as usize, &words[k..end], true)?;
+                k = end;
+            }
+        }
+        if wanted {
+            return Ok(Op4Matrix {
+                name: mname,
+                n,
+                entries,
+                binary: false,
+            });
+        }
+    }
+    Err(Error::Usage(format!(
+        "{}: no OUTPUT4 matrix {} (matrices in the file: {})",
+        path.display(),
+        quoted(name.unwrap_or("")),
+        if names.is_empty() {
+            "none".into()
+        } else {
+            names.join(", ")
+        }
+    )))
 }
 
 /// Whether a line holds integers only (a record or string header), not values.
@@ -58,13 +387,13 @@ fn value_line(raw: &str) -> bool {
 
 /// Whether a line is a matrix header: four integers in its first 32 columns, then a name.
 fn header_line(t: &str) -> bool {
-    let head: String = t.chars().take(32).collect();
-    t.chars().count() > 32
-        && head.split_whitespace().count() >= 1
-        && head
-            .bytes()
-            .all(|b| b.is_ascii_digit() || b == b' ' || b == b'-')
-        && t.chars().skip(32).any(|c| c.is_ascii_alphabetic())
+    let b = t.as_bytes();
+    b.len() > 32
+        && b[..32].iter().any(|c| c.is_ascii_digit())
+        && b[..32]
+            .iter()
+            .all(|&c| c.is_ascii_digit() || c == b' ' || c == b'-')
+        && b[32..].iter().any(|c| c.is_ascii_alphabetic())
 }
 
 /// Values per line and field width of a Fortran format such as `1P,3E23.16` or `(5E16.9)`.
@@ -138,7 +467,7 @@ pub fn parse_op4(text: &str, path: &Path, name: Option<&str>) -> Result<Op4Matri
             )
         })?;
         let (ncol, nrow, _form, ty) = (v[0], v[1], v[2], v[3]);
-        let bigmat = nrow < 0;
+        let bigmat = !(0..65536).contains(&nrow);
         let mname: String = h
             .chars()
             .skip(32)
@@ -184,6 +513,14 @@ pub fn parse_op4(text: &str, path: &Path, name: Option<&str>) -> Result<Op4Matri
         names.push(mname.clone());
         let wanted = name.is_none_or(|w| w.eq_ignore_ascii_case(&mname));
         at += 1;
+        if !wanted {
+            // Another matrix: skipped unparsed to the next header (value lines hold a '.'
+            // in their first 32 columns, record lines are shorter, so neither looks like one).
+            while at < lines.len() && !header_line(lines[at]) {
+                at += 1;
+            }
+            continue;
+        }
         let mut entries = Vec::new();
         // Values of the value lines from `at` on, until an integer line or the end.
         let values = |at: &mut usize| -> Result<Vec<(f64, usize)>> {
@@ -201,14 +538,9 @@ pub fn parse_op4(text: &str, path: &Path, name: Option<&str>) -> Result<Op4Matri
                     if f.is_empty() {
                         continue;
                     }
-                    let v: f64 = f
-                        .replace(['D', 'd'], "E")
-                        .parse()
-                        .ok()
-                        .filter(|v: &f64| v.is_finite())
-                        .ok_or_else(|| {
-                            err(ln, format!("value {} is not a finite number", quoted(f)))
-                        })?;
+                    let v: f64 = crate::formats::fe_matrices::nastran_real(f).ok_or_else(|| {
+                        err(ln, format!("value {} is not a finite number", quoted(f)))
+                    })?;
                     out.push((v, ln));
                 }
                 if l.trim().len() > per_line * width {
@@ -322,6 +654,7 @@ pub fn parse_op4(text: &str, path: &Path, name: Option<&str>) -> Result<Op4Matri
                 name: mname,
                 n,
                 entries,
+                binary: true,
             });
         }
     }
@@ -335,6 +668,178 @@ pub fn parse_op4(text: &str, path: &Path, name: Option<&str>) -> Result<Op4Matri
             names.join(", ")
         }
     )))
+}
+
+/// How [`to_op4`] writes an OUTPUT4 file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Op4Layout {
+    /// ASCII, values as `1P,3E25.16` (17 significant digits: every value to the bit).
+    Ascii,
+    /// Binary, little-endian (x86, ARM).
+    BinaryLittleEndian,
+    /// Binary, big-endian (older Unix workstations).
+    BinaryBigEndian,
+}
+
+impl Op4Layout {
+    /// The layout of a name: `ascii`, `binary` (little-endian), `binary-le`, `binary-be`.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s.to_ascii_lowercase().as_str() {
+            "ascii" | "text" => Some(Op4Layout::Ascii),
+            "binary" | "binary-le" | "little-endian" => Some(Op4Layout::BinaryLittleEndian),
+            "binary-be" | "big-endian" => Some(Op4Layout::BinaryBigEndian),
+            _ => None,
+        }
+    }
+}
+
+/// A value in a Fortran `E25.16` field: 17 significant digits and a signed exponent of at
+/// least two digits (`-1.2345678901234567E+308`).
+fn fortran_e(v: f64) -> String {
+    let s = format!("{v:.16E}");
+    let (mantissa, exp) = s.split_once('E').unwrap_or((&s, "0"));
+    let e: i32 = exp.parse().unwrap_or(0);
+    let sign = if e < 0 { '-' } else { '+' };
+    format!(
+        "{:>25}",
+        format!("{mantissa}E{sign}{:02}", e.unsigned_abs())
+    )
+}
+
+/// The runs of consecutive rows of a column's sorted row indices: (first index, count).
+fn runs(rows: &[usize]) -> Vec<(usize, usize)> {
+    let mut out: Vec<(usize, usize)> = Vec::new();
+    for (k, &r) in rows.iter().enumerate() {
+        match out.last_mut() {
+            Some((s, c)) if rows[*s] + *c == r => *c += 1,
+            _ => out.push((k, 1)),
+        }
+    }
+    out
+}
+
+/// The symmetric matrices `matrices` (name, matrix; names of up to 8 characters) as one
+/// OUTPUT4 file: square symmetric form (6), real double precision (type 2), both triangles
+/// stored in sparse strings of consecutive rows (bigmat with `NROW < 0` from 65 536 rows on),
+/// as Nastran writes `OUTPUT4 ... /-1/-2` (binary) or `/-1/2` (ASCII). The upper triangle is
+/// the lower one mirrored, so the file is symmetric to the bit and equals the lower triangle
+/// that `nlsim export` writes to Matrix Market.
+pub fn to_op4(matrices: &[(&str, &SparseSym)], layout: Op4Layout) -> Vec<u8> {
+    use std::fmt::Write as _;
+    let little = layout == Op4Layout::BinaryLittleEndian;
+    let mut out: Vec<u8> = Vec::new();
+    let int = |x: i32| -> [u8; 4] {
+        if little {
+            x.to_le_bytes()
+        } else {
+            x.to_be_bytes()
+        }
+    };
+    let real = |x: f64| -> [u8; 8] {
+        if little {
+            x.to_le_bytes()
+        } else {
+            x.to_be_bytes()
+        }
+    };
+    // One binary record: its length, the payload, its length again.
+    let record = |out: &mut Vec<u8>, payload: &[u8]| {
+        let len = int(payload.len() as i32);
+        out.extend_from_slice(&len);
+        out.extend_from_slice(payload);
+        out.extend_from_slice(&len);
+    };
+    for &(name, a) in matrices {
+        let n = a.n();
+        // Bigmat from 65 536 rows on, or when a string is too long for the one-word header.
+        let longest = (0..n)
+            .flat_map(|j| runs(a.col(j).0))
+            .map(|(_, c)| c)
+            .max()
+            .unwrap_or(0);
+        let bigmat = n >= 65536 || ((2 * longest + 1) << 16) + n > i32::MAX as usize;
+        let nrow = if bigmat { -(n as i32) } else { n as i32 };
+        let name8 = format!("{:<8}", name.chars().take(8).collect::<String>());
+        if layout == Op4Layout::Ascii {
+            let mut t = String::new();
+            let _ = writeln!(t, "{n:8}{nrow:8}{:8}{:8}{name8}1P,3E25.16", 6, 2);
+            out.extend_from_slice(t.as_bytes());
+        } else {
+            let mut h = Vec::with_capacity(24);
+            for x in [n as i32, nrow, 6, 2] {
+                h.extend_from_slice(&int(x));
+            }
+            h.extend_from_slice(name8.as_bytes());
+            record(&mut out, &h);
+        }
+        for j in 0..n {
+            let (rows, stored) = a.col(j);
+            if rows.is_empty() {
+                continue;
+            }
+            let vals: Vec<f64> = rows
+                .iter()
+                .zip(stored)
+                .map(|(&i, &v)| if i < j { a.get(j, i) } else { v })
+                .collect();
+            let strings = runs(rows);
+            let head = if bigmat { 2 } else { 1 };
+            let nw: usize = strings.iter().map(|&(_, c)| head + 2 * c).sum();
+            if layout == Op4Layout::Ascii {
+                let mut t = String::new();
+                let _ = writeln!(t, "{:8}{:8}{nw:8}", j + 1, 0);
+                for &(s, c) in &strings {
+                    let (row, l) = (rows[s] + 1, 2 * c);
+                    if bigmat {
+                        let _ = writeln!(t, "{:8}{row:8}", l + 1);
+                    } else {
+                        let _ = writeln!(t, "{:8}", row + ((l + 1) << 16));
+                    }
+                    for chunk in vals[s..s + c].chunks(3) {
+                        for &v in chunk {
+                            t.push_str(&fortran_e(v));
+                        }
+                        t.push('\n');
+                    }
+                }
+                out.extend_from_slice(t.as_bytes());
+            } else {
+                let mut p = Vec::with_capacity(12 + 4 * nw);
+                for x in [(j + 1) as i32, 0, nw as i32] {
+                    p.extend_from_slice(&int(x));
+                }
+                for &(s, c) in &strings {
+                    let (row, l) = (rows[s] + 1, 2 * c);
+                    if bigmat {
+                        p.extend_from_slice(&int(l as i32 + 1));
+                        p.extend_from_slice(&int(row as i32));
+                    } else {
+                        p.extend_from_slice(&int((row + ((l + 1) << 16)) as i32));
+                    }
+                    for &v in &vals[s..s + c] {
+                        p.extend_from_slice(&real(v));
+                    }
+                }
+                record(&mut out, &p);
+            }
+        }
+        // The closing record: column NCOL + 1 with one value.
+        if layout == Op4Layout::Ascii {
+            let mut t = String::new();
+            let _ = writeln!(t, "{:8}{:8}{:8}", n + 1, 1, 2);
+            t.push_str(&fortran_e(1.0));
+            t.push('\n');
+            out.extend_from_slice(t.as_bytes());
+        } else {
+            let mut p = Vec::with_capacity(20);
+            for x in [n as i32 + 1, 1, 2] {
+                p.extend_from_slice(&int(x));
+            }
+            p.extend_from_slice(&real(1.0));
+            record(&mut out, &p);
+        }
+    }
+    out
 }
 
 #[cfg(test)]
@@ -427,5 +932,139 @@ mod tests {
             e.contains("no OUTPUT4 matrix 'MAAX' (matrices in the file: KAAX)"),
             "{e}"
         );
+    }
+
+    fn sample() -> SparseSym {
+        // A 5 × 5 symmetric matrix with gaps in its columns (several strings per column).
+        let lower = [
+            (0, 0, 4.0),
+            (1, 0, -1.25e-300),
+            (3, 0, 0.1),
+            (1, 1, 1.0 / 3.0),
+            (4, 1, -7.5e250),
+            (2, 2, 2.0),
+            (3, 2, -1.0),
+            (4, 2, 3.0),
+            (3, 3, 5.0),
+            (4, 4, 6.0),
+        ];
+        SparseSym::from_lower_triplets("A", 5, &lower).unwrap()
+    }
+
+    fn both(a: &SparseSym) -> Vec<(usize, usize, u64)> {
+        let mut v: Vec<_> = a.entries().map(|(i, j, x)| (i, j, x.to_bits())).collect();
+        v.sort();
+        v
+    }
+
+    fn read_back(bytes: &[u8], name: &str) -> Vec<(usize, usize, u64)> {
+        let p = Path::new("a.op4");
+        let m = if binary_order(bytes).is_some() {
+            parse_op4_binary(bytes, p, Some(name)).unwrap()
+        } else {
+            parse_op4(std::str::from_utf8(bytes).unwrap(), p, Some(name)).unwrap()
+        };
+        let mut v: Vec<_> = m
+            .entries
+            .iter()
+            .map(|e| (e.0, e.1, e.2.to_bits()))
+            .collect();
+        v.sort();
+        v
+    }
+
+    #[test]
+    fn written_files_read_back_to_the_bit_in_every_layout() {
+        let a = sample();
+        let b = a.scaled(-2.0);
+        for layout in [
+            Op4Layout::Ascii,
+            Op4Layout::BinaryLittleEndian,
+            Op4Layout::BinaryBigEndian,
+        ] {
+            let bytes = to_op4(&[("KAAX", &a), ("MAAX", &b)], layout);
+            assert_eq!(read_back(&bytes, "KAAX"), both(&a), "{layout:?}");
+            assert_eq!(read_back(&bytes, "maax"), both(&b), "{layout:?}");
+        }
+        // Bigmat from 65 536 rows on: a diagonal with one coupling at the far end.
+        let n = 65_540;
+        let mut lower: Vec<(usize, usize, f64)> = (0..n).map(|i| (i, i, 1.0 + i as f64)).collect();
+        lower.push((n - 1, 0, 0.5));
+        let big = SparseSym::from_lower_triplets("B", n, &lower).unwrap();
+        for layout in [Op4Layout::Ascii, Op4Layout::BinaryBigEndian] {
+            let bytes = to_op4(&[("KAAX", &big)], layout);
+            assert_eq!(read_back(&bytes, "KAAX"), both(&big), "{layout:?}");
+        }
+    }
+
+    #[test]
+    fn single_precision_and_dense_binary_columns() {
+        // A hand-made little-endian single-precision file, dense columns (fill zero dropped).
+        let mut f = Vec::new();
+        let rec = |f: &mut Vec<u8>, words: &[[u8; 4]]| {
+            let len = (4 * words.len() as u32).to_le_bytes();
+            f.extend_from_slice(&len);
+            for w in words {
+                f.extend_from_slice(w);
+            }
+            f.extend_from_slice(&len);
+        };
+        let i = |x: i32| x.to_le_bytes();
+        let r = |x: f32| x.to_le_bytes();
+        rec(&mut f, &[i(2), i(2), i(6), i(1), *b"K   ", *b"    "]);
+        rec(&mut f, &[i(1), i(1), i(2), r(2.5), r(0.0)]);
+        rec(&mut f, &[i(2), i(2), i(1), r(0.75)]);
+        rec(&mut f, &[i(3), i(1), i(1), r(1.0)]);
+        let m = parse_op4_binary(&f, Path::new("k.op4"), None).unwrap();
+        assert_eq!(m.name, "K");
+        let got: Vec<_> = m.entries.iter().map(|e| (e.0, e.1, e.2, e.3)).collect();
+        assert_eq!(got, vec![(0, 0, 2.5, 2), (1, 1, 0.75, 3)]);
+    }
+
+    #[test]
+    fn bad_binary_files_name_the_record() {
+        let a = sample();
+        let good = to_op4(&[("KAAX", &a)], Op4Layout::BinaryLittleEndian);
+        let p = Path::new("k.op4");
+        let e = |b: &[u8]| parse_op4_binary(b, p, None).unwrap_err().to_string();
+        // Truncated inside the third record.
+        let cut = &good[..good.len() - 30];
+        assert!(e(cut).contains("truncated"), "{}", e(cut));
+        // The header's closing length changed.
+        let mut b = good.clone();
+        b[28] = 99;
+        assert!(
+            e(&b).contains("record 1 (byte 0): the record's closing length"),
+            "{}",
+            e(&b)
+        );
+        // NW of the first column record one word too many.
+        let mut b = good.clone();
+        let nw = i32::from_le_bytes(b[44..48].try_into().unwrap());
+        b[44..48].copy_from_slice(&(nw + 1).to_le_bytes());
+        assert!(
+            e(&b).contains("record 2 (byte 32): column record 1: NW"),
+            "{}",
+            e(&b)
+        );
+        // A string header pointing past the last row (row 1 → 9).
+        let mut b = good.clone();
+        let is = i32::from_le_bytes(b[48..52].try_into().unwrap());
+        b[48..52].copy_from_slice(&(is + 8).to_le_bytes());
+        assert!(
+            e(&b).contains("row 9 is past the matrix's 5 rows"),
+            "{}",
+            e(&b)
+        );
+        // A size of 2·10⁹ rows.
+        let mut b = good.clone();
+        b[4..8].copy_from_slice(&2_000_000_000i32.to_le_bytes());
+        b[8..12].copy_from_slice(&2_000_000_000i32.to_le_bytes());
+        assert!(e(&b).contains("declares 2000000000 rows"), "{}", e(&b));
+        // The 64-bit-word header.
+        let mut b = vec![48, 0, 0, 0];
+        b.extend_from_slice(&[0; 48]);
+        b.extend_from_slice(&[48, 0, 0, 0]);
+        assert!(e(&b).contains("64-bit words"), "{}", e(&b));
     }
 }
