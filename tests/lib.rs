@@ -3022,6 +3022,11 @@ mod test_data_hdf5 {
         ]);
         assert_eq!(rc, 0, "{out}{err}");
         assert!(out.contains("converged in"), "{out}");
+        // One parameter is one parameter (issue 48: "calibrating 1 parameters").
+        assert!(
+            out.contains("calibrating 1 parameter of 'ecl_beam'"),
+            "{out}"
+        );
 
         // A response of the wrong shape.
         let bad = dir.join("bad.h5");
@@ -4767,7 +4772,10 @@ mod hardening {
                 with(&["batch"], &[&folds]),
                 "folds: calibration folds: 1000000000000",
             ),
-            (with(&["batch"], &[&few]), "folds must be 0 (none) or 2..=5"),
+            (
+                with(&["batch"], &[&few]),
+                "give 0 (no cross-validation) or 2 to 5 (the data points)",
+            ),
             (
                 with(
                     &["calibrate", grouped],
@@ -6891,6 +6899,84 @@ mod fe_formats_keys {
         assert!(
             e.contains("t.toml:3: matrices.format: unknown matrix format 'op2'"),
             "{e}"
+        );
+    }
+}
+
+/// Issue 48's smaller defects: each message as a reader needs it.
+mod wording {
+    use super::*;
+
+    #[test]
+    fn typos_counts_and_the_model_summary() {
+        let dir = scratch("wording");
+        // A typo'd key is named beside the key it misses.
+        let typo = dir.join("k33.toml");
+        std::fs::write(
+            &typo,
+            "name = \"k33\"\n[matrices]\nmass = [[1.0]]\nstiffness = [[100.0]]\n\
+             [[element]]\nname = \"s\"\ntype = \"cubic\"\ndof = \"1:u\"\nk33 = 1e6\n",
+        )
+        .unwrap();
+        let (rc, _, err) = nlsim(&["check", typo.to_str().unwrap()]);
+        assert_eq!(rc, 1, "{err}");
+        assert!(
+            err.contains(
+                "missing: k3 in N/m^3 (the table has 'k33', which is not a key here: a \
+                          typo of 'k3'?)"
+            ),
+            "{err}"
+        );
+        // A count of 0 is a usage error (exit 2), as `frf --harmonics 0` is.
+        let (rc, _, err) = nlsim(&["modes", "ecl_beam", "--count", "0"]);
+        assert_eq!(rc, 2, "{err}");
+        assert!(err.contains("give 1 or more"), "{err}");
+        // `check` shows force harmonics, groups and springs.
+        let h = dir.join("harm.toml");
+        std::fs::write(
+            &h,
+            "name = \"harm\"\n[matrices]\nmass = [[1.0, 0.0], [0.0, 1.0]]\n\
+             stiffness = [[200.0, -100.0], [-100.0, 100.0]]\n\
+             [[excitation]]\nname = \"drive\"\ndof = \"2:u\"\namplitude = 1.0\n\
+             [[excitation.harmonic]]\norder = 3\namplitude = 0.25\nphase = 90\n\
+             [[excitation.harmonic]]\norder = \"1/2\"\namplitude = 0.5\n",
+        )
+        .unwrap();
+        let (rc, out, err) = nlsim(&["check", h.to_str().unwrap()]);
+        assert_eq!(rc, 0, "{err}");
+        assert!(
+            out.contains(
+                "drive at 2:u, 1 N + 0.25 N at 3Ω (phase 90.0°) + 0.5 N at Ω/2 (phase 0.0°)"
+            ),
+            "{out}"
+        );
+        let g = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/models/grouped_chain6.toml");
+        let (rc, out, err) = nlsim(&["check", g.to_str().unwrap()]);
+        assert_eq!(rc, 0, "{err}");
+        assert!(
+            out.contains("  groups       root: K_g 4 stored entries\n"),
+            "{out}"
+        );
+        assert!(
+            out.contains("               tip: M_g 2 stored entries\n"),
+            "{out}"
+        );
+        assert!(out.contains("  springs      6:ux 5.0000e2 N/m\n"), "{out}");
+        // Settings files say which kind of number they want, not Rust's type name.
+        let cal = dir.join("cal.toml");
+        std::fs::write(
+            &cal,
+            "model = \"ecl_beam\"\ndata = \"x.csv\"\nharmonics = 2.5\n",
+        )
+        .unwrap();
+        let (rc, _, err) = nlsim(&["calibrate", "--config", cal.to_str().unwrap()]);
+        assert_ne!(rc, 0);
+        assert!(
+            err.contains(
+                "cal.toml:3: toml: invalid type: floating point `2.5`, expected a whole \
+                          number (0 or more)"
+            ),
+            "{err}"
         );
     }
 }

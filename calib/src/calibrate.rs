@@ -108,10 +108,19 @@ impl CalibrationConfig {
         if self.folds == 1 || self.folds > n_points {
             return Err(Error::invalid(
                 "calibration settings",
-                format!(
-                    "folds must be 0 (none) or 2..={n_points} (the data points), not {}",
-                    self.folds
-                ),
+                if n_points < 2 {
+                    format!(
+                        "folds = {}: cross-validation needs at least 2 data points and the data \
+                         has {n_points}; set folds = 0",
+                        self.folds
+                    )
+                } else {
+                    format!(
+                        "folds = {}: give 0 (no cross-validation) or 2 to {n_points} (the data \
+                         points)",
+                        self.folds
+                    )
+                },
             ));
         }
         Ok(())

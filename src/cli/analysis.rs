@@ -31,6 +31,15 @@ pub struct ExportArgs {
     op4: Option<crate::formats::op4::Op4Layout>,
 }
 
+/// A count of 1 or more (a usage error otherwise, exit code 2 as clap's own).
+fn at_least_one(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(0) => Err("give 1 or more".into()),
+        Ok(n) => Ok(n),
+        Err(_) => Err(format!("'{s}' is not a whole number")),
+    }
+}
+
 fn parse_op4_layout(s: &str) -> Result<crate::formats::op4::Op4Layout, String> {
     crate::formats::op4::Op4Layout::parse(s)
         .ok_or_else(|| format!("unknown OUTPUT4 layout '{s}': use ascii, binary or binary-be"))
@@ -42,7 +51,7 @@ pub struct ModesArgs {
     /// Model file (.toml) or built-in model, e.g. `bracket:dofs=100000`.
     model: String,
     /// Number of lowest modes (default 10, or every mode of a smaller model).
-    #[arg(long, conflicts_with = "fmax")]
+    #[arg(long, conflicts_with = "fmax", value_parser = at_least_one)]
     count: Option<usize>,
     /// Every mode below this frequency (Hz) instead of a count.
     #[arg(long)]

@@ -120,9 +120,27 @@ impl<'a, 'i> Tab<'a, 'i> {
     fn err(&self, v: Val<'_, '_>, k: &str, msg: impl Into<String>) -> Error {
         self.doc.err(v.span(), &self.key(k), msg)
     }
+    /// A required key `k` is missing; a key of the table that is not one and lies within two
+    /// edits of `k` is named as the likely typo.
     fn missing(&self, k: &str, what: &str) -> Error {
-        self.doc
-            .err(self.span.clone(), &self.key(k), format!("missing: {what}"))
+        let typo = self
+            .t
+            .iter()
+            .map(|(key, _)| key.get_ref().to_string())
+            .find(|key| {
+                !self.used.iter().any(|u| u == key) && key != k && edit_distance(key, k) <= 2
+            });
+        let hint = typo.map_or_else(String::new, |t| {
+            format!(
+                " (the table has '{}', which is not a key here: a typo of '{k}'?)",
+                crate::formats::files::quoted(&t).trim_matches('\'')
+            )
+        });
+        self.doc.err(
+            self.span.clone(),
+            &self.key(k),
+            format!("missing: {what}{hint}"),
+        )
     }
     fn str(&mut self, k: &str) -> Result<Option<(String, Range<usize>)>> {
         match self.get(k) {
@@ -210,6 +228,23 @@ impl<'a, 'i> Tab<'a, 'i> {
         }
         Ok(())
     }
+}
+
+/// The Levenshtein distance between two short keys (characters inserted, deleted or
+/// replaced).
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut prev: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut cur = vec![i + 1; b.len() + 1];
+        for (j, &cb) in b.iter().enumerate() {
+            cur[j + 1] = (prev[j] + usize::from(ca != cb))
+                .min(prev[j + 1] + 1)
+                .min(cur[j] + 1);
+        }
+        prev = cur;
+    }
+    prev[b.len()]
 }
 
 fn number(v: &Spanned<DeValue<'_>>) -> Option<f64> {

@@ -32,7 +32,7 @@ impl<'a> SettingsFile<'a> {
                 .span()
                 .map_or(1, |s| crate::formats::files::line_of(text, s.start)),
             key: toml_key(e.message()),
-            message: e.message().to_string(),
+            message: plain_types(e.message()),
         })
     }
 
@@ -80,4 +80,46 @@ pub fn line_of_key(text: &str, key: &str) -> usize {
                 || l.starts_with(&format!("[[{key}]]"))
         })
         .map_or(1, |i| i + 1)
+}
+
+/// A deserializer's message with Rust's type names in words: `expected usize` becomes
+/// `expected a whole number (0 or more)`, `expected f64` `expected a number`.
+pub fn plain_types(message: &str) -> String {
+    let mut m = message.to_string();
+    for (rust, words) in [
+        ("expected usize", "expected a whole number (0 or more)"),
+        ("expected u64", "expected a whole number (0 or more)"),
+        ("expected u32", "expected a whole number (0 or more)"),
+        ("expected u16", "expected a whole number (0 or more)"),
+        ("expected u8", "expected a whole number (0 or more)"),
+        ("expected i64", "expected a whole number"),
+        ("expected i32", "expected a whole number"),
+        ("expected f64", "expected a number"),
+        ("expected f32", "expected a number"),
+        ("expected a boolean", "expected true or false"),
+    ] {
+        if let Some(at) = m.find(rust) {
+            let end = at + rust.len();
+            // Whole words only (`expected u8` is not `expected u80`).
+            if !m[end..].starts_with(|c: char| c.is_ascii_alphanumeric()) {
+                m.replace_range(at..end, words);
+            }
+        }
+    }
+    m
+}
+
+#[cfg(test)]
+mod plain_type_tests {
+    #[test]
+    fn rust_type_names_become_words() {
+        assert_eq!(
+            super::plain_types("invalid type: floating point `2.5`, expected usize"),
+            "invalid type: floating point `2.5`, expected a whole number (0 or more)"
+        );
+        assert_eq!(
+            super::plain_types("invalid type: string \"x\", expected f64"),
+            "invalid type: string \"x\", expected a number"
+        );
+    }
 }

@@ -118,13 +118,50 @@ pub fn model_summary(model: &Model, source: &str, validation: Option<&Validation
         } else {
             "               "
         };
+        let more: String = x
+            .harmonics
+            .iter()
+            .map(|h| {
+                let at = match (h.numerator, h.denominator) {
+                    (1, 1) => "Ω".to_string(),
+                    (p, 1) => format!("{p}Ω"),
+                    (1, q) => format!("Ω/{q}"),
+                    (p, q) => format!("{p}Ω/{q}"),
+                };
+                format!(
+                    " + {} N at {at} (phase {:.1}°)",
+                    h.amplitude,
+                    h.phase.to_degrees()
+                )
+            })
+            .collect();
         let _ = writeln!(
             s,
-            "{head}{} at {}, {} N",
+            "{head}{} at {}, {} N{more}",
             x.name,
             dofs.describe(x.dof),
             x.amplitude
         );
+    }
+    for (i, g) in model.groups().iter().enumerate() {
+        let head = if i == 0 {
+            "  groups       "
+        } else {
+            "               "
+        };
+        let parts: Vec<String> = [("K_g", g.stiffness()), ("M_g", g.mass())]
+            .into_iter()
+            .filter_map(|(w, m)| m.map(|m| format!("{w} {} stored entries", m.nnz())))
+            .collect();
+        let _ = writeln!(s, "{head}{}: {}", g.name(), parts.join(", "));
+    }
+    if !model.boundary_springs().is_empty() {
+        let springs: Vec<String> = model
+            .boundary_springs()
+            .iter()
+            .map(|&(d, k)| format!("{} {k:.4e} N/m", dofs.describe(d)))
+            .collect();
+        let _ = writeln!(s, "  springs      {}", springs.join(", "));
     }
     let sensors: Vec<String> = model
         .sensors()
@@ -173,4 +210,24 @@ pub fn model_summary(model: &Model, source: &str, validation: Option<&Validation
         );
     }
     s
+}
+
+/// `n` and a noun, singular for one: `counted(1, "parameter")` is `1 parameter`,
+/// `counted(3, "parameter")` is `3 parameters` (nouns taking `-s`).
+pub fn counted(n: usize, noun: &str) -> String {
+    if n == 1 {
+        format!("1 {noun}")
+    } else {
+        format!("{n} {noun}s")
+    }
+}
+
+#[cfg(test)]
+mod counted_tests {
+    #[test]
+    fn one_is_singular() {
+        assert_eq!(super::counted(1, "parameter"), "1 parameter");
+        assert_eq!(super::counted(0, "fold"), "0 folds");
+        assert_eq!(super::counted(12, "step"), "12 steps");
+    }
 }

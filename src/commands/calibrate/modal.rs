@@ -91,9 +91,9 @@ impl ModalRun {
         let with_shape = d.modes.iter().filter(|m| m.shape.is_some()).count();
         let mut v = vec![
             format!(
-                "calibrating {} FE-level parameters of '{}' on {} ({} modes, {with_shape} with \
+                "calibrating {} of '{}' on {} ({} modes, {with_shape} with \
                  shapes at {} DOFs; pairing among {} computed modes); setup {:.2} s",
-                c.params.len(),
+                crate::present::summary::counted(c.params.len(), "FE-level parameter"),
                 self.model_name,
                 self.request.data.display(),
                 d.modes.len(),

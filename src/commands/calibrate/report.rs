@@ -6,6 +6,7 @@ use crate::error::{Error, Result};
 use crate::present::plot::BarGroup;
 use crate::present::plot::Bars;
 use crate::present::plot::Lines;
+use crate::present::summary::counted;
 use nlsim_calib::{Candidate, ParamSpec, StartRun};
 use nlsim_kernel::Param;
 use std::fmt::Write as _;
@@ -21,14 +22,13 @@ impl CalibrationRun {
         let best = &c.runs[0].report;
         let mut v = vec![
             format!(
-                "calibrating {} parameters of '{}' on {} ({} sweeps, {} steps, {} channels); \
-                 reduction {:.2} s",
-                c.params.len(),
+                "calibrating {} of '{}' on {} ({}, {}, {}); reduction {:.2} s",
+                counted(c.params.len(), "parameter"),
                 self.prepared.model_name,
                 self.request.data.display(),
-                d.sweeps.len(),
-                d.n_points(),
-                d.channels.len(),
+                counted(d.sweeps.len(), "sweep"),
+                counted(d.n_points(), "step"),
+                counted(d.channels.len(), "channel"),
                 self.prepared.seconds
             ),
             format!(

@@ -186,13 +186,13 @@ pub(crate) fn demo_frf(
         if v.is_empty() {
             "none".into()
         } else {
-            v.join(", ")
+            format!("at {}", v.join(", "))
         }
     };
     say(&format!(
         "[4/8] multi-harmonic FRFs {lo:.2}–{hi:.2} Hz, H = 7 ({} unknowns): continuation {} points \
-         in {:.2} s with Hill stability ({} unstable), folds at {}; stepped sines of {n} points \
-         in {:.3} s: up jumps at {}, down at {}",
+         in {:.2} s with Hill stability ({} unstable), folds: {}; stepped sines of {n} points \
+         in {:.3} s: up jumps: {}, down jumps: {}",
         sys.n_unknowns(),
         cont.points.len(),
         t_cont,
