@@ -9,7 +9,7 @@
 //! times (default 3) each, interleaved, and prints the best time and its ratio to Matrix
 //! Market's. The files go to `target/readers-bench` and are removed at the end.
 
-use nlsim::formats::op4::{Op4Layout, to_op4};
+use nlsim::formats::op4_write::{Op4Layout, to_op4};
 use nlsim::kernel::{Component, DofLabel, SparseSym};
 use std::fmt::Write as _;
 use std::path::Path;

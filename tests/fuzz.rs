@@ -851,7 +851,7 @@ fn fuzz_inner() {
     };
     panics.extend(survive("dmig", 10000 * scale(), |_| {
         let text = mutate(rng.pick(&dmig).clone().as_str(), &mut rng);
-        match nlsim::formats::fe_matrices::parse_dmig(&text, Path::new("k.pch"), "KAAX") {
+        match nlsim::formats::dmig::parse_dmig(&text, Path::new("k.pch"), "KAAX") {
             Ok(m) => fe_place(m),
             Err(e) => Some(e.to_string()),
         }
@@ -860,7 +860,7 @@ fn fuzz_inner() {
         [std::fs::read_to_string(root().join("examples/models/spring_mass_K.abq.mtx")).unwrap()];
     panics.extend(survive("abaqus mtx", 10000 * scale(), |_| {
         let text = mutate(rng.pick(&abaqus).clone().as_str(), &mut rng);
-        match nlsim::formats::fe_matrices::parse_abaqus(&text, Path::new("k.mtx")) {
+        match nlsim::formats::abaqus::parse_abaqus(&text, Path::new("k.mtx")) {
             Ok(m) => fe_place(m),
             Err(e) => Some(e.to_string()),
         }
@@ -896,13 +896,14 @@ fn fuzz_inner() {
     .model;
     let beam = nlsim::load_model("ecl_beam").unwrap().model;
     let op4_bin: Vec<Vec<u8>> = [
-        nlsim::formats::op4::Op4Layout::BinaryLittleEndian,
-        nlsim::formats::op4::Op4Layout::BinaryBigEndian,
+        nlsim::formats::op4_write::Op4Layout::BinaryLittleEndian,
+        nlsim::formats::op4_write::Op4Layout::BinaryBigEndian,
     ]
     .into_iter()
     .flat_map(|l| {
-        [&sm, &beam]
-            .map(|m| nlsim::formats::op4::to_op4(&[("KAAX", m.stiffness()), ("MAAX", m.mass())], l))
+        [&sm, &beam].map(|m| {
+            nlsim::formats::op4_write::to_op4(&[("KAAX", m.stiffness()), ("MAAX", m.mass())], l)
+        })
     })
     .collect();
     panics.extend(survive("op4 binary", 10000 * scale(), |_| {
@@ -962,7 +963,7 @@ fn fuzz_inner() {
     ];
     panics.extend(survive("harwell-boeing", 10000 * scale(), |_| {
         let text = mutate(rng.pick(&hb).clone().as_str(), &mut rng);
-        match nlsim::formats::fe_matrices::parse_harwell_boeing(&text, Path::new("k.rsa")) {
+        match nlsim::formats::harwell_boeing::parse_harwell_boeing(&text, Path::new("k.rsa")) {
             Ok(m) => nlsim::formats::fe_matrices::symmetric_from_entries(
                 Path::new("k.rsa"),
                 "K",
@@ -979,7 +980,7 @@ fn fuzz_inner() {
         [std::fs::read_to_string(root().join("examples/models/spring_mass_K.mapping")).unwrap()];
     panics.extend(survive("hb mapping", 10000 * scale(), |_| {
         let text = mutate(rng.pick(&mapping).clone().as_str(), &mut rng);
-        match nlsim::formats::fe_matrices::parse_mapping(&text, Path::new("k.mapping")) {
+        match nlsim::formats::harwell_boeing::parse_mapping(&text, Path::new("k.mapping")) {
             Ok(labels) => nlsim::kernel::DofMap::new(labels)
                 .err()
                 .map(|e| e.to_string()),

@@ -28,7 +28,7 @@ pub struct ExportArgs {
     /// Also write K and M as Nastran OUTPUT4 `matrices.op4` (KAAX and MAAX, rows in the order
     /// of dofs.txt): `ascii`, `binary` (little-endian) or `binary-be` (big-endian).
     #[arg(long, value_name = "LAYOUT", value_parser = parse_op4_layout)]
-    op4: Option<crate::formats::op4::Op4Layout>,
+    op4: Option<crate::formats::op4_write::Op4Layout>,
 }
 
 /// A count of 1 or more (a usage error otherwise, exit code 2 as clap's own).
@@ -40,8 +40,8 @@ fn at_least_one(s: &str) -> Result<usize, String> {
     }
 }
 
-fn parse_op4_layout(s: &str) -> Result<crate::formats::op4::Op4Layout, String> {
-    crate::formats::op4::Op4Layout::parse(s)
+fn parse_op4_layout(s: &str) -> Result<crate::formats::op4_write::Op4Layout, String> {
+    crate::formats::op4_write::Op4Layout::parse(s)
         .ok_or_else(|| format!("unknown OUTPUT4 layout '{s}': use ascii, binary or binary-be"))
 }
 

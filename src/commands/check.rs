@@ -38,7 +38,7 @@ pub fn fixtures(console: &Console) {
 pub fn export(
     spec: &str,
     dir: &Path,
-    op4: Option<crate::formats::op4::Op4Layout>,
+    op4: Option<crate::formats::op4_write::Op4Layout>,
     console: &Console,
 ) -> Result<()> {
     let loaded = crate::load_model(spec)?;
@@ -65,8 +65,10 @@ pub fn export(
     }
     let mut wrote = "K.mtx, M.mtx, dofs.txt".to_string();
     if let Some(layout) = op4 {
-        let bytes =
-            crate::formats::op4::to_op4(&[("KAAX", m.stiffness()), ("MAAX", m.mass())], layout);
+        let bytes = crate::formats::op4_write::to_op4(
+            &[("KAAX", m.stiffness()), ("MAAX", m.mass())],
+            layout,
+        );
         crate::formats::files::write_bytes_atomically(&dir.join("matrices.op4"), &bytes)?;
         wrote.push_str(", matrices.op4");
     }

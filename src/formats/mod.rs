@@ -25,17 +25,22 @@
 //! | [`candidates`] | the candidates file of a merged calibration batch |
 //! | [`files`] | atomic writes, bounded reads, provenance attributes, one-line messages |
 
+pub mod abaqus;
 pub mod cache;
 pub mod candidates;
+pub mod dmig;
 pub mod fe_matrices;
+pub mod fe_read;
 pub mod files;
 pub mod frf_file;
+pub mod harwell_boeing;
 pub mod history_file;
 pub mod matrices;
 pub mod modal_data;
 pub mod model_file;
 pub mod modes_file;
 pub mod op4;
+pub mod op4_write;
 pub mod settings;
 pub mod test_data;
 pub mod uff;

@@ -607,7 +607,7 @@ fn fe_matrix(
         return Ok(None);
     };
     let default = if key == "mass" { "MAAX" } else { "KAAX" };
-    let m = fe::read(&path, format, Some(name.unwrap_or(default)))?;
+    let m = crate::formats::fe_read::read(&path, format, Some(name.unwrap_or(default)))?;
     Ok(Some(m))
 }
 
