@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 /// Largest FE matrix file read (bytes): 16 GiB, a 10⁶-DOF model's stiffness with room.
 pub const MAX_FE_FILE_BYTES: u64 = 16 << 30;
 
-/// The FE-code formats [`read`] takes (`format =` in a model file's `[matrices]`).
+/// The FE-code formats [`crate::formats::fe_read::read`] takes (`format =` in a model file's `[matrices]`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FeFormat {
     /// Nastran DMIG entries (punch or bulk data).
