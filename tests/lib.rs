@@ -6962,6 +6962,15 @@ mod wording {
             "{out}"
         );
         assert!(out.contains("  springs      6:ux 5.0000e2 N/m\n"), "{out}");
+        // The demo does not write into a folder that is not an nlsim report.
+        let foreign = dir.join("thesis");
+        std::fs::create_dir_all(&foreign).unwrap();
+        std::fs::write(foreign.join("chapter1.tex"), "keep me").unwrap();
+        let (rc, _, err) = nlsim(&["demo", "--report", foreign.to_str().unwrap()]);
+        assert_eq!(rc, 2, "{err}");
+        assert!(err.contains("holds files and no nlsim report"), "{err}");
+        let left: Vec<_> = std::fs::read_dir(&foreign).unwrap().flatten().collect();
+        assert_eq!(left.len(), 1, "{left:?}");
         // Settings files say which kind of number they want, not Rust's type name.
         let cal = dir.join("cal.toml");
         std::fs::write(

@@ -268,9 +268,11 @@ pub struct DemoArgs {
     /// Model to run on (default: the ECL benchmark beam).
     #[arg(long, default_value = "ecl_beam")]
     model: String,
-    /// Report folder (plots as SVG and PNG, the summary as text).
-    #[arg(long, default_value = "nlsim-report")]
-    report: std::path::PathBuf,
+    /// Report folder (plots as SVG and PNG, the summary as text); default `nlsim-report` for
+    /// the ECL beam, `nlsim-report-MODEL` for another model (so that one model's demo does
+    /// not replace another's). A folder that holds files but no nlsim report is refused.
+    #[arg(long)]
+    report: Option<std::path::PathBuf>,
 }
 
 impl CheckArgs {
@@ -437,6 +439,10 @@ impl NnmArgs {
 impl DemoArgs {
     /// `nlsim demo`.
     pub fn execute(&self, console: &Console) -> crate::Result<()> {
-        commands::demo::execute(&self.model, &self.report, console)
+        let dir = self
+            .report
+            .clone()
+            .unwrap_or_else(|| commands::demo::default_report_dir(&self.model));
+        commands::demo::execute(&self.model, &dir, console)
     }
 }

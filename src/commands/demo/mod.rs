@@ -169,6 +169,70 @@ pub fn execute(
     report_dir: &Path,
     console: &crate::present::console::Console,
 ) -> Result<()> {
+    refuse_foreign_folder(report_dir)?;
     let command_line = crate::present::report::command_line();
     run_demo(model, report_dir, &command_line, &|s: &str| console.say(s))
+}
+
+/// The demo's report folder when none is given: `nlsim-report` for the default model (the ECL
+/// beam), `nlsim-report-MODEL` for another (characters other than letters, digits, `-` and
+/// `_` of the model's name or spec become `_`).
+pub fn default_report_dir(model: &str) -> std::path::PathBuf {
+    if model == "ecl_beam" {
+        return "nlsim-report".into();
+    }
+    let stem = Path::new(model)
+        .file_stem()
+        .map_or_else(|| model.to_string(), |s| s.to_string_lossy().into_owned());
+    let safe: String = stem
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    format!("nlsim-report-{safe}").into()
+}
+
+/// Refuses a report folder that exists, holds files and is not an nlsim report (no
+/// `report.h5` or `index.html`): the demo replaces its own reports, never someone's folder.
+fn refuse_foreign_folder(dir: &Path) -> Result<()> {
+    let Ok(mut entries) = std::fs::read_dir(dir) else {
+        return Ok(()); // missing (created later) or unreadable (that error comes later)
+    };
+    let ours = [crate::present::report::DATA, crate::present::report::PAGE]
+        .iter()
+        .any(|f| dir.join(f).is_file());
+    if !ours && entries.next().is_some() {
+        return Err(crate::error::Error::Usage(format!(
+            "{}: the folder holds files and no nlsim report; the demo would write into it: \
+             give another --report folder",
+            dir.display()
+        )));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod report_dir_tests {
+    #[test]
+    fn each_model_has_its_own_default_folder() {
+        use super::default_report_dir as d;
+        assert_eq!(d("ecl_beam"), std::path::PathBuf::from("nlsim-report"));
+        assert_eq!(
+            d("duffing_fig3"),
+            std::path::PathBuf::from("nlsim-report-duffing_fig3")
+        );
+        assert_eq!(
+            d("bracket:refinement=2"),
+            std::path::PathBuf::from("nlsim-report-bracket_refinement_2")
+        );
+        assert_eq!(
+            d("examples/models/two_dof.toml"),
+            std::path::PathBuf::from("nlsim-report-two_dof")
+        );
+    }
 }
