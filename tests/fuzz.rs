@@ -143,6 +143,25 @@ fn damage(b: &mut Vec<u8>, rng: &mut Rng, special: impl FnOnce(&mut Vec<u8>, &mu
     }
 }
 
+/// What an OUTPUT4 or Harwell-Boeing reader accepted, resolved as a symmetric matrix on
+/// `n` scalar DOFs: the error text, if any.
+fn resolve_symmetric(
+    file: &str,
+    n: usize,
+    entries: &[(usize, usize, f64, usize)],
+    place: nlsim::formats::fe_matrices::Place,
+) -> Option<String> {
+    nlsim::formats::fe_matrices::symmetric_from_entries(
+        Path::new(file),
+        "K",
+        &nlsim::kernel::DofMap::scalar(n),
+        entries,
+        place,
+    )
+    .err()
+    .map(|e| e.to_string())
+}
+
 /// Runs `f` on every input; returns the inputs that panicked (at most a few, escaped).
 fn survive(name: &str, inputs: usize, mut f: impl FnMut(usize) -> Option<String>) -> Vec<String> {
     let mut panics = Vec::new();
@@ -871,15 +890,12 @@ fn fuzz_inner() {
     panics.extend(survive("op4 ascii", 10000 * scale(), |_| {
         let text = mutate(rng.pick(&op4).clone().as_str(), &mut rng);
         match nlsim::formats::op4::parse_op4(&text, Path::new("k.op4"), Some("KAAX")) {
-            Ok(m) => nlsim::formats::fe_matrices::symmetric_from_entries(
-                Path::new("k.op4"),
-                "K",
-                &nlsim::kernel::DofMap::scalar(m.n),
+            Ok(m) => resolve_symmetric(
+                "k.op4",
+                m.n,
                 &m.entries,
                 nlsim::formats::fe_matrices::Place::Line,
-            )
-            .err()
-            .map(|e| e.to_string()),
+            ),
             Err(e) => Some(e.to_string()),
         }
     }));
@@ -935,15 +951,12 @@ fn fuzz_inner() {
         });
         let name = *rng.pick(&["KAAX", "MAAX"]);
         match nlsim::formats::op4::parse_op4_binary(&b, Path::new("k.op4"), Some(name)) {
-            Ok(m) => nlsim::formats::fe_matrices::symmetric_from_entries(
-                Path::new("k.op4"),
-                "K",
-                &nlsim::kernel::DofMap::scalar(m.n),
+            Ok(m) => resolve_symmetric(
+                "k.op4",
+                m.n,
                 &m.entries,
                 nlsim::formats::fe_matrices::Place::Record,
-            )
-            .err()
-            .map(|e| e.to_string()),
+            ),
             Err(e) => Some(e.to_string()),
         }
     }));
@@ -964,15 +977,12 @@ fn fuzz_inner() {
     panics.extend(survive("harwell-boeing", 10000 * scale(), |_| {
         let text = mutate(rng.pick(&hb).clone().as_str(), &mut rng);
         match nlsim::formats::harwell_boeing::parse_harwell_boeing(&text, Path::new("k.rsa")) {
-            Ok(m) => nlsim::formats::fe_matrices::symmetric_from_entries(
-                Path::new("k.rsa"),
-                "K",
-                &nlsim::kernel::DofMap::scalar(m.n),
+            Ok(m) => resolve_symmetric(
+                "k.rsa",
+                m.n,
                 &m.entries,
                 nlsim::formats::fe_matrices::Place::Line,
-            )
-            .err()
-            .map(|e| e.to_string()),
+            ),
             Err(e) => Some(e.to_string()),
         }
     }));

@@ -74,15 +74,7 @@ pub fn parse_abaqus(text: &str, path: &Path) -> Result<LabelledMatrix> {
     if entries.is_empty() {
         return Err(err(1, "no matrix entry".into()));
     }
-    let name = path
-        .file_name()
-        .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
-    Ok(LabelledMatrix {
-        path: path.to_path_buf(),
-        name,
-        labels: labels.list,
-        entries,
-    })
+    Ok(LabelledMatrix::named_by_file(path, labels.list, entries))
 }
 
 #[cfg(test)]

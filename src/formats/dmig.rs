@@ -113,12 +113,10 @@ fn each_card<'a>(
             continue;
         }
         // A new card: the previous one is complete.
-        let fields: Vec<Cow<'a, str>> = cur.drain(at..).collect();
         if keeping {
-            f(&cur, cur_line)?;
+            f(&cur[..at], cur_line)?;
         }
-        cur.clear();
-        cur.extend(fields);
+        cur.drain(..at);
         let name = first.trim_end_matches('*').to_ascii_uppercase();
         if name == "ENDDATA" {
             cur.clear();

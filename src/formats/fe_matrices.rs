@@ -120,6 +120,22 @@ pub struct LabelledMatrix {
 }
 
 impl LabelledMatrix {
+    /// The only matrix of the file `path` (Abaqus, Harwell–Boeing): named by the file name.
+    pub fn named_by_file(
+        path: &Path,
+        labels: Vec<DofLabel>,
+        entries: Vec<(usize, usize, f64, usize)>,
+    ) -> Self {
+        LabelledMatrix {
+            path: path.to_path_buf(),
+            name: path
+                .file_name()
+                .map_or_else(String::new, |n| n.to_string_lossy().into_owned()),
+            labels,
+            entries,
+        }
+    }
+
     /// Every DOF an entry names, in label order (node, then component).
     pub fn labels(&self) -> BTreeSet<DofLabel> {
         self.labels.iter().copied().collect()

@@ -45,15 +45,7 @@ pub fn read(path: &Path, format: FeFormat, name: Option<&str>) -> Result<Labelle
                     hb.n
                 )));
             }
-            let name = path
-                .file_name()
-                .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
-            Ok(LabelledMatrix {
-                path: path.to_path_buf(),
-                name,
-                labels,
-                entries: hb.entries,
-            })
+            Ok(LabelledMatrix::named_by_file(path, labels, hb.entries))
         }
     }
 }

@@ -364,7 +364,12 @@ pub fn parse_op4_binary(bytes: &[u8], path: &Path, name: Option<&str>) -> Result
             });
         }
     }
-    Err(Error::Usage(format!(
+    Err(not_found(path, name, &names))
+}
+
+/// The error for a matrix `name` that is not among `names`, the matrices of the file.
+fn not_found(path: &Path, name: Option<&str>, names: &[String]) -> Error {
+    Error::Usage(format!(
         "{}: no OUTPUT4 matrix {} (matrices in the file: {})",
         path.display(),
         quoted(name.unwrap_or("")),
@@ -373,7 +378,7 @@ pub fn parse_op4_binary(bytes: &[u8], path: &Path, name: Option<&str>) -> Result
         } else {
             names.join(", ")
         }
-    )))
+    ))
 }
 
 /// Whether a line holds integers only (a record or string header), not values.
@@ -663,16 +668,7 @@ pub fn parse_op4(text: &str, path: &Path, name: Option<&str>) -> Result<Op4Matri
             });
         }
     }
-    Err(Error::Usage(format!(
-        "{}: no OUTPUT4 matrix {} (matrices in the file: {})",
-        path.display(),
-        quoted(name.unwrap_or("")),
-        if names.is_empty() {
-            "none".into()
-        } else {
-            names.join(", ")
-        }
-    )))
+    Err(not_found(path, name, &names))
 }
 
 #[cfg(test)]

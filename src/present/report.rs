@@ -526,7 +526,7 @@ fn esc(s: &str) -> String {
 }
 
 /// A name for files and HDF5 objects: ASCII letters, digits, `-` and `_`.
-fn safe_name(s: &str) -> String {
+pub(crate) fn safe_name(s: &str) -> String {
     let n: String = s
         .chars()
         .map(|c| {

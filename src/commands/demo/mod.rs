@@ -184,17 +184,7 @@ pub fn default_report_dir(model: &str) -> std::path::PathBuf {
     let stem = Path::new(model)
         .file_stem()
         .map_or_else(|| model.to_string(), |s| s.to_string_lossy().into_owned());
-    let safe: String = stem
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect();
-    format!("nlsim-report-{safe}").into()
+    format!("nlsim-report-{}", crate::present::report::safe_name(&stem)).into()
 }
 
 /// Refuses a report folder that exists, holds files and is not an nlsim report (no
