@@ -16,16 +16,21 @@ test:
 	@# The computation alone (no `io`): builds, and pulls in no HDF5 or plotting crate.
 	cargo build -p nlsim --no-default-features --quiet
 	@! cargo tree -p nlsim --no-default-features -e normal | grep -E 'hdf5|plotters|png '
-	@# The file formats alone (`formats`): builds without plotting, clap or the command layer.
+	@# The file formats alone (`formats`, what the Python package links): builds without
+	@# libhdf5, plotting, clap or the command layer; with `hdf5` it adds the HDF5 files.
 	cargo build -p nlsim --no-default-features --features formats --quiet
-	@! cargo tree -p nlsim --no-default-features --features formats -e normal | grep -E 'plotters|png |clap'
+	@! cargo tree -p nlsim --no-default-features --features formats -e normal | grep -E 'hdf5|plotters|png |clap'
+	cargo build -p nlsim --no-default-features --features hdf5 --quiet
 	@# The layout: no import circle between files, layers pointing down, file sizes.
 	python3 scripts/layers.py
-	cargo test --workspace
+	@# The Python package is a cdylib tested from Python (below), not by a Rust harness.
+	cargo test --workspace --exclude nlsim-python
 	@# The matrix adapters (optional features of the kernel).
 	cargo clippy -p nlsim-kernel --all-targets --features nalgebra-sparse,sprs,test-util -- -D warnings
 	cargo test -p nlsim-kernel --features nalgebra-sparse,sprs --lib --test adapters
 	scripts/slurm-e2e.sh $${CARGO_TARGET_DIR:-target}/debug/nlsim
+	@# The Python package, installed into a fresh virtual environment as docs/python.md says.
+	scripts/python-tests.sh $${CARGO_TARGET_DIR:-target}/debug/nlsim
 
 bench:
 	@scripts/ensure-deps.sh

@@ -7,9 +7,10 @@ set -euo pipefail
 # pkg-config to find it) for the result files, and a TrueType font for the text of PNG plots.
 APT_PACKAGES=(gcc libc6-dev libhdf5-dev pkg-config fonts-dejavu-core)
 # `make test` also reads every result file with h5py, runs the batch tool on a real
-# single-node SLURM (scripts/slurm-e2e.sh) and opens the report page in headless chromium.
+# single-node SLURM (scripts/slurm-e2e.sh), opens the report page in headless chromium and
+# installs the Python package into a fresh virtual environment (scripts/python-tests.sh).
 if [ "${1:-}" = "--test" ]; then
-  APT_PACKAGES+=(python3-h5py python3-pip slurm-wlm munge chromium)
+  APT_PACKAGES+=(python3-h5py python3-pip python3-venv slurm-wlm munge chromium)
 fi
 
 say() { printf 'nlsim setup: %s\n' "$*" >&2; }

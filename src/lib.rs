@@ -8,17 +8,18 @@
 //!
 //! | layer | holds | feature |
 //! |---|---|---|
-//! | [`formats`] | file formats in and out: model files, matrices, test data, universal files, result files | `formats` |
+//! | [`formats`] | file formats in and out: model files, matrices, test data, universal files, result files | `formats` (`.h5` files: `hdf5`) |
 //! | [`present`] | summaries, plots, the HTML report, the terminal | `io` (summaries always) |
 //! | [`commands`] | one request, one run, one report writer per `nlsim` command | `io` |
 //! | [`batch`] | jobs files, shards, merge, SLURM job arrays | `io` |
 //! | [`cli`] | the command line: options and help texts, arguments into requests, dispatch | `cli` |
 //! | `src/bin/nlsim/` | the `nlsim` binary: parse, thread pool, dispatch, exit code | `cli` |
 //!
-//! `cli` implies `io`, which implies `formats`; `cli` is on by default. Link with
+//! `cli` implies `io`, which implies `hdf5` and `formats`; `cli` is on by default. Link with
 //! `default-features = false` for the computation alone (no libhdf5, no plotting, no file
-//! formats), or with `features = ["formats"]` to read and write nlsim's files without the
-//! plotting and command layers. [`prelude`] holds the names a workflow in code needs:
+//! formats), with `features = ["formats"]` to read and write nlsim's text and binary files
+//! without any system library (the Python package does), or `features = ["hdf5"]` for the
+//! HDF5 files too, still without the plotting and command layers. [`prelude`] holds the names a workflow in code needs:
 //!
 //! ```
 //! use nlsim::prelude::*;

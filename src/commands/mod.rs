@@ -7,7 +7,7 @@
 //! |---|---|---|---|
 //! | `check`, `export` | [`check`] | | |
 //! | `modes` | [`modes`] | | |
-//! | `simulate` | [`simulate::request`], [`simulate::excitation`] | [`simulate::run`] | [`simulate::report`] |
+//! | `simulate` | [`simulate::request`], [`crate::formats::excitation`] | [`simulate::run`] | [`simulate::report`] |
 //! | `frf` | [`frf::request`], [`frf::start`] | [`frf::run`] | [`frf::report`] |
 //! | `nnm` | [`nnm`] | | |
 //! | `calibrate` | [`calibrate::request`] | [`calibrate::run`], [`calibrate::modal`] | [`calibrate::report`] |

@@ -3,6 +3,7 @@
 //! failed or killed run leaves no partial file and an existing one untouched).
 
 use crate::error::{Error, Result};
+#[cfg(feature = "hdf5")]
 use hdf5_metno as hdf5;
 use std::path::{Path, PathBuf};
 
@@ -312,6 +313,7 @@ pub fn temp_path(path: &Path) -> PathBuf {
     path.with_file_name(name)
 }
 
+#[cfg(feature = "hdf5")]
 /// Checks that an HDF5 dataset holds complex numbers the way nlsim and h5py write them: a
 /// compound of two floating-point members named `r` and `i`. HDF5 converts compounds by
 /// member name, so `{re, im}` or `{real, imag}` would read as zeros; `Err` says what the
@@ -394,6 +396,7 @@ pub fn unit(q: nlsim_kernel::Quantity) -> &'static str {
     }
 }
 
+#[cfg(feature = "hdf5")]
 /// Writes a string attribute (non-ASCII-safe text; `?` if it cannot be stored).
 pub fn str_attr(loc: &hdf5::Location, name: &str, v: &str) -> hdf5::Result<()> {
     let s: hdf5::types::VarLenUnicode = v.parse().unwrap_or_else(|_| "?".parse().expect("ascii"));
@@ -402,6 +405,7 @@ pub fn str_attr(loc: &hdf5::Location, name: &str, v: &str) -> hdf5::Result<()> {
         .write_scalar(&s)
 }
 
+#[cfg(feature = "hdf5")]
 /// Writes a scalar `f64` attribute.
 pub fn f64_attr(loc: &hdf5::Location, name: &str, v: f64) -> hdf5::Result<()> {
     loc.new_attr::<f64>().create(name)?.write_scalar(&v)
@@ -427,6 +431,19 @@ pub fn one_line(text: &str) -> String {
     out
 }
 
+/// The error for an HDF5 file in a build without the `hdf5` feature (the Python package and
+/// `--features formats` builds link no libhdf5): names the file and what to do instead.
+pub fn without_hdf5(path: &Path) -> Error {
+    Error::Hdf5 {
+        path: path.to_path_buf(),
+        message: "this build of nlsim reads and writes no HDF5 (it was built without the \
+                  `hdf5` feature); use the CSV form, or read the file with h5py and pass the \
+                  arrays in"
+            .into(),
+    }
+}
+
+#[cfg(feature = "hdf5")]
 /// Maps an HDF5 error to [`Error::Hdf5`] naming `path`.
 pub fn h5err(path: &Path) -> impl Fn(hdf5::Error) -> Error + '_ {
     move |e| Error::Hdf5 {
@@ -435,6 +452,7 @@ pub fn h5err(path: &Path) -> impl Fn(hdf5::Error) -> Error + '_ {
     }
 }
 
+#[cfg(feature = "hdf5")]
 /// Writes what every nlsim HDF5 file carries at its root (`docs/file-formats.md`): the nlsim
 /// version, the command, the model spec as given, the model's name, the seed of any random
 /// draws, and — when the spec is a model file — that file's text, so the data can be traced
@@ -462,6 +480,7 @@ pub fn provenance(
     Ok(())
 }
 
+#[cfg(feature = "hdf5")]
 /// Reads a `u64` root attribute, if present.
 pub fn u64_attr(file: &hdf5::File, name: &str) -> Option<u64> {
     file.attr(name).ok()?.read_scalar::<u64>().ok()

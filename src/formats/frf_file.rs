@@ -3,10 +3,13 @@
 //! documented in `docs/file-formats.md`; batches write the same groups into their shards.
 use crate::error::{Error, Result};
 use crate::formats::files::Format;
+#[cfg(feature = "hdf5")]
 use crate::formats::files::f64_attr;
+#[cfg(feature = "hdf5")]
 use crate::formats::files::str_attr;
 use crate::formats::files::unit;
 use faer::{Mat, c64};
+#[cfg(feature = "hdf5")]
 use hdf5_metno as hdf5;
 use nlsim_hb::{Branch, HbSystem, PointKind};
 use std::fmt::Write as _;
@@ -36,6 +39,7 @@ pub struct FrfInfo {
     pub notes: Vec<String>,
 }
 
+#[cfg(feature = "hdf5")]
 /// Writes the located maxima `peaks` as the group `peaks` of `g`: per maximum its sensor
 /// (index into the `sensors` attribute), harmonic index `k` and ratio `k/ν`, frequency (Hz),
 /// level, `|Y_k|` in the sensor's unit and whether it was located between points.
@@ -124,7 +128,10 @@ pub fn write_frf(
 ) -> Result<()> {
     crate::formats::files::write_atomically(path, HINT, |tmp, format| match format {
         Format::Csv => write_csv(tmp, sys, branch, y, info),
+        #[cfg(feature = "hdf5")]
         Format::Hdf5 => write_hdf5(tmp, sys, branch, y, info),
+        #[cfg(not(feature = "hdf5"))]
+        Format::Hdf5 => Err(crate::formats::files::without_hdf5(path)),
     })
 }
 
@@ -212,6 +219,7 @@ fn write_csv(
     })
 }
 
+#[cfg(feature = "hdf5")]
 fn write_hdf5(
     path: &Path,
     sys: &HbSystem,
@@ -248,6 +256,7 @@ fn write_hdf5(
     Ok(())
 }
 
+#[cfg(feature = "hdf5")]
 /// Writes the FRF datasets of `branch` into `g` (the layout of `docs/file-formats.md`; used
 /// for `nlsim frf` files and for each job of an `nlsim batch` shard).
 pub fn write_group(

@@ -2,9 +2,12 @@
 //! forces, the excitation it ran with). The layouts are documented in `docs/file-formats.md`.
 use crate::error::{Error, Result};
 use crate::formats::files::Format;
+#[cfg(feature = "hdf5")]
 use crate::formats::files::f64_attr;
+#[cfg(feature = "hdf5")]
 use crate::formats::files::str_attr;
 use crate::formats::files::unit;
+#[cfg(feature = "hdf5")]
 use hdf5_metno as hdf5;
 use nlsim_kernel::Model;
 use nlsim_sim::TimeHistory;
@@ -35,7 +38,13 @@ pub struct RunInfo {
 pub fn write_history(path: &Path, model: &Model, h: &TimeHistory, info: &RunInfo) -> Result<()> {
     crate::formats::files::write_atomically(path, HINT, |tmp, format| match format {
         Format::Csv => write_csv(tmp, h, info),
+        #[cfg(feature = "hdf5")]
         Format::Hdf5 => write_hdf5(tmp, model, h, info),
+        #[cfg(not(feature = "hdf5"))]
+        Format::Hdf5 => {
+            let _ = model;
+            Err(crate::formats::files::without_hdf5(path))
+        }
     })
 }
 
@@ -101,6 +110,7 @@ fn write_csv(path: &Path, h: &TimeHistory, info: &RunInfo) -> Result<()> {
     })
 }
 
+#[cfg(feature = "hdf5")]
 fn write_hdf5(path: &Path, model: &Model, h: &TimeHistory, info: &RunInfo) -> Result<()> {
     let err = crate::formats::files::h5err(path);
     let file = hdf5::File::create(path).map_err(&err)?;
@@ -113,6 +123,7 @@ fn write_hdf5(path: &Path, model: &Model, h: &TimeHistory, info: &RunInfo) -> Re
     Ok(())
 }
 
+#[cfg(feature = "hdf5")]
 /// Writes the datasets of a time history into `g` (the layout of `docs/file-formats.md`; used
 /// for `nlsim simulate` files and for each job of an `nlsim batch` shard). Series are chunked,
 /// and compressed (shuffle, then deflate) when `info.compress`.

@@ -279,6 +279,7 @@ pub const MAX_HDF5_VALUES: usize = 1 << 28;
 /// Largest dense HDF5 matrix (n × n ≤ [`MAX_HDF5_VALUES`]).
 pub const MAX_DENSE_DIM: usize = 16_384;
 
+#[cfg(feature = "hdf5")]
 /// Reads a square matrix from an HDF5 file: `object` is either a group holding compressed
 /// sparse rows in scipy's convention (`data`, `indices`, `indptr`, 0-based, and a `shape`
 /// attribute or dataset; repeated entries are summed) or a 2-D dense dataset.

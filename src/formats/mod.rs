@@ -1,4 +1,5 @@
-//! File formats in and out (feature `formats`): everything nlsim reads — model files, Matrix
+//! File formats in and out (feature `formats`; the HDF5 files with feature `hdf5`, which
+//! links libhdf5 — without it a `.h5` file is refused by [`files::without_hdf5`]): everything nlsim reads — model files, Matrix
 //! Market and HDF5 matrices with their binary cache, stepped-sine test data, measured modes,
 //! universal files, settings files — and the result files it writes (modes, time histories,
 //! FRFs), with the atomic writes and bounded reads they share.
@@ -8,10 +9,11 @@
 //! argument parsing, or running anything (no reduction, no solve) — so the C ABI, a Python
 //! package or another program can read and write nlsim's files without `clap`, `plotters`
 //! or the command layer (`cargo build -p nlsim --no-default-features --features formats`
-//! checks it in `make test`). Depends only on the numeric crates.
+//! checks it in `make test`, and that it pulls in no HDF5). Depends only on the numeric crates.
 //!
 //! | file | format |
 //! |---|---|
+//! | [`excitation`] | the excitation grammar of `nlsim simulate --excitation` and the Python package |
 //! | [`model_file`] | model files (TOML) and the `MODEL` argument (file or built-in name) |
 //! | [`matrices`] | Matrix Market and HDF5 (scipy-style CSC) matrices |
 //! | [`fe_matrices`] | Nastran DMIG and Abaqus `*MATRIX GENERATE` matrices, labelled by node and DOF |
@@ -27,8 +29,10 @@
 
 pub mod abaqus;
 pub mod cache;
+#[cfg(feature = "hdf5")]
 pub mod candidates;
 pub mod dmig;
+pub mod excitation;
 pub mod fe_matrices;
 pub mod fe_read;
 pub mod files;

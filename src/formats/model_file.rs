@@ -658,7 +658,10 @@ fn read_matrix(
                 );
             }
             match h5 {
+                #[cfg(feature = "hdf5")]
                 Some((file, object)) => mtx::read_hdf5_matrix(&base.join(file), object, name),
+                #[cfg(not(feature = "hdf5"))]
+                Some((file, _)) => Err(crate::formats::files::without_hdf5(&base.join(file))),
                 None => crate::formats::cache::load_matrix_market(&base.join(p), name),
             }
         }

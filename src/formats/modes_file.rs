@@ -7,9 +7,12 @@
 //! (modes × DOFs, mass-normalised, m/√kg); dataset `/dofs/labels` (strings such as `12:uz`).
 use crate::error::{Error, Result};
 use crate::formats::files::Format;
+#[cfg(feature = "hdf5")]
 use hdf5_metno as hdf5;
 use nlsim_kernel::Model;
-use nlsim_reduction::{EffectiveMass, EigenConfig, EigenMethod, Modes};
+#[cfg(feature = "hdf5")]
+use nlsim_reduction::EigenMethod;
+use nlsim_reduction::{EffectiveMass, EigenConfig, Modes};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -47,7 +50,13 @@ impl ModeReport {
 pub fn write_modes(path: &Path, model_spec: &str, model: &Model, r: &ModeReport) -> Result<()> {
     crate::formats::files::write_atomically(path, HINT, |tmp, format| match format {
         Format::Csv => write_csv(tmp, r),
+        #[cfg(feature = "hdf5")]
         Format::Hdf5 => write_hdf5(tmp, model_spec, model, r),
+        #[cfg(not(feature = "hdf5"))]
+        Format::Hdf5 => {
+            let _ = (model_spec, model);
+            Err(crate::formats::files::without_hdf5(path))
+        }
     })
 }
 
@@ -81,6 +90,7 @@ fn write_csv(path: &Path, r: &ModeReport) -> Result<()> {
     })
 }
 
+#[cfg(feature = "hdf5")]
 fn write_hdf5(path: &Path, model_spec: &str, model: &Model, r: &ModeReport) -> Result<()> {
     let err = crate::formats::files::h5err(path);
     let file = hdf5::File::create(path).map_err(&err)?;
@@ -92,6 +102,7 @@ fn write_hdf5(path: &Path, model_spec: &str, model: &Model, r: &ModeReport) -> R
     Ok(())
 }
 
+#[cfg(feature = "hdf5")]
 /// Writes group `modes` and dataset `dofs/labels` into `root` (the layout of `nlsim modes`
 /// files, also used by reports).
 pub fn write_group(root: &hdf5::Group, model: &Model, r: &ModeReport) -> hdf5::Result<()> {

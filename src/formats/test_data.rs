@@ -445,8 +445,10 @@ pub fn write_csv(path: &Path, data: &TestData) -> Result<()> {
 }
 
 /// Most complex values a test-data HDF5 file may declare (16 bytes each: 1 GiB).
+#[cfg(feature = "hdf5")]
 const H5_MAX_VALUES: usize = 1 << 26;
 
+#[cfg(feature = "hdf5")]
 /// Writes `data` as HDF5 (documented in docs/file-formats.md; `h5py` reads it directly):
 /// root attributes `format = "nlsim test data"`, `input`, `harmonics`; datasets
 /// `channels/name`, `channels/quantity`, `channels/noise_relative`, `channels/noise_absolute`;
@@ -530,6 +532,7 @@ pub fn write_h5(path: &Path, data: &TestData) -> Result<()> {
     })
 }
 
+#[cfg(feature = "hdf5")]
 /// Reads test data written in the layout of [`write_h5`] (by nlsim or by any HDF5 tool);
 /// errors name the file and the object. Declared sizes are checked against the datasets'
 /// shapes and a budget of 2²⁶ values before anything is read.

@@ -1,13 +1,12 @@
 //! `nlsim simulate`: time histories by the exponential first-order hold or a reference
-//! integrator. [`SimRequest`] (`request.rs`, the excitation grammar in `excitation.rs`) →
+//! integrator. [`SimRequest`] (`request.rs`; the excitation grammar is `formats::excitation`) →
 //! [`run_simulation`] (`run.rs`) → [`SimOutputs::write`] (`report.rs`).
 
-pub mod excitation;
 pub mod report;
 pub mod request;
 pub mod run;
 
-pub use excitation::*;
+pub use crate::formats::excitation::*;
 pub use report::*;
 pub use request::*;
 pub use run::*;

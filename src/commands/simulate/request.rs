@@ -71,7 +71,7 @@ impl Drive {
     pub fn all(signal: Signal) -> Self {
         Self {
             point: None,
-            label: crate::commands::simulate::excitation::describe_signal(&signal),
+            label: crate::formats::excitation::describe_signal(&signal),
             signal,
             nominal: false,
         }
@@ -86,7 +86,7 @@ impl Drive {
     }
 
     /// Parses `SPEC` (every point) or `NAME=SPEC` (one point) in the grammar of
-    /// [`crate::commands::simulate::excitation::parse_excitation`]; a sweep without `duration` lasts `duration_s`,
+    /// [`crate::formats::excitation::parse_excitation`]; a sweep without `duration` lasts `duration_s`,
     /// a force file without `rate` is sampled at `rate_hz`.
     pub fn parse(text: &str, duration_s: f64, rate_hz: f64) -> Result<Self> {
         let (point, spec) = match text
@@ -97,7 +97,7 @@ impl Drive {
             None => (None, text),
         };
         let (signal, nominal) =
-            crate::commands::simulate::excitation::parse_signal(spec, 1.0, duration_s, rate_hz)?;
+            crate::formats::excitation::parse_signal(spec, 1.0, duration_s, rate_hz)?;
         Ok(Self {
             point,
             signal,

@@ -1,0 +1,177 @@
+"""nlsim: simulation and calibration of large linear structures with local nonlinearities.
+
+The Python face of the nlsim engine (Y. Chen, *Model calibration methods for mechanical
+systems with local nonlinearities*, Linnaeus University, 2016). Build a :class:`Model` from
+scipy.sparse mass and stiffness matrices or load a model file, then compute
+
+- :func:`modes` -- natural frequencies, mass-normalised shapes, effective masses;
+- :func:`reduce` -- the modal reduction with residual flexibility that the runs use;
+- :func:`simulate` -- time histories by the exponential first-order hold;
+- :func:`frf` -- multi-harmonic frequency responses by harmonic balance, followed through
+  folds, with Hill stability.
+
+Every function runs the same code as the ``nlsim`` command line with the same defaults, so the
+numbers equal the command's to the last bit. Results are numpy arrays, time or frequency
+first; frequencies are in Hz. Computations release the GIL, run on ``threads`` threads
+(default: one per core; the numbers do not depend on it) and stop at Ctrl-C with
+``KeyboardInterrupt``. Errors are :class:`Error` subclasses with the command line's
+one-line messages. See ``docs/python.md`` for a worked example.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Optional, Sequence
+
+import numpy as np
+
+from . import _native
+from ._native import (
+    ComputationError,
+    Error,
+    FileError,
+    Frf,
+    History,
+    InputError,
+    Model,
+    Modes,
+    Reduced,
+    builtin_models,
+    frf,
+    modes,
+    reduce,
+    simulate,
+)
+
+__version__: str = _native.__version__
+
+__all__ = [
+    "ComputationError",
+    "Error",
+    "FileError",
+    "Frf",
+    "History",
+    "InputError",
+    "Model",
+    "Modes",
+    "Reduced",
+    "builtin_models",
+    "frf",
+    "from_matrices",
+    "load",
+    "modes",
+    "reduce",
+    "simulate",
+]
+
+
+def _csr(name: str, a: Any, n: Optional[int]):
+    """The CSR arrays of matrix ``a`` (scipy.sparse or a dense 2-D array) as contiguous
+    numpy arrays, without a copy where they already are."""
+    if hasattr(a, "tocsr"):
+        a = a.tocsr()
+        shape = a.shape
+        indptr, indices, data = a.indptr, a.indices, a.data
+    else:
+        dense = np.asarray(a)
+        if dense.ndim != 2:
+            raise InputError(
+                f"{name}: expected a scipy.sparse matrix or a 2-D array, got {dense.ndim} dimension(s)"
+            )
+        shape = dense.shape
+        rows, cols = np.nonzero(dense)
+        indptr = np.searchsorted(rows, np.arange(shape[0] + 1)).astype(np.int64)
+        indices = cols.astype(np.int64)
+        data = dense[rows, cols]
+    if shape[0] != shape[1]:
+        raise InputError(f"{name}: shape {shape[0]} x {shape[1]} is not square")
+    if n is not None and shape[0] != n:
+        raise InputError(f"{name}: shape {shape[0]} x {shape[1]}; the model has {n} DOFs")
+    if not np.issubdtype(np.asarray(data).dtype, np.floating) and not np.issubdtype(
+        np.asarray(data).dtype, np.integer
+    ):
+        raise InputError(f"{name}: dtype {np.asarray(data).dtype} is not real (float64 expected)")
+    data = np.ascontiguousarray(data, dtype=np.float64)
+    indptr = np.ascontiguousarray(indptr)
+    indices = np.ascontiguousarray(indices)
+    if indptr.dtype not in (np.int32, np.int64):
+        indptr = indptr.astype(np.int64)
+    if indices.dtype not in (np.int32, np.int64):
+        indices = indices.astype(np.int64)
+    return shape[0], indptr, indices, data
+
+
+def from_matrices(
+    M: Any,
+    K: Any,
+    dofs: Optional[Sequence[str]] = None,
+    name: str = "model",
+) -> Model:
+    """A :class:`Model` from its mass ``M`` (kg) and stiffness ``K`` (N/m) matrices.
+
+    ``M`` and ``K`` are scipy.sparse matrices (any format; taken through ``.tocsr()``, with
+    no further copy on the Python side) or dense 2-D arrays, symmetric, of the same order
+    ``n``. ``dofs`` gives one label ``NODE:COMPONENT`` per row (``"12:uz"``, ``"3:rx"``) or is
+    ``None`` for ``1:u`` ... ``n:u``. Raises :class:`InputError` naming the argument for a
+    non-square, non-symmetric or non-finite matrix, or a wrong number of labels.
+    """
+    n, mp, mi, md = _csr("M", M, None)
+    _, kp, ki, kd = _csr("K", K, n)
+    labels = None if dofs is None else [str(d) for d in dofs]
+    return Model.from_csr(name, n, mp, mi, md, kp, ki, kd, labels)
+
+
+def load(spec: str) -> Model:
+    """Loads a model file (``.toml``) or a built-in model by name (``"ecl_beam"``,
+    ``"bracket:dofs=20000"``; see :func:`builtin_models`)."""
+    return Model.load(spec)
+
+
+def _frame(columns: dict):
+    try:
+        import pandas as pd
+    except ImportError as e:  # pragma: no cover - depends on the environment
+        raise ImportError("to_dataframe() needs pandas: pip install pandas") from e
+    return pd.DataFrame(columns)
+
+
+def _modes_frame(self: Modes):
+    cols = {
+        "frequency_hz": self.frequency_hz,
+        "damping_ratio": self.damping_ratio,
+    }
+    for k, v in self.effective_mass.items():
+        cols[f"effective_mass_{k}_kg"] = v
+    cols["residual"] = self.residual
+    df = _frame(cols)
+    df.index = np.arange(1, len(df) + 1)
+    df.index.name = "mode"
+    return df
+
+
+def _history_frame(self: History):
+    cols = {"time_s": self.time}
+    out = self.outputs
+    for j, s in enumerate(self.sensors):
+        cols[s] = out[:, j]
+    return _frame(cols)
+
+
+def _frf_frame(self: Frf):
+    cols = {
+        "frequency_hz": self.frequency_hz,
+        "level": self.level,
+        "stable": self.stable,
+        "kind": self.kind,
+    }
+    y = self.response
+    for j, s in enumerate(self.sensors):
+        for k, h in enumerate(self.harmonics):
+            label = f"{h:g}"
+            cols[f"{s}_h{label}"] = y[:, j, k]
+    return _frame(cols)
+
+
+Modes.to_dataframe = _modes_frame  # type: ignore[attr-defined]
+History.to_dataframe = _history_frame  # type: ignore[attr-defined]
+Frf.to_dataframe = _frf_frame  # type: ignore[attr-defined]
+Model.from_matrices = staticmethod(from_matrices)  # type: ignore[attr-defined]
