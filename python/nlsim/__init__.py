@@ -8,7 +8,9 @@ scipy.sparse mass and stiffness matrices or load a model file, then compute
 - :func:`reduce` -- the modal reduction with residual flexibility that the runs use;
 - :func:`simulate` -- time histories by the exponential first-order hold;
 - :func:`frf` -- multi-harmonic frequency responses by harmonic balance, followed through
-  folds, with Hill stability.
+  folds, with Hill stability;
+- :func:`calibrate` -- parameters fitted to a stepped-sine test, with Cramer-Rao bounds and
+  k-fold cross validation.
 
 Every function runs the same code as the ``nlsim`` command line with the same defaults, so the
 numbers equal the command's to the last bit. Results are numpy arrays, time or frequency
@@ -26,6 +28,7 @@ import numpy as np
 
 from . import _native
 from ._native import (
+    Calibration,
     ComputationError,
     Error,
     FileError,
@@ -36,6 +39,7 @@ from ._native import (
     Modes,
     Reduced,
     builtin_models,
+    calibrate,
     frf,
     modes,
     reduce,
@@ -45,6 +49,7 @@ from ._native import (
 __version__: str = _native.__version__
 
 __all__ = [
+    "Calibration",
     "ComputationError",
     "Error",
     "FileError",
@@ -55,6 +60,7 @@ __all__ = [
     "Modes",
     "Reduced",
     "builtin_models",
+    "calibrate",
     "frf",
     "from_matrices",
     "load",
@@ -171,6 +177,24 @@ def _frf_frame(self: Frf):
     return _frame(cols)
 
 
+def _calibration_frame(self: Calibration):
+    cols = {
+        "estimate": self.estimate,
+        "cramer_rao_std": self.cramer_rao_std,
+    }
+    if self.kfold_mean is not None:
+        cols["kfold_mean"] = self.kfold_mean
+        cols["kfold_std"] = self.kfold_std
+        cols["jackknife_std"] = self.jackknife_std
+    cols["at_bound"] = self.at_bound
+    cols["poorly_identified"] = self.poorly_identified
+    df = _frame(cols)
+    df.index = self.params
+    df.index.name = "param"
+    return df
+
+
+Calibration.to_dataframe = _calibration_frame  # type: ignore[attr-defined]
 Modes.to_dataframe = _modes_frame  # type: ignore[attr-defined]
 History.to_dataframe = _history_frame  # type: ignore[attr-defined]
 Frf.to_dataframe = _frf_frame  # type: ignore[attr-defined]

@@ -1,6 +1,7 @@
 """Type stubs of nlsim's compiled module (python/src). Shapes are noted as (axis, ...);
 frequencies in Hz, times in s, forces in N, responses in the sensor's quantity."""
 
+import os
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
@@ -172,6 +173,60 @@ class Frf:
     def __len__(self) -> int: ...
     def to_dataframe(self) -> Any: ...
 
+class Calibration:
+    """Parameters fitted to a stepped-sine test, per parameter in the order of `params`."""
+
+    @property
+    def params(self) -> List[str]: ...
+    @property
+    def estimate(self) -> npt.NDArray[np.float64]:
+        """(param,)"""
+    @property
+    def status(self) -> str: ...
+    @property
+    def cost(self) -> float: ...
+    @property
+    def reduced_chi2(self) -> float: ...
+    @property
+    def cramer_rao_std(self) -> npt.NDArray[np.float64]:
+        """(param,)"""
+    @property
+    def covariance(self) -> npt.NDArray[np.float64]:
+        """(param, param)"""
+    @property
+    def at_bound(self) -> List[bool]: ...
+    @property
+    def poorly_identified(self) -> List[bool]: ...
+    @property
+    def kfold_mean(self) -> Optional[npt.NDArray[np.float64]]: ...
+    @property
+    def kfold_std(self) -> Optional[npt.NDArray[np.float64]]: ...
+    @property
+    def jackknife_std(self) -> Optional[npt.NDArray[np.float64]]: ...
+    @property
+    def candidates(self) -> npt.NDArray[np.float64]:
+        """(candidate, param)"""
+    @property
+    def candidate_cost(self) -> npt.NDArray[np.float64]:
+        """(candidate,)"""
+    def to_dataframe(self) -> Any: ...
+
+def calibrate(
+    model: Model,
+    data: Union[str, "os.PathLike[str]"],
+    params: Mapping[str, Tuple[float, float]],
+    compare: Sequence[int] = ...,
+    form: str = "complex",
+    branch: str = "nearest",
+    harmonics: int = 3,
+    modes: int = 20,
+    uff_noise: float = 0.01,
+    lhs: int = 64,
+    seed: int = 1,
+    starts: int = 3,
+    folds: int = 10,
+    threads: Optional[int] = None,
+) -> Calibration: ...
 def modes(
     model: Model,
     count: Optional[int] = None,

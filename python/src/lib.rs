@@ -12,6 +12,7 @@
 //! [`ComputationError`] for a numerical failure on valid input. A solver that stops short is
 //! not an error: its result carries `status` and `detail`, as in the Rust library.
 
+mod calibration;
 mod model;
 mod runs;
 
@@ -93,5 +94,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(runs::simulate, m)?)?;
     m.add_function(wrap_pyfunction!(runs::frf, m)?)?;
     m.add_function(wrap_pyfunction!(runs::builtin_models, m)?)?;
+    m.add_class::<calibration::Calibration>()?;
+    m.add_function(wrap_pyfunction!(calibration::calibrate, m)?)?;
     Ok(())
 }

@@ -47,7 +47,7 @@ pub(crate) struct Stop(Arc<AtomicBool>);
 
 impl Stop {
     /// Unwinds out of the run when it was asked to stop.
-    fn check(&self) {
+    pub(crate) fn check(&self) {
         if self.0.load(AtomicOrdering::Relaxed) {
             std::panic::resume_unwind(Box::new(Interrupted));
         }
@@ -58,7 +58,7 @@ impl Stop {
 /// core), waiting without the GIL. At Ctrl-C (any pending Python signal) the run is told to
 /// stop at its next progress check and waited for, then `KeyboardInterrupt` is raised; a
 /// second Ctrl-C while it winds down stops the wait and leaves the worker to end alone.
-fn run<T: Send + 'static>(
+pub(crate) fn run<T: Send + 'static>(
     py: Python<'_>,
     threads: Option<usize>,
     job: impl FnOnce(&Stop) -> T + Send + 'static,

@@ -126,6 +126,65 @@ def test_results_do_not_depend_on_the_thread_count() -> None:
     np.testing.assert_array_equal(m1.shapes, m2.shapes)
 
 
+TEST_FILE = """harmonics = 3
+seed = 7
+noise = { relative = 0.02 }
+
+[[sweep]]
+label = "0.1 N up"
+from = 21.0
+to = 27.0
+steps = 13
+force = 0.1
+"""
+
+
+def test_calibration_equals_the_command_line_and_finds_the_truth(tmp_path: Path) -> None:
+    """A virtual test of the ECL beam (nlsim test: shaker, force control, 2 % noise, seeded),
+    calibrated by the command line and by the package with the same settings: the same
+    estimates, Cramer-Rao and k-fold statistics to the bit; k3 within 3 Cramer-Rao std of the
+    6e9 N/m^3 the data were made with."""
+    (tmp_path / "t.toml").write_text(TEST_FILE)
+    cli("test", "ecl_beam", "t.toml", "--out", "d.csv", "--report", "rep", cwd=tmp_path)
+    cli(
+        "calibrate", "ecl_beam", "d.csv",
+        "--param", "tip_spring.k3=1e9:2e10", "--param", "mode1.zeta=0.001:0.05",
+        "--lhs", "16", "--folds", "4", "--out", "est.csv",
+        cwd=tmp_path,
+    )
+    c = nlsim.calibrate(
+        nlsim.load("ecl_beam"),
+        tmp_path / "d.csv",
+        {"tip_spring.k3": (1e9, 2e10), "mode1.zeta": (0.001, 0.05)},
+        lhs=16,
+        folds=4,
+    )
+    rows = [l.split(",") for l in (tmp_path / "est.csv").read_text().splitlines()[1:]]
+    assert c.params == [r[0] for r in rows]
+    for j, r in enumerate(rows):
+        assert c.estimate[j] == float(r[1])
+        assert c.cramer_rao_std[j] == float(r[2])
+        assert c.kfold_mean[j] == float(r[3])
+        assert c.kfold_std[j] == float(r[4])
+        assert c.jackknife_std[j] == float(r[5])
+        assert c.at_bound[j] == (r[6] == "true")
+        assert c.poorly_identified[j] == (r[7] == "true")
+    assert c.status == "converged"
+    assert abs(c.estimate[0] - 6e9) < 3 * c.cramer_rao_std[0]
+    # 16 Latin-hypercube candidates and the model's own values.
+    assert c.candidates.shape == (17, 2) and c.candidate_cost.shape == (17,)
+    df = c.to_dataframe()
+    assert list(df.index) == c.params
+    with pytest.raises(nlsim.InputError, match="unknown parameter 'tip.k9'; known parameters: tip_spring.k3, mode1.f"):
+        nlsim.calibrate(nlsim.load("ecl_beam"), tmp_path / "d.csv", {"tip.k9": (1, 2)})
+    with pytest.raises(nlsim.InputError, match="bounds"):
+        nlsim.calibrate(nlsim.load("ecl_beam"), tmp_path / "d.csv", {"tip_spring.k3": (2e10, 1e9)})
+    with pytest.raises(nlsim.FileError, match="d.h5: HDF5: this build of nlsim reads and writes no HDF5"):
+        nlsim.calibrate(nlsim.load("ecl_beam"), tmp_path / "d.h5", {"tip_spring.k3": (1e9, 2e10)})
+    with pytest.raises(nlsim.FileError, match="nothing.csv"):
+        nlsim.calibrate(nlsim.load("ecl_beam"), tmp_path / "nothing.csv", {"tip_spring.k3": (1e9, 2e10)})
+
+
 # --- independent oracles -----------------------------------------------------------------
 
 

@@ -445,6 +445,51 @@ pub fn write_csv(path: &Path, data: &TestData) -> Result<()> {
 }
 
 /// Most complex values a test-data HDF5 file may declare (16 bytes each: 1 GiB).
+/// Test data by file extension (`nlsim calibrate`'s `DATA`): CSV, HDF5 (`.h5`, `.hdf5`) or linear FRFs in universal
+/// file dataset 58 (`.uff`, `.unv`, `.uf`; ASCII or binary), whose drive point is the
+/// model's single excitation and whose noise is `uff_noise` of each value.
+pub fn read(path: &Path, model: &nlsim_kernel::Model, uff_noise: f64) -> Result<TestData> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    match ext.as_str() {
+        "csv" if crate::formats::modal_data::is_modal_csv(path)? => Err(Error::Usage(format!(
+            "{}: this is modal data (mode,frequency_hz,...), not a stepped-sine test: \
+             `nlsim calibrate` runs it on its own (the modal calibration); it has no \
+             batch kinds and no harmonic balance",
+            path.display()
+        ))),
+        "csv" => read_csv(path),
+        #[cfg(feature = "hdf5")]
+        "h5" | "hdf5" => read_h5(path),
+        #[cfg(not(feature = "hdf5"))]
+        "h5" | "hdf5" => Err(crate::formats::files::without_hdf5(path)),
+        "uff" | "unv" | "uf" => {
+            let records = crate::formats::uff::read(path)?;
+            let inputs: Vec<&str> = model.excitation().iter().map(|e| e.name.as_str()).collect();
+            let [input] = inputs.as_slice() else {
+                return Err(Error::Usage(format!(
+                    "{}: FRFs name no drive point in the model's terms, so the model needs \
+                     exactly one excitation (it has: {})",
+                    path.display(),
+                    inputs.join(", ")
+                )));
+            };
+            crate::formats::uff::to_test_data(&records, input, Noise::relative(uff_noise)).map_err(
+                // Invalid records are bad input; the line names the file.
+                |e| Error::Usage(format!("{}: {e}", path.display())),
+            )
+        }
+        _ => Err(Error::Usage(format!(
+            "{}: test data must be .csv, .h5/.hdf5 or universal file dataset 58 \
+             (.uff/.unv/.uf)",
+            path.display()
+        ))),
+    }
+}
+
 #[cfg(feature = "hdf5")]
 const H5_MAX_VALUES: usize = 1 << 26;
 

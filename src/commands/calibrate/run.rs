@@ -2,56 +2,13 @@
 //! model, the objective prepared, candidates → Levenberg–Marquardt → statistics → k-fold.
 use crate::commands::calibrate::request::CalibrationRequest;
 use crate::error::{Error, Result};
-use nlsim_calib::{
-    Calibration, Candidate, FrfObjective, Noise, ObjectiveConfig, Progress, TestData,
-};
+use nlsim_calib::{Calibration, Candidate, FrfObjective, ObjectiveConfig, Progress};
 use nlsim_hb::{HarmonicSet, HbConfig};
-use nlsim_kernel::Model;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
-/// Test data by file extension: CSV, HDF5 (`.h5`, `.hdf5`) or linear FRFs in universal
-/// file dataset 58 (`.uff`, `.unv`, `.uf`; ASCII or binary), whose drive point is the
-/// model's single excitation and whose noise is `uff_noise` of each value.
-pub fn read_test_data(path: &Path, model: &Model, uff_noise: f64) -> Result<TestData> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
-    match ext.as_str() {
-        "csv" if crate::formats::modal_data::is_modal_csv(path)? => Err(Error::Usage(format!(
-            "{}: this is modal data (mode,frequency_hz,...), not a stepped-sine test: \
-             `nlsim calibrate` runs it on its own (the modal calibration); it has no \
-             batch kinds and no harmonic balance",
-            path.display()
-        ))),
-        "csv" => crate::formats::test_data::read_csv(path),
-        "h5" | "hdf5" => crate::formats::test_data::read_h5(path),
-        "uff" | "unv" | "uf" => {
-            let records = crate::formats::uff::read(path)?;
-            let inputs: Vec<&str> = model.excitation().iter().map(|e| e.name.as_str()).collect();
-            let [input] = inputs.as_slice() else {
-                return Err(Error::Usage(format!(
-                    "{}: FRFs name no drive point in the model's terms, so the model needs \
-                     exactly one excitation (it has: {})",
-                    path.display(),
-                    inputs.join(", ")
-                )));
-            };
-            crate::formats::uff::to_test_data(&records, input, Noise::relative(uff_noise)).map_err(
-                // Invalid records are bad input; the line names the file.
-                |e| Error::Usage(format!("{}: {e}", path.display())),
-            )
-        }
-        _ => Err(Error::Usage(format!(
-            "{}: test data must be .csv, .h5/.hdf5 or universal file dataset 58 \
-             (.uff/.unv/.uf)",
-            path.display()
-        ))),
-    }
-}
+pub use crate::formats::test_data::read as read_test_data;
 
 /// The objective of a request: the model loaded with its overrides, reduced, turned into a
 /// harmonic balance system and compared with the data.

@@ -1,0 +1,266 @@
+//! `nlsim.calibrate`: parameters fitted to a stepped-sine test (thesis §4.5–4.6) as `nlsim
+//! calibrate MODEL DATA --param …` does it — maximin Latin-hypercube candidates, bounded
+//! Levenberg–Marquardt from the best starts, Cramér–Rao bounds at the optimum, k-fold cross
+//! validation — with the command's defaults, so the estimates are the command's to the bit.
+
+use crate::model::Model;
+use crate::runs::{Stop, run};
+use crate::{input, py_err};
+use nlsim::calib::{
+    BranchChoice, CalibrationConfig, Form, FrfObjective, ObjectiveConfig, ParamSpec,
+};
+use nlsim::hb::{HarmonicSet, HbConfig};
+use nlsim::kernel::{Param, Parameterized};
+use numpy::ndarray::Array2;
+use numpy::{IntoPyArray, PyArray1, PyArray2};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// The result of a calibration (`nlsim.calibrate`); arrays are per parameter in the order of
+/// `params` unless noted.
+#[pyclass(module = "nlsim._native", name = "Calibration", frozen)]
+pub struct Calibration {
+    c: nlsim::calib::Calibration,
+}
+
+fn vec1<'py>(py: Python<'py>, v: Vec<f64>) -> Bound<'py, PyArray1<f64>> {
+    PyArray1::from_vec(py, v)
+}
+
+#[pymethods]
+impl Calibration {
+    /// The calibrated parameters' names.
+    #[getter]
+    fn params(&self) -> Vec<String> {
+        self.c.params.iter().map(ToString::to_string).collect()
+    }
+
+    /// The estimate, shape `(param,)`, in each parameter's unit.
+    #[getter]
+    fn estimate<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        vec1(py, self.c.estimate.clone())
+    }
+
+    /// `"converged"`, or why the best Levenberg–Marquardt run stopped.
+    #[getter]
+    fn status(&self) -> &'static str {
+        self.c.status.as_str()
+    }
+
+    /// The cost `½ Σ r²` of the normalised residuals at the estimate.
+    #[getter]
+    fn cost(&self) -> f64 {
+        self.c.cost
+    }
+
+    /// Reduced χ² at the estimate (1 when the noise model fits the misfit).
+    #[getter]
+    fn reduced_chi2(&self) -> f64 {
+        self.c.cramer_rao.reduced_chi2
+    }
+
+    /// Cramér–Rao standard deviations (the Fisher information's inverse; thesis eq. 36),
+    /// shape `(param,)`.
+    #[getter]
+    fn cramer_rao_std<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        vec1(py, self.c.cramer_rao.std.clone())
+    }
+
+    /// The Cramér–Rao covariance, shape `(param, param)`.
+    #[getter]
+    fn covariance<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let m = &self.c.cramer_rao.covariance;
+        Array2::from_shape_fn((m.nrows(), m.ncols()), |(i, j)| m[(i, j)]).into_pyarray(py)
+    }
+
+    /// Whether each estimate sits at a bound.
+    #[getter]
+    fn at_bound(&self) -> Vec<bool> {
+        self.c.at_bound.clone()
+    }
+
+    /// Whether each parameter is poorly identified (relative Cramér–Rao std above 1).
+    #[getter]
+    fn poorly_identified(&self) -> Vec<bool> {
+        self.c.poorly_identified.clone()
+    }
+
+    /// Mean of the k-fold estimates, shape `(param,)`; `None` without cross validation.
+    #[getter]
+    fn kfold_mean<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
+        self.c.kfold.as_ref().map(|k| vec1(py, k.mean.clone()))
+    }
+
+    /// Standard deviation of the k-fold estimates, shape `(param,)`.
+    #[getter]
+    fn kfold_std<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
+        self.c.kfold.as_ref().map(|k| vec1(py, k.std.clone()))
+    }
+
+    /// Jackknife standard deviation from the folds, shape `(param,)`.
+    #[getter]
+    fn jackknife_std<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
+        self.c
+            .kfold
+            .as_ref()
+            .map(|k| vec1(py, k.jackknife_std.clone()))
+    }
+
+    /// The candidates' values, shape `(candidate, param)`: the `lhs` Latin-hypercube points
+    /// and the model's own values.
+    #[getter]
+    fn candidates<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let c = &self.c.candidates;
+        let p = self.c.params.len();
+        Array2::from_shape_fn((c.len(), p), |(i, j)| c[i].values[j]).into_pyarray(py)
+    }
+
+    /// The candidates' costs, shape `(candidate,)`.
+    #[getter]
+    fn candidate_cost<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        vec1(py, self.c.candidates.iter().map(|c| c.cost).collect())
+    }
+
+    fn __repr__(&self) -> String {
+        let parts: Vec<String> = self
+            .c
+            .params
+            .iter()
+            .zip(&self.c.estimate)
+            .zip(&self.c.cramer_rao.std)
+            .map(|((p, e), s)| format!("{p} = {e:.6e} ± {s:.2e}"))
+            .collect();
+        format!(
+            "<nlsim.Calibration: {}; reduced chi2 {:.3}, {}>",
+            parts.join(", "),
+            self.c.cramer_rao.reduced_chi2,
+            self.c.status.as_str()
+        )
+    }
+}
+
+/// Calibrates parameters of `model` on the stepped-sine test in file `data` (CSV or
+/// universal file dataset 58; HDF5 through h5py is not read here). `params` maps each
+/// parameter's text form to its bounds `(lower, upper)`. The other arguments are `nlsim
+/// calibrate`'s options with its defaults: `compare` the harmonics compared (1 = the
+/// fundamental), `form` `"complex"` or `"log"` (log-magnitude and phase), `branch`
+/// `"nearest"` or `"continuation"`, `harmonics` the H of the harmonic balance, `modes`
+/// retained, `uff_noise` the relative noise of UFF FRFs, `lhs` candidates, `seed`, `starts`,
+/// `folds` (0: no cross validation).
+#[pyfunction]
+#[pyo3(signature = (model, data, params, compare=vec![1], form="complex", branch="nearest", harmonics=3, modes=20, uff_noise=0.01, lhs=64, seed=1, starts=3, folds=10, threads=None))]
+#[allow(clippy::too_many_arguments)]
+pub fn calibrate(
+    py: Python<'_>,
+    model: &Model,
+    data: PathBuf,
+    params: &Bound<'_, PyDict>,
+    compare: Vec<usize>,
+    form: &str,
+    branch: &str,
+    harmonics: usize,
+    modes: usize,
+    uff_noise: f64,
+    lhs: usize,
+    seed: u64,
+    starts: usize,
+    folds: usize,
+    threads: Option<usize>,
+) -> PyResult<Calibration> {
+    let mut specs = Vec::new();
+    for (k, v) in params.iter() {
+        let name: String = k
+            .extract()
+            .map_err(|_| input("params: keys are parameter names (str), e.g. 'tip_spring.k3'"))?;
+        let (lo, hi): (f64, f64) = v.extract().map_err(|_| {
+            input(format!(
+                "params['{name}']: expected bounds (lower, upper) as two numbers"
+            ))
+        })?;
+        let p: Param = name.parse().map_err(|_| {
+            let known = model.inner.parameters();
+            input(format!(
+                "params: '{name}' is not a parameter name; the model's: {}",
+                known
+                    .iter()
+                    .map(ToString::to_string)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+        })?;
+        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+            return Err(input(format!(
+                "params['{name}']: bounds ({lo}, {hi}) must be finite with lower < upper"
+            )));
+        }
+        specs.push(ParamSpec::new(p, lo, hi));
+    }
+    if specs.is_empty() {
+        return Err(input("params: name at least one parameter with its bounds"));
+    }
+    let form = match form {
+        "complex" => Form::Complex,
+        "log" => Form::LogMagnitudePhase,
+        other => return Err(input(format!("form: '{other}'; use 'complex' or 'log'"))),
+    };
+    let branch = match branch {
+        "nearest" => BranchChoice::NearestToData,
+        "continuation" => BranchChoice::Continuation,
+        other => {
+            return Err(input(format!(
+                "branch: '{other}'; use 'nearest' or 'continuation'"
+            )));
+        }
+    };
+    if compare.is_empty() || compare.contains(&0) {
+        return Err(input(format!(
+            "compare: {compare:?}; give harmonics 1 (the fundamental) or above"
+        )));
+    }
+    if modes == 0 {
+        return Err(input("modes: 0; keep at least one mode"));
+    }
+    if !(uff_noise > 0.0 && uff_noise.is_finite()) {
+        return Err(input(format!(
+            "uff_noise: {uff_noise}; give a positive fraction"
+        )));
+    }
+    let set = HarmonicSet::new(harmonics, 1).map_err(|e| input(format!("harmonics: {e}")))?;
+    let config = CalibrationConfig {
+        lhs_samples: lhs,
+        seed,
+        starts,
+        folds,
+        ..CalibrationConfig::default()
+    };
+    config
+        .validate_settings()
+        .map_err(|e| input(e.to_string()))?;
+    let m = model.inner.clone();
+    let result = run(py, threads, move |stop: &Stop| -> nlsim::Result<_> {
+        let data = Arc::new(nlsim::formats::test_data::read(&data, &m, uff_noise)?);
+        let reduction = nlsim::reduction::ReductionConfig::lowest(modes.min(m.n_dofs()));
+        let objective = FrfObjective::from_model(
+            &m,
+            &reduction,
+            set,
+            HbConfig::default(),
+            data,
+            specs,
+            ObjectiveConfig {
+                harmonics: compare,
+                form,
+                branch,
+            },
+        )?;
+        Ok(nlsim::calib::calibrate_with_progress(
+            &objective,
+            &config,
+            &|_| stop.check(),
+        )?)
+    })?
+    .map_err(py_err)?;
+    Ok(Calibration { c: result })
+}
