@@ -851,31 +851,9 @@ pub extern "C" fn nlsim_model_set_modal_damping(model: NlsimModel, zeta: f64) ->
     })
 }
 
-/// Parses `"cubic k3=1.7e15"`: a law type then `key=value` pairs (spaces or commas between).
+/// Parses `"cubic k3=1.7e15"` ([`Law::from_text`]).
 fn parse_law(element: &str, text: &str) -> Result<Law, Failure> {
-    let mut words = text
-        .split(|c: char| c.is_whitespace() || c == ',')
-        .filter(|w| !w.is_empty());
-    let kind = words.next().ok_or_else(|| {
-        Failure::input(format!(
-            "element '{element}': the law is empty; write e.g. \"cubic k3=1e9\""
-        ))
-    })?;
-    let mut pairs = Vec::new();
-    for w in words {
-        let (k, v) = w.split_once('=').ok_or_else(|| {
-            Failure::input(format!(
-                "element '{element}': '{w}' is not key=value (e.g. k3=1e9)"
-            ))
-        })?;
-        let v: f64 = v.trim().parse().map_err(|_| {
-            Failure::input(format!(
-                "element '{element}': the value of '{k}' ('{v}') is not a number"
-            ))
-        })?;
-        pairs.push((k.trim(), v));
-    }
-    Ok(Law::from_named(element, kind, &pairs)?)
+    Ok(Law::from_text(element, text)?)
 }
 
 fn dof_index(model: &Model, label: &str) -> Result<usize, Failure> {

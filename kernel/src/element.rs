@@ -203,6 +203,32 @@ impl Law {
         }
     }
 
+    /// Parses a law written as one line, `"cubic k3=1.7e15"` or `"clearance, k1=5e5,
+    /// e1=1e-3"`: the law type, then `key=value` words (spaces or commas between) with the
+    /// model file's keys, handed to [`Law::from_named`]. The line form of the C ABI and the
+    /// Python package; `element` names the element in errors.
+    pub fn from_text(element: &str, text: &str) -> Result<Self> {
+        let bad = |reason: String| Error::invalid(format!("law of element '{element}'"), reason);
+        let mut words = text
+            .split(|c: char| c.is_whitespace() || c == ',')
+            .filter(|w| !w.is_empty());
+        let kind = words
+            .next()
+            .ok_or_else(|| bad("the law is empty; write e.g. \"cubic k3=1e9\"".into()))?;
+        let mut pairs = Vec::new();
+        for w in words {
+            let (k, v) = w
+                .split_once('=')
+                .ok_or_else(|| bad(format!("'{w}' is not key=value (e.g. k3=1e9)")))?;
+            let v: f64 = v
+                .trim()
+                .parse()
+                .map_err(|_| bad(format!("the value of '{k}' ('{v}') is not a number")))?;
+            pairs.push((k.trim(), v));
+        }
+        Law::from_named(element, kind, &pairs)
+    }
+
     /// The law of type `kind` (the model-file names: `cubic`, `polynomial`, `clearance`,
     /// `bump_stop`, `quadratic_damping`, `coulomb`, `jenkins`) from `name = value` pairs with
     /// the model file's keys and defaults (`clearance`: `k2 = e2 = 0`, `r = s = 1`;

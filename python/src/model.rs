@@ -110,34 +110,17 @@ fn csr_matrix(
     SparseSym::from_faer(name, SparseColMat::new(symbolic, vals.to_vec())).map_err(kernel_err)
 }
 
-/// Parses `"cubic k3=1.7e15"`: a law type, then `key=value` words (the model-file keys).
-pub(crate) fn parse_law(element: &str, text: &str) -> PyResult<Law> {
-    let mut words = text
-        .split(|c: char| c.is_whitespace() || c == ',')
-        .filter(|w| !w.is_empty());
-    let kind = words.next().ok_or_else(|| {
-        input(format!(
-            "element '{element}': law is empty; write e.g. \"cubic k3=1e9\""
-        ))
-    })?;
-    let mut pairs = Vec::new();
-    for w in words {
-        let (k, v) = w.split_once('=').ok_or_else(|| {
-            input(format!(
-                "element '{element}': law: '{w}' is not key=value (e.g. k3=1e9)"
-            ))
-        })?;
-        let v: f64 = v.trim().parse().map_err(|_| {
-            input(format!(
-                "element '{element}': law: the value of '{k}' ('{v}') is not a number"
-            ))
-        })?;
-        pairs.push((k.trim(), v));
-    }
-    Law::from_named(element, kind, &pairs).map_err(kernel_err)
-}
-
 impl Model {
+    /// The DOF labels as text, in the order of the matrices' rows.
+    pub(crate) fn dofs_text(&self) -> Vec<String> {
+        self.inner
+            .dofs()
+            .labels()
+            .iter()
+            .map(ToString::to_string)
+            .collect()
+    }
+
     fn dof(&self, arg: &str, label: &str) -> PyResult<usize> {
         self.inner
             .dofs()
@@ -282,7 +265,7 @@ impl Model {
                 Coupling::relative(a, b)
             }
         };
-        let law = parse_law(name, law)?;
+        let law = Law::from_text(name, law).map_err(kernel_err)?;
         let element = NonlinearElement::new(name, law, coupling).map_err(kernel_err)?;
         self.inner.add_element(element).map_err(kernel_err)
     }
@@ -342,12 +325,7 @@ impl Model {
     /// DOF labels (`"12:uz"`), in the order of the matrices' rows.
     #[getter]
     fn dofs(&self) -> Vec<String> {
-        self.inner
-            .dofs()
-            .labels()
-            .iter()
-            .map(ToString::to_string)
-            .collect()
+        self.dofs_text()
     }
 
     /// Names of the nonlinear elements.

@@ -133,20 +133,12 @@ pub(crate) fn run<T: Send + 'static>(
     }
 }
 
-/// Half the memory the system reports available, as the command line's default factor
-/// budget (`--memory-budget`).
-fn memory_budget() -> Option<usize> {
-    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kib: usize = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib.saturating_mul(1024) / 2)
-}
-
 fn eigen_config(selection: ModeSelection, threads: Option<usize>) -> EigenConfig {
     EigenConfig {
         selection,
         par: par(threads),
-        memory_budget: memory_budget(),
+        // As the command line's default `--memory-budget`.
+        memory_budget: nlsim::formats::files::default_memory_budget(),
         ..EigenConfig::default()
     }
 }
@@ -540,15 +532,8 @@ fn drive(
         let signal =
             nlsim::formats::excitation::parse_excitation(&spec, point.amplitude, duration, rate_hz)
                 .map_err(|e| input(format!("excitation['{}']: {e}", point.name)))?;
-        if let Some(f) = signal.max_frequency_hz()
-            && f > 0.5 * rate_hz
-        {
-            return Err(input(format!(
-                "excitation['{}']: {f} Hz is above the Nyquist frequency {} Hz of rate_hz {rate_hz}",
-                point.name,
-                0.5 * rate_hz
-            )));
-        }
+        nlsim::formats::excitation::nyquist_check(&spec, &signal, rate_hz)
+            .map_err(|e| input(format!("excitation['{}']: {e}", point.name)))?;
         return Ok((signal, spec));
     }
     let samples = value
@@ -932,15 +917,4 @@ pub fn builtin_models() -> Vec<(&'static str, &'static str)> {
         .iter()
         .map(|f| (f.name, f.summary))
         .collect()
-}
-
-impl Model {
-    pub(crate) fn dofs_text(&self) -> Vec<String> {
-        self.inner
-            .dofs()
-            .labels()
-            .iter()
-            .map(ToString::to_string)
-            .collect()
-    }
 }

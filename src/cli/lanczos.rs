@@ -41,7 +41,7 @@ impl LanczosArgs {
                     "--memory-budget {gb}: give a positive number of GB"
                 )));
             }
-            None => crate::commands::setup::default_memory_budget(),
+            None => crate::formats::files::default_memory_budget(),
         };
         Ok(crate::commands::setup::Lanczos {
             basis: self.basis,

@@ -64,16 +64,6 @@ impl Default for Lanczos {
     }
 }
 
-/// Half the memory the system reports available (`MemAvailable` of `/proc/meminfo`, bytes):
-/// the command line's default factor budget, so that a model whose two factors would not fit
-/// beside each other is checked in the storage of one. `None` where the file is not there.
-pub fn default_memory_budget() -> Option<usize> {
-    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kib: usize = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib.saturating_mul(1024) / 2)
-}
-
 /// The reduction every run uses: the lowest `modes` modes, with or without residual
 /// flexibility.
 fn reduce(
@@ -219,15 +209,6 @@ pub(crate) fn cluster_note(kept: usize, asked: usize) -> Option<String> {
         };
         format!("{which}: equal frequencies (to 1e-8), and a degenerate cluster is not split at the cut-off")
     })
-}
-
-/// `v` in plain notation in the usual range, in scientific notation beyond it.
-pub(crate) fn short(v: f64) -> String {
-    if v == 0.0 || (1e-3..1e7).contains(&v.abs()) {
-        format!("{v}")
-    } else {
-        format!("{v:e}")
-    }
 }
 
 /// The default report folder of a settings file: `DIR/NAME-report` for `DIR/NAME.toml`.

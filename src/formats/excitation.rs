@@ -234,6 +234,33 @@ fn read_force_file(path: &Path, rate_hz: f64) -> Result<Signal> {
     Ok(Signal::Sampled { rate_hz, values })
 }
 
+/// Refuses a force with content above the Nyquist frequency of the sample rate `rate` (Hz):
+/// the step (FOH, ZOH, LSOH) or the output samples (the others) would alias it.
+pub fn nyquist_check(label: &str, signal: &Signal, rate: f64) -> Result<()> {
+    if let Some(f) = signal.max_frequency_hz()
+        && f > 0.5 * rate
+    {
+        return Err(Error::Usage(format!(
+            "excitation '{label}': {} Hz is above the Nyquist frequency {} Hz of the {} Hz \
+             rate, which would alias it; give a rate above {} Hz",
+            short(f),
+            short(0.5 * rate),
+            short(rate),
+            short(2.0 * f)
+        )));
+    }
+    Ok(())
+}
+
+/// `v` in plain notation in the usual range, in scientific notation beyond it.
+fn short(v: f64) -> String {
+    if v == 0.0 || (1e-3..1e7).contains(&v.abs()) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

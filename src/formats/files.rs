@@ -486,6 +486,16 @@ pub fn u64_attr(file: &hdf5::File, name: &str) -> Option<u64> {
     file.attr(name).ok()?.read_scalar::<u64>().ok()
 }
 
+/// Half the memory the system reports available (`MemAvailable` of `/proc/meminfo`, bytes):
+/// the command line's default factor budget, so that a model whose two factors would not fit
+/// beside each other is checked in the storage of one. `None` where the file is not there.
+pub fn default_memory_budget() -> Option<usize> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: usize = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib.saturating_mul(1024) / 2)
+}
+
 /// Name of job `index`'s group in shard and merged files.
 pub fn job_group_name(index: usize) -> String {
     format!("job-{index:08}")

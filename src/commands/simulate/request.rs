@@ -1,7 +1,6 @@
 //! The request of `nlsim simulate`: duration, sample rate, method, drives, tolerances;
 //! checked before the run (sampling against the excitation's frequencies included).
 use crate::commands::setup::Lanczos;
-use crate::commands::setup::short;
 use crate::error::{Error, Result};
 use nlsim_sim::Signal;
 
@@ -186,7 +185,7 @@ impl SimRequest {
             )));
         }
         for d in &self.excitation {
-            nyquist_check(&d.label, &d.signal, self.rate)?;
+            crate::formats::excitation::nyquist_check(&d.label, &d.signal, self.rate)?;
         }
         Ok(n_steps)
     }
@@ -213,24 +212,6 @@ impl SimRequest {
             })
             .collect()
     }
-}
-
-/// Refuses a force with content above the Nyquist frequency of the sample rate `rate` (Hz):
-/// the step (FOH, ZOH, LSOH) or the output samples (the others) would alias it.
-pub(crate) fn nyquist_check(label: &str, signal: &Signal, rate: f64) -> Result<()> {
-    if let Some(f) = signal.max_frequency_hz()
-        && f > 0.5 * rate
-    {
-        return Err(Error::Usage(format!(
-            "excitation '{label}': {} Hz is above the Nyquist frequency {} Hz of the {} Hz \
-             rate, which would alias it; give a rate above {} Hz",
-            short(f),
-            short(0.5 * rate),
-            short(rate),
-            short(2.0 * f)
-        )));
-    }
-    Ok(())
 }
 
 /// Where `nlsim simulate` writes.

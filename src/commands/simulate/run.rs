@@ -4,8 +4,8 @@ use crate::commands::setup::Reductions;
 use crate::commands::simulate::request::Drive;
 use crate::commands::simulate::request::Method;
 use crate::commands::simulate::request::SimRequest;
-use crate::commands::simulate::request::nyquist_check;
 use crate::error::{Error, Result};
+use crate::formats::excitation::nyquist_check;
 use nlsim_kernel::Model;
 use nlsim_reduction::ModalSystem;
 use nlsim_sim::{
