@@ -3602,6 +3602,10 @@ seed = 9
         ]);
         assert_eq!(rc, 0, "{out}{err}");
         assert!(out.contains("group:root.k_scale"), "{out}");
+        assert!(
+            out.contains("FE-level parameters: parametric reduced model"),
+            "{out}"
+        );
         let rows = csv_rows(&est);
         assert_eq!(rows.len(), 4);
         for ((row, name), t) in rows.iter().zip(names).zip(values) {
@@ -3609,6 +3613,72 @@ seed = 9
             let e: f64 = row[1].parse().unwrap();
             assert!(((e - t) / t).abs() < 1e-6, "{name}: {e} vs {t}\n{out}");
         }
+        // The same with a full reduction per evaluation, the reference.
+        let args = |extra: &[&str]| -> Vec<String> {
+            let mut a: Vec<String> = [
+                "calibrate",
+                model_file.to_str().unwrap(),
+                dir.join("test.csv").to_str().unwrap(),
+                "--param",
+                "group:root.k_scale=0.5:2",
+                "--param",
+                "group:tip.m_scale=0.5:1.5",
+                "--param",
+                "spring:6:ux.k=100:5000",
+                "--param",
+                "tip.k3=1e5:1e8",
+                "--harmonics",
+                "3",
+                "--compare",
+                "1,3",
+                "--modes",
+                "6",
+                "--lhs",
+                "16",
+                "--starts",
+                "2",
+                "--folds",
+                "0",
+            ]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+            a.extend(extra.iter().map(|s| s.to_string()));
+            a
+        };
+        let run = |extra: &[&str]| {
+            let a = args(extra);
+            nlsim(&a.iter().map(String::as_str).collect::<Vec<_>>())
+        };
+        let full_est = dir.join("full.csv");
+        let (rc, out, err) = run(&[
+            "--fe-reduction",
+            "full",
+            "--out",
+            full_est.to_str().unwrap(),
+        ]);
+        assert_eq!(rc, 0, "{out}{err}");
+        assert!(out.contains("a full reduction at each of"), "{out}");
+        for ((row, name), t) in csv_rows(&full_est).iter().zip(names).zip(values) {
+            let e: f64 = row[1].parse().unwrap();
+            assert!(((e - t) / t).abs() < 1e-6, "{name}: {e} vs {t}\n{out}");
+        }
+        // The estimate before running: evaluations and time, nothing written.
+        let (rc, out, err) = run(&["--dry-run"]);
+        assert_eq!(rc, 0, "{out}{err}");
+        assert!(
+            out.contains("candidates: 17 cost evaluations") && out.contains("estimated wall time"),
+            "{out}"
+        );
+        let (rc, _, err) = run(&["--fe-tolerance", "0"]);
+        assert_eq!(rc, 2, "{err}");
+        assert!(
+            err.contains("fe-tolerance") && err.contains("positive"),
+            "{err}"
+        );
+        let (rc, _, err) = run(&["--fe-reduction", "full", "--fe-tolerance", "1e-5"]);
+        assert_eq!(rc, 2, "{err}");
+        assert!(err.contains("parametric"), "{err}");
     }
 
     /// The linear stage from the command line: measured modes as CSV (four with shapes at

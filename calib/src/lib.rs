@@ -48,9 +48,10 @@ pub use modal::{
     MeasuredMode, ModalCalibration, ModalData, ModalFit, ModalObjective, calibrate_modal, mac_of,
 };
 pub use nlsim_kernel::Status;
+pub use nlsim_reduction::{ParametricConfig, ParametricStats};
 pub use objective::{
-    BRANCH_CHECK, BranchChoice, Form, FrfObjective, ObjectiveConfig, ParamSpec, PointResult,
-    SweepEvaluation,
+    BRANCH_CHECK, BranchChoice, FeReduction, FeReductionStats, Form, FrfObjective, ObjectiveConfig,
+    ParamSpec, PointResult, SweepEvaluation,
 };
 pub use plan::{
     Band, Criterion, Design, Exciter, FimSummary, Placement, Planner, RankedDesign, SideTone,

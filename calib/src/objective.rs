@@ -27,10 +27,12 @@ use nlsim_hb::{
 };
 use nlsim_kernel::{Error, Model, Param, Parameterized, Quantity, Result, Status};
 use nlsim_reduction::{
-    EigenSolver, ReductionConfig, SensitivityConfig, reduce_with, reduced_sensitivities,
+    EigenSolver, ParametricConfig, ParametricReduction, ReductionConfig, SensitivityConfig,
+    reduce_with, reduced_sensitivities,
 };
 use std::f64::consts::PI;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 
 /// A parameter to calibrate, with its box and how its range is sampled and scaled.
 #[derive(Debug, Clone, PartialEq)]
@@ -217,27 +219,127 @@ pub struct SweepEvaluation {
 /// the sub-steps between them, each `n_x (n_x + inputs (2H+1))` values.
 const RECEPTANCE_BUDGET: usize = 64 << 20;
 
+/// How an objective with FE-level parameters (group scales, boundary springs) reduces the
+/// model at each evaluation.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FeReduction {
+    /// The parametric reduced model ([`ParametricReduction`]): one basis built with the
+    /// objective, a small dense eigen solve per evaluation, certified against the full
+    /// matrices and refreshed by a full reduction where the certificate fails.
+    Parametric(ParametricConfig),
+    /// A full reduction of the model at every evaluation (the reference; slow on large
+    /// models).
+    Full,
+}
+
+impl Default for FeReduction {
+    fn default() -> Self {
+        FeReduction::Parametric(ParametricConfig::default())
+    }
+}
+
+/// Counters of the FE-level reductions, shared by every copy of an objective (the copies
+/// the calibration runs in parallel included).
+#[derive(Debug, Default)]
+struct FeCounters {
+    evaluations: AtomicUsize,
+    refreshes: AtomicUsize,
+    full_reductions: AtomicUsize,
+    full_micros: AtomicU64,
+}
+
+/// What the FE-level reductions of an objective (and of all its copies) did so far.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct FeReductionStats {
+    /// Whether the parametric reduced model is used (else a full reduction per evaluation).
+    pub parametric: bool,
+    /// Basis vectors of the parametric model as built.
+    pub basis_size: usize,
+    /// Full reductions made while the objective was built (the nominal one and the
+    /// parametric model's training).
+    pub setup_reductions: usize,
+    /// Evaluations of the linear part.
+    pub evaluations: usize,
+    /// Evaluations where the parametric model's certificate failed and the model was reduced
+    /// in full (always every evaluation with [`FeReduction::Full`]).
+    pub refreshes: usize,
+    /// Full reductions made by the evaluations.
+    pub full_reductions: usize,
+    /// Seconds of those full reductions (summed over the threads).
+    pub full_seconds: f64,
+}
+
+/// The reduction behind FE-level parameters.
+#[derive(Debug)]
+enum FeModel {
+    Parametric(ParametricReduction),
+    Full {
+        model: Model,
+        reduction: ReductionConfig,
+        solver: EigenSolver,
+    },
+}
+
 /// The FE model behind an objective with FE-level parameters (group scales, boundary
-/// springs): set on the model, which is reduced again at each evaluation; their Jacobian
-/// columns come from the reduced model's analytic sensitivities on the same factor.
+/// springs): each evaluation sets them on the parametric reduced model (or reduces the model
+/// again with [`FeReduction::Full`]); their Jacobian columns come from the same model's
+/// analytic sensitivities.
 #[derive(Debug)]
 struct FeLink {
-    model: Model,
-    reduction: ReductionConfig,
-    solver: EigenSolver,
+    model: FeModel,
     /// Indices (in the specs) of the FE-level parameters.
     fe: Vec<usize>,
+    counters: Arc<FeCounters>,
+    setup: FeReductionStats,
 }
 
 impl Clone for FeLink {
-    /// A copy with a fresh eigen solver (its symbolic analysis is redone once).
+    /// A copy with a fresh eigen solver (its symbolic analysis is redone on first need); the
+    /// parametric basis is shared until the copy enriches it.
     fn clone(&self) -> Self {
         Self {
-            model: self.model.clone(),
-            reduction: self.reduction.clone(),
-            solver: EigenSolver::new(),
+            model: match &self.model {
+                FeModel::Parametric(p) => FeModel::Parametric(p.clone()),
+                FeModel::Full {
+                    model, reduction, ..
+                } => FeModel::Full {
+                    model: model.clone(),
+                    reduction: reduction.clone(),
+                    solver: EigenSolver::new(),
+                },
+            },
             fe: self.fe.clone(),
+            counters: Arc::clone(&self.counters),
+            setup: self.setup,
         }
+    }
+}
+
+impl FeLink {
+    fn param(&self, p: &Param) -> Result<f64> {
+        match &self.model {
+            FeModel::Parametric(r) => {
+                let i = r
+                    .params()
+                    .iter()
+                    .position(|q| q == p)
+                    .ok_or_else(|| nlsim_kernel::param::unknown_param(p, r.params()))?;
+                Ok(r.nominal()[i])
+            }
+            FeModel::Full { model, .. } => model.param(p),
+        }
+    }
+
+    fn fe_parameters(&self) -> Vec<Param> {
+        let model = match &self.model {
+            FeModel::Parametric(r) => r.model(),
+            FeModel::Full { model, .. } => model,
+        };
+        model
+            .parameters()
+            .into_iter()
+            .filter(|p| !matches!(p, Param::Element { .. }))
+            .collect()
     }
 }
 
@@ -300,13 +402,8 @@ impl FrfObjective {
     /// The objective of `data` on `model` reduced by `reduction` and balanced with the
     /// harmonics `set`: as [`FrfObjective::new`], and the parameters may also be FE-level
     /// ones of the model (`group:NAME.k_scale`, `group:NAME.m_scale`, `spring:NODE:COMP.k`),
-    /// next to element law parameters. The model is then reduced again at every evaluation
-    /// (one eigen solve; the symbolic analysis is kept), and their Jacobian columns come from
-    /// the analytic sensitivities of the reduced model
-    /// ([`nlsim_reduction::reduced_sensitivities`]), never from finite differences; these
-    /// reductions run on one thread (`Par::Seq`: the calibration runs its candidates and
-    /// folds in parallel, and the estimates must not depend on the thread count). Modal
-    /// parameters (`modeN.f`, ...) cannot be mixed with FE-level ones, which define them.
+    /// next to element law parameters. These go through the parametric reduced model with
+    /// its default settings ([`FrfObjective::from_model_with`]).
     pub fn from_model(
         model: &Model,
         reduction: &ReductionConfig,
@@ -316,16 +413,56 @@ impl FrfObjective {
         specs: Vec<ParamSpec>,
         config: ObjectiveConfig,
     ) -> Result<Self> {
-        let mut solver = EigenSolver::new();
-        let reduced = reduce_with(model, reduction, &mut solver, &mut |_| {})?;
-        let sys = HbSystem::from_model(model, &reduced, set, hb)?;
-        let fe: Vec<usize> = specs
+        Self::from_model_with(
+            model,
+            reduction,
+            &FeReduction::default(),
+            set,
+            hb,
+            data,
+            specs,
+            config,
+        )
+    }
+
+    /// As [`FrfObjective::from_model`], with the FE-level parameters reduced as `fe` says.
+    ///
+    /// With [`FeReduction::Parametric`] the parametric reduced model
+    /// ([`ParametricReduction`]) is built here: the nominal reduction, then a greedy
+    /// training over the corners and the centre of the FE-level parameters' box (their
+    /// internal, possibly logarithmic, coordinates; the centre and the face centres beyond
+    /// four parameters). Each evaluation then solves a dense eigenproblem of the basis's size
+    /// and checks the result against the full matrices; where that certificate fails the
+    /// model is reduced in full there, and an evaluation with a Jacobian keeps the enrichment
+    /// in its copy of the objective (the optimisations and folds run sequentially on their
+    /// own copies, so the estimates do not depend on the thread count). The Jacobian columns
+    /// come from the same projected matrices. With [`FeReduction::Full`] the model is reduced
+    /// again at every evaluation (one eigen solve; the symbolic analysis kept) and the
+    /// Jacobian columns come from [`nlsim_reduction::reduced_sensitivities`]. Either way
+    /// these reductions run on one thread (`Par::Seq`), so that the results do not depend on
+    /// the thread count. Modal parameters (`modeN.f`, ...) cannot be mixed with FE-level
+    /// ones, which define them.
+    #[allow(clippy::too_many_arguments)]
+    pub fn from_model_with(
+        model: &Model,
+        reduction: &ReductionConfig,
+        fe: &FeReduction,
+        set: HarmonicSet,
+        hb: HbConfig,
+        data: Arc<TestData>,
+        specs: Vec<ParamSpec>,
+        config: ObjectiveConfig,
+    ) -> Result<Self> {
+        let fe_idx: Vec<usize> = specs
             .iter()
             .enumerate()
             .filter(|(_, s)| model.matrix_derivative(&s.param).is_ok())
             .map(|(i, _)| i)
             .collect();
-        if fe.is_empty() {
+        if fe_idx.is_empty() {
+            let mut solver = EigenSolver::new();
+            let reduced = reduce_with(model, reduction, &mut solver, &mut |_| {})?;
+            let sys = HbSystem::from_model(model, &reduced, set, hb)?;
             return Self::build(&sys, None, data, specs, config);
         }
         if let Some(s) = specs.iter().find(|s| is_linear_part_param(&s.param)) {
@@ -334,21 +471,77 @@ impl FrfObjective {
                 format!(
                     "{} is a parameter of the reduced model, which the FE-level parameter {} \
                      changes: calibrate one kind or the other",
-                    s.param, specs[fe[0]].param
+                    s.param, specs[fe_idx[0]].param
                 ),
             ));
         }
-        // The candidates and folds run in parallel: each reduction runs on one thread, so
-        // that the results do not depend on the thread count.
+        for &i in &fe_idx {
+            specs[i].check()?;
+        }
         let mut reduction = reduction.clone();
         reduction.eigen.par = faer::Par::Seq;
+        let (fe_model, reduced, setup) = match fe {
+            FeReduction::Parametric(settings) => {
+                let params: Vec<Param> = fe_idx.iter().map(|&i| specs[i].param.clone()).collect();
+                let fe_specs: Vec<&ParamSpec> = fe_idx.iter().map(|&i| &specs[i]).collect();
+                let training = training_points(&fe_specs);
+                let mut prom = ParametricReduction::new(
+                    model,
+                    &reduction,
+                    &params,
+                    settings.clone(),
+                    &training,
+                    &mut |_| {},
+                )?;
+                let nominal = prom.nominal().to_vec();
+                let point = prom.evaluate(&nominal, false, true)?;
+                let st = prom.stats();
+                let setup = FeReductionStats {
+                    parametric: true,
+                    basis_size: st.basis_size,
+                    setup_reductions: st.full_reductions,
+                    ..FeReductionStats::default()
+                };
+                (FeModel::Parametric(prom), point.reduced, setup)
+            }
+            FeReduction::Full => {
+                let mut solver = EigenSolver::new();
+                let reduced = reduce_with(model, &reduction, &mut solver, &mut |_| {})?;
+                let setup = FeReductionStats {
+                    setup_reductions: 1,
+                    ..FeReductionStats::default()
+                };
+                (
+                    FeModel::Full {
+                        model: model.clone(),
+                        reduction,
+                        solver,
+                    },
+                    reduced,
+                    setup,
+                )
+            }
+        };
+        let sys = HbSystem::from_model(model, &reduced, set, hb)?;
         let link = FeLink {
-            model: model.clone(),
-            reduction,
-            solver,
-            fe,
+            model: fe_model,
+            fe: fe_idx,
+            counters: Arc::new(FeCounters::default()),
+            setup,
         };
         Self::build(&sys, Some(link), data, specs, config)
+    }
+
+    /// What the FE-level reductions did so far, over every copy of this objective; `None`
+    /// without FE-level parameters.
+    pub fn fe_stats(&self) -> Option<FeReductionStats> {
+        self.fe.as_ref().map(|l| FeReductionStats {
+            evaluations: l.counters.evaluations.load(Ordering::Relaxed),
+            refreshes: l.counters.refreshes.load(Ordering::Relaxed),
+            full_reductions: l.counters.full_reductions.load(Ordering::Relaxed),
+            full_seconds: l.counters.full_micros.load(Ordering::Relaxed) as f64 * 1e-6,
+            ..l.setup
+        })
     }
 
     fn build(
@@ -364,12 +557,7 @@ impl FrfObjective {
         }
         let mut known = sys.parameters();
         if let Some(link) = &fe {
-            known.extend(
-                link.model
-                    .parameters()
-                    .into_iter()
-                    .filter(|p| !matches!(p, Param::Element { .. })),
-            );
+            known.extend(link.fe_parameters());
         }
         for (i, s) in specs.iter().enumerate() {
             s.check()?;
@@ -771,11 +959,11 @@ impl FrfObjective {
         if n == 0 { 0.0 } else { sum / n as f64 }
     }
 
-    /// Sets the FE-level parameters of `values` on the model, reduces it again and puts the
-    /// new linear part into the system; with `jacobian`, the variations of the linear part
-    /// along each FE-level parameter (in their spec order). `Ok(None)` when the eigen solve
-    /// fails numerically at these values. Nothing to do (an empty list) without FE-level
-    /// parameters.
+    /// Sets the FE-level parameters of `values` on the parametric model (or the full model,
+    /// reduced again) and puts the new linear part into the system; with `jacobian`, the
+    /// variations of the linear part along each FE-level parameter (in their spec order).
+    /// `Ok(None)` when the reduction fails numerically at these values. Nothing to do (an
+    /// empty list) without FE-level parameters.
     fn update_fe(
         &mut self,
         values: &[f64],
@@ -789,42 +977,102 @@ impl FrfObjective {
             .iter()
             .map(|&i| self.specs[i].param.clone())
             .collect();
-        for (p, &i) in params.iter().zip(&link.fe) {
-            link.model.set_param(p, values[i])?;
+        let fe_values: Vec<f64> = link.fe.iter().map(|&i| values[i]).collect();
+        link.counters.evaluations.fetch_add(1, Ordering::Relaxed);
+        match &mut link.model {
+            FeModel::Parametric(prom) => {
+                let before = prom.stats();
+                // An evaluation with a Jacobian (an optimisation step, sequential on its own
+                // copy) keeps an enrichment; a cost-only one (the candidates, run in parallel
+                // on shared copies) does not, so that no result depends on the scheduling.
+                let point = prom.evaluate(&fe_values, jacobian, jacobian);
+                let after = prom.stats();
+                if after.refreshes > before.refreshes {
+                    link.counters.refreshes.fetch_add(1, Ordering::Relaxed);
+                }
+                let full = after.full_reductions - before.full_reductions;
+                link.counters
+                    .full_reductions
+                    .fetch_add(full, Ordering::Relaxed);
+                link.counters.full_micros.fetch_add(
+                    ((after.full_seconds - before.full_seconds) * 1e6) as u64,
+                    Ordering::Relaxed,
+                );
+                let point = match point {
+                    Ok(p) => p,
+                    Err(Error::Numerical { .. }) => return Ok(None),
+                    Err(e) => return Err(e),
+                };
+                self.sys
+                    .set_linear(LinearPart::from_reduced(&point.reduced)?)?;
+                let Some(d) = point.derivatives else {
+                    return Ok(Some(Vec::new()));
+                };
+                Ok(Some(
+                    params
+                        .into_iter()
+                        .enumerate()
+                        .map(|(j, param)| LinearVariation {
+                            param,
+                            eigenvalues: d.eigenvalues.col(j).iter().copied().collect(),
+                            damping: d.damping[j].clone(),
+                            participation: d.participation[j].clone(),
+                            residual: d.residual[j].clone(),
+                        })
+                        .collect(),
+                ))
+            }
+            FeModel::Full {
+                model,
+                reduction,
+                solver,
+            } => {
+                for (p, &v) in params.iter().zip(&fe_values) {
+                    model.set_param(p, v)?;
+                }
+                link.counters.refreshes.fetch_add(1, Ordering::Relaxed);
+                link.counters
+                    .full_reductions
+                    .fetch_add(1, Ordering::Relaxed);
+                let t = std::time::Instant::now();
+                let reduced = reduce_with(model, reduction, solver, &mut |_| {});
+                link.counters
+                    .full_micros
+                    .fetch_add((t.elapsed().as_secs_f64() * 1e6) as u64, Ordering::Relaxed);
+                let reduced = match reduced {
+                    Ok(r) => r,
+                    Err(Error::Numerical { .. }) => return Ok(None),
+                    Err(e) => return Err(e),
+                };
+                self.sys.set_linear(LinearPart::from_reduced(&reduced)?)?;
+                if !jacobian {
+                    return Ok(Some(Vec::new()));
+                }
+                let d = reduced_sensitivities(
+                    model,
+                    &reduced,
+                    solver,
+                    &params,
+                    &SensitivityConfig {
+                        par: reduction.eigen.par,
+                        ..SensitivityConfig::default()
+                    },
+                )?;
+                Ok(Some(
+                    params
+                        .into_iter()
+                        .enumerate()
+                        .map(|(j, param)| LinearVariation {
+                            param,
+                            eigenvalues: d.eigen.eigenvalue.col(j).iter().copied().collect(),
+                            damping: d.damping[j].clone(),
+                            participation: d.participation[j].clone(),
+                            residual: d.residual[j].clone(),
+                        })
+                        .collect(),
+                ))
+            }
         }
-        let reduced = match reduce_with(&link.model, &link.reduction, &mut link.solver, &mut |_| {})
-        {
-            Ok(r) => r,
-            Err(Error::Numerical { .. }) => return Ok(None),
-            Err(e) => return Err(e),
-        };
-        self.sys.set_linear(LinearPart::from_reduced(&reduced)?)?;
-        if !jacobian {
-            return Ok(Some(Vec::new()));
-        }
-        let d = reduced_sensitivities(
-            &link.model,
-            &reduced,
-            &link.solver,
-            &params,
-            &SensitivityConfig {
-                par: link.reduction.eigen.par,
-                ..SensitivityConfig::default()
-            },
-        )?;
-        Ok(Some(
-            params
-                .into_iter()
-                .enumerate()
-                .map(|(j, param)| LinearVariation {
-                    param,
-                    eigenvalues: d.eigen.eigenvalue.col(j).iter().copied().collect(),
-                    damping: d.damping[j].clone(),
-                    participation: d.participation[j].clone(),
-                    residual: d.residual[j].clone(),
-                })
-                .collect(),
-        ))
     }
 
     /// Every point failed with `status` (the model could not be set up at these values).
@@ -851,7 +1099,7 @@ impl FrfObjective {
     /// else on the system.
     pub fn param_value(&self, p: &Param) -> Result<f64> {
         match &self.fe {
-            Some(link) if link.fe.iter().any(|&i| self.specs[i].param == *p) => link.model.param(p),
+            Some(link) if link.fe.iter().any(|&i| self.specs[i].param == *p) => link.param(p),
             _ => self.sys.param(p),
         }
     }
@@ -916,6 +1164,37 @@ fn in_spec_order(
         .collect();
     all.sort_by_key(|(i, _)| *i);
     all.into_iter().map(|(_, s)| s).collect()
+}
+
+/// The parametric model's training points over the box of `specs` (values, in their
+/// order): the centre and the corners of the box in the internal coordinates (the centre and
+/// the face centres beyond four parameters).
+fn training_points(specs: &[&ParamSpec]) -> Vec<Vec<f64>> {
+    let n = specs.len();
+    let (lo, hi): (Vec<f64>, Vec<f64>) = specs.iter().map(|s| s.internal_bounds()).unzip();
+    let centre: Vec<f64> = (0..n).map(|j| 0.5 * (lo[j] + hi[j])).collect();
+    let mut internal = vec![centre.clone()];
+    if n <= 4 {
+        for mask in 0..(1usize << n) {
+            internal.push(
+                (0..n)
+                    .map(|j| if mask >> j & 1 == 1 { hi[j] } else { lo[j] })
+                    .collect(),
+            );
+        }
+    } else {
+        for j in 0..n {
+            for end in [lo[j], hi[j]] {
+                let mut p = centre.clone();
+                p[j] = end;
+                internal.push(p);
+            }
+        }
+    }
+    internal
+        .into_iter()
+        .map(|u| specs.iter().zip(u).map(|(s, v)| s.to_value(v)).collect())
+        .collect()
 }
 
 /// Wraps an angle to `(−π, π]`.

@@ -471,7 +471,9 @@ impl Planner {
 
     /// A planner on `model` reduced by `reduction`: as [`Planner::new`], and the parameters
     /// may be FE-level ones (group scales, boundary springs; see
-    /// [`FrfObjective::from_model`]).
+    /// [`FrfObjective::from_model`]). Planning evaluates at the nominal values only, so their
+    /// parametric reduced model is the nominal basis with its derivative directions, without
+    /// training: one full reduction, and the sensitivities from the projected matrices.
     pub fn from_model(
         model: &Model,
         reduction: &ReductionConfig,
@@ -503,9 +505,13 @@ impl Planner {
                 noise: Noise::relative(0.01),
             })
             .collect();
-        let prototype = FrfObjective::from_model(
+        let prototype = FrfObjective::from_model_with(
             model,
             reduction,
+            &crate::objective::FeReduction::Parametric(nlsim_reduction::ParametricConfig {
+                max_training: 0,
+                ..nlsim_reduction::ParametricConfig::default()
+            }),
             set,
             hb,
             Arc::new(template(channels, &input, 1)),

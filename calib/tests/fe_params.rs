@@ -3,8 +3,8 @@
 //! DOFs, first mode 1.08 Hz) with a cubic spring at its free end, driven and measured there.
 
 use nlsim_calib::{
-    CalibrationConfig, Form, FrfObjective, LeastSquares, Noise, ObjectiveConfig, ParamSpec, Status,
-    SweepPlan, TestData, calibrate, synthesize,
+    CalibrationConfig, FeReduction, Form, FrfObjective, LeastSquares, Noise, ObjectiveConfig,
+    ParamSpec, Status, SweepPlan, TestData, calibrate, synthesize,
 };
 use nlsim_hb::{HarmonicSet, HbConfig, HbSystem};
 use nlsim_kernel::{
@@ -217,15 +217,17 @@ fn modal_parameters_do_not_mix_with_fe_level_ones() {
         e.contains("mode1.zeta") && e.contains("group:mid.k_scale"),
         "{e}"
     );
-    // A damping matrix has no FE-level sensitivities here: refused when the Jacobian is
-    // first asked for, naming the reason.
+    // A damping matrix has no FE-level sensitivities by full re-reduction (they would need
+    // the mode-shape derivatives at every DOF): refused when the Jacobian is first asked for,
+    // naming the reason. The parametric model has them (its test is in parametric.rs).
     let n = 60;
     let v = nlsim_kernel::SparseSym::diagonal("C", &vec![0.1; n]).unwrap();
     let mut m = chain(Damping::Matrix(v));
     m.set_name("matrix-damped");
-    let mut obj = FrfObjective::from_model(
+    let mut obj = FrfObjective::from_model_with(
         &m,
         &reduction(false),
+        &FeReduction::Full,
         HarmonicSet::new(3, 1).unwrap(),
         HbConfig::default(),
         Arc::new(data(modal(), 1e-10)),
@@ -236,4 +238,87 @@ fn modal_parameters_do_not_mix_with_fe_level_ones() {
     let u = obj.to_internal(&TRUTH);
     let e = obj.evaluate(&u).unwrap_err().to_string();
     assert!(e.contains("damping matrix"), "{e}");
+}
+
+#[test]
+fn parametric_jacobian_matches_central_differences_of_full_re_reduction() {
+    // The same objective twice: the parametric reduced model (default) and a full reduction
+    // per evaluation. Their residuals must agree to the parametric model's accuracy, and the
+    // parametric Jacobian must match central differences of the full one (steps as in
+    // fe_level_jacobian_matches_central_differences; the parametric derivatives miss the
+    // part of the derivative directions outside the basis, ~1e-5 of a column at most, see
+    // reduction/tests/parametric.rs).
+    for damping in [
+        modal(),
+        Damping::Matrix(nlsim_kernel::SparseSym::diagonal("C", &[0.1; 60]).unwrap()),
+    ] {
+        let model = chain(damping.clone());
+        let make = |fe: FeReduction| {
+            FrfObjective::from_model_with(
+                &model,
+                &reduction(true),
+                &fe,
+                HarmonicSet::new(3, 1).unwrap(),
+                hb(1e-13),
+                Arc::new(data(damping.clone(), 1e-13)),
+                specs(),
+                ObjectiveConfig {
+                    harmonics: vec![1, 3],
+                    ..ObjectiveConfig::default()
+                },
+            )
+            .unwrap()
+        };
+        let mut prom = make(FeReduction::default());
+        let mut full = make(FeReduction::Full);
+        let p = [1.1, 0.95, 2500.0, 5e8];
+        let u = prom.to_internal(&p);
+        let ev = prom.evaluate(&u).unwrap().unwrap();
+        let base = full.evaluate_values(&p, None, false).unwrap().residuals;
+        let rmax = base.iter().fold(0.0f64, |a, r| a.max(r.abs()));
+        let dr = ev
+            .residuals
+            .iter()
+            .zip(&base)
+            .fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
+        eprintln!(
+            "{}: residuals differ by {:.1e} of the largest",
+            damping.kind(),
+            dr / rmax
+        );
+        assert!(dr <= 1e-6 * rmax, "{dr:e} vs {rmax:e}");
+        for k in 0..p.len() {
+            let h = 1e-5 * u[k].abs().max(1e-3);
+            let (mut a, mut b) = (u.clone(), u.clone());
+            a[k] += h;
+            b[k] -= h;
+            let ra = full
+                .evaluate_values(&full.to_values(&a), None, false)
+                .unwrap()
+                .residuals;
+            let rb = full
+                .evaluate_values(&full.to_values(&b), None, false)
+                .unwrap()
+                .residuals;
+            let col_max = (0..ra.len())
+                .map(|i| ev.jacobian[(i, k)].abs())
+                .fold(0.0, f64::max);
+            assert!(col_max > 0.0);
+            let worst = (0..ra.len())
+                .map(|i| ((ra[i] - rb[i]) / (2.0 * h) - ev.jacobian[(i, k)]).abs() / col_max)
+                .fold(0.0, f64::max);
+            eprintln!(
+                "{}: {}: |J − FD(full)| / max|J| = {worst:.1e}",
+                damping.kind(),
+                specs()[k].param
+            );
+            assert!(worst <= 1e-5, "{}: {worst:e}", specs()[k].param);
+        }
+        let st = prom.fe_stats().unwrap();
+        assert!(st.parametric && st.basis_size > 6, "{st:?}");
+        assert_eq!(
+            full.fe_stats().unwrap().refreshes,
+            full.fe_stats().unwrap().evaluations
+        );
+    }
 }

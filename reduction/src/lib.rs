@@ -10,6 +10,8 @@
 //! - [`ordering`]: the fill-reducing orderings of that analysis (AMD, METIS nested dissection);
 //! - [`modal`]: ports (elements, excitation, sensors), modal participation and the residual
 //!   flexibility of the truncated modes at the ports (the feedthrough `D_L`, `D_NL` of eq. 10);
+//! - [`parametric`]: the reduction at any values of FE-level parameters from one projected
+//!   basis, certified against the full matrices and enriched by full reductions where needed;
 //! - [`sensitivity`]: analytic eigenvalue and mode-shape derivatives with respect to FE-level
 //!   parameters, on the eigen solve's factor (no refactorisation per parameter);
 //! - [`state_space`]: the diagonal complex-modal state-space form ([`ModalSystem`]) and the
@@ -21,6 +23,7 @@ pub mod eigen;
 pub mod factor;
 pub mod modal;
 pub mod ordering;
+pub mod parametric;
 mod products;
 mod rayleigh;
 pub mod sensitivity;
@@ -37,6 +40,9 @@ pub use modal::{
     effective_masses, model_port_map, model_ports, reduce, reduce_with,
 };
 pub use ordering::Ordering;
+pub use parametric::{
+    ParametricConfig, ParametricDerivatives, ParametricPoint, ParametricReduction, ParametricStats,
+};
 pub use sensitivity::{
     EigenSensitivities, ReducedSensitivities, SensitivityConfig, eigen_sensitivities,
     reduced_sensitivities,

@@ -54,6 +54,17 @@ pub struct CalibrateArgs {
     /// shape [default: 0.02].
     #[arg(long)]
     shape_noise: Option<f64>,
+    /// How FE-level parameters (`group:NAME.k_scale`, `group:NAME.m_scale`,
+    /// `spring:NODE:COMP.k`) reduce the model at each evaluation: `parametric` (one basis,
+    /// a small eigen solve per evaluation, certified against the full matrices and
+    /// refreshed by a full reduction where the certificate fails) or `full` (a full
+    /// reduction every time; slow) [default: parametric].
+    #[arg(long, value_parser = ["parametric", "full"])]
+    fe_reduction: Option<String>,
+    /// Certificate tolerance of the parametric reduction (relative; the default keeps the
+    /// predicted FRFs within about 1e-6 of a full re-reduction) [default: 1e-6].
+    #[arg(long)]
+    fe_tolerance: Option<f64>,
     /// Latin-hypercube candidates [default: 64].
     #[arg(long)]
     lhs: Option<usize>,
@@ -66,6 +77,11 @@ pub struct CalibrateArgs {
     /// Seed of the Latin hypercube and of the folds [default: 1].
     #[arg(long)]
     seed: Option<u64>,
+    /// Build the objective, time one evaluation of each kind and print what the
+    /// calibration will cost (evaluations and an estimate of the wall time); nothing else
+    /// runs and nothing is written.
+    #[arg(long)]
+    dry_run: bool,
     /// Candidates already evaluated: the merged file of a `calibrate-candidates` batch
     /// of this calibration (docs/batch.md).
     #[arg(long)]
@@ -178,6 +194,21 @@ impl CalibrateArgs {
         if let Some(s) = self.shape_noise {
             req.shape_noise = s;
         }
+        if self.fe_reduction.is_some() || self.fe_tolerance.is_some() {
+            let kind = self.fe_reduction.as_deref().or(match &req.fe {
+                crate::calib::FeReduction::Full if self.fe_tolerance.is_none() => Some("full"),
+                _ => None,
+            });
+            let tol = self.fe_tolerance.or(match &req.fe {
+                crate::calib::FeReduction::Parametric(p) if self.fe_reduction.is_none() => {
+                    Some(p.tolerance)
+                }
+                _ => None,
+            });
+            req.fe = commands::calibrate::parse_fe_reduction(kind, tol).map_err(|(key, m)| {
+                crate::Error::Usage(format!("--{}: {m}", key.replace('_', "-")))
+            })?;
+        }
         if self.out.is_some() {
             req.out = self.out.clone();
         }
@@ -189,6 +220,26 @@ impl CalibrateArgs {
 
     /// `nlsim calibrate`.
     pub fn execute(&self, console: &Console) -> crate::Result<()> {
+        if self.dry_run {
+            let req = self.request()?;
+            req.check()?;
+            if req
+                .data
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
+                && crate::formats::modal_data::is_modal_csv(&req.data)?
+            {
+                return Err(crate::Error::Usage(
+                    "--dry-run: estimates a calibration on stepped-sine data; a modal-data \
+                     calibration is one eigen solve per evaluation and needs no estimate"
+                        .into(),
+                ));
+            }
+            for line in commands::calibrate::estimate_calibration(&req)?.lines() {
+                console.say(&line);
+            }
+            return Ok(());
+        }
         commands::calibrate::execute(&self.request()?, self.candidates.as_deref(), console)
     }
 }

@@ -137,6 +137,37 @@ impl Console {
         }
     }
 
+    /// Progress of one phase of a long run with an estimate of the time left: on a
+    /// terminal the replaced line `  WHAT done/total, 3.1 s, about 12 s left` (ended at the
+    /// last), elsewhere (a log file, a batch job) one line when the phase ends,
+    /// `  WHAT total/total in 15.2 s`. `started` is when `first` of the items were done
+    /// (the rate is measured from there).
+    pub fn phase(&self, what: &str, done: usize, total: usize, started: Instant, first: usize) {
+        if self.quiet {
+            return;
+        }
+        let s = started.elapsed().as_secs_f64();
+        if self.progress {
+            let left = if done > first && done < total {
+                format!(
+                    ", about {} left",
+                    duration_text(s / (done - first) as f64 * (total - done) as f64)
+                )
+            } else {
+                String::new()
+            };
+            eprint!(
+                "\r  {what} {done}/{total}, {}{left}        ",
+                duration_text(s)
+            );
+            if done == total {
+                eprintln!();
+            }
+        } else if done == total && self.sink.is_none() {
+            eprintln!("  {what} {done}/{total} in {}", duration_text(s));
+        }
+    }
+
     /// A `done/total` progress callback: `  WHAT:  42 % (21/50, 3.1 s)`, ended at the last.
     pub fn counter<'a>(&'a self, what: &'a str) -> impl FnMut(usize, usize) + 'a {
         let t = Instant::now();
@@ -152,5 +183,21 @@ impl Console {
                 }
             }
         }
+    }
+}
+
+/// A duration for people: `3.1 s`, `4 min 05 s`, `1 h 02 min`.
+pub fn duration_text(seconds: f64) -> String {
+    if !seconds.is_finite() || seconds < 0.0 {
+        return "?".into();
+    }
+    if seconds < 60.0 {
+        return format!("{seconds:.1} s");
+    }
+    let s = seconds.round() as u64;
+    if s < 3600 {
+        format!("{} min {:02} s", s / 60, s % 60)
+    } else {
+        format!("{} h {:02} min", s / 3600, (s % 3600) / 60)
     }
 }

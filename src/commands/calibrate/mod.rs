@@ -68,18 +68,22 @@ pub fn execute(
             crate::formats::candidates::read_candidates(p)?,
         )),
     };
+    // One line per phase with the time left (a log line per phase when stderr is not a
+    // terminal); the callback runs on the worker threads.
+    let phase = std::sync::Mutex::new((String::new(), std::time::Instant::now(), 0usize));
     let progress = |p: Progress| {
-        if console.shows_progress() {
-            let (what, d, n) = match p {
-                Progress::Candidates { done, total } => ("candidates", done, total),
-                Progress::Start { done, total } => ("optimisations", done, total),
-                Progress::Fold { done, total } => ("folds", done, total),
-            };
-            console.progress(&format!("  {what} {d}/{n}        "));
-            if d == n {
-                console.progress_end();
-            }
+        let (what, d, n) = match p {
+            Progress::Candidates { done, total } => ("candidates", done, total),
+            Progress::Start { done, total } => ("optimisations", done, total),
+            Progress::Fold { done, total } => ("folds", done, total),
+        };
+        let mut ph = phase
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if ph.0 != what {
+            *ph = (what.to_string(), std::time::Instant::now(), d);
         }
+        console.phase(what, d, n, ph.1, ph.2);
     };
     let modal = req
         .data

@@ -54,6 +54,25 @@ impl CalibrationRun {
                 c.cost, c.cramer_rao.reduced_chi2, c.cramer_rao.collinearity
             ),
         ];
+        if let Some(fe) = self.prepared.objective.fe_stats() {
+            v.push(if fe.parametric {
+                format!(
+                    "FE-level parameters: parametric reduced model of {} basis vectors ({} \
+                     full reductions to build it); {} evaluations, {} refreshed by a full \
+                     reduction ({:.2} s)",
+                    fe.basis_size,
+                    fe.setup_reductions,
+                    fe.evaluations,
+                    fe.refreshes,
+                    fe.full_seconds
+                )
+            } else {
+                format!(
+                    "FE-level parameters: a full reduction at each of {} evaluations ({:.2} s)",
+                    fe.evaluations, fe.full_seconds
+                )
+            });
+        }
         if !c.fit.failed.is_empty() {
             let at: Vec<String> = c
                 .fit

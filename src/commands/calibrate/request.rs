@@ -2,7 +2,10 @@
 //! `docs/calibration.md`), checked before the run.
 use crate::error::{Error, Result};
 use crate::formats::settings::SettingsFile;
-use nlsim_calib::{BranchChoice, CalibrationConfig, Form, LmConfig, ParamSpec, Spacing};
+use nlsim_calib::{
+    BranchChoice, CalibrationConfig, FeReduction, Form, LmConfig, ParamSpec, ParametricConfig,
+    Spacing,
+};
 use nlsim_kernel::Param;
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -37,6 +40,10 @@ pub struct CalibrationRequest {
     pub shape_noise: f64,
     /// The search: candidates, starts, folds, seed, Levenberg–Marquardt settings.
     pub config: CalibrationConfig,
+    /// How FE-level parameters (group scales, boundary springs) reduce the model: the
+    /// parametric reduced model with its certificate tolerance, or a full reduction per
+    /// evaluation.
+    pub fe: FeReduction,
     /// Estimates and statistics as CSV.
     pub out: Option<PathBuf>,
     /// Report folder: tables, plots and the summary.
@@ -64,6 +71,7 @@ impl CalibrationRequest {
             uff_noise: 0.01,
             shape_noise: 0.02,
             config: CalibrationConfig::default(),
+            fe: FeReduction::default(),
             out: None,
             report: None,
             source: None,
@@ -114,6 +122,11 @@ impl CalibrationRequest {
                 "shape_noise",
                 format!("{} must be positive", self.shape_noise),
             );
+        }
+        if let FeReduction::Parametric(p) = &self.fe
+            && let Err(e) = p.check()
+        {
+            return bad("fe_tolerance", e.to_string());
         }
         let c = &self.config;
         for (key, value, max) in [
@@ -208,6 +221,8 @@ pub(crate) struct CalibrationTable {
     modes: Option<usize>,
     uff_noise: Option<f64>,
     shape_noise: Option<f64>,
+    fe_reduction: Option<String>,
+    fe_tolerance: Option<f64>,
     lhs: Option<usize>,
     starts: Option<usize>,
     folds: Option<usize>,
@@ -269,6 +284,8 @@ impl CalibrationTable {
             },
         };
         lm.validate().map_err(|e| err("lm", e.to_string()))?;
+        let fe = parse_fe_reduction(self.fe_reduction.as_deref(), self.fe_tolerance)
+            .map_err(|(key, m)| err(key, m))?;
         let dc = CalibrationConfig::default();
         let req = CalibrationRequest {
             model,
@@ -290,6 +307,7 @@ impl CalibrationTable {
                 lm,
                 folds: self.folds.unwrap_or(dc.folds),
             },
+            fe,
             out: self.out.as_deref().map(rel),
             report: self.report.as_deref().map(rel),
             source: Some(path.to_path_buf()),
@@ -321,5 +339,31 @@ pub fn parse_branch(s: &str) -> std::result::Result<BranchChoice, String> {
         "nearest" => Ok(BranchChoice::NearestToData),
         "continuation" => Ok(BranchChoice::Continuation),
         _ => Err(format!("'{s}': use nearest or continuation")),
+    }
+}
+
+/// The FE-level reduction named by `kind` (`parametric`, the default, or `full`, as in a
+/// calibration file's `fe_reduction` and `--fe-reduction`) with the parametric model's
+/// certificate `tolerance` (`fe_tolerance`, `--fe-tolerance`; default 1e-6). The error names
+/// the key and says what is accepted.
+pub fn parse_fe_reduction(
+    kind: Option<&str>,
+    tolerance: Option<f64>,
+) -> std::result::Result<FeReduction, (&'static str, String)> {
+    let settings = ParametricConfig {
+        tolerance: tolerance.unwrap_or(ParametricConfig::default().tolerance),
+        ..ParametricConfig::default()
+    };
+    settings
+        .check()
+        .map_err(|e| ("fe_tolerance", e.to_string()))?;
+    match kind {
+        None | Some("parametric") => Ok(FeReduction::Parametric(settings)),
+        Some("full") if tolerance.is_some() => Err((
+            "fe_tolerance",
+            "a tolerance belongs to the parametric reduction, not to fe_reduction = full".into(),
+        )),
+        Some("full") => Ok(FeReduction::Full),
+        Some(s) => Err(("fe_reduction", format!("'{s}': use parametric or full"))),
     }
 }

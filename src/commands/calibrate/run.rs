@@ -28,9 +28,10 @@ pub fn prepare(req: &CalibrationRequest) -> Result<Prepared> {
     let model = crate::commands::setup::load_for_run(&req.model, &req.set)?;
     let data = Arc::new(read_test_data(&req.data, &model, req.uff_noise)?);
     let cfg = nlsim_reduction::ReductionConfig::lowest(req.modes.min(model.n_dofs()));
-    let objective = FrfObjective::from_model(
+    let objective = FrfObjective::from_model_with(
         &model,
         &cfg,
+        &req.fe,
         HarmonicSet::new(req.harmonics, 1)?,
         HbConfig::default(),
         data,
@@ -112,5 +113,96 @@ pub fn run_calibration(
         calibration,
         seconds: t.elapsed().as_secs_f64(),
         candidates_from,
+    })
+}
+
+/// What a calibration will cost, before it runs (`nlsim calibrate --dry-run`): the objective
+/// is built (the reduction, and the parametric model's training with FE-level parameters)
+/// and one evaluation of each kind is timed at the first candidate (the model's current
+/// values clamped to the bounds).
+#[derive(Debug, Clone)]
+pub struct CalibrationEstimate {
+    /// Seconds to load, reduce and build the objective.
+    pub setup_seconds: f64,
+    /// Candidate evaluations (cost only), run in parallel.
+    pub candidates: usize,
+    /// Seconds of one cost evaluation.
+    pub cost_seconds: f64,
+    /// Seconds of one evaluation with its Jacobian (one per Levenberg–Marquardt iteration).
+    pub jacobian_seconds: f64,
+    /// Levenberg–Marquardt runs from the best candidates.
+    pub starts: usize,
+    /// Cross-validation folds (each a Levenberg–Marquardt run from the estimate).
+    pub folds: usize,
+    /// Most iterations of one Levenberg–Marquardt run.
+    pub max_iterations: usize,
+    /// Worker threads of the parallel phases.
+    pub threads: usize,
+}
+
+impl CalibrationEstimate {
+    /// Wall-time estimate (s) with `iterations` Levenberg–Marquardt iterations per run:
+    /// the candidates and the runs spread over the threads.
+    pub fn seconds(&self, iterations: usize) -> f64 {
+        let t = self.threads.max(1) as f64;
+        let waves = |n: usize| (n as f64 / t).ceil();
+        self.setup_seconds
+            + waves(self.candidates) * self.cost_seconds
+            + (waves(self.starts) + waves(self.folds)) * iterations as f64 * self.jacobian_seconds
+    }
+
+    /// The estimate as lines for people.
+    pub fn lines(&self) -> Vec<String> {
+        use crate::present::console::duration_text;
+        vec![
+            format!(
+                "objective built in {} (loading, reduction)",
+                duration_text(self.setup_seconds)
+            ),
+            format!(
+                "candidates: {} cost evaluations of {} each, on {} threads",
+                self.candidates,
+                duration_text(self.cost_seconds),
+                self.threads
+            ),
+            format!(
+                "optimisations: {} starts and {} folds, one evaluation with Jacobian ({}) per \
+                 iteration, at most {} iterations each",
+                self.starts,
+                self.folds,
+                duration_text(self.jacobian_seconds),
+                self.max_iterations
+            ),
+            format!(
+                "estimated wall time: about {} with 10 iterations per run, at most {}",
+                duration_text(self.seconds(10)),
+                duration_text(self.seconds(self.max_iterations))
+            ),
+        ]
+    }
+}
+
+/// Builds the objective of `req` and times one evaluation of each kind (see
+/// [`CalibrationEstimate`]).
+pub fn estimate_calibration(req: &CalibrationRequest) -> Result<CalibrationEstimate> {
+    let prepared = prepare(req)?;
+    let mut obj = prepared.objective.clone();
+    let points = nlsim_calib::candidate_points(&obj, &req.config)?;
+    let first = points[0].clone();
+    let t = Instant::now();
+    obj.cost_values(&first)?;
+    let cost_seconds = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    obj.evaluate_values(&first, None, true)?;
+    let jacobian_seconds = t.elapsed().as_secs_f64();
+    Ok(CalibrationEstimate {
+        setup_seconds: prepared.seconds,
+        candidates: points.len(),
+        cost_seconds,
+        jacobian_seconds,
+        starts: req.config.starts.min(points.len()),
+        folds: req.config.folds,
+        max_iterations: req.config.lm.max_iterations,
+        threads: rayon::current_num_threads(),
     })
 }

@@ -1,0 +1,111 @@
+//! The FE-level calibration of issue 49 on the bracket ([`nlsim_bench::bracket_fe_case`]),
+//! with the parametric reduced model and, with `--full`, with a full reduction per
+//! evaluation beside it: wall time, the FE-reduction counters, the estimates with their
+//! Cramér–Rao bounds and (with `--full`) the difference of the estimates in units of those
+//! bounds and of the predicted responses.
+//!
+//! `cargo run --release -p nlsim-bench --example fe_calibration -- 30000 [--full] [--folds N]`
+use nlsim_calib::{
+    CalibrationConfig, FeReduction, FrfObjective, ObjectiveConfig, calibrate_with_progress,
+};
+use std::sync::Arc;
+use std::time::Instant;
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let target: usize = args
+        .get(1)
+        .map_or(30_000, |s| s.parse().expect("a DOF count"));
+    let with_full = args.iter().any(|a| a == "--full");
+    let folds = args
+        .iter()
+        .position(|a| a == "--folds")
+        .map_or(10, |i| args[i + 1].parse().expect("a fold count"));
+    let t = Instant::now();
+    let case = nlsim_bench::bracket_fe_case(target);
+    println!(
+        "{} DOFs; case built in {:.1} s",
+        case.model.n_dofs(),
+        t.elapsed().as_secs_f64()
+    );
+    let data = Arc::new(case.data);
+    let cfg = CalibrationConfig {
+        folds,
+        ..CalibrationConfig::default()
+    };
+    let mut kinds = vec![("parametric", FeReduction::default())];
+    if with_full {
+        kinds.push(("full", FeReduction::Full));
+    }
+    let mut results = Vec::new();
+    for (name, fe) in kinds {
+        let t = Instant::now();
+        let obj = FrfObjective::from_model_with(
+            &case.model,
+            &case.reduction,
+            &fe,
+            nlsim_hb::HarmonicSet::new(3, 1).expect("H = 3"),
+            nlsim_hb::HbConfig::default(),
+            Arc::clone(&data),
+            case.specs.clone(),
+            ObjectiveConfig::default(),
+        )
+        .expect("the objective");
+        let setup = t.elapsed().as_secs_f64();
+        let last = std::sync::Mutex::new(String::new());
+        let cal = calibrate_with_progress(&obj, &cfg, &|p| {
+            let s = format!("{p:?}");
+            let mut l = last.lock().expect("progress");
+            if s != *l {
+                eprint!("\r  {name}: {s}          ");
+                *l = s;
+            }
+        })
+        .expect("the calibration");
+        eprintln!();
+        let total = t.elapsed().as_secs_f64();
+        println!(
+            "{name}: {total:.1} s wall ({setup:.1} s to build the objective), status {:?}, \
+             {} candidates, {:?}",
+            cal.status,
+            cal.candidates.len(),
+            obj.fe_stats()
+        );
+        for (j, s) in case.specs.iter().enumerate() {
+            println!(
+                "  {:<22} {:.6e} ± {:.2e} (truth {:.3e})",
+                s.param.to_string(),
+                cal.estimate[j],
+                cal.cramer_rao.std[j],
+                case.truth[j]
+            );
+        }
+        results.push((cal, obj));
+    }
+    if let [(a, _), (b, obj_full)] = &results[..] {
+        let worst = (0..a.estimate.len())
+            .map(|j| (a.estimate[j] - b.estimate[j]).abs() / b.cramer_rao.std[j])
+            .fold(0.0f64, f64::max);
+        println!("estimates differ by {worst:.2e} of their Cramér–Rao bounds at most");
+        // Predicted responses at the parametric estimate, both ways.
+        let mut prom = results[0].1.clone();
+        let mut full = obj_full.clone();
+        let pa = prom
+            .evaluate_values(&a.estimate, None, false)
+            .expect("evaluation");
+        let pb = full
+            .evaluate_values(&a.estimate, None, false)
+            .expect("evaluation");
+        let (mut d, mut m) = (0.0f64, 0.0f64);
+        for (x, y) in pa.points.iter().zip(&pb.points) {
+            d = d.max((&x.response - &y.response).norm_max());
+            m = m.max(y.response.norm_max());
+        }
+        println!("predicted responses differ by {:.2e} of the largest", d / m);
+    }
+    if let Ok(s) = std::fs::read_to_string("/proc/self/status") {
+        for l in s.lines().filter(|l| l.starts_with("VmHWM")) {
+            println!("peak memory: {}", l.trim_start_matches("VmHWM:").trim());
+        }
+    }
+}
