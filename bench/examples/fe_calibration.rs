@@ -8,10 +8,10 @@
 //! eigen-sensitivities at every evaluation) and the estimates are compared.
 //!
 //! `cargo run --release -p nlsim-bench --example fe_calibration -- 30000 [--check] [--full] [--folds N]`
+use faer::linalg::solvers::Solve;
 use nlsim_calib::{
     CalibrationConfig, FeReduction, FrfObjective, ObjectiveConfig, calibrate_with_progress,
 };
-use faer::linalg::solvers::Solve;
 use std::sync::Arc;
 use std::time::Instant;
 
