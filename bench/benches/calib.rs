@@ -75,25 +75,10 @@ fn bench(c: &mut Criterion) {
 }
 
 fn bracket_fe(c: &mut Criterion) {
-    use nlsim_calib::{FeReduction, ObjectiveConfig};
-    use std::sync::Arc;
+    use nlsim_calib::FeReduction;
     let case = nlsim_bench::bracket_fe_case(30_000);
-    let data = Arc::new(case.data);
-    let make = |fe: FeReduction| {
-        FrfObjective::from_model_with(
-            &case.model,
-            &case.reduction,
-            &fe,
-            nlsim_hb::HarmonicSet::new(3, 1).expect("H = 3"),
-            nlsim_hb::HbConfig::default(),
-            Arc::clone(&data),
-            case.specs.clone(),
-            ObjectiveConfig::default(),
-        )
-        .expect("the objective")
-    };
-    let prom = make(FeReduction::default());
-    let full = make(FeReduction::Full);
+    let prom = case.objective(&FeReduction::default());
+    let full = case.objective(&FeReduction::Full);
     let mut g = c.benchmark_group(format!("bracket_fe_{}dofs", case.model.n_dofs()));
     g.sample_size(10).measurement_time(Duration::from_secs(20));
     // Away from the nominal point and from the truth, inside the box.

@@ -9,10 +9,7 @@
 //!
 //! `cargo run --release -p nlsim-bench --example fe_calibration -- 30000 [--check] [--full] [--folds N]`
 use faer::linalg::solvers::Solve;
-use nlsim_calib::{
-    CalibrationConfig, FeReduction, FrfObjective, ObjectiveConfig, calibrate_with_progress,
-};
-use std::sync::Arc;
+use nlsim_calib::{CalibrationConfig, FeReduction, SweepEvaluation, calibrate_with_progress};
 use std::time::Instant;
 
 fn main() {
@@ -33,7 +30,6 @@ fn main() {
         case.model.n_dofs(),
         t.elapsed().as_secs_f64()
     );
-    let data = Arc::new(case.data);
     let cfg = CalibrationConfig {
         folds,
         ..CalibrationConfig::default()
@@ -45,17 +41,7 @@ fn main() {
     let mut results = Vec::new();
     for (name, fe) in kinds {
         let t = Instant::now();
-        let obj = FrfObjective::from_model_with(
-            &case.model,
-            &case.reduction,
-            &fe,
-            nlsim_hb::HarmonicSet::new(3, 1).expect("H = 3"),
-            nlsim_hb::HbConfig::default(),
-            Arc::clone(&data),
-            case.specs.clone(),
-            ObjectiveConfig::default(),
-        )
-        .expect("the objective");
+        let obj = case.objective(&fe);
         let setup = t.elapsed().as_secs_f64();
         let last = std::sync::Mutex::new(String::new());
         let cal = calibrate_with_progress(&obj, &cfg, &|p| {
@@ -101,42 +87,23 @@ fn main() {
         let pb = full
             .evaluate_values(&a.estimate, None, false)
             .expect("evaluation");
-        let (mut d, mut m) = (0.0f64, 0.0f64);
-        for (x, y) in pa.points.iter().zip(&pb.points) {
-            d = d.max((&x.response - &y.response).norm_max());
-            m = m.max(y.response.norm_max());
-        }
-        println!("predicted responses differ by {:.2e} of the largest", d / m);
+        let d = response_difference(&pa, &pb);
+        println!("predicted responses differ by {d:.2e} of the largest");
     }
     if check {
         let (cal, prom) = &results[0];
         let mut prom = prom.clone();
-        let mut full = FrfObjective::from_model_with(
-            &case.model,
-            &case.reduction,
-            &FeReduction::Full,
-            nlsim_hb::HarmonicSet::new(3, 1).expect("H = 3"),
-            nlsim_hb::HbConfig::default(),
-            Arc::clone(&data),
-            case.specs.clone(),
-            ObjectiveConfig::default(),
-        )
-        .expect("the objective");
+        let mut full = case.objective(&FeReduction::Full);
         let pa = prom
             .evaluate_values(&cal.estimate, None, true)
             .expect("evaluation");
         let pb = full
             .evaluate_values(&cal.estimate, None, false)
             .expect("evaluation");
-        let (mut d, mut m) = (0.0f64, 0.0f64);
-        for (x, y) in pa.points.iter().zip(&pb.points) {
-            d = d.max((&x.response - &y.response).norm_max());
-            m = m.max(y.response.norm_max());
-        }
+        let d = response_difference(&pa, &pb);
         println!(
-            "check: predicted responses at the estimate, parametric vs full reduction: {:.2e} \
-             of the largest",
-            d / m
+            "check: predicted responses at the estimate, parametric vs full reduction: {d:.2e} \
+             of the largest"
         );
         // δp = (JᵀJ)⁻¹ Jᵀ (r_full − r_prom) in the values' units.
         let j = pa.jacobian.expect("a Jacobian");
@@ -167,4 +134,15 @@ fn main() {
             println!("peak memory: {}", l.trim_start_matches("VmHWM:").trim());
         }
     }
+}
+
+/// The largest difference of the computed responses of `a` and `b` (point by point),
+/// relative to the largest response of `b`.
+fn response_difference(a: &SweepEvaluation, b: &SweepEvaluation) -> f64 {
+    let (mut d, mut m) = (0.0f64, 0.0f64);
+    for (x, y) in a.points.iter().zip(&b.points) {
+        d = d.max((&x.response - &y.response).norm_max());
+        m = m.max(y.response.norm_max());
+    }
+    d / m
 }

@@ -71,7 +71,7 @@ pub struct FeCase {
     /// The model at its nominal values.
     pub model: nlsim_kernel::Model,
     /// The synthetic test data.
-    pub data: nlsim_calib::TestData,
+    pub data: std::sync::Arc<nlsim_calib::TestData>,
     /// The calibrated parameters: the spring (5e3–1e5 N/m) and k3 (1e11–1e13 N/m³).
     pub specs: Vec<nlsim_calib::ParamSpec>,
     /// The true values, in `specs` order.
@@ -119,9 +119,27 @@ pub fn bracket_fe_case(target: usize) -> FeCase {
         synthesize(&sys, "shaker", &plans, 3, Noise::relative(0.01), 7).expect("synthetic sweeps");
     FeCase {
         model,
-        data,
+        data: std::sync::Arc::new(data),
         specs,
         truth,
         reduction,
+    }
+}
+
+impl FeCase {
+    /// The calibration objective of the case (H = 3, the fundamental compared) with the
+    /// FE-level parameters reduced as `fe` says.
+    pub fn objective(&self, fe: &nlsim_calib::FeReduction) -> nlsim_calib::FrfObjective {
+        nlsim_calib::FrfObjective::from_model_with(
+            &self.model,
+            &self.reduction,
+            fe,
+            nlsim_hb::HarmonicSet::new(3, 1).expect("H = 3"),
+            nlsim_hb::HbConfig::default(),
+            std::sync::Arc::clone(&self.data),
+            self.specs.clone(),
+            nlsim_calib::ObjectiveConfig::default(),
+        )
+        .expect("the objective")
     }
 }

@@ -1008,19 +1008,13 @@ impl FrfObjective {
                 let Some(d) = point.derivatives else {
                     return Ok(Some(Vec::new()));
                 };
-                Ok(Some(
-                    params
-                        .into_iter()
-                        .enumerate()
-                        .map(|(j, param)| LinearVariation {
-                            param,
-                            eigenvalues: d.eigenvalues.col(j).iter().copied().collect(),
-                            damping: d.damping[j].clone(),
-                            participation: d.participation[j].clone(),
-                            residual: d.residual[j].clone(),
-                        })
-                        .collect(),
-                ))
+                Ok(Some(variations(
+                    params,
+                    &d.eigenvalues,
+                    d.damping,
+                    d.participation,
+                    d.residual,
+                )))
             }
             FeModel::Full {
                 model,
@@ -1058,19 +1052,13 @@ impl FrfObjective {
                         ..SensitivityConfig::default()
                     },
                 )?;
-                Ok(Some(
-                    params
-                        .into_iter()
-                        .enumerate()
-                        .map(|(j, param)| LinearVariation {
-                            param,
-                            eigenvalues: d.eigen.eigenvalue.col(j).iter().copied().collect(),
-                            damping: d.damping[j].clone(),
-                            participation: d.participation[j].clone(),
-                            residual: d.residual[j].clone(),
-                        })
-                        .collect(),
-                ))
+                Ok(Some(variations(
+                    params,
+                    &d.eigen.eigenvalue,
+                    d.damping,
+                    d.participation,
+                    d.residual,
+                )))
             }
         }
     }
@@ -1164,6 +1152,31 @@ fn in_spec_order(
         .collect();
     all.sort_by_key(|(i, _)| *i);
     all.into_iter().map(|(_, s)| s).collect()
+}
+
+/// The variations of the linear part along `params` from their derivatives: eigenvalues
+/// (modes × parameters), and per parameter the modal damping, participation and residual.
+fn variations(
+    params: Vec<Param>,
+    eigenvalues: &Mat<f64>,
+    damping: Vec<Mat<f64>>,
+    participation: Vec<Mat<f64>>,
+    residual: Vec<Mat<f64>>,
+) -> Vec<LinearVariation> {
+    params
+        .into_iter()
+        .zip(damping.into_iter().zip(participation).zip(residual))
+        .enumerate()
+        .map(
+            |(j, (param, ((damping, participation), residual)))| LinearVariation {
+                param,
+                eigenvalues: eigenvalues.col(j).iter().copied().collect(),
+                damping,
+                participation,
+                residual,
+            },
+        )
+        .collect()
 }
 
 /// The parametric model's training points over the box of `specs` (values, in their

@@ -400,6 +400,17 @@ fn name_dofs(e: Error, model: &Model) -> Error {
     }
 }
 
+/// The port load matrix `W` (DOFs × ports): column `p` holds port `p`'s weights at its DOFs.
+pub(crate) fn port_loads(n: usize, ports: &[Port]) -> Mat<f64> {
+    let mut w = Mat::<f64>::zeros(n, ports.len());
+    for (p, port) in ports.iter().enumerate() {
+        for (&d, &wt) in port.dofs.iter().zip(&port.weights) {
+            w[(d, p)] += wt;
+        }
+    }
+    w
+}
+
 fn residual_flexibility(
     model: &Model,
     solver: &EigenSolver,
@@ -408,13 +419,7 @@ fn residual_flexibility(
     participation: &Mat<f64>,
     par: faer::Par,
 ) -> Result<(Mat<f64>, f64)> {
-    let n = model.n_dofs();
-    let mut w = Mat::<f64>::zeros(n, ports.len());
-    for (p, port) in ports.iter().enumerate() {
-        for (&d, &wt) in port.dofs.iter().zip(&port.weights) {
-            w[(d, p)] += wt;
-        }
-    }
+    let w = port_loads(model.n_dofs(), ports);
     // The eigen solve's factor when it ran Lanczos (again at its shift when released under
     // its memory budget); otherwise a factor made here (small models).
     let (mut own, mut own_factor) = (None, None);

@@ -33,7 +33,7 @@
 //! `∂(W_Bᵀ A⁻¹ W_B) = −Yᵀ ∂A Y` with `A = K_B − σ M_B`, `Y = A⁻¹ W_B`.
 
 use crate::eigen::{EigenMethod, EigenSolver, EigenStats, ModeSelection, Modes};
-use crate::modal::{Port, ReducedModel, ReductionConfig, reduce_with};
+use crate::modal::{Port, ReducedModel, ReductionConfig, port_loads, reduce_with};
 use crate::products::symmetric_times;
 use faer::linalg::solvers::Solve;
 use faer::{Mat, MatRef, Par, Side};
@@ -156,6 +156,14 @@ struct Ritz {
     m: Mat<f64>,
 }
 
+/// The certificate of a Ritz solution: its indicator, the modes' relative residuals `ρ_r`
+/// and the Galerkin static responses `Y = (K_B − σ M_B)⁻¹ W_B` (with residual flexibility).
+struct Certificate {
+    indicator: f64,
+    rho: Vec<f64>,
+    y: Option<Mat<f64>>,
+}
+
 /// The reduction of a model at any values of some FE-level parameters, from one basis.
 #[derive(Debug)]
 pub struct ParametricReduction {
@@ -215,17 +223,6 @@ fn derivative_times(
             (Some(y), None)
         }
     }
-}
-
-/// The port load matrix `W` (DOFs × ports).
-fn port_loads(n: usize, ports: &[Port]) -> Mat<f64> {
-    let mut w = Mat::<f64>::zeros(n, ports.len());
-    for (p, port) in ports.iter().enumerate() {
-        for (&d, &wt) in port.dofs.iter().zip(&port.weights) {
-            w[(d, p)] += wt;
-        }
-    }
-    w
 }
 
 /// `Wᵀ X` without forming `W` (ports × columns of `x`).
@@ -550,9 +547,8 @@ impl ParametricReduction {
             let mut worst = (0usize, 0.0f64);
             for (i, t) in training.iter().enumerate() {
                 let e = out
-                    .ritz(&out.projection, t)
-                    .and_then(|r| out.certificate(&out.projection, t, &r).map(|(e, _)| e))
-                    .unwrap_or(f64::INFINITY);
+                    .checked(&out.projection, t)
+                    .map_or(f64::INFINITY, |c| c.2.indicator);
                 if e.is_nan() || e > worst.1 {
                     worst = (i, if e.is_nan() { f64::INFINITY } else { e });
                 }
@@ -622,16 +618,12 @@ impl ParametricReduction {
             nlsim_kernel::param::check_finite(p, v)?;
         }
         self.stats.evaluations += 1;
-        let first = self.ritz(&self.projection, values).and_then(|r| {
-            self.certificate(&self.projection, values, &r)
-                .map(|c| (r, c))
-        });
-        if let Ok((ritz, (e, rho))) = first
-            && e <= self.settings.tolerance
+        if let Ok(checked) = self.checked(&self.projection, values)
+            && checked.2.indicator <= self.settings.tolerance
         {
-            self.stats.worst_indicator = self.stats.worst_indicator.max(e);
+            self.stats.worst_indicator = self.stats.worst_indicator.max(checked.2.indicator);
             let proj = Arc::clone(&self.projection);
-            return self.point(&proj, values, ritz, e, rho, derivatives, false);
+            return self.point(&proj, checked, derivatives, false);
         }
         self.stats.refreshes += 1;
         let cols = self.full_at(values)?;
@@ -646,10 +638,9 @@ impl ParametricReduction {
             proj.extend(&self.model, &self.params, &self.ports, cols, par)?;
             Arc::new(proj)
         };
-        let ritz = self.ritz(&proj, values)?;
-        let (e, rho) = self.certificate(&proj, values, &ritz)?;
-        self.stats.worst_indicator = self.stats.worst_indicator.max(e);
-        self.point(&proj, values, ritz, e, rho, derivatives, true)
+        let checked = self.checked(&proj, values)?;
+        self.stats.worst_indicator = self.stats.worst_indicator.max(checked.2.indicator);
+        self.point(&proj, checked, derivatives, true)
     }
 
     /// The full reduction at `values`: its modes and static port responses as columns.
@@ -775,15 +766,15 @@ impl ParametricReduction {
         Ok((kx, mx))
     }
 
-    /// The certificate indicator at `values` and the modes' relative residuals `ρ_r`.
+    /// The certificate at `values` of `ritz` with its lifted modes `phi`.
     fn certificate(
         &self,
         proj: &Projection,
         values: &[f64],
         ritz: &Ritz,
-    ) -> Result<(f64, Vec<f64>)> {
+        phi: &Mat<f64>,
+    ) -> Result<Certificate> {
         let m = ritz.retained;
-        let phi = &proj.basis * ritz.vectors.subcols(0, m);
         let (kp, mp) = self.products(values, phi.as_ref())?;
         let mut worst = 0.0f64;
         let mut rho = Vec::with_capacity(m);
@@ -811,6 +802,7 @@ impl ParametricReduction {
             };
             worst = worst.max(if e.is_nan() { f64::INFINITY } else { e });
         }
+        let mut y_out = None;
         if self.config.residual_flexibility && !self.ports.is_empty() {
             let a = &ritz.k - &ritz.m * faer::Scale(self.shift);
             let y = solve_symmetric(&a, &proj.w)?;
@@ -826,38 +818,40 @@ impl ParametricReduction {
             }
             let e = r.norm_l2() / wn.sqrt();
             worst = worst.max(if e.is_nan() { f64::INFINITY } else { e });
+            y_out = Some(y);
         }
-        Ok((worst, rho))
+        Ok(Certificate {
+            indicator: worst,
+            rho,
+            y: y_out,
+        })
     }
 
-    /// The evaluation's result on `proj`.
-    #[allow(clippy::too_many_arguments)]
+    /// The Ritz solution at `values` on `proj`, its lifted modes (signs fixed) and its
+    /// certificate.
+    fn checked(&self, proj: &Projection, values: &[f64]) -> Result<(Ritz, Mat<f64>, Certificate)> {
+        let mut ritz = self.ritz(proj, values)?;
+        let phi = self.lift(proj, &mut ritz);
+        let cert = self.certificate(proj, values, &ritz, &phi)?;
+        Ok((ritz, phi, cert))
+    }
+
+    /// The evaluation's result on `proj`, from its checked Ritz solution.
     fn point(
         &self,
         proj: &Projection,
-        values: &[f64],
-        mut ritz: Ritz,
-        indicator: f64,
-        rho: Vec<f64>,
+        (ritz, vectors, cert): (Ritz, Mat<f64>, Certificate),
         derivatives: bool,
         refreshed: bool,
     ) -> Result<ParametricPoint> {
-        let _ = values;
+        let Certificate { indicator, rho, y } = cert;
         let m = ritz.retained;
-        let vectors = self.lift(proj, &mut ritz);
         let np = self.ports.len();
         let psi_m = ritz.vectors.subcols(0, m).to_owned();
         let phi_all = proj.w.transpose() * &ritz.vectors; // ports × b
         let participation = phi_all.subcols(0, m).to_owned();
         let lambda = &ritz.values;
         let sigma = self.shift;
-        let with_residual = self.config.residual_flexibility && np > 0;
-        let a = &ritz.k - &ritz.m * faer::Scale(sigma);
-        let y = if with_residual {
-            Some(solve_symmetric(&a, &proj.w)?)
-        } else {
-            None
-        };
         let residual = match &y {
             Some(y) => {
                 let mut d = proj.w.transpose() * y;
@@ -946,19 +940,12 @@ impl ParametricReduction {
                         if r != s {
                             return 0.0;
                         }
-                        let dl = eigenvalues[(r, j)];
-                        match damping {
-                            Damping::None | Damping::Matrix(_) => 0.0,
-                            Damping::Rayleigh { beta, .. } => beta * dl,
-                            Damping::Modal(md) => {
-                                let w = lambda[r].max(0.0).sqrt();
-                                if w > 0.0 {
-                                    md.zeta(r, w / (2.0 * PI)) * dl / w
-                                } else {
-                                    0.0
-                                }
-                            }
-                        }
+                        crate::sensitivity::proportional_damping_derivative(
+                            damping,
+                            r,
+                            lambda[r],
+                            eigenvalues[(r, j)],
+                        )
                     }),
                 };
                 dpart.push(dphi);

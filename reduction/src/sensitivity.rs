@@ -340,19 +340,12 @@ pub fn reduced_sensitivities(
                 if r != s {
                     return 0.0;
                 }
-                let dl = eigen.eigenvalue[(r, j)];
-                match model.damping() {
-                    Damping::None | Damping::Matrix(_) => 0.0,
-                    Damping::Rayleigh { beta, .. } => beta * dl,
-                    Damping::Modal(md) => {
-                        let w = lambda[r].max(0.0).sqrt();
-                        if w > 0.0 {
-                            md.zeta(r, w / (2.0 * PI)) * dl / w
-                        } else {
-                            0.0
-                        }
-                    }
-                }
+                proportional_damping_derivative(
+                    model.damping(),
+                    r,
+                    lambda[r],
+                    eigen.eigenvalue[(r, j)],
+                )
             })
         })
         .collect();
@@ -379,12 +372,7 @@ pub fn reduced_sensitivities(
                 ),
             ));
         }
-        let mut x = Mat::<f64>::zeros(n, np);
-        for (p, port) in ports.iter().enumerate() {
-            for (&d, &w) in port.dofs.iter().zip(&port.weights) {
-                x[(d, p)] += w;
-            }
-        }
+        let mut x = crate::modal::port_loads(n, ports);
         pencil.solve_in_place(factor, x.as_mut());
         let mut y = vec![0.0; n];
         let mut out = Vec::with_capacity(params.len());
@@ -420,6 +408,30 @@ pub fn reduced_sensitivities(
         residual,
         damping,
     })
+}
+
+/// `∂c̃_rr/∂p` of a proportional damping law for mode `r` of eigenvalue `lambda`
+/// (rad²/s²) whose eigenvalue moves by `dl` per unit of `p`: Rayleigh `β ∂λ_r`, modal ratios
+/// held `ζ_r ∂λ_r / ω_r`; 0 without damping or for a damping matrix (which is not diagonal
+/// and needs the mode-shape derivatives).
+pub(crate) fn proportional_damping_derivative(
+    damping: &Damping,
+    r: usize,
+    lambda: f64,
+    dl: f64,
+) -> f64 {
+    match damping {
+        Damping::None | Damping::Matrix(_) => 0.0,
+        Damping::Rayleigh { beta, .. } => beta * dl,
+        Damping::Modal(md) => {
+            let w = lambda.max(0.0).sqrt();
+            if w > 0.0 {
+                md.zeta(r, w / (2.0 * PI)) * dl / w
+            } else {
+                0.0
+            }
+        }
+    }
 }
 
 fn sparse_times(a: &SparseSym, x: MatRef<'_, f64>, par: Par) -> Mat<f64> {
