@@ -154,6 +154,9 @@ pub struct ContinuationStats {
     /// Pairs of turning points dismissed as ripples of a non-smooth branch
     /// ([`WIGGLE_PARAMETER`]).
     pub n_wiggles: usize,
+    /// Stepped sines: steps the branch of the last point could not be followed across (a
+    /// non-smooth point), whose point may or may not be a jump; a finer grid tells.
+    pub n_unverified: usize,
 }
 
 /// Two successive turning points closer than this share of the parameter range, between
@@ -247,6 +250,9 @@ pub struct ContinuationReport {
     pub stats: ContinuationStats,
     /// Where and why the run stopped short; empty when converged.
     pub detail: String,
+    /// Stepped sines: the frequencies (rad/s) where no start converged, left out of the
+    /// branch (a gap); empty for a continuation.
+    pub skipped: Vec<f64>,
 }
 
 impl ContinuationReport {
@@ -292,6 +298,7 @@ impl ContinuationReport {
             branch,
             stats,
             detail: format!("{what}\n{why}"),
+            skipped: Vec::new(),
         }
     }
 }
@@ -710,6 +717,7 @@ fn follow(
         branch,
         stats,
         detail: String::new(),
+        skipped: Vec::new(),
     };
     let mut ds = cfg.ds;
     loop {
@@ -918,16 +926,31 @@ fn locate_fold(tr: &Tracker<'_>, cur: &State, ds: f64) -> Option<State> {
 
 /// A stepped sine over `omegas` (rad/s, in test order, up or down) at force level `scale`:
 /// every point is solved from the previous solution, as a test dwells at each frequency.
-/// A step that Newton cannot take directly is split into 2, 4, … 16 sub-steps. Past a fold
-/// the branch ends: the point is then solved from other starts (the linear response, the
-/// last solution scaled down and up) and, when stability is computed, only a stable solution
-/// is preferred, since a test cannot dwell on an unstable one (an unstable one is kept,
-/// flagged, when no start gives a stable one). A point is a
-/// [`PointKind::Jump`] when it is not on the continuation of the last one: farther from the
-/// tangent prediction `x + (dx/dΩ) ΔΩ` than half its distance from `x`.
 ///
-/// A frequency where Newton converges from no start ends the sweep with
-/// [`Status::StepTooSmall`]; the points before it are kept in the report.
+/// Each step first tries Newton from the last solution (split into 2, 4, … 16 sub-steps
+/// when it fails directly). When that fails, or when its solution lies off the tangent
+/// prediction `x + (dx/dΩ) ΔΩ` by more than half its distance from `x` (a step over a fold,
+/// or only a coarse step near a resonance), the step is decided by following the branch of
+/// the last solution across it by pseudo-arclength continuation:
+///
+/// - the branch reaches the new frequency without turning: the point is the branch's there,
+///   a regular one (whatever Newton found);
+/// - the branch folds inside the step (ripples of a non-smooth branch dismissed as in
+///   [`continuation`]): the branch ends and the point is a [`PointKind::Jump`], solved from
+///   other starts — Newton's own solution, the linear response, the last solution scaled
+///   down and up, and last a continuation in the force level from `scale`/1000 at the new
+///   frequency;
+/// - the continuation cannot follow the step (a non-smooth point): the point is found from
+///   the same starts, kept regular and counted in [`ContinuationStats::n_unverified`] —
+///   refine the grid there to tell.
+///
+/// With stability, a test cannot dwell on an unstable solution: an unstable point of the
+/// branch ends it as a fold does (a jump), and a stable solution is preferred among the
+/// starts (an unstable one is kept, flagged, when none is stable).
+///
+/// A frequency where no start converges is skipped: it is listed in
+/// [`ContinuationReport::skipped`] and the sweep goes on from the last solution, so that the
+/// sweep has a gap there rather than an end.
 pub fn stepped_sine(
     sys: &HbSystem,
     omegas: &[f64],
@@ -935,6 +958,92 @@ pub fn stepped_sine(
     stability: bool,
 ) -> Result<ContinuationReport> {
     stepped_sine_with_progress(sys, omegas, scale, stability, &mut |_| {})
+}
+
+/// How the branch of the last stepped-sine point crosses a step.
+enum Across {
+    /// It reaches the new frequency: its solution there and the corrector's iterations.
+    Reached(Vec<f64>, usize),
+    /// It turns back inside the step: the response leaves it.
+    Folded,
+    /// The continuation stopped short.
+    Failed,
+}
+
+/// Follows the branch through `x` at `from` (rad/s, level `scale`) to `to` by
+/// pseudo-arclength continuation, turning points within `span` ripples dismissed. Steps fine
+/// on the scale of the step come first; when they cannot get across (the ripples of a
+/// contact grazing trap them), the steps of a continuation over the whole sweep `span`
+/// (those of [`ContinuationConfig::frequency`]), which pass over ripples as that one does.
+fn follow_across(
+    sys: &HbSystem,
+    from: f64,
+    to: f64,
+    scale: f64,
+    x: &[f64],
+    span: f64,
+) -> Result<Across> {
+    let ratio = (span / (to - from).abs()).max(1.0);
+    let sweep = ContinuationConfig::frequency(0.0, 1.0);
+    let tries = [(0.1, 0.25), (sweep.ds * ratio, sweep.ds_max * ratio)];
+    for (k, &(ds, ds_max)) in tries.iter().enumerate() {
+        if k > 0 && ds_max <= tries[0].1 {
+            break;
+        }
+        let cfg = ContinuationConfig {
+            parameter: Parameter::Frequency,
+            from,
+            to,
+            fixed: scale,
+            ds: ds.min(ds_max),
+            ds_min: 1e-8,
+            ds_max,
+            max_points: 200,
+            stability: false,
+            max_corrector: 12,
+        };
+        let mut rep = follow(sys, &cfg, Some(x), &mut |_| {})?;
+        if !rep.status.is_converged() {
+            continue;
+        }
+        dismiss_wiggles(&mut rep.branch, span);
+        let points = &rep.branch.points;
+        if points.iter().any(|p| p.kind == PointKind::Fold) {
+            return Ok(Across::Folded);
+        }
+        return Ok(match points.last() {
+            Some(p) if p.kind == PointKind::End => Across::Reached(p.x.clone(), p.iterations),
+            _ => Across::Folded,
+        });
+    }
+    Ok(Across::Failed)
+}
+
+/// The solution at `omega` (rad/s) and level `scale` reached by continuation in the force
+/// level from `scale`/1000 (where the response is close to linear), or `None`.
+fn by_force_level(sys: &HbSystem, omega: f64, scale: f64) -> Result<Option<(Vec<f64>, usize)>> {
+    if scale == 0.0 || !scale.is_finite() {
+        return Ok(None);
+    }
+    let cfg = ContinuationConfig {
+        parameter: Parameter::ForceLevel,
+        from: 1e-3 * scale,
+        to: scale,
+        fixed: omega,
+        ds: 5e-3,
+        ds_min: 1e-8,
+        ds_max: 0.05,
+        max_points: 2000,
+        stability: false,
+        max_corrector: 12,
+    };
+    let rep = follow(sys, &cfg, None, &mut |_| {})?;
+    Ok(match rep.branch.points.last() {
+        Some(p) if rep.status.is_converged() && p.kind == PointKind::End => {
+            Some((p.x.clone(), p.iterations))
+        }
+        _ => None,
+    })
 }
 
 /// [`stepped_sine`] with `progress` called on every point.
@@ -948,6 +1057,11 @@ pub fn stepped_sine_with_progress(
     let Some(&first) = omegas.first() else {
         return Err(Error::invalid("stepped sine", "no frequency"));
     };
+    // The sweep's span: ripples are judged on it, as in a continuation over the range.
+    let (lo, hi) = omegas
+        .iter()
+        .fold((first, first), |(a, b), &w| (a.min(w), b.max(w)));
+    let span = (hi - lo).max(f64::MIN_POSITIVE);
     let mut x = match sys.solve_from_rest(first, scale)? {
         (x, rep) if rep.converged() => x,
         _ => sys.linear_guess(first, scale),
@@ -961,6 +1075,7 @@ pub fn stepped_sine_with_progress(
     };
     let mut points: Vec<SolutionPoint> = Vec::with_capacity(omegas.len());
     let mut stats = ContinuationStats::default();
+    let mut skipped = Vec::new();
     let accept = |x: &[f64], om: f64| -> Result<Option<Option<Stability>>> {
         if !stability {
             return Ok(Some(None));
@@ -969,104 +1084,129 @@ pub fn stepped_sine_with_progress(
         Ok(st.stable.then_some(Some(st)))
     };
     for &om in omegas {
-        // Along the branch: from the last solution, in sub-steps when needed. A converged
-        // but unstable solution is kept as the fallback.
-        let mut found = None;
-        let mut fallback = None;
+        // Newton from the last solution, in sub-steps when needed.
+        let mut direct: Option<(Vec<f64>, usize)> = None;
         let mut sub = 1usize;
-        while sub <= 16 && found.is_none() {
+        while sub <= 16 && direct.is_none() {
             let mut xt = x.clone();
-            let mut rep = None;
+            let mut iterations = None;
             for i in 1..=sub {
                 let w = prev + (om - prev) * i as f64 / sub as f64;
                 match solve(w, &xt) {
                     Ok((xs, r)) if r.converged() => {
                         xt = xs;
-                        rep = Some(r);
+                        iterations = Some(r.iterations);
                     }
                     _ => {
                         stats.n_rejected += 1;
-                        rep = None;
+                        iterations = None;
                         break;
                     }
                 }
             }
-            if let Some(r) = rep {
-                match accept(&xt, om)? {
-                    Some(st) => found = Some((xt, r, st, PointKind::Regular)),
-                    None => fallback = Some((xt, r, PointKind::Regular)),
-                }
-                break;
+            if let Some(it) = iterations {
+                direct = Some((xt, it));
             }
             sub *= 2;
         }
-        // Off the end of the branch: the jump.
+        // Is it the branch of the last point? Checked by continuation across the step when
+        // Newton failed or landed off the tangent prediction.
+        let suspect = !points.is_empty()
+            && match &direct {
+                None => true,
+                Some((xn, _)) => match sys.dx_domega(&x, prev, scale) {
+                    Ok(t) => {
+                        let off: f64 = xn
+                            .iter()
+                            .zip(x.iter().zip(&t))
+                            .map(|(a, (b, d))| (a - b - d * (om - prev)).powi(2))
+                            .sum();
+                        let step: f64 = xn.iter().zip(&x).map(|(a, b)| (a - b).powi(2)).sum();
+                        off > 0.25 * step && step > (1e-3 * norm_inf(xn)).powi(2)
+                    }
+                    Err(_) => true,
+                },
+            };
+        let mut left = false;
+        let on_branch = if suspect {
+            match follow_across(sys, prev, om, scale, &x, span)? {
+                Across::Reached(xc, it) => Some((xc, it)),
+                Across::Folded => {
+                    left = true;
+                    None
+                }
+                Across::Failed => {
+                    stats.n_unverified += 1;
+                    direct.clone()
+                }
+            }
+        } else {
+            direct.clone()
+        };
+        let mut found = None;
+        let mut fallback = None;
+        if let Some((xc, it)) = on_branch {
+            match accept(&xc, om)? {
+                Some(st) => found = Some((xc, it, st, PointKind::Regular)),
+                None => {
+                    // Unstable: a test cannot dwell there, the response leaves the branch.
+                    left = true;
+                    fallback = Some((xc, it, PointKind::Regular));
+                }
+            }
+        }
+        // Off the branch: the jump, to a solution from other starts.
         if found.is_none() {
-            let lin = sys.linear_guess(om, scale);
-            let starts = std::iter::once(lin).chain(
-                [0.5, 2.0, 0.25, 4.0, 0.1, 10.0]
-                    .iter()
-                    .map(|f| x.iter().map(|v| v * f).collect()),
-            );
+            let kind = if left {
+                PointKind::Jump
+            } else {
+                PointKind::Regular
+            };
+            let newton = direct.filter(|_| left).map(|(xn, _)| xn);
+            let starts = newton
+                .into_iter()
+                .chain(std::iter::once(sys.linear_guess(om, scale)))
+                .chain(
+                    [0.5, 2.0, 0.25, 4.0, 0.1, 10.0]
+                        .iter()
+                        .map(|f| x.iter().map(|v| v * f).collect()),
+                );
             for start in starts {
                 if let Ok((xs, r)) = solve(om, &start)
                     && r.converged()
                 {
                     match accept(&xs, om)? {
                         Some(st) => {
-                            found = Some((xs, r, st, PointKind::Jump));
+                            found = Some((xs, r.iterations, st, kind));
                             break;
                         }
                         None => {
-                            fallback.get_or_insert((xs, r, PointKind::Jump));
+                            fallback.get_or_insert((xs, r.iterations, kind));
                         }
                     }
                 }
             }
-        }
-        // No stable solution anywhere: keep the converged one, flagged unstable, rather than
-        // lose the sweep.
-        if found.is_none()
-            && let Some((xs, r, kind)) = fallback
-        {
-            let st = sys.stability(&xs, om)?;
-            found = Some((xs, r, Some(st), kind));
-        }
-        let Some((xn, rep, st, kind)) = found else {
-            let what = format!("stepped sine at {:.6} Hz (level {scale})", om / (2.0 * PI));
-            let why = "Newton converged from none of the last point, the linear response \
-                       or scaled starts; refine the frequency grid"
-                .to_string();
-            let branch = Branch {
-                parameter: Parameter::Frequency,
-                points,
-                branch_points: Vec::new(),
-                bifurcations: Vec::new(),
-            };
-            return Ok(ContinuationReport::stopped(
-                Status::StepTooSmall,
-                branch,
-                stats,
-                what,
-                why,
-            ));
-        };
-        let tangent = match kind {
-            PointKind::Regular if !points.is_empty() => sys.dx_domega(&x, prev, scale).ok(),
-            _ => None,
-        };
-        let kind = match (kind, tangent) {
-            (PointKind::Regular, Some(t)) => {
-                let pred: Vec<f64> = x.iter().zip(&t).map(|(a, b)| a + b * (om - prev)).collect();
-                let off: f64 = xn.iter().zip(&pred).map(|(a, b)| (a - b).powi(2)).sum();
-                let step: f64 = xn.iter().zip(&x).map(|(a, b)| (a - b).powi(2)).sum();
-                if off > 0.25 * step && step > (1e-3 * norm_inf(&xn)).powi(2) {
-                    PointKind::Jump
-                } else {
-                    PointKind::Regular
+            if found.is_none()
+                && fallback.is_none()
+                && let Some((xs, it)) = by_force_level(sys, om, scale)?
+            {
+                match accept(&xs, om)? {
+                    Some(st) => found = Some((xs, it, st, kind)),
+                    None => fallback = Some((xs, it, kind)),
                 }
             }
-            (k, _) => k,
+        }
+        // No stable solution anywhere: keep the converged one, flagged unstable, rather than
+        // lose the point.
+        if found.is_none()
+            && let Some((xs, it, kind)) = fallback
+        {
+            let st = sys.stability(&xs, om)?;
+            found = Some((xs, it, Some(st), kind));
+        }
+        let Some((xn, iterations, st, kind)) = found else {
+            skipped.push(om);
+            continue;
         };
         x = xn;
         prev = om;
@@ -1076,7 +1216,7 @@ pub fn stepped_sine_with_progress(
             stability: st,
             x: x.clone(),
             kind,
-            iterations: rep.iterations,
+            iterations,
         };
         stats.n_points += 1;
         stats.n_newton += p.iterations;
@@ -1093,6 +1233,7 @@ pub fn stepped_sine_with_progress(
         },
         stats,
         detail: String::new(),
+        skipped,
     })
 }
 
@@ -1418,6 +1559,7 @@ pub fn continuation_through(
         branch,
         stats,
         detail,
+        skipped: Vec::new(),
     })
 }
 

@@ -47,7 +47,8 @@ impl std::str::FromStr for Magnitude {
 
 /// Plots the FRF of sensor `sensor` (responses `y` from `commands::frf::responses`) as SVG or PNG by the
 /// extension of `path`: one panel per harmonic carrying response, each on its own scale,
-/// magnitude read as `magnitude`, with a phase panel beside each when `phase`; stable parts
+/// magnitude read as `magnitude`, with a phase panel beside each when `phase`, a gap across
+/// each of `gaps` (Hz, a stepped sine's unsolved frequencies); stable parts
 /// in the harmonic's colour, unstable parts red, folds and jumps marked. Written atomically.
 #[allow(clippy::too_many_arguments)]
 pub fn plot_frf(
@@ -59,6 +60,7 @@ pub fn plot_frf(
     title: &str,
     magnitude: Magnitude,
     phase: bool,
+    gaps: &[f64],
 ) -> Result<()> {
     crate::present::plot::write(
         path,
@@ -70,6 +72,7 @@ pub fn plot_frf(
             title,
             magnitude,
             phase,
+            gaps,
         },
     )
 }
@@ -90,6 +93,8 @@ pub struct FrfPlot<'a> {
     pub magnitude: Magnitude,
     /// Whether a phase panel goes beside each magnitude panel.
     pub phase: bool,
+    /// Frequencies (Hz) a stepped sine could not solve: the curve has a gap across each.
+    pub gaps: &'a [f64],
 }
 
 /// At most this many harmonic panels: the fundamental and the largest others.
@@ -323,15 +328,21 @@ impl FrfPlot<'_> {
             .y_label_area_size(76);
         let xs = tick_step(x0, x1, 20);
         let x_fmt = |v: &f64| tick_label(*v, xs, x1.abs());
-        // Segments of equal stability; a jump starts a new curve, and so does a phase wrap.
+        // Segments of equal stability; a jump starts a new curve, and so do a phase wrap and a
+        // skipped frequency.
         let segments = || {
             let mut out: Vec<(bool, Vec<(f64, f64)>)> = Vec::new();
             for i in 0..n {
                 let stable = self.branch.points[i].stable() != Some(false);
                 let jump = self.branch.points[i].kind == PointKind::Jump;
                 let wrap = phase && i > 0 && (vals[i] - vals[i - 1]).abs() > 180.0;
+                let gap = i > 0
+                    && self
+                        .gaps
+                        .iter()
+                        .any(|&g| (g - hz[i - 1]) * (hz[i] - g) > 0.0);
                 match out.last_mut() {
-                    Some((s, pts)) if !jump && !wrap => {
+                    Some((s, pts)) if !jump && !wrap && !gap => {
                         pts.push((hz[i], vals[i]));
                         if *s != stable {
                             // The shared point ends one stretch and starts the next.

@@ -343,7 +343,7 @@ pub struct Lines {
     pub x_desc: String,
     /// y-axis label with unit.
     pub y_desc: String,
-    /// The curves.
+    /// The curves; a non-finite point leaves a gap.
     pub series: Vec<(String, Vec<(f64, f64)>)>,
 }
 
@@ -409,12 +409,19 @@ impl Figure for Lines {
         for (i, (label, p)) in self.series.iter().enumerate() {
             let c = palette[i % palette.len()];
             let w = if i == 0 { 2 } else { 1 };
-            chart
-                .draw_series(LineSeries::new(p.iter().copied(), c.stroke_width(w)))?
-                .label(label)
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(w))
-                });
+            // A non-finite point is a gap: each finite stretch is its own line.
+            let stretches = p
+                .split(|(x, y)| !(x.is_finite() && y.is_finite()))
+                .filter(|s| !s.is_empty());
+            for (j, stretch) in stretches.enumerate() {
+                let drawn = chart
+                    .draw_series(LineSeries::new(stretch.iter().copied(), c.stroke_width(w)))?;
+                if j == 0 {
+                    drawn.label(label).legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(w))
+                    });
+                }
+            }
         }
         draw_legend(&mut chart, SeriesLabelPosition::UpperRight)
     }

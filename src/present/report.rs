@@ -94,6 +94,10 @@ pub const PAGE: &str = "index.html";
 /// The file name of the data beside it.
 pub const DATA: &str = "report.h5";
 
+/// A file every report folder gets as soon as the report starts (the command line that
+/// made it): a run that fails half-way leaves a folder still known as an nlsim report.
+pub const MARKER: &str = ".nlsim-report";
+
 impl Report {
     /// Starts the report of a run in `dir` (created if missing): `title` heads the page,
     /// `command_line` (as typed) and `model_spec` go into the provenance of the page and of
@@ -101,6 +105,11 @@ impl Report {
     pub fn create(dir: &Path, title: &str, command_line: &str, model_spec: &str) -> Result<Self> {
         std::fs::create_dir_all(dir).map_err(|source| Error::Io {
             path: dir.to_path_buf(),
+            source,
+        })?;
+        let marker = dir.join(MARKER);
+        std::fs::write(&marker, format!("{command_line}\n")).map_err(|source| Error::Io {
+            path: marker,
             source,
         })?;
         let h5_path = dir.join(DATA);

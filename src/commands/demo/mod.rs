@@ -188,14 +188,19 @@ pub fn default_report_dir(model: &str) -> std::path::PathBuf {
 }
 
 /// Refuses a report folder that exists, holds files and is not an nlsim report (no
-/// `report.h5` or `index.html`): the demo replaces its own reports, never someone's folder.
+/// `report.h5`, `index.html` or the marker a report leaves as soon as it starts): the demo
+/// replaces its own reports, finished or not, never someone's folder.
 fn refuse_foreign_folder(dir: &Path) -> Result<()> {
     let Ok(mut entries) = std::fs::read_dir(dir) else {
         return Ok(()); // missing (created later) or unreadable (that error comes later)
     };
-    let ours = [crate::present::report::DATA, crate::present::report::PAGE]
-        .iter()
-        .any(|f| dir.join(f).is_file());
+    let ours = [
+        crate::present::report::DATA,
+        crate::present::report::PAGE,
+        crate::present::report::MARKER,
+    ]
+    .iter()
+    .any(|f| dir.join(f).is_file());
     if !ours && entries.next().is_some() {
         return Err(crate::error::Error::Usage(format!(
             "{}: the folder holds files and no nlsim report; the demo would write into it: \
@@ -224,5 +229,23 @@ mod report_dir_tests {
             d("examples/models/two_dof.toml"),
             std::path::PathBuf::from("nlsim-report-two_dof")
         );
+    }
+
+    /// A report that stopped half-way (plots written, no `report.h5` or page yet) is still
+    /// the demo's own folder: the next run may replace it; a folder of other files is not.
+    #[test]
+    fn a_half_written_report_is_still_ours() {
+        let dir = std::env::temp_dir().join(format!("nlsim-demo-dir-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let report = crate::present::report::Report::create(&dir, "t", "nlsim demo", "m")
+            .expect("report starts");
+        std::fs::write(dir.join("time_response.svg"), "<svg/>").unwrap();
+        drop(report);
+        assert!(!dir.join(crate::present::report::DATA).exists());
+        super::refuse_foreign_folder(&dir).expect("a half-written report is ours");
+        std::fs::remove_file(dir.join(crate::present::report::MARKER)).unwrap();
+        let e = super::refuse_foreign_folder(&dir).unwrap_err().to_string();
+        assert!(e.contains("holds files and no nlsim report"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

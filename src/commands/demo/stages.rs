@@ -172,9 +172,32 @@ pub(crate) fn demo_frf(
             .collect()
     };
     let t = Instant::now();
-    let up = nlsim_hb::stepped_sine(&sys, &grid(lo, hi), 1.0, false)?.into_branch()?;
-    let down = nlsim_hb::stepped_sine(&sys, &grid(hi, lo), 1.0, false)?.into_branch()?;
+    let up_run = nlsim_hb::stepped_sine(&sys, &grid(lo, hi), 1.0, true)?;
+    let down_run = nlsim_hb::stepped_sine(&sys, &grid(hi, lo), 1.0, true)?;
     let t_step = t.elapsed().as_secs_f64();
+    let (up, down) = (&up_run.branch, &down_run.branch);
+    // What a stepped sine could not settle, said rather than drawn over.
+    let mut caveats = Vec::new();
+    for (what, r) in [("up", &up_run), ("down", &down_run)] {
+        if !r.skipped.is_empty() {
+            let hz: Vec<String> = r
+                .skipped
+                .iter()
+                .map(|w| format!("{:.3}", w / (2.0 * PI)))
+                .collect();
+            caveats.push(format!(
+                "stepped sine {what}: no solution at {} Hz (gaps)",
+                hz.join(", ")
+            ));
+        }
+        if r.stats.n_unverified > 0 {
+            caveats.push(format!(
+                "stepped sine {what}: {} step(s) across a non-smooth point shown as regular \
+                 (a finer grid tells whether the response jumps there)",
+                r.stats.n_unverified
+            ));
+        }
+    }
     let hz = |p: &nlsim_hb::SolutionPoint| p.omega / (2.0 * PI);
     let list = |kind: PointKind, b: &nlsim_hb::Branch| -> String {
         let v: Vec<String> = b
@@ -202,14 +225,17 @@ pub(crate) fn demo_frf(
             .count(),
         list(PointKind::Fold, &cont),
         t_step,
-        list(PointKind::Jump, &up),
-        list(PointKind::Jump, &down)
+        list(PointKind::Jump, up),
+        list(PointKind::Jump, down)
     ));
+    for c in &caveats {
+        say(&format!("  note: {c}"));
+    }
     // The sensor responses of each branch, once: for the data, the tables and the plots.
     let branches = [
         ("continuation", "continuation", &cont),
-        ("step_up", "stepped sine up", &up),
-        ("step_down", "stepped sine down", &down),
+        ("step_up", "stepped sine up", up),
+        ("step_down", "stepped sine down", down),
     ]
     .map(|(name, what, b)| (name, what, b, crate::commands::frf::run::responses(&sys, b)));
     report.data(|root| {
@@ -239,15 +265,31 @@ pub(crate) fn demo_frf(
         title: &title,
         magnitude: crate::present::frf_plot::Magnitude::Db,
         phase: true,
+        gaps: &[],
     };
     let mut plots = vec![plot_both(report, &format!("frf_{}", model.name()), &fig)?];
     // The stepped sines as a test would run them, over the continuation.
-    let fund = |i: usize| -> Vec<(f64, f64)> {
+    // A skipped frequency is a gap (a non-finite point) in its curve.
+    let fund = |i: usize, skipped: &[f64]| -> Vec<(f64, f64)> {
         let (_, _, b, yb) = &branches[i];
-        yb.iter()
+        let mut out: Vec<(f64, f64)> = yb
+            .iter()
             .zip(&b.points)
-            .map(|(r, p)| (hz(p), r[(0, 1)].norm()))
-            .collect()
+            .map(|(r, p)| (p.omega, r[(0, 1)].norm()))
+            .chain(skipped.iter().map(|&w| (w, f64::NAN)))
+            .collect();
+        if !skipped.is_empty() {
+            // A stepped sine's points are in test order, monotonic in frequency.
+            let down = b.points.len() > 1 && b.points[b.points.len() - 1].omega < b.points[0].omega;
+            out.sort_by(|a, b| {
+                if down {
+                    b.0.total_cmp(&a.0)
+                } else {
+                    a.0.total_cmp(&b.0)
+                }
+            });
+        }
+        out.into_iter().map(|(w, v)| (w / (2.0 * PI), v)).collect()
     };
     let sen = &sys.sensors()[0];
     let fig = crate::present::plot::Lines {
@@ -259,9 +301,9 @@ pub(crate) fn demo_frf(
             crate::formats::files::unit(sen.quantity)
         ),
         series: vec![
-            ("continuation (every branch)".into(), fund(0)),
-            ("stepped sine up".into(), fund(1)),
-            ("stepped sine down".into(), fund(2)),
+            ("continuation (every branch)".into(), fund(0, &[])),
+            ("stepped sine up".into(), fund(1, &up_run.skipped)),
+            ("stepped sine down".into(), fund(2, &down_run.skipped)),
         ],
     };
     plots.push(plot_both(report, "stepped_sines", &fig)?);

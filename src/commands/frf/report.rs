@@ -200,6 +200,7 @@ pub fn write_report(
                 title: &title,
                 magnitude,
                 phase,
+                gaps: &run.skipped_hz,
             },
         )?;
     }
@@ -434,6 +435,7 @@ impl FrfOutputs {
                 &title,
                 self.magnitude,
                 self.phase,
+                &run.skipped_hz,
             )?;
             console.say(&format!("  plot {}", p.display()));
         }

@@ -42,6 +42,8 @@ pub struct FrfRun {
     pub reduce_seconds: f64,
     /// Wall time of the sweep (s).
     pub seconds: f64,
+    /// Stepped sines: frequencies (Hz) where no start converged, left out (gaps).
+    pub skipped_hz: Vec<f64>,
 }
 
 /// Computes the FRF `req` asks for on `model`, calling `progress` after every point.
@@ -222,6 +224,23 @@ pub fn run_frf_shared(
             100.0 * nlsim_hb::continuation::WIGGLE_RESPONSE
         ));
     }
+    if report.stats.n_unverified > 0 {
+        notes.push(format!(
+            "{} step(s) the branch of the last point could not be followed across (a \
+             non-smooth point): their points are shown as regular, not as jumps, though the \
+             response may have left its branch there; a finer grid (--points) tells",
+            report.stats.n_unverified
+        ));
+    }
+    let skipped_hz: Vec<f64> = report.skipped.iter().map(|w| w / (2.0 * PI)).collect();
+    if !skipped_hz.is_empty() {
+        let list: Vec<String> = skipped_hz.iter().map(|f| format!("{f:.5}")).collect();
+        notes.push(format!(
+            "no solution converged at {} Hz (from the last point, other starts or a \
+             continuation in the force level): left out, a gap in the sweep and its plot",
+            list.join(", ")
+        ));
+    }
     let status = report.status;
     let detail = report.detail.replace('\n', ": ");
     if report.branch.points.is_empty() {
@@ -273,6 +292,7 @@ pub fn run_frf_shared(
         modes,
         reduce_seconds,
         seconds,
+        skipped_hz,
     })
 }
 
