@@ -55,8 +55,10 @@ pub use objective::{
 };
 pub use plan::{
     Band, Criterion, Design, Exciter, FimSummary, Placement, Planner, RankedDesign, SideTone,
-    SweepInformation, dof_information, greedy_placement, rank_designs, subsets,
+    SweepInformation, dof_information, greedy_placement, rank_designs, scaled_noise, subsets,
 };
-pub use shaker::{ControlConfig, Shaker, StepControl, VirtualTest, virtual_test};
+pub use shaker::{
+    ControlConfig, Shaker, StepControl, VirtualTest, virtual_test, virtual_test_with,
+};
 pub use stats::CramerRao;
 pub use synthetic::{Gaussian, SweepPlan, synthesize};

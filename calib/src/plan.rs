@@ -555,16 +555,44 @@ impl Planner {
         noise: Noise,
         harmonics: &[usize],
     ) -> Result<SweepInformation> {
+        let per_channel = vec![noise; self.system().sensors().len()];
+        self.sweep_information_with(exciter, band, &per_channel, harmonics)
+    }
+
+    /// [`Planner::sweep_information`] with a noise model per channel (`noise[c]` for the
+    /// system's sensor `c`), e.g. floors in each sensor's own scale from
+    /// [`Planner::response_peaks`].
+    pub fn sweep_information_with(
+        &self,
+        exciter: &Exciter,
+        band: &Band,
+        noise: &[Noise],
+        harmonics: &[usize],
+    ) -> Result<SweepInformation> {
         band.check()?;
-        if !(noise.absolute > 0.0 && noise.absolute.is_finite() && noise.relative >= 0.0) {
+        let sensors = self.system().sensors();
+        if noise.len() != sensors.len() {
             return Err(Error::invalid(
                 "planning noise",
                 format!(
-                    "needs a positive absolute floor (got absolute {}, relative {}): without it \
-                     a harmonic the model predicts as nearly zero would weigh without bound",
-                    noise.absolute, noise.relative
+                    "{} noise models given for {} channels",
+                    noise.len(),
+                    sensors.len()
                 ),
             ));
+        }
+        for (n, sen) in noise.iter().zip(sensors) {
+            if !(n.absolute > 0.0 && n.absolute.is_finite() && n.relative >= 0.0) {
+                return Err(Error::invalid(
+                    format!("planning noise of channel '{}'", sen.name),
+                    format!(
+                        "needs a positive absolute floor (got absolute {}, relative {}): \
+                         without it a harmonic the model predicts as nearly zero would weigh \
+                         without bound",
+                        n.absolute, n.relative
+                    ),
+                ));
+            }
         }
         if !(exciter.level.is_finite() && exciter.level > 0.0) {
             return Err(Error::invalid(
@@ -588,55 +616,14 @@ impl Planner {
                 ));
             }
         }
-        let h_data = harmonics
-            .iter()
-            .chain(exciter.side.iter().map(|t| &t.harmonic))
-            .fold(1, |a, &b| a.max(b));
-        let mut data = template(
-            crate::synthetic::sensor_channels(self.system(), noise),
-            &exciter.input,
-            h_data,
-        );
-        let force = exciter.force(h_data);
-        let nan = c64::new(f64::NAN, f64::NAN);
-        let freqs = band.frequencies_hz();
-        data.sweeps = vec![Sweep {
-            label: band.label.clone(),
-            direction: if band.to_hz > band.from_hz {
-                SweepDirection::Up
-            } else {
-                SweepDirection::Down
-            },
-            steps: freqs
-                .iter()
-                .map(|&f| Step {
-                    frequency_hz: f,
-                    force: force.clone(),
-                    response: Mat::from_fn(data.channels.len(), h_data, |_, _| nan),
-                })
-                .collect(),
-        }];
-        let config = ObjectiveConfig {
-            harmonics: harmonics.to_vec(),
-            form: Form::Complex,
-            branch: BranchChoice::Continuation,
-        };
-        // The predicted responses: the test's noise-free data.
-        let mut obj = self
-            .prototype
-            .with_data(Arc::new(data.clone()), config.clone())?;
-        let ev = obj.evaluate_values(&self.nominal, None, false)?;
-        let mut failed_hz = Vec::new();
-        let mut responses = Vec::with_capacity(freqs.len());
-        for pr in &ev.points {
-            if pr.status == Status::Converged {
-                data.sweeps[0].steps[pr.id.step].response = pr.response.clone();
-            } else {
-                failed_hz.push(freqs[pr.id.step]);
+        let (mut data, config, responses, failed_hz) =
+            self.predict(exciter, band, noise, harmonics)?;
+        for (st, y) in data.sweeps[0].steps.iter_mut().zip(&responses) {
+            if !failed_hz.contains(&st.frequency_hz) {
+                st.response = y.clone();
             }
-            responses.push(pr.response.clone());
         }
-        let mut obj = obj.with_data(Arc::new(data.clone()), config)?;
+        let mut obj = self.prototype.with_data(Arc::new(data.clone()), config)?;
         let ev = obj.evaluate_values(&self.nominal, None, true)?;
         let jac = ev.jacobian.expect("asked for");
         let n = self.params.len();
@@ -675,6 +662,110 @@ impl Planner {
             failed_hz,
         })
     }
+}
+
+impl Planner {
+    /// The noise-free predicted test of `band` driven by `exciter`: its template data
+    /// (channels with `noise`, responses unknown), the objective settings for `harmonics`,
+    /// the predicted responses per step (channels × harmonics `1..=max`) and the frequencies
+    /// (Hz) where the harmonic balance failed.
+    #[allow(clippy::type_complexity)]
+    fn predict(
+        &self,
+        exciter: &Exciter,
+        band: &Band,
+        noise: &[Noise],
+        harmonics: &[usize],
+    ) -> Result<(TestData, ObjectiveConfig, Vec<Mat<c64>>, Vec<f64>)> {
+        let h_data = harmonics
+            .iter()
+            .chain(exciter.side.iter().map(|t| &t.harmonic))
+            .fold(1, |a, &b| a.max(b));
+        let mut data = template(
+            crate::synthetic::sensor_channels_with(self.system(), noise),
+            &exciter.input,
+            h_data,
+        );
+        let force = exciter.force(h_data);
+        let nan = c64::new(f64::NAN, f64::NAN);
+        let freqs = band.frequencies_hz();
+        data.sweeps = vec![Sweep {
+            label: band.label.clone(),
+            direction: if band.to_hz > band.from_hz {
+                SweepDirection::Up
+            } else {
+                SweepDirection::Down
+            },
+            steps: freqs
+                .iter()
+                .map(|&f| Step {
+                    frequency_hz: f,
+                    force: force.clone(),
+                    response: Mat::from_fn(data.channels.len(), h_data, |_, _| nan),
+                })
+                .collect(),
+        }];
+        let config = ObjectiveConfig {
+            harmonics: harmonics.to_vec(),
+            form: Form::Complex,
+            branch: BranchChoice::Continuation,
+        };
+        let mut obj = self
+            .prototype
+            .with_data(Arc::new(data.clone()), config.clone())?;
+        let ev = obj.evaluate_values(&self.nominal, None, false)?;
+        let mut failed_hz = Vec::new();
+        let mut responses = Vec::with_capacity(freqs.len());
+        for pr in &ev.points {
+            if pr.status != Status::Converged {
+                failed_hz.push(freqs[pr.id.step]);
+            }
+            responses.push(pr.response.clone());
+        }
+        Ok((data, config, responses, failed_hz))
+    }
+
+    /// The largest predicted fundamental amplitude `|Y_1|` of each channel (the sensor's
+    /// unit) over the stepped sines `tests` (drive and band each) at the nominal parameters:
+    /// the scale a test team sets each sensor's range for, and with it the noise floor in
+    /// the sensor's own scale (e.g. 10⁻³ of it, a 60 dB range). Steps where the harmonic
+    /// balance fails are left out; a channel no step reaches gets 0.
+    pub fn response_peaks(&self, tests: &[(&Exciter, &Band)]) -> Result<Vec<f64>> {
+        let nc = self.system().sensors().len();
+        let noise = vec![Noise::relative(0.01); nc];
+        let mut peaks = vec![0.0f64; nc];
+        for (exciter, band) in tests {
+            band.check()?;
+            let (_, _, responses, failed) = self.predict(exciter, band, &noise, &[1])?;
+            let freqs = band.frequencies_hz();
+            for (y, f) in responses.iter().zip(&freqs) {
+                if failed.contains(f) {
+                    continue;
+                }
+                for (c, p) in peaks.iter_mut().enumerate() {
+                    let a = y[(c, 0)].norm();
+                    if a.is_finite() {
+                        *p = p.max(a);
+                    }
+                }
+            }
+        }
+        Ok(peaks)
+    }
+}
+
+/// Per-channel noise models with floors in each sensor's own scale: `relative` of the
+/// response, and an absolute floor of `floor` times the channel's `peaks` entry (from
+/// [`Planner::response_peaks`]), or `absolute` where that is larger. A channel with no
+/// predicted response keeps `absolute` (which must then be positive to plan).
+pub fn scaled_noise(relative: f64, absolute: f64, floor: f64, peaks: &[f64]) -> Vec<Noise> {
+    peaks
+        .iter()
+        .map(|&p| Noise {
+            absolute: absolute.max(floor * p),
+            relative,
+        })
+        .collect()
 }
 
 fn first_input(sys: &HbSystem) -> Result<String> {

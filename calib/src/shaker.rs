@@ -504,6 +504,45 @@ pub fn virtual_test(
     force_noise: Noise,
     seed: u64,
 ) -> Result<VirtualTest> {
+    let per_channel = vec![noise; sys.sensors().len()];
+    virtual_test_with(
+        sys,
+        input,
+        shaker,
+        plans,
+        harmonics,
+        control,
+        &per_channel,
+        force_noise,
+        seed,
+    )
+}
+
+/// [`virtual_test`] with a noise model per sensor (`noise[c]` for the system's sensor `c`,
+/// e.g. floors in each sensor's own scale); the same draws as [`virtual_test`] when every
+/// entry is the same.
+#[allow(clippy::too_many_arguments)]
+pub fn virtual_test_with(
+    sys: &HbSystem,
+    input: &str,
+    shaker: &Shaker,
+    plans: &[SweepPlan],
+    harmonics: usize,
+    control: &ControlConfig,
+    noise: &[Noise],
+    force_noise: Noise,
+    seed: u64,
+) -> Result<VirtualTest> {
+    if noise.len() != sys.sensors().len() {
+        return Err(Error::invalid(
+            "virtual test noise",
+            format!(
+                "{} noise models given for {} sensors",
+                noise.len(),
+                sys.sensors().len()
+            ),
+        ));
+    }
     shaker.check()?;
     let set = *sys.harmonics();
     if set.nu != 1 {
@@ -641,7 +680,7 @@ pub fn virtual_test(
                     let response = Mat::from_fn(y.nrows(), harmonics, |s, k| y[(s, k + 1)]);
                     let response = Mat::from_fn(response.nrows(), harmonics, |s, k| {
                         let v = response[(s, k)];
-                        let sg = noise.sigma(v);
+                        let sg = noise[s].sigma(v);
                         v + c64::new(sg * normal(), sg * normal())
                     });
                     let measured_force = (1..=harmonics)
@@ -686,7 +725,7 @@ pub fn virtual_test(
         });
         records.push(record);
     }
-    let channels = crate::synthetic::sensor_channels(sys, noise);
+    let channels = crate::synthetic::sensor_channels_with(sys, noise);
     let data = TestData {
         input: input.into(),
         channels,

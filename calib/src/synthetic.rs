@@ -140,9 +140,16 @@ pub fn synthesize(
 
 /// One channel per sensor of `sys` (its name and quantity) with noise `noise`.
 pub(crate) fn sensor_channels(sys: &HbSystem, noise: Noise) -> Vec<Channel> {
+    sensor_channels_with(sys, &vec![noise; sys.sensors().len()])
+}
+
+/// The channels of `sys`'s sensors, sensor `c` with `noise[c]` (`noise` as long as the
+/// sensors).
+pub(crate) fn sensor_channels_with(sys: &HbSystem, noise: &[Noise]) -> Vec<Channel> {
     sys.sensors()
         .iter()
-        .map(|s| Channel {
+        .zip(noise)
+        .map(|(s, &noise)| Channel {
             name: s.name.clone(),
             quantity: s.quantity,
             noise,

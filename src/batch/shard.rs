@@ -143,10 +143,10 @@ fn run_job(
                 return Ok(JobResult::Fold(r));
             }
             &Assignment::PlanSweep(i) => {
-                let (Some(setup), BatchCommand::PlanCandidates(req)) = (plan, &b.command) else {
+                let (Some(setup), BatchCommand::PlanCandidates(_)) = (plan, &b.command) else {
                     return Err(Error::Failed("no planning context".into()));
                 };
-                let info = crate::commands::plan::run::sweep_information(setup, i, req.noise)?;
+                let info = crate::commands::plan::run::sweep_information(setup, i)?;
                 return Ok(JobResult::PlanSweep(
                     Box::new(info),
                     setup.planner.nominal().to_vec(),

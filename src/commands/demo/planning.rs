@@ -7,7 +7,7 @@ use crate::present::plot::Lines;
 use crate::present::report::plot_both;
 use nlsim_calib::{
     Band, ControlConfig, Criterion, Exciter, Noise, Planner, Shaker, SweepPlan, TestData,
-    rank_designs, subsets, virtual_test,
+    rank_designs, subsets, virtual_test_with,
 };
 use nlsim_hb::{HarmonicSet, HbConfig, HbSystem};
 use nlsim_kernel::{Model, Param, Parameterized};
@@ -92,19 +92,28 @@ pub fn demo_planning(
         steps: 15,
     });
     let levels = [0.25, 0.5, 1.0].map(|x| x * force);
-    // 1 % of each response with a floor of 1e-3 in the sensors' units.
-    let noise = Noise {
-        absolute: 1e-3,
-        relative: 0.01,
-    };
+    // 1 % of each response with a floor of 1e-3 of each sensor's largest predicted response
+    // (at the largest level): the floor in the sensor's own scale, whatever its quantity.
+    let top = Exciter::sine(&input, levels[2]);
+    let tests: Vec<(&Exciter, &Band)> = bands.iter().map(|b| (&top, b)).collect();
+    let peaks = planner.response_peaks(&tests)?;
+    let noise = nlsim_calib::scaled_noise(0.01, 0.0, 1e-3, &peaks);
+    if let Some((sen, _)) = sys.sensors().iter().zip(&peaks).find(|(_, p)| **p <= 0.0) {
+        say(&format!(
+            "[5/8] pre-test planning: sensor '{}' has no predicted response; skipped",
+            sen.name
+        ));
+        report.skip("a sensor without a predicted response");
+        return Ok(());
+    }
     let harmonics = [1, 3];
     let mut sweeps = Vec::new();
     for &level in &levels {
         for b in &bands {
-            sweeps.push(planner.sweep_information(
+            sweeps.push(planner.sweep_information_with(
                 &Exciter::sine(&input, level),
                 b,
-                noise,
+                &noise,
                 &harmonics,
             )?);
         }
@@ -116,7 +125,8 @@ pub fn demo_planning(
     say(&format!(
         "[5/8] pre-test planning: {} candidate tests ({} levels x {} bands x {} sensor sets x \
          {} harmonic sets) ranked by D-optimality in {:.2} s; Fisher information from the \
-         analytic sensitivities of {} and {} (relative units), noise 1 % + 1e-3",
+         analytic sensitivities of {} and {} (relative units), noise 1 % with a floor of 1e-3 \
+         of each sensor's largest predicted response ({})",
         ranked.len(),
         levels.len(),
         bands.len(),
@@ -124,7 +134,18 @@ pub fn demo_planning(
         harmonic_sets.len(),
         t.elapsed().as_secs_f64(),
         params[0],
-        params[1]
+        params[1],
+        sys.sensors()
+            .iter()
+            .zip(&noise)
+            .map(|(sen, n)| format!(
+                "{} {:.2e} {}",
+                sen.name,
+                n.absolute,
+                crate::formats::files::unit(sen.quantity)
+            ))
+            .collect::<Vec<_>>()
+            .join(", ")
     ));
     let describe = |r: &nlsim_calib::RankedDesign| {
         let sw = &sweeps[r.design.sweep];
@@ -237,7 +258,7 @@ pub fn demo_planning(
 
 /// Stage 6: the demo's test (see [`demo_sweeps`]) through the default [`Shaker`] at the
 /// model's drive point, first voltage-driven, then force-controlled (1 %); 2 % response
-/// noise (seed 2016). Returns the controlled test's data for the calibration stage, or
+/// noise with a floor of 1e-3 of each sensor's largest response (seed 2016). Returns the controlled test's data for the calibration stage, or
 /// `None` when the model has nothing to test.
 pub fn demo_virtual_test(
     model: &Model,
@@ -262,9 +283,30 @@ pub fn demo_virtual_test(
     let plans = demo_sweeps(&sys, &params, force);
     let input = sys.inputs()[0].0.clone();
     let shaker = Shaker::default();
-    let noise = Noise::relative(0.02);
+    // 2 % noise with a floor of 1e-3 of each sensor's largest response in the noise-free
+    // controlled test (a harmonic the structure does not make is then noise, not zero).
     let quiet = Noise::relative(0.0);
-    let open = virtual_test(
+    let control = ControlConfig::default();
+    let n_sensors = sys.sensors().len();
+    let clean = virtual_test_with(
+        &sys,
+        &input,
+        &shaker,
+        &plans,
+        3,
+        &control,
+        &vec![quiet; n_sensors],
+        quiet,
+        2016,
+    )?;
+    let mut peaks = vec![0.0f64; n_sensors];
+    for st in clean.data.sweeps.iter().flat_map(|s| &s.steps) {
+        for (c, p) in peaks.iter_mut().enumerate() {
+            *p = p.max(st.response[(c, 0)].norm());
+        }
+    }
+    let noise = nlsim_calib::scaled_noise(0.02, 0.0, 1e-3, &peaks);
+    let open = virtual_test_with(
         &sys,
         &input,
         &shaker,
@@ -274,13 +316,12 @@ pub fn demo_virtual_test(
             enabled: false,
             ..ControlConfig::default()
         },
-        noise,
+        &noise,
         quiet,
         2016,
     )?;
-    let control = ControlConfig::default();
-    let ctl = virtual_test(
-        &sys, &input, &shaker, &plans, 3, &control, noise, quiet, 2016,
+    let ctl = virtual_test_with(
+        &sys, &input, &shaker, &plans, 3, &control, &noise, quiet, 2016,
     )?;
     say(&format!(
         "[6/8] virtual test: the stepped sines through a shaker model (armature {} kg, Bl {} N/A, \

@@ -199,12 +199,28 @@ pub(crate) fn demo_frf(
         }
     }
     let hz = |p: &nlsim_hb::SolutionPoint| p.omega / (2.0 * PI);
+    // A jump whose step holds no fold of the continuation left a branch the continuation
+    // from the lower end does not follow (the stepped sine showed that branch to fold).
+    let cont_folds: Vec<f64> = cont.folds().iter().map(|&i| cont.points[i].omega).collect();
+    let elsewhere = std::cell::Cell::new(false);
     let list = |kind: PointKind, b: &nlsim_hb::Branch| -> String {
         let v: Vec<String> = b
             .points
             .iter()
-            .filter(|p| p.kind == kind)
-            .map(|p| format!("{:.3} Hz", hz(p)))
+            .enumerate()
+            .filter(|(_, p)| p.kind == kind)
+            .map(|(i, p)| {
+                let before = b.points[i.saturating_sub(1)].omega;
+                let (a, z) = (before.min(p.omega), before.max(p.omega));
+                let step = (z - a).max(2.0 * PI * (hi - lo) / (n - 1) as f64);
+                let seen = cont_folds.iter().any(|&f| f >= a - step && f <= z + step);
+                if kind == PointKind::Jump && !seen {
+                    elsewhere.set(true);
+                    format!("{:.3} Hz*", hz(p))
+                } else {
+                    format!("{:.3} Hz", hz(p))
+                }
+            })
             .collect();
         if v.is_empty() {
             "none".into()
@@ -228,6 +244,12 @@ pub(crate) fn demo_frf(
         list(PointKind::Jump, up),
         list(PointKind::Jump, down)
     ));
+    if elsewhere.get() {
+        caveats.push(format!(
+            "* a jump off a branch the continuation from {lo:.2} Hz does not follow: the \
+             stepped sine showed that branch to fold inside the step"
+        ));
+    }
     for c in &caveats {
         say(&format!("  note: {c}"));
     }
@@ -372,7 +394,7 @@ pub(crate) fn demo_calibration(
     };
     say(&format!(
         "[7/8] calibration on {source}: {} sweeps, {} steps, harmonics 1-3 at {} sensors, {:.0} % \
-         noise (seed 2016)",
+         noise with a floor of 1e-3 of each sensor's largest response (seed 2016)",
         data.sweeps.len(),
         data.n_points(),
         data.channels.len(),

@@ -13,7 +13,7 @@
 //! levels = [0.05, 0.1, 0.2]           # fundamental force amplitudes (N)
 //! measured = [[1], [1, 3]]            # candidate sets of measured harmonics
 //! sensor_counts = [1, 2]              # sizes of the candidate sensor sets
-//! noise = { relative = 0.01, absolute = 1e-3 }
+//! noise = { relative = 0.01, floor = 1e-3 }  # floor: of each channel's largest response
 //!
 //! [[actuator]]                        # drive points beside the model's excitations
 //! name = "mid"

@@ -71,8 +71,8 @@ impl PlanRun {
         let _ = writeln!(t, "modes = {}", req.modes);
         let _ = writeln!(
             t,
-            "noise = {{ relative = {:e}, absolute = {:e} }}",
-            req.noise.relative, req.noise.absolute
+            "noise = {{ relative = {:e}, absolute = {:e}, floor = {:e} }}",
+            req.noise.relative, req.noise.absolute, req.noise_floor
         );
         let _ = writeln!(t, "out = \"virtual_test.csv\"");
         let names: Vec<String> = sw.channel_names(&r.design).into_iter().map(q).collect();
@@ -128,6 +128,34 @@ impl PlanRun {
         )
     }
 
+    /// The noise floor as the summary states it: the absolute floor, the relative one, and
+    /// each channel's resulting floor in its unit.
+    fn floor_text(&self) -> String {
+        let req = &self.request;
+        let mut parts = Vec::new();
+        if req.noise.absolute > 0.0 {
+            parts.push(format!("{:e} absolute", req.noise.absolute));
+        }
+        if req.noise_floor > 0.0 {
+            parts.push(format!(
+                "{:e} of each channel's largest predicted response",
+                req.noise_floor
+            ));
+        }
+        let mut text = format!("a floor of {}", parts.join(" or, if larger, "));
+        if !self.noise.is_empty() {
+            let per: Vec<String> = self
+                .candidates
+                .channels
+                .iter()
+                .zip(&self.noise)
+                .map(|(c, n)| format!("{c} {:.2e}", n.absolute))
+                .collect();
+            text.push_str(&format!(" ({})", per.join(", ")));
+        }
+        text
+    }
+
     /// The readable summary: what was planned, the best designs and the worst, and how much
     /// better the best is.
     pub fn summary(&self) -> Vec<String> {
@@ -138,7 +166,7 @@ impl PlanRun {
             format!(
                 "planning a test of '{}' for {} (nominal {}); Fisher information from the \
                  analytic harmonic-balance sensitivities, relative units (d/d ln p), noise {} % \
-                 + {:e}{}",
+                 + {}{}",
                 s.model_name,
                 names.join(", "),
                 self.nominal
@@ -147,7 +175,7 @@ impl PlanRun {
                     .collect::<Vec<_>>()
                     .join(", "),
                 100.0 * req.noise.relative,
-                req.noise.absolute,
+                self.floor_text(),
                 if s.prior.is_some() {
                     ", prior information added"
                 } else {
@@ -228,6 +256,9 @@ impl PlanRun {
                 "Cramér–Rao std (of the nominal value), best design -> worst: {}",
                 each.join(", ")
             ));
+        }
+        for w in &self.warnings {
+            v.push(format!("warning: {w}"));
         }
         v
     }
@@ -611,6 +642,10 @@ pub(crate) fn merged_plan(req: &PlanRequest, jobs: &[hdf5_metno::Group]) -> Resu
         ranked,
         sweep_seconds: 0.0,
         rank_seconds: t.elapsed().as_secs_f64(),
+        // The shards computed these; the merge does not reduce the model again.
+        peaks: Vec::new(),
+        noise: Vec::new(),
+        warnings: Vec::new(),
     })
 }
 

@@ -18,6 +18,9 @@ pub const MAX_STEPS: usize = 1_000_000;
 /// Most parameters planned for.
 pub const MAX_PARAMS: usize = 64;
 
+/// Default noise floor of a plan: 10⁻³ of each channel's largest predicted response.
+pub const DEFAULT_NOISE_FLOOR: f64 = 1e-3;
+
 /// A candidate excitation signal: a pure sine, or a multi-sine with side tones (thesis
 /// eq. 12).
 #[derive(Debug, Clone, PartialEq)]
@@ -66,8 +69,14 @@ pub struct PlanRequest {
     pub harmonics: usize,
     /// Retained modes.
     pub modes: usize,
-    /// Measurement noise of every channel (with an absolute floor).
+    /// Measurement noise of every channel: `relative` of the response, with an absolute
+    /// floor of `noise.absolute` (the sensors' unit) or `noise_floor` times the channel's
+    /// largest predicted response, whichever is larger.
     pub noise: Noise,
+    /// The noise floor relative to each channel's largest predicted fundamental response
+    /// over the candidate tests at the largest level (10⁻³: a 60 dB range): the floor in
+    /// the sensor's own scale whatever its quantity. 0 when an absolute floor is given alone.
+    pub noise_floor: f64,
     /// Ranking criterion.
     pub criterion: Criterion,
     /// Information of an earlier test (CSV written by a plan report as `fim_best.csv`).
@@ -84,7 +93,8 @@ pub struct PlanRequest {
 impl PlanRequest {
     /// A plan of `params` of `model` over `bands` with the defaults: the model's drive points,
     /// sensors and force, a pure sine, the fundamental measured, noise 1 % with a floor of
-    /// 10⁻³ of the sensors' unit, H = 3, 20 modes, D-optimality, 10 rows.
+    /// 10⁻³ of each channel's largest predicted response, H = 3, 20 modes, D-optimality,
+    /// 10 rows.
     pub fn new(model: impl Into<String>, params: Vec<Param>, bands: Vec<Band>) -> Self {
         Self {
             model: model.into(),
@@ -100,9 +110,10 @@ impl PlanRequest {
             harmonics: 3,
             modes: 20,
             noise: Noise {
-                absolute: 1e-3,
+                absolute: 0.0,
                 relative: 0.01,
             },
+            noise_floor: DEFAULT_NOISE_FLOOR,
             criterion: Criterion::D,
             prior: None,
             top: 10,
@@ -199,19 +210,24 @@ impl PlanRequest {
             }
         }
         let n = &self.noise;
-        if !(n.absolute.is_finite() && n.absolute > 0.0 && n.relative.is_finite())
+        let f = self.noise_floor;
+        if !(n.absolute.is_finite() && n.absolute >= 0.0 && n.relative.is_finite())
             || n.relative < 0.0
             || n.absolute > nlsim_calib::data::MAX_AMPLITUDE
             || n.relative > nlsim_calib::data::MAX_RELATIVE_NOISE
+            || !(f.is_finite() && (0.0..=1.0).contains(&f))
+            || (n.absolute == 0.0 && f == 0.0)
         {
             return bad(
                 "noise",
                 format!(
-                    "absolute {:e} must be positive (a floor: without it a harmonic the model \
-                     predicts as nearly zero would weigh without bound) and at most {:e}, and \
-                     relative {:e} within 0..={}",
+                    "needs a floor: absolute {:e} (the sensors' unit, at most {:e}) or floor \
+                     {:e} (of each channel's largest predicted response, 0 to 1), one of them \
+                     positive — without a floor a harmonic the model predicts as nearly zero \
+                     would weigh without bound; relative {:e} within 0..={}",
                     n.absolute,
                     nlsim_calib::data::MAX_AMPLITUDE,
+                    f,
                     n.relative,
                     nlsim_calib::data::MAX_RELATIVE_NOISE
                 ),
@@ -298,6 +314,7 @@ struct BandTable {
 struct NoiseTable {
     relative: Option<f64>,
     absolute: Option<f64>,
+    floor: Option<f64>,
 }
 
 /// A plan file, or the `[plan]` table of a jobs file.
@@ -349,12 +366,21 @@ impl PlanTable {
             .map_err(|e| err("params", e.to_string()))?;
         let point = |p: &PointTable, key: &str| p.spec(&file, key);
         let d = PlanRequest::new("", Vec::new(), Vec::new());
-        let noise = match &self.noise {
-            None => d.noise,
-            Some(n) => Noise {
-                absolute: n.absolute.unwrap_or(d.noise.absolute),
-                relative: n.relative.unwrap_or(d.noise.relative),
-            },
+        let (noise, noise_floor) = match &self.noise {
+            None => (d.noise, d.noise_floor),
+            Some(n) => (
+                Noise {
+                    absolute: n.absolute.unwrap_or(d.noise.absolute),
+                    relative: n.relative.unwrap_or(d.noise.relative),
+                },
+                // An absolute floor given alone is the floor; a relative one joins it only
+                // when given too.
+                n.floor.unwrap_or(if n.absolute.is_some() {
+                    0.0
+                } else {
+                    d.noise_floor
+                }),
+            ),
         };
         let criterion = match &self.criterion {
             None => d.criterion,
@@ -407,6 +433,7 @@ impl PlanTable {
             harmonics: self.harmonics.unwrap_or(d.harmonics),
             modes: self.modes.unwrap_or(d.modes),
             noise,
+            noise_floor,
             criterion,
             prior: self.prior.as_deref().map(rel),
             top: self.top.unwrap_or(d.top),

@@ -56,7 +56,14 @@ pub struct PlanSetup {
     pub candidates: PlanCandidates,
     /// The planner (its system's sensors are the candidate channels).
     pub planner: Planner,
-    /// Wall time of loading and reduction (s).
+    /// Each candidate channel's largest predicted fundamental response over the candidate
+    /// tests at the largest level (the channel's unit): the scale of its noise floor.
+    pub peaks: Vec<f64>,
+    /// The noise model of each candidate channel (floors in the channel's own scale).
+    pub noise: Vec<Noise>,
+    /// What the user should know about the noise: floors that bury a channel's response.
+    pub warnings: Vec<String>,
+    /// Wall time of loading, reduction and the response scales (s).
     pub seconds: f64,
 }
 
@@ -89,11 +96,75 @@ pub fn prepare_plan(req: &PlanRequest) -> Result<PlanSetup> {
         HbConfig::default(),
         &req.params,
     )?;
+    let (peaks, noise, warnings) = channel_noise(req, &candidates, &planner)?;
     Ok(PlanSetup {
         candidates,
         planner,
+        peaks,
+        noise,
+        warnings,
         seconds: t.elapsed().as_secs_f64(),
     })
+}
+
+/// Each channel's response scale (its largest predicted fundamental over the candidate
+/// tests at the largest level), its noise model (`req.noise`'s floor or `req.noise_floor`
+/// of that scale, the larger) and a warning for each channel whose floor is at least a
+/// tenth of its response (the channel then carries little information, whatever the
+/// design: a floor in the wrong unit, or a sensor where the structure hardly moves).
+#[allow(clippy::type_complexity)]
+fn channel_noise(
+    req: &PlanRequest,
+    candidates: &PlanCandidates,
+    planner: &Planner,
+) -> Result<(Vec<f64>, Vec<Noise>, Vec<String>)> {
+    let top = candidates
+        .sweeps
+        .iter()
+        .map(|s| s.exciter.level)
+        .fold(0.0f64, f64::max);
+    let tests: Vec<(&Exciter, &Band)> = candidates
+        .sweeps
+        .iter()
+        .filter(|s| s.exciter.level == top)
+        .map(|s| (&s.exciter, &s.band))
+        .collect();
+    let peaks = planner.response_peaks(&tests)?;
+    let noise = nlsim_calib::scaled_noise(
+        req.noise.relative,
+        req.noise.absolute,
+        req.noise_floor,
+        &peaks,
+    );
+    let sensors = planner.system().sensors();
+    let mut warnings = Vec::new();
+    for ((n, &p), sen) in noise.iter().zip(&peaks).zip(sensors) {
+        let unit = crate::formats::files::unit(sen.quantity);
+        if n.absolute <= 0.0 {
+            return Err(Error::Usage(format!(
+                "plan noise: channel '{}' has no predicted response at any candidate test (is \
+                 it on a node the drive does not move?), so a floor relative to it is 0: give \
+                 noise = {{ absolute = … }} in {unit}",
+                sen.name
+            )));
+        }
+        if n.absolute >= 0.1 * p {
+            warnings.push(format!(
+                "the noise floor of channel '{}', {:.3e} {unit}, is {} its largest predicted \
+                 response ({:.3e} {unit}): it carries little information in any design; check \
+                 the floor's unit, or give noise = {{ floor = … }} (relative to the response)",
+                sen.name,
+                n.absolute,
+                if n.absolute >= p {
+                    "above".to_string()
+                } else {
+                    format!("{:.0} % of", 100.0 * n.absolute / p)
+                },
+                p
+            ));
+        }
+    }
+    Ok((peaks, noise, warnings))
 }
 
 /// The model of `req` with its candidate points, and the candidates, every size checked
@@ -268,8 +339,8 @@ fn point_dof(model: &Model, p: &PointSpec, what: &str) -> Result<usize> {
     })
 }
 
-/// The information of candidate sweep `i` of `setup`.
-pub fn sweep_information(setup: &PlanSetup, i: usize, noise: Noise) -> Result<SweepInformation> {
+/// The information of candidate sweep `i` of `setup`, with its channels' noise.
+pub fn sweep_information(setup: &PlanSetup, i: usize) -> Result<SweepInformation> {
     let c = &setup.candidates;
     let s = c.sweeps.get(i).ok_or_else(|| {
         Error::Usage(format!(
@@ -279,7 +350,7 @@ pub fn sweep_information(setup: &PlanSetup, i: usize, noise: Noise) -> Result<Sw
     })?;
     Ok(setup
         .planner
-        .sweep_information(&s.exciter, &s.band, noise, &c.harmonics)?)
+        .sweep_information_with(&s.exciter, &s.band, &setup.noise, &c.harmonics)?)
 }
 
 /// A finished plan.
@@ -302,6 +373,12 @@ pub struct PlanRun {
     pub sweep_seconds: f64,
     /// Wall time of the ranking (s).
     pub rank_seconds: f64,
+    /// Each candidate channel's response scale ([`PlanSetup::peaks`]).
+    pub peaks: Vec<f64>,
+    /// Each candidate channel's noise model ([`PlanSetup::noise`]).
+    pub noise: Vec<Noise>,
+    /// Warnings about the noise ([`PlanSetup::warnings`]).
+    pub warnings: Vec<String>,
 }
 
 /// Runs `req`: every candidate sweep predicted with its information (in parallel on the
@@ -315,7 +392,7 @@ pub fn run_plan(req: &PlanRequest, progress: &(dyn Fn(usize, usize) + Sync)) -> 
     let sweeps = (0..total)
         .into_par_iter()
         .map(|i| {
-            let r = sweep_information(&setup, i, req.noise);
+            let r = sweep_information(&setup, i);
             progress(done.fetch_add(1, Ordering::Relaxed) + 1, total);
             r
         })
@@ -333,6 +410,9 @@ pub fn run_plan(req: &PlanRequest, progress: &(dyn Fn(usize, usize) + Sync)) -> 
         ranked,
         sweep_seconds,
         rank_seconds: t.elapsed().as_secs_f64(),
+        peaks: setup.peaks,
+        noise: setup.noise,
+        warnings: setup.warnings,
     })
 }
 

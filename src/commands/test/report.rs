@@ -21,7 +21,8 @@ impl TestRun {
             format!(
                 "virtual test of '{}' at '{}' through a shaker (armature {} kg, suspension {} \
                  N/m, coil {} ohm {} H, Bl {} N/A, stinger {:e} N/m), {}; {} sweeps, {} \
-                 harmonics, noise {} % + {:e} (seed {}); reduction {:.2} s, test {:.2} s",
+                 harmonics, noise {} % + a floor of {} (seed {}); reduction {:.2} s, test \
+                 {:.2} s",
                 self.model_name,
                 self.drive,
                 s.armature_mass,
@@ -38,7 +39,11 @@ impl TestRun {
                 r.sweeps.len(),
                 r.harmonics,
                 100.0 * r.noise.relative,
-                r.noise.absolute,
+                self.floors
+                    .iter()
+                    .map(|(c, f)| format!("{f:.2e} at {c}"))
+                    .collect::<Vec<_>>()
+                    .join(", "),
                 r.seed,
                 self.setup_seconds,
                 self.seconds
@@ -105,6 +110,9 @@ impl TestRun {
             self.test.data.channels.len(),
             r.out.display()
         ));
+        for w in &self.warnings {
+            v.push(format!("warning: {w}"));
+        }
         v
     }
 

@@ -40,8 +40,14 @@ pub struct TestRequest {
     /// Also run the test voltage-driven (the voltage of each sweep's first step held) to
     /// show the force drop-out beside the controlled test.
     pub compare_open_loop: bool,
-    /// Response measurement noise.
+    /// Response measurement noise: `relative` of the response with an absolute floor of
+    /// `noise.absolute` (the sensors' unit) or `noise_floor` times the sensor's largest
+    /// noise-free fundamental response over the test, whichever is larger.
     pub noise: Noise,
+    /// The response noise floor relative to each sensor's largest noise-free fundamental
+    /// response over the test (10⁻³ by default: a 60 dB range, in the sensor's own scale);
+    /// 0 when an absolute floor is given alone.
+    pub noise_floor: f64,
     /// Force measurement noise.
     pub force_noise: Noise,
     /// Seed of the noise.
@@ -61,7 +67,8 @@ pub struct TestRequest {
 impl TestRequest {
     /// A test of `model` along `sweeps` with the defaults: the model's first excitation, 3
     /// harmonics, 20 modes, [`Shaker::default`], force control at 1 %, the open loop run
-    /// too, 2 % response noise, no force noise, seed 1, data to `virtual_test.csv`.
+    /// too, 2 % response noise with a floor of 10⁻³ of each sensor's largest response, no
+    /// force noise, seed 1, data to `virtual_test.csv`.
     pub fn new(model: impl Into<String>, sweeps: Vec<SweepPlan>) -> Self {
         Self {
             model: model.into(),
@@ -75,6 +82,7 @@ impl TestRequest {
             control: ControlConfig::default(),
             compare_open_loop: true,
             noise: Noise::relative(0.02),
+            noise_floor: crate::commands::plan::request::DEFAULT_NOISE_FLOOR,
             force_noise: Noise::relative(0.0),
             seed: 1,
             out: PathBuf::from("virtual_test.csv"),
@@ -174,6 +182,15 @@ impl TestRequest {
                 ),
             );
         }
+        if !(self.noise_floor.is_finite() && (0.0..=1.0).contains(&self.noise_floor)) {
+            return bad(
+                "noise",
+                format!(
+                    "floor {} (of each sensor's largest response) must be within 0..=1",
+                    self.noise_floor
+                ),
+            );
+        }
         for (name, n) in [("noise", self.noise), ("force_noise", self.force_noise)] {
             if !(n.absolute.is_finite()
                 && n.relative.is_finite()
@@ -233,6 +250,7 @@ impl TestRequest {
 struct NoiseTable {
     relative: Option<f64>,
     absolute: Option<f64>,
+    floor: Option<f64>,
 }
 
 impl NoiseTable {
@@ -240,6 +258,15 @@ impl NoiseTable {
         t.as_ref().map_or(d, |n| Noise {
             absolute: n.absolute.unwrap_or(0.0),
             relative: n.relative.unwrap_or(0.0),
+        })
+    }
+
+    /// The floor relative to the response: as given; else 0 beside an absolute floor, the
+    /// default `d` otherwise.
+    fn floor(t: &Option<NoiseTable>, d: f64) -> f64 {
+        t.as_ref().map_or(d, |n| {
+            n.floor
+                .unwrap_or(if n.absolute.is_some() { 0.0 } else { d })
         })
     }
 }
@@ -365,6 +392,7 @@ impl TestTable {
             control,
             compare_open_loop: compare && enabled,
             noise: NoiseTable::get(&self.noise, d.noise),
+            noise_floor: NoiseTable::floor(&self.noise, d.noise_floor),
             force_noise: NoiseTable::get(&self.force_noise, d.force_noise),
             seed: self.seed.unwrap_or(d.seed),
             out: rel(self.out.as_deref().unwrap_or("virtual_test.csv")),

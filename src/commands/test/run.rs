@@ -2,7 +2,7 @@
 //! off-line force controller, and the test data they give.
 use crate::commands::test::request::TestRequest;
 use crate::error::{Error, Result};
-use nlsim_calib::{ControlConfig, VirtualTest, virtual_test};
+use nlsim_calib::{ControlConfig, Noise, VirtualTest, virtual_test_with};
 use nlsim_hb::{HarmonicSet, HbConfig, HbSystem};
 use nlsim_kernel::Excitation;
 use std::time::Instant;
@@ -15,6 +15,11 @@ pub struct TestRun {
     pub model_name: String,
     /// The input the shaker drives.
     pub drive: String,
+    /// The absolute response noise floor of each recorded channel (name, the channel's
+    /// unit): the request's, or its floor relative to the channel's largest response.
+    pub floors: Vec<(String, f64)>,
+    /// Floors that bury a channel's response (at least a tenth of its largest).
+    pub warnings: Vec<String>,
     /// The test as asked (controlled, unless control is off).
     pub test: VirtualTest,
     /// The same test voltage-driven, when compared.
@@ -92,19 +97,22 @@ pub fn run_test(req: &TestRequest, progress: &mut dyn FnMut(usize, usize)) -> Re
     let t = Instant::now();
     // One sweep at a time (for progress); the noise seed of sweep `s` is `seed + s`, so a
     // test of several sweeps is the same whichever are run.
-    let run = |control: &ControlConfig, progress: &mut dyn FnMut(usize, usize)| {
+    let run = |control: &ControlConfig,
+               noise: &[Noise],
+               force_noise: Noise,
+               progress: &mut dyn FnMut(usize, usize)| {
         let mut out: Option<VirtualTest> = None;
         for (s, plan) in req.sweeps.iter().enumerate() {
             progress(s, req.sweeps.len());
-            let one = virtual_test(
+            let one = virtual_test_with(
                 &sys,
                 &drive,
                 &req.shaker,
                 std::slice::from_ref(plan),
                 req.harmonics,
                 control,
-                req.noise,
-                req.force_noise,
+                noise,
+                force_noise,
                 req.seed.wrapping_add(s as u64),
             )?;
             match &mut out {
@@ -125,13 +133,42 @@ pub fn run_test(req: &TestRequest, progress: &mut dyn FnMut(usize, usize)) -> Re
         }
         Ok(t)
     };
-    let test = keep(run(&req.control, progress)?)?;
+    // The noise floor in each sensor's own scale: from the noise-free test (the controller
+    // does not see the noise, so the run with noise reaches the same structure states).
+    let n_sensors = sys.sensors().len();
+    let (noise, peaks) = if req.noise_floor > 0.0 {
+        let quiet = run(
+            &req.control,
+            &vec![Noise::relative(0.0); n_sensors],
+            Noise::relative(0.0),
+            &mut |_, _| {},
+        )?;
+        let mut peaks = vec![0.0f64; n_sensors];
+        for st in quiet.data.sweeps.iter().flat_map(|s| &s.steps) {
+            for (c, p) in peaks.iter_mut().enumerate() {
+                let a = st.response[(c, 0)].norm();
+                if a.is_finite() {
+                    *p = p.max(a);
+                }
+            }
+        }
+        let noise = nlsim_calib::scaled_noise(
+            req.noise.relative,
+            req.noise.absolute,
+            req.noise_floor,
+            &peaks,
+        );
+        (noise, peaks)
+    } else {
+        (vec![req.noise; n_sensors], vec![f64::NAN; n_sensors])
+    };
+    let test = keep(run(&req.control, &noise, req.force_noise, progress)?)?;
     let open_loop = if req.compare_open_loop {
         let open = ControlConfig {
             enabled: false,
             ..req.control
         };
-        Some(keep(run(&open, &mut |_, _| {})?)?)
+        Some(keep(run(&open, &noise, req.force_noise, &mut |_, _| {})?)?)
     } else {
         None
     };
@@ -145,9 +182,40 @@ pub fn run_test(req: &TestRequest, progress: &mut dyn FnMut(usize, usize)) -> Re
         Some("h5" | "hdf5") => crate::formats::test_data::write_h5(&req.out, &test.data)?,
         _ => crate::formats::test_data::write_csv(&req.out, &test.data)?,
     }
+    let recorded = |name: &String| req.channels.is_empty() || req.channels.contains(name);
+    let floors = sys
+        .sensors()
+        .iter()
+        .zip(&noise)
+        .filter(|(sen, _)| recorded(&sen.name))
+        .map(|(sen, n)| (sen.name.clone(), n.absolute))
+        .collect();
+    let warnings = sys
+        .sensors()
+        .iter()
+        .zip(noise.iter().zip(&peaks))
+        .filter(|(sen, (n, p))| recorded(&sen.name) && p.is_finite() && n.absolute >= 0.1 * **p)
+        .map(|(sen, (n, &p))| {
+            let unit = crate::formats::files::unit(sen.quantity);
+            format!(
+                "the noise floor of channel '{}', {:.3e} {unit}, is {} its largest response \
+                 ({p:.3e} {unit}): the data carry little of it; check the floor's unit, or \
+                 give noise = {{ floor = … }} (relative to the response)",
+                sen.name,
+                n.absolute,
+                if n.absolute >= p {
+                    "above".to_string()
+                } else {
+                    format!("{:.0} % of", 100.0 * n.absolute / p)
+                },
+            )
+        })
+        .collect();
     Ok(TestRun {
         request: req.clone(),
         model_name: model.name().to_string(),
+        floors,
+        warnings,
         drive,
         test,
         open_loop,
