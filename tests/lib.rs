@@ -1187,10 +1187,25 @@ mod modes {
         ]);
         assert_eq!(rc, 0, "{err}");
         assert!(
-            stdout.contains("shift-invert block Lanczos") && stdout.contains("Sturm check: "),
+            stdout.contains("shift-invert block Lanczos")
+                && stdout.contains("as found: no mode below the last one is missing"),
             "{stdout}"
         );
         assert_eq!(std::fs::read_to_string(&out).unwrap().lines().count(), 13);
+        // Below --fmax the Sturm line states the range it proves: up to --fmax, not only up
+        // to the last mode found.
+        let (rc, stdout, err) = nlsim(&[
+            "modes",
+            "bracket:refinement=2,nonlinear=none",
+            "--fmax",
+            "1500",
+        ]);
+        assert_eq!(rc, 0, "{err}");
+        assert!(
+            stdout.contains("3 eigenvalues below 1500 Hz, as found")
+                && stdout.contains("no mode below 1500 Hz is missing"),
+            "{stdout}"
+        );
         // Unknown output format: usage error before any work, nothing written.
         let bad = d.join("b.xlsx");
         let (rc, _, err) = nlsim(&["modes", "ecl_beam", "--out", bad.to_str().unwrap()]);
@@ -1240,6 +1255,41 @@ mod modes {
 mod simulate {
     use super::*;
     use hdf5_metno as hdf5;
+
+    /// An RK45 absolute tolerance that is a sizeable share of the modal states (ODE45's
+    /// 1e-6 on the ECL beam, whose largest static state is about 9e-6 √kg m) is warned
+    /// about with the scaled value to use; the default (scaled to the response) is not.
+    #[test]
+    fn rk45_warns_of_an_absolute_tolerance_above_the_response() {
+        let d = scratch("rk45-atol");
+        let run = |extra: &[&str]| {
+            let out = d.join("r.csv");
+            let mut args = vec![
+                "simulate",
+                "ecl_beam",
+                "--duration",
+                "0.2",
+                "--rate",
+                "2000",
+                "--method",
+                "rk45",
+                "--out",
+                out.to_str().unwrap(),
+            ];
+            args.extend_from_slice(extra);
+            let (rc, stdout, err) = nlsim(&args);
+            assert_eq!(rc, 0, "{err}");
+            stdout
+        };
+        let loose = run(&["--atol", "1e-6"]);
+        assert!(
+            loose.contains("warning: atol 1.000e-6 √kg m is")
+                && loose.contains("of the largest static modal state"),
+            "{loose}"
+        );
+        let scaled = run(&[]);
+        assert!(!scaled.contains("warning"), "{scaled}");
+    }
 
     /// `nlsim simulate --report` and `nlsim modes --report`: the pages hold their figures
     /// (one per output and the element force–displacement loop; frequencies and effective

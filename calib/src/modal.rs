@@ -15,9 +15,9 @@
 //!   unit length over the sensors and the computed one signed to agree with the measured one.
 //!
 //! Pairing: a measured mode with a shape takes the free computed mode of largest MAC
-//! (`MAC = (φᵀψ)² / (φᵀφ ψᵀψ)`), in measured order; one without a shape takes the lowest
-//! computed mode not yet taken. It is redone at every evaluation (mode tracking), and
-//! reported.
+//! (`MAC = (φᵀψ)² / (φᵀφ ψᵀψ)`), in measured order; one without a shape takes the free
+//! computed mode nearest in frequency (by ratio). It is redone at every evaluation (mode
+//! tracking), and reported.
 
 use crate::CalibrationConfig;
 use crate::calibrate::{
@@ -304,8 +304,15 @@ impl ModalObjective {
                     best.0
                 }
                 None => {
+                    // No shape: the free computed mode nearest in frequency (ratio), not
+                    // the next in order, which pairs a measured fifth mode with a computed
+                    // third when modes between were not measured.
                     mac.push(f64::NAN);
-                    (0..modes.len()).find(|&r| !taken[r]).unwrap_or(0)
+                    let gap = |r: usize| (freqs[r] / m.frequency_hz).ln().abs();
+                    (0..modes.len())
+                        .filter(|&r| !taken[r])
+                        .min_by(|&a, &b| gap(a).total_cmp(&gap(b)))
+                        .unwrap_or(0)
                 }
             };
             taken[r] = true;

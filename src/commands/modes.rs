@@ -79,11 +79,34 @@ pub fn format_table(r: &ModeReport) -> String {
                 st.analysis_seconds, st.factor_seconds, st.iteration_seconds, st.check_seconds
             );
             if let Some((count, at)) = st.sturm {
-                let _ = writeln!(
-                    s,
-                    "  Sturm check: {count} eigenvalues below {:.6} Hz, as found",
-                    at.max(0.0).sqrt() / (2.0 * std::f64::consts::PI)
-                );
+                let hz = |v: f64| v.max(0.0).sqrt() / (2.0 * std::f64::consts::PI);
+                // What the counts prove: below --fmax, the count there (which set how many
+                // modes to find) and the one just above the last found together cover the
+                // whole range; for the lowest N, the range up to the last found.
+                let certified = st.status.is_converged() && count == r.modes.len();
+                let _ = match r.config.selection {
+                    _ if !certified => writeln!(
+                        s,
+                        "  Sturm check: {count} eigenvalues below {:.6} Hz, {} found: modes \
+                         may be missing ({})",
+                        hz(at),
+                        r.modes.len(),
+                        st.detail
+                    ),
+                    nlsim_reduction::ModeSelection::Below { f_max_hz } => writeln!(
+                        s,
+                        "  Sturm check: {count} eigenvalues below {f_max_hz} Hz, as found (counted \
+                         at {f_max_hz} Hz before the iteration and at {:.6} Hz after it): no mode \
+                         below {f_max_hz} Hz is missing",
+                        hz(at)
+                    ),
+                    nlsim_reduction::ModeSelection::Lowest(_) => writeln!(
+                        s,
+                        "  Sturm check: {count} eigenvalues below {:.6} Hz, as found: no mode \
+                         below the last one is missing (modes above it are not counted)",
+                        hz(at)
+                    ),
+                };
             }
         }
     }

@@ -490,11 +490,19 @@ impl Report {
 }
 
 impl Drop for Report {
-    /// An unfinished report leaves no temporary HDF5 file behind.
+    /// An unfinished report leaves no temporary HDF5 file behind, and its marker only
+    /// beside files it wrote (a folder it left empty is left as it was).
     fn drop(&mut self) {
         if let Some(f) = self.h5.borrow_mut().take() {
             drop(f);
             let _ = std::fs::remove_file(&self.h5_tmp);
+            let marker = self.dir.join(MARKER);
+            let others = std::fs::read_dir(&self.dir)
+                .map(|d| d.flatten().any(|e| e.path() != marker))
+                .unwrap_or(true);
+            if !others {
+                let _ = std::fs::remove_file(&marker);
+            }
         }
     }
 }

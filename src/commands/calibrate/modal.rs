@@ -151,6 +151,23 @@ impl ModalRun {
                 }
             ));
         }
+        // A mode without a shape is paired by frequency alone: say when that is doubtful.
+        for (i, m) in d.modes.iter().enumerate() {
+            let f = c.fit.frequencies_hz[i];
+            let off = (f - m.frequency_hz).abs() / m.frequency_hz;
+            if c.fit.mac[i].is_nan() && off > 0.05 {
+                v.push(format!(
+                    "warning: measured mode {} ({:.6} Hz) has no shape and is paired by \
+                     frequency with computed mode {} at {:.6} Hz, {:.1} % away: the pairing \
+                     may be wrong; give its shape, or leave it out",
+                    self.file.labels[i],
+                    m.frequency_hz,
+                    c.fit.pairing[i] + 1,
+                    f,
+                    100.0 * off
+                ));
+            }
+        }
         v
     }
 

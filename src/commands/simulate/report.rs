@@ -72,7 +72,7 @@ impl SimRun {
         if let Some(note) = cluster_note(run.modes, req.modes) {
             out.push(format!("  {note}"));
         }
-        if let Some((a, scaled)) = run.atol {
+        if let Some((a, scaled, z_ref)) = run.atol {
             out.push(format!(
                 "  rk45 tolerances: rtol {:e}, atol {a:.3e} √kg m on the modal states{}",
                 req.rtol,
@@ -82,6 +82,18 @@ impl SimRun {
                     ""
                 }
             ));
+            // An absolute tolerance of a percent of the states lets RK45 accept steps whose
+            // error is that large: the response can be far off with no sign of it.
+            if !scaled && z_ref > 0.0 && a >= 1e-2 * z_ref {
+                out.push(format!(
+                    "  warning: atol {a:.3e} √kg m is {:.0} % of the largest static modal state \
+                     ({z_ref:.3e} √kg m): RK45 may accept steps with errors that large and the \
+                     response may be far off; leave --atol out (scaled to the response: \
+                     {:.1e} here)",
+                    100.0 * a / z_ref,
+                    1e-3 * req.rtol * z_ref
+                ));
+            }
         }
         let st = &history.stats;
         if run.flops_per_state_step > 0 {

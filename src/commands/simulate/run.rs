@@ -28,8 +28,9 @@ pub struct SimRun {
     pub states: usize,
     /// Flops per state and step of the FOH loop (0 for the other methods).
     pub flops_per_state_step: usize,
-    /// RK45's absolute tolerance and whether it was scaled to the response (RK45 only).
-    pub atol: Option<(f64, bool)>,
+    /// RK45's absolute tolerance, whether it was scaled to the response, and the largest
+    /// static modal state it is judged against (√kg m; RK45 only).
+    pub atol: Option<(f64, bool, f64)>,
 }
 
 /// RK45's absolute tolerance scaled to the response (√kg m): `10⁻³ rtol z_ref`, with
@@ -207,10 +208,11 @@ pub fn run_simulation_shared(
             sim.run_with_progress(&case, n_steps, progress)?
         }
         Method::Rk45 => {
-            let a = req
-                .atol
-                .unwrap_or_else(|| auto_atol(&plant, &case.forces, dt, n_steps, req.rtol));
-            atol = Some((a, req.atol.is_none()));
+            let auto = auto_atol(&plant, &case.forces, dt, n_steps, req.rtol);
+            let a = req.atol.unwrap_or(auto);
+            // The largest static modal state the auto tolerance is scaled to.
+            let z_ref = auto / (1e-3 * req.rtol);
+            atol = Some((a, req.atol.is_none(), z_ref));
             nlsim_sim::rk45_with_progress(
                 &plant,
                 &case,
