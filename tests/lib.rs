@@ -1726,6 +1726,65 @@ mod frf_cli {
     use faer::c64;
     use hdf5_metno as hdf5;
 
+    /// The frequency-domain guide's start-file commands: a 1/3 sub-harmonic branch found at
+    /// H = 9 over 88–100 Hz, then redone at H = 15 from the file. Its start (the file's
+    /// first point, at 100 Hz) lies just past a fold at 100.56 Hz outside the range: the
+    /// branch was followed out to it and back, and those 16 points (and the fold) were
+    /// reported. Every point now lies in the range asked for, and the branch still turns at
+    /// its fold inside it (89.1 Hz).
+    #[test]
+    fn start_file_continuation_stays_in_the_range() {
+        let d = scratch("frf-start-range");
+        let sub = d.join("sub.h5");
+        let (rc, out, err) = nlsim(&[
+            "frf",
+            "duffing_fig3",
+            "--subharmonic",
+            "3",
+            "--force",
+            "200",
+            "--harmonics",
+            "9",
+            "--from",
+            "88",
+            "--to",
+            "100",
+            "--out",
+            sub.to_str().unwrap(),
+        ]);
+        assert_eq!(rc, 0, "{out}\n{err}");
+        let csv = d.join("sub15.csv");
+        let (rc, out, err) = nlsim(&[
+            "frf",
+            "duffing_fig3",
+            "--subharmonic",
+            "3",
+            "--force",
+            "200",
+            "--harmonics",
+            "15",
+            "--from",
+            "88",
+            "--to",
+            "100",
+            "--start-file",
+            sub.to_str().unwrap(),
+            "--out",
+            csv.to_str().unwrap(),
+        ]);
+        assert_eq!(rc, 0, "{out}\n{err}");
+        let hz: Vec<f64> = std::fs::read_to_string(&csv)
+            .unwrap()
+            .lines()
+            .filter(|l| !l.starts_with('#') && !l.starts_with("frequency"))
+            .map(|l| l.split(',').next().unwrap().parse().unwrap())
+            .collect();
+        assert!(hz.len() > 20, "{out}");
+        let outside: Vec<&f64> = hz.iter().filter(|f| !(88.0..=100.0).contains(*f)).collect();
+        assert!(outside.is_empty(), "points outside 88-100 Hz: {outside:?}");
+        assert!(out.contains("fold at 89."), "{out}");
+    }
+
     /// `nlsim frf --report`: the page renders in a browser with the FRF plot in dB with phase
     /// panels and the folds table; report.h5 holds the FRF in the layout of FRF files, and
     /// the plotted fundamental equals 20 log10 |Y1| of that data. A bad magnitude name is a

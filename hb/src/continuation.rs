@@ -719,6 +719,9 @@ fn follow(
         detail: String::new(),
         skipped: Vec::new(),
     };
+    // A point past the start of the range (the branch may leave it a little before it
+    // turns back in) is followed but not kept: the branch reports the range asked for.
+    let inside = |y: &[f64]| y[n] >= -1e-9;
     let mut ds = cfg.ds;
     loop {
         if branch.points.len() >= cfg.max_points {
@@ -807,8 +810,10 @@ fn follow(
                     why,
                 ));
             };
-            push(&mut branch, &mut stats, tr.point(&fold, PointKind::Fold)?);
-        } else if next.det_sign != cur.det_sign {
+            if inside(&fold.y) {
+                push(&mut branch, &mut stats, tr.point(&fold, PointKind::Fold)?);
+            }
+        } else if next.det_sign != cur.det_sign && inside(&cur.y) && inside(&next.y) {
             let i = branch.points.len() - 1;
             let (_, p0) = tr.unscale(&cur.y);
             let (_, p1) = tr.unscale(&next.y);
@@ -849,11 +854,13 @@ fn follow(
             next.t = t;
             next.det_sign = d;
         }
-        push(
-            &mut branch,
-            &mut stats,
-            tr.point(&next, PointKind::Regular)?,
-        );
+        if inside(&next.y) {
+            push(
+                &mut branch,
+                &mut stats,
+                tr.point(&next, PointKind::Regular)?,
+            );
+        }
         cur = next;
     }
 }
