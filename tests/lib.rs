@@ -951,6 +951,12 @@ mod cli {
         // The report folder: the summary as printed, and every plot as SVG and PNG.
         let summary = std::fs::read_to_string(report.join("summary.txt")).unwrap();
         assert!(summary.contains("[4/8] multi-harmonic FRFs") && out.starts_with(&summary[..200]));
+        // The voltage-driven run loses the structure past 25.5 Hz at 0.2 N: those steps are
+        // named (they were dropped in silence, the summary counting the controlled run).
+        assert!(
+            out.contains("open loop: structure not solved at steps 17 (25.554 Hz, step too small)"),
+            "{out}"
+        );
         let figures = [
             "time_response",
             "frf_ecl_beam",

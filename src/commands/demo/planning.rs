@@ -356,6 +356,22 @@ pub fn demo_virtual_test(
             cs.converged,
             cs.steps
         ));
+        // Steps a run could not solve are named, not dropped in silence.
+        for (what, steps) in [("open loop", o), ("controlled", c)] {
+            let failed: Vec<String> = steps
+                .iter()
+                .enumerate()
+                .filter(|(_, st)| !st.force[1].norm().is_finite())
+                .map(|(k, st)| format!("{} ({:.3} Hz, {})", k + 1, st.frequency_hz, st.status))
+                .collect();
+            if !failed.is_empty() {
+                say(&format!(
+                    "    {what}: structure not solved at step{} {}: left out, a gap in the plots",
+                    if failed.len() == 1 { "" } else { "s" },
+                    failed.join(", ")
+                ));
+            }
+        }
     }
     let csv = report.dir().join("virtual_test.csv");
     crate::formats::test_data::write_csv(&csv, &ctl.data)?;
@@ -364,9 +380,9 @@ pub fn demo_virtual_test(
     // Thesis Fig. 11: the force at the drive point and the response, open loop vs control.
     let last = plans.len() - 1;
     let series = |t: &nlsim_calib::VirtualTest, k: usize| -> Vec<(f64, f64)> {
+        // A step not solved is a gap (a non-finite point).
         t.steps[last]
             .iter()
-            .filter(|st| st.force[k].norm().is_finite())
             .map(|st| (st.frequency_hz, st.force[k].norm()))
             .collect()
     };
@@ -386,18 +402,19 @@ pub fn demo_virtual_test(
         ],
     };
     let ch = &ctl.data.channels[0];
+    // Every step in test order; one left out of the data is a gap.
     let resp = |t: &nlsim_calib::VirtualTest| -> Vec<(f64, f64)> {
-        t.data
-            .sweeps
+        let data = t.data.sweeps.iter().find(|s| s.label == plans[last].label);
+        t.steps[last]
             .iter()
-            .find(|s| s.label == plans[last].label)
-            .map(|s| {
-                s.steps
-                    .iter()
-                    .map(|st| (st.frequency_hz, st.response[(0, 0)].norm()))
-                    .collect()
+            .map(|rec| {
+                let f = rec.frequency_hz;
+                let v = data
+                    .and_then(|s| s.steps.iter().find(|st| st.frequency_hz == f))
+                    .map_or(f64::NAN, |st| st.response[(0, 0)].norm());
+                (f, v)
             })
-            .unwrap_or_default()
+            .collect()
     };
     let fig2 = Lines {
         title: format!("{}: response, {}", model.name(), plans[last].label),

@@ -86,7 +86,23 @@ impl TestRun {
                 cs.converged,
                 cs.steps
             ));
-            for st in c.iter().filter(|st| !st.status.is_converged()).take(3) {
+            if let Some(o) = &self.open_loop {
+                let failed: Vec<String> = o.steps[i]
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, st)| !st.force[1].norm().is_finite())
+                    .map(|(k, st)| format!("{} ({:.4} Hz, {})", k + 1, st.frequency_hz, st.status))
+                    .collect();
+                if !failed.is_empty() {
+                    v.push(format!(
+                        "  open loop: structure not solved at step{} {}: left out of its data \
+                         and a gap in its plots",
+                        if failed.len() == 1 { "" } else { "s" },
+                        failed.join(", ")
+                    ));
+                }
+            }
+            for st in c.iter().filter(|st| !st.status.is_converged()) {
                 v.push(format!(
                     "  {:.4} Hz: {}{}",
                     st.frequency_hz,
@@ -194,12 +210,11 @@ pub fn write_test_report(dir: &Path, run: &TestRun) -> Result<Vec<PathBuf>> {
     let mut force = Vec::new();
     for (what, t) in &tests {
         for (i, plan) in run.request.sweeps.iter().enumerate() {
+            // A step whose structure was not solved is a gap (a non-finite point).
             let pts = |f: &dyn Fn(&[faer::c64]) -> f64| -> Vec<(f64, f64)> {
                 t.steps[i]
                     .iter()
-                    .filter(|st| st.status.is_converged() || st.force[1].norm().is_finite())
                     .map(|st| (st.frequency_hz, f(&st.force)))
-                    .filter(|p| p.1.is_finite())
                     .collect()
             };
             force.push((
@@ -214,7 +229,7 @@ pub fn write_test_report(dir: &Path, run: &TestRun) -> Result<Vec<PathBuf>> {
             }
         }
     }
-    force.retain(|(_, p)| !p.is_empty());
+    force.retain(|(_, p)| p.iter().any(|q| q.1.is_finite()));
     written.extend(report.figure(
         "force",
         &Lines {
@@ -230,18 +245,24 @@ pub fn write_test_report(dir: &Path, run: &TestRun) -> Result<Vec<PathBuf>> {
     let ch = &run.test.data.channels[0];
     let mut resp = Vec::new();
     for (what, t) in &tests {
-        for sw in &t.data.sweeps {
+        for (i, plan) in run.request.sweeps.iter().enumerate() {
+            // Every step of the sweep in test order; one left out of the data (structure
+            // not solved) is a gap.
+            let data = t.data.sweeps.iter().find(|sw| sw.label == plan.label);
+            let value = |f: f64| -> f64 {
+                data.and_then(|sw| sw.steps.iter().find(|st| st.frequency_hz == f))
+                    .map_or(f64::NAN, |st| st.response[(0, 0)].norm())
+            };
             resp.push((
-                format!("{}, {what}", sw.label),
-                sw.steps
+                format!("{}, {what}", plan.label),
+                t.steps[i]
                     .iter()
-                    .map(|st| (st.frequency_hz, st.response[(0, 0)].norm()))
-                    .filter(|p| p.1.is_finite())
+                    .map(|st| (st.frequency_hz, value(st.frequency_hz)))
                     .collect::<Vec<_>>(),
             ));
         }
     }
-    resp.retain(|(_, p)| !p.is_empty());
+    resp.retain(|(_, p)| p.iter().any(|q| q.1.is_finite()));
     written.extend(report.figure(
         "response",
         &Lines {
