@@ -1,7 +1,7 @@
 //! A 2-DOF chain with a cubic spring, built in code: reduce, simulate with the FOH
 //! integrator, solve one harmonic balance point, follow the FRF by continuation, and take
 //! sensitivities — through `nlsim::prelude` alone. Run with
-//! `cargo run --example two_dof_cubic`; the test suite runs it too.
+//! `cargo run --release --example two_dof_cubic`; the test suite runs it too.
 
 use nlsim::prelude::*;
 
