@@ -5,6 +5,10 @@
                                       rules of docs/file-formats.md that hold for every file
     h5check.py same A B [--ignore N]  A and B hold the same tree, datasets equal bit for bit,
                                       attributes equal (except those named N, e.g. timings)
+    h5check.py documented KIND FILE   FILE holds what docs/file-formats.md's section of KIND
+                                      (modes, simulate, frf, nnm, test-data) lists: every
+                                      path of its table (`<name>` any child, `sweepN` any
+                                      sweep, `{a,b}` each) and every root attribute named
     h5check.py report DIR             a report folder: report.h5 read as above, every figure
                                       in it inline in index.html with its SVG and PNG files,
                                       and curves redrawn from the data: the first curve of
@@ -30,16 +34,30 @@ def walk(f):
     return out
 
 
+# Attributes that count or order something: stored as integers, never as floats (`mode` is
+# also the text of an FRF's sweep mode).
+INTEGER_ATTRIBUTES = {"harmonics", "modes", "mode", "subharmonic_order", "seed"}
+
+
 def read(path):
     problems = []
     with h5py.File(path, "r") as f:
-        for key in ("nlsim_version", "command", "model"):
+        # Test data come from a lab as often as from a model: no model attributes there.
+        data = f.attrs.get("command") == "test data"
+        required = ("nlsim_version", "command") if data else (
+            "nlsim_version", "command", "model", "model_name")
+        for key in required:
             if key not in f.attrs:
                 problems.append(f"{path}: root attribute '{key}' is missing")
+        if not data and "model_name" in f.attrs and not str(f.attrs["model_name"]):
+            problems.append(f"{path}: root attribute 'model_name' is empty")
         n = 0
         for name, obj in walk(f):
             for k, v in obj.attrs.items():
                 _ = v  # reading the value is the check
+                if k in INTEGER_ATTRIBUTES and np.asarray(v).dtype.kind == "f":
+                    problems.append(
+                        f"{path}:{name}: attribute '{k}' is {np.asarray(v).dtype}, not an integer")
             if isinstance(obj, h5py.Dataset):
                 data = obj[()]
                 n += 1
@@ -52,6 +70,67 @@ def read(path):
         if n == 0:
             problems.append(f"{path}: no datasets")
     return problems, n
+
+
+# The section of docs/file-formats.md that documents each kind of file.
+SECTIONS = {
+    "modes": "## Modes (`nlsim modes MODEL --out FILE`)",
+    "simulate": "## `nlsim simulate --out FILE.h5`",
+    "frf": "## `nlsim frf --out FILE.h5`",
+    "nnm": "## `nlsim nnm --out FILE`",
+    "test-data": "## Stepped-sine test data (HDF5)",
+}
+
+
+def documented(kind, path):
+    """What docs/file-formats.md says FILE of KIND holds, checked in it."""
+    doc = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "docs", "file-formats.md")
+    text = open(doc, encoding="utf-8").read()
+    start = text.index(SECTIONS[kind])
+    end = text.find("\n## ", start + 1)
+    section = text[start:end if end >= 0 else len(text)]
+    paths, attributes = [], []
+    for line in section.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")] if line.startswith("|") else []
+        if cells and ("attributes" in cells[0] or "attributes" in (cells[1] if len(cells) > 1 else "")) \
+                and "`/`" in cells[0]:
+            # The root's attributes: the names before any parenthesis or "when".
+            body = re.sub(r"\([^)]*\)", "", cells[-1].split(" and, when")[0])
+            attributes += [a for a in re.findall(r"`([a-z_]+)(?: = [^`]*)?`", body)]
+        elif cells and cells[0].startswith("`/"):
+            for p in re.findall(r"`(/[^`]+)`", cells[0]):
+                m = re.match(r"(.*)\{([^}]*)\}(.*)", p)
+                paths += [m.group(1) + x + m.group(3) for x in m.group(2).split(",")] if m else [p]
+    if kind == "nnm":
+        m = re.search(r"root attributes (.*?); datasets", section, re.S)
+        attributes += re.findall(r"`([a-z_]+)`", re.sub(r"\([^)]*\)", "", m.group(1)))
+        paths += [p for p in re.findall(r"`(/[a-z_<>/]+)`", section)]
+    problems = []
+    with h5py.File(path, "r") as f:
+        for a in attributes:
+            if a in ("common", "detail"):
+                continue
+            if a not in f.attrs:
+                problems.append(f"{path}: root attribute '{a}' that the docs list is missing")
+        for p in paths:
+            if not exists(f, p.strip("/").split("/")):
+                problems.append(f"{path}: '{p}' that the docs list is missing")
+    if not paths:
+        problems.append(f"{path}: no path read from the docs' section on {kind}")
+    return problems
+
+
+def exists(group, parts):
+    """Whether the path `parts` is in `group`, `<…>` and `…N` segments matching any child."""
+    if not parts:
+        return True
+    head, rest = parts[0], parts[1:]
+    if not isinstance(group, h5py.Group):
+        return False
+    if "<" in head or re.fullmatch(r"[a-z]+N", head):
+        prefix = head.split("<")[0] if "<" in head else head[:-1]
+        return any(k.startswith(prefix) and exists(group[k], rest) for k in group.keys())
+    return head in group and exists(group[head], rest)
 
 
 def equal_bits(a, b):
@@ -191,6 +270,10 @@ def main(argv):
         problems = same(argv[1], argv[2], ignore)
         if not problems:
             print(f"h5check: {argv[1]} and {argv[2]} are the same")
+    elif len(argv) == 3 and argv[0] == "documented" and argv[1] in SECTIONS:
+        problems = documented(argv[1], argv[2])
+        if not problems:
+            print(f"h5check: {argv[2]} holds what the docs list for {argv[1]}")
     elif len(argv) == 2 and argv[0] == "report":
         problems = report(argv[1])
         if not problems:

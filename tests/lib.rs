@@ -95,6 +95,106 @@ fn h5check_report(dir: &Path) -> String {
     said
 }
 
+/// Every kind of HDF5 file nlsim writes holds what `docs/file-formats.md` lists for it
+/// (every path of its table and every root attribute named), read by h5py alone
+/// (`scripts/h5check.py documented`), and obeys the rules for every file (`read`): the root
+/// provenance with a non-empty `model_name`, counts and orders (`harmonics`, `modes`,
+/// `mode`, `subharmonic_order`) stored as integers, a `unit` on every real series. The nnm
+/// file and report.h5 had an empty `model_name`, the counts were float64, and test data
+/// had no `unit` on its series.
+#[test]
+fn hdf5_files_hold_what_the_docs_list() {
+    let d = scratch("h5-documented");
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    let run = |args: &[&str]| {
+        let (rc, out, err) = nlsim(args);
+        assert_eq!(rc, 0, "{args:?}: {out}\n{err}");
+    };
+    run(&["modes", "ecl_beam", "--count", "6", "--out", &p("m.h5")]);
+    run(&[
+        "simulate",
+        "ecl_beam",
+        "--duration",
+        "0.1",
+        "--rate",
+        "2000",
+        "--out",
+        &p("s.h5"),
+    ]);
+    run(&[
+        "frf",
+        "duffing_fig3",
+        "--from",
+        "26",
+        "--to",
+        "40",
+        "--out",
+        &p("f.h5"),
+    ]);
+    run(&[
+        "nnm",
+        "ecl_beam",
+        "--from",
+        "1e-5",
+        "--to",
+        "1e-3",
+        "--harmonics",
+        "3",
+        "--out",
+        &p("n.h5"),
+    ]);
+    run(&[
+        "frf",
+        "ecl_beam",
+        "--from",
+        "20",
+        "--to",
+        "30",
+        "--harmonics",
+        "3",
+        "--report",
+        &p("rep"),
+    ]);
+    std::fs::write(
+        d.join("t.toml"),
+        "harmonics = 2\nmodes = 8\nout = \"t.h5\"\n\
+         [[sweep]]\nlabel = \"up\"\nfrom = 22.0\nto = 26.0\nsteps = 5\nforce = 0.1\n",
+    )
+    .unwrap();
+    run(&["test", "ecl_beam", &p("t.toml")]);
+    let h5check = |args: &[&str]| {
+        let out = Command::new(python_h5py())
+            .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/h5check.py"))
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "h5check {args:?}: {}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    for (kind, f) in [
+        ("modes", "m.h5"),
+        ("simulate", "s.h5"),
+        ("frf", "f.h5"),
+        ("nnm", "n.h5"),
+        ("test-data", "t.h5"),
+    ] {
+        h5check(&["documented", kind, &p(f)]);
+    }
+    h5check(&[
+        "read",
+        &p("m.h5"),
+        &p("s.h5"),
+        &p("f.h5"),
+        &p("n.h5"),
+        &p("t.h5"),
+        &p("rep/report.h5"),
+    ]);
+}
+
 /// Opening report pages in a real browser: Debian's chromium, headless.
 mod browser {
     use super::*;

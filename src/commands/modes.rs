@@ -169,6 +169,7 @@ pub fn write_report(
         command_line,
         model_spec,
     )?;
+    report.model_name(model.name());
     report.section("Modes");
     for line in format_table(r).lines() {
         report.say(line);

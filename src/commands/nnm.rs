@@ -4,7 +4,6 @@
 
 use crate::error::{Error, Result};
 use crate::formats::files::Format;
-use crate::formats::files::f64_attr;
 use crate::formats::files::str_attr;
 use crate::formats::files::unit;
 use faer::c64;
@@ -119,6 +118,8 @@ pub struct NnmRun {
     pub modes: usize,
     /// Wall time (s).
     pub seconds: f64,
+    /// The model's name.
+    pub model_name: String,
 }
 
 impl NnmRun {
@@ -255,6 +256,7 @@ pub fn run_nnm(
         modes: reduced.modes.len(),
         report,
         seconds: t0.elapsed().as_secs_f64(),
+        model_name: model.name().to_string(),
     })
 }
 
@@ -358,10 +360,11 @@ fn write_hdf5(path: &Path, run: &NnmRun, model_spec: &str, req: &NnmRequest) -> 
     let file = hdf5::File::create(path).map_err(&err)?;
     let root = file.as_group().map_err(&err)?;
     let sys = &run.system;
-    crate::formats::files::provenance(&root, "nnm", model_spec, "", None).map_err(&err)?;
-    f64_attr(&root, "mode", req.mode as f64).map_err(&err)?;
-    f64_attr(&root, "harmonics", req.harmonics as f64).map_err(&err)?;
-    f64_attr(&root, "modes", run.modes as f64).map_err(&err)?;
+    crate::formats::files::provenance(&root, "nnm", model_spec, &run.model_name, None)
+        .map_err(&err)?;
+    crate::formats::files::count_attr(&root, "mode", req.mode).map_err(&err)?;
+    crate::formats::files::count_attr(&root, "harmonics", req.harmonics).map_err(&err)?;
+    crate::formats::files::count_attr(&root, "modes", run.modes).map_err(&err)?;
     str_attr(&root, "status", run.report.status.as_str()).map_err(&err)?;
     let pts = &run.report.points;
     let real = |name: &str, data: Vec<f64>, u: &str| -> hdf5::Result<()> {

@@ -411,6 +411,27 @@ pub fn f64_attr(loc: &hdf5::Location, name: &str, v: f64) -> hdf5::Result<()> {
     loc.new_attr::<f64>().create(name)?.write_scalar(&v)
 }
 
+#[cfg(feature = "hdf5")]
+/// Writes a scalar `u64` attribute: counts and orders (harmonics, modes, a mode number).
+pub fn count_attr(loc: &hdf5::Location, name: &str, v: usize) -> hdf5::Result<()> {
+    loc.new_attr::<u64>()
+        .create(name)?
+        .write_scalar(&(v as u64))
+}
+
+#[cfg(feature = "hdf5")]
+/// Reads a scalar numeric attribute as `f64`, whether stored as an integer (files of this
+/// version) or a float (earlier ones).
+pub fn number_attr(loc: &hdf5::Location, name: &str) -> hdf5::Result<f64> {
+    use hdf5::types::TypeDescriptor;
+    let a = loc.attr(name)?;
+    match a.dtype()?.to_descriptor()? {
+        TypeDescriptor::Unsigned(_) => Ok(a.read_scalar::<u64>()? as f64),
+        TypeDescriptor::Integer(_) => Ok(a.read_scalar::<i64>()? as f64),
+        _ => a.read_scalar::<f64>(),
+    }
+}
+
 /// `text` as one printable line: its lines trimmed and joined by `; `, and any other control
 /// character (an escape sequence read from a file name or a file, a tab) written as an
 /// escape, so that an error never spans lines or drives the terminal.
@@ -467,7 +488,11 @@ pub fn provenance(
     str_attr(root, "nlsim_version", env!("CARGO_PKG_VERSION"))?;
     str_attr(root, "command", command)?;
     str_attr(root, "model", model_spec)?;
-    str_attr(root, "model_name", model_name)?;
+    // An empty name is written later by the caller (a report, whose model loads after it
+    // starts).
+    if !model_name.is_empty() {
+        str_attr(root, "model_name", model_name)?;
+    }
     if let Some(s) = seed {
         root.new_attr::<u64>().create("seed")?.write_scalar(&s)?;
     }

@@ -239,7 +239,7 @@ fn write_hdf5(
     )
     .map_err(&err)?;
     str_attr(&root, "mode", &info.mode).map_err(&err)?;
-    f64_attr(&root, "modes", info.modes as f64).map_err(&err)?;
+    crate::formats::files::count_attr(&root, "modes", info.modes).map_err(&err)?;
     f64_attr(
         &root,
         "residual_flexibility",
@@ -270,8 +270,8 @@ pub fn write_group(
         "convention",
         "q(t) = Re(sum_k Q_k exp(i k Omega t / nu)); harmonic k is at k/nu times the fundamental",
     )?;
-    f64_attr(g, "harmonics", sys.harmonics().h as f64)?;
-    f64_attr(g, "subharmonic_order", sys.harmonics().nu as f64)?;
+    crate::formats::files::count_attr(g, "harmonics", sys.harmonics().h)?;
+    crate::formats::files::count_attr(g, "subharmonic_order", sys.harmonics().nu)?;
     let n = branch.points.len();
     let real = |g: &hdf5::Group, name: &str, data: &[f64], u: &str| -> hdf5::Result<()> {
         let d = g.new_dataset_builder().with_data(data).create(name)?;

@@ -146,7 +146,7 @@ pub fn write_group(g: &hdf5::Group, h: &TimeHistory, info: &RunInfo) -> hdf5::Re
     str_attr(g, "method", &info.method)?;
     str_attr(g, "case", &h.case)?;
     f64_attr(g, "dt_s", h.dt)?;
-    f64_attr(g, "modes", info.modes as f64)?;
+    crate::formats::files::count_attr(g, "modes", info.modes)?;
     // A run that stopped short keeps the samples it computed, and says so.
     str_attr(g, "status", h.status.as_str())?;
     if let Some(e) = &h.stopped {

@@ -493,6 +493,10 @@ pub fn read(path: &Path, model: &nlsim_kernel::Model, uff_noise: f64) -> Result<
 #[cfg(feature = "hdf5")]
 const H5_MAX_VALUES: usize = 1 << 26;
 
+/// The `unit` attribute of per-channel data in test-data HDF5: each channel's SI unit.
+#[cfg(feature = "hdf5")]
+const CHANNEL_UNIT: &str = "the channel's SI unit: m, m/s or m/s^2 by /channels/quantity";
+
 #[cfg(feature = "hdf5")]
 /// Writes `data` as HDF5 (documented in docs/file-formats.md; `h5py` reads it directly):
 /// root attributes `format = "nlsim test data"`, `input`, `harmonics`; datasets
@@ -516,6 +520,8 @@ pub fn write_h5(path: &Path, data: &TestData) -> Result<()> {
     };
     (|| -> hdf5::Result<()> {
         let f = hdf5::File::create(&tmp)?;
+        str_attr(&f, "nlsim_version", env!("CARGO_PKG_VERSION"))?;
+        str_attr(&f, "command", "test data")?;
         str_attr(&f, "format", "nlsim test data")?;
         str_attr(&f, "input", &data.input)?;
         f.new_attr::<u64>()
@@ -532,12 +538,16 @@ pub fn write_h5(path: &Path, data: &TestData) -> Result<()> {
             .create("quantity")?;
         let rel: Vec<f64> = data.channels.iter().map(|c| c.noise.relative).collect();
         let abs: Vec<f64> = data.channels.iter().map(|c| c.noise.absolute).collect();
-        ch.new_dataset_builder()
+        let d = ch
+            .new_dataset_builder()
             .with_data(&rel)
             .create("noise_relative")?;
-        ch.new_dataset_builder()
+        str_attr(&d, "unit", "1")?;
+        let d = ch
+            .new_dataset_builder()
             .with_data(&abs)
             .create("noise_absolute")?;
+        str_attr(&d, "unit", CHANNEL_UNIT)?;
         let sweeps = f.create_group("sweeps")?;
         let (nc, h) = (data.channels.len(), data.harmonics);
         for (i, sw) in data.sweeps.iter().enumerate() {
@@ -546,27 +556,30 @@ pub fn write_h5(path: &Path, data: &TestData) -> Result<()> {
             str_attr(&g, "direction", sw.direction.as_str())?;
             let n = sw.steps.len();
             let freq: Vec<f64> = sw.steps.iter().map(|s| s.frequency_hz).collect();
-            g.new_dataset_builder()
+            let d = g
+                .new_dataset_builder()
                 .with_data(&freq)
                 .create("frequency_hz")?;
+            str_attr(&d, "unit", "Hz")?;
             let force: Vec<c64> = sw
                 .steps
                 .iter()
                 .flat_map(|s| s.force.iter().copied())
                 .collect();
-            g.new_dataset::<c64>()
-                .shape((n, h))
-                .create("force")?
-                .write_raw(&force)?;
+            let d = g.new_dataset::<c64>().shape((n, h)).create("force")?;
+            d.write_raw(&force)?;
+            str_attr(&d, "unit", "N")?;
             let resp: Vec<c64> = sw
                 .steps
                 .iter()
                 .flat_map(|s| (0..nc).flat_map(move |c| (0..h).map(move |k| s.response[(c, k)])))
                 .collect();
-            g.new_dataset::<c64>()
+            let d = g
+                .new_dataset::<c64>()
                 .shape((n, nc, h))
-                .create("response")?
-                .write_raw(&resp)?;
+                .create("response")?;
+            d.write_raw(&resp)?;
+            str_attr(&d, "unit", CHANNEL_UNIT)?;
         }
         Ok(())
     })()

@@ -82,6 +82,7 @@ pub struct Report {
     title: String,
     command_line: String,
     model_spec: String,
+    model_name: RefCell<Option<String>>,
     started: Instant,
     started_utc: String,
     h5_tmp: PathBuf,
@@ -119,6 +120,7 @@ impl Report {
         let started_utc = utc_text(SystemTime::now());
         {
             let root = file.as_group().map_err(&err)?;
+            // `model_name` is written when the report finishes (the model may load later).
             crate::formats::files::provenance(&root, "report", model_spec, "", None)
                 .map_err(&err)?;
             str_attr(&root, "title", title).map_err(&err)?;
@@ -130,6 +132,7 @@ impl Report {
             title: title.to_string(),
             command_line: command_line.to_string(),
             model_spec: model_spec.to_string(),
+            model_name: RefCell::new(None),
             started: Instant::now(),
             started_utc,
             h5_tmp,
@@ -141,6 +144,12 @@ impl Report {
                 written: Vec::new(),
             }),
         })
+    }
+
+    /// The name of the model the report is about (the `model_name` attribute of
+    /// `report.h5`; the model argument as given when never set).
+    pub fn model_name(&self, name: &str) {
+        *self.model_name.borrow_mut() = Some(name.to_string());
     }
 
     /// The report's folder.
@@ -313,7 +322,15 @@ impl Report {
     pub fn finish(self) -> Result<PathBuf> {
         let wall = self.started.elapsed().as_secs_f64();
         let h5_path = self.dir.join(DATA);
-        self.data(|root| f64_attr(root, "wall_seconds", wall))?;
+        let name = self
+            .model_name
+            .borrow()
+            .clone()
+            .unwrap_or_else(|| self.model_spec.clone());
+        self.data(|root| {
+            f64_attr(root, "wall_seconds", wall)?;
+            crate::formats::files::str_attr(root, "model_name", &name)
+        })?;
         let file = self.h5.borrow_mut().take().expect("finished once");
         let err = crate::formats::files::h5err(&h5_path);
         file.flush().map_err(&err)?;

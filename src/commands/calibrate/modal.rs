@@ -243,6 +243,7 @@ pub fn write_modal_report(dir: &Path, run: &ModalRun) -> Result<Vec<PathBuf>> {
         &crate::present::report::command_line(),
         &run.request.model,
     )?;
+    report.model_name(&run.model_name);
     report.seed("Latin hypercube", run.request.config.seed)?;
     report.section_with("Summary", &run.summary());
     report.table(

@@ -344,6 +344,7 @@ pub fn write_report(dir: &Path, run: &CalibrationRun) -> Result<Vec<PathBuf>> {
         &crate::present::report::command_line(),
         &run.request.model,
     )?;
+    report.model_name(&run.prepared.model_name);
     report.seed("Latin hypercube and k-fold split", run.request.config.seed)?;
     report.section_with("Summary", &run.summary());
     report.table(

@@ -49,6 +49,7 @@ pub fn run_demo(
     let t0 = Instant::now();
     report.section("1. Model");
     let loaded = crate::load_model(model)?;
+    report.model_name(loaded.model.name());
     let validation = loaded.model.validate(&ValidationConfig::default())?;
     say(&format!(
         "[1/8] model: loaded and validated in {:.1} ms",

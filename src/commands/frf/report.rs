@@ -168,6 +168,7 @@ pub fn write_report(
         command_line,
         spec,
     )?;
+    report.model_name(model.name());
     let (sys, branch, y) = (&run.system, &run.branch, &run.responses);
     report.section_with(
         &format!("FRF by harmonic balance ({})", req.mode.as_str()),

@@ -38,14 +38,12 @@ pub fn read_start(sf: &StartFile, sys: &HbSystem, from_hz: f64, to_hz: f64) -> R
     crate::formats::files::regular_file(path)?;
     let f = hdf5::File::open(path).map_err(|e| err("file", e.to_string()))?;
     let attr = |name: &str| -> Result<f64> {
-        f.attr(name)
-            .and_then(|a| a.read_scalar::<f64>())
-            .map_err(|e| {
-                err(
-                    "/",
-                    format!("attribute '{name}': {e} (is it an `nlsim frf` output?)"),
-                )
-            })
+        crate::formats::files::number_attr(&f, name).map_err(|e| {
+            err(
+                "/",
+                format!("attribute '{name}': {e} (is it an `nlsim frf` output?)"),
+            )
+        })
     };
     let (h_attr, nu_attr) = (attr("harmonics")?, attr("subharmonic_order")?);
     let set = sys.harmonics();

@@ -391,6 +391,7 @@ pub fn write_plan_report(dir: &Path, run: &PlanRun) -> Result<Vec<PathBuf>> {
         &crate::present::report::command_line(),
         &run.request.model,
     )?;
+    report.model_name(&run.candidates.model_name);
     report.section_with("Summary", &run.summary());
     report.table(
         "ranking",

@@ -177,6 +177,7 @@ pub fn write_report(
         command_line,
         &info.model_spec,
     )?;
+    report.model_name(model.name());
     report.section_with("Time response", summary);
     let n = h.n_samples();
     let every = (n / 4000).max(1);

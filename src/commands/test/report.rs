@@ -186,6 +186,7 @@ pub fn write_test_report(dir: &Path, run: &TestRun) -> Result<Vec<PathBuf>> {
         &crate::present::report::command_line(),
         &run.request.model,
     )?;
+    report.model_name(&run.model_name);
     report.seed("measurement noise", run.request.seed)?;
     report.section_with("Summary", &run.summary());
     report.section("Force and response");
