@@ -59,16 +59,20 @@ if [ -n "$have_mb" ] && [ $((have_mb + used_mb)) -lt "$need_mb" ]; then
   say "  needs about $need_mb MB. Free space, or point CARGO_TARGET_DIR at a larger disk."
 fi
 
-# pyNastran (PyPI) for `make test`: the independent writer of the DMIG files the FE-matrix
-# readers are checked on, installed into the Python that has h5py.
+# pyNastran and pyuff (PyPI) for `make test`: the independent writers and readers of the DMIG
+# files the FE-matrix readers are checked on and of the universal files nlsim reads and
+# writes, installed into the Python that has h5py.
 if [ "${1:-}" = "--test" ]; then
   py="$(scripts/find-h5py.sh)"
-  if ! "$py" -c 'import pyNastran' 2>/dev/null; then
-    say "installing pyNastran 1.4.1 (PyPI) for $py"
-    "$py" -m pip install -q --break-system-packages 'pyNastran==1.4.1' 2>/dev/null \
-      || "$py" -m pip install -q 'pyNastran==1.4.1' \
-      || { say "could not install pyNastran. Run: $py -m pip install --break-system-packages pyNastran==1.4.1"; exit 1; }
-  fi
+  for pkg in pyNastran==1.4.1 pyuff==2.5.8; do
+    mod="${pkg%%==*}"
+    if ! "$py" -c "import $mod" 2>/dev/null; then
+      say "installing $pkg (PyPI) for $py"
+      "$py" -m pip install -q --break-system-packages "$pkg" 2>/dev/null \
+        || "$py" -m pip install -q "$pkg" \
+        || { say "could not install $pkg. Run: $py -m pip install --break-system-packages $pkg"; exit 1; }
+    fi
+  done
 fi
 
 # rustfmt and clippy for `make test`.

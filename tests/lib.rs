@@ -2862,6 +2862,131 @@ mod uff58 {
     use nlsim::formats::uff;
     use nlsim::formats::uff::Uff58;
     use nlsim::prelude::*;
+
+    /// Universal files both ways with pyuff 2.5.8, the common Python writer and reader, as
+    /// the independent party: `frf --out F.uff` and `simulate --out S.uff` are read by pyuff
+    /// and equal the HDF5 outputs of the same runs (values to the written `E20.11`, 1e-10;
+    /// the uneven frequency abscissa to its `E13.5`, 1e-5); FRFs pyuff writes — ASCII and
+    /// binary 58b (with its short byte count), even and uneven abscissa — are read by
+    /// `nlsim calibrate` as test data of the ECL beam.
+    #[test]
+    fn pyuff_reads_what_nlsim_writes_and_the_reverse() {
+        let d = scratch("uff-pyuff");
+        let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+        for args in [
+            vec![
+                "frf",
+                "duffing_fig3",
+                "--from",
+                "26",
+                "--to",
+                "40",
+                "--out",
+                &p("f.uff"),
+            ],
+            vec![
+                "frf",
+                "duffing_fig3",
+                "--from",
+                "26",
+                "--to",
+                "40",
+                "--out",
+                &p("f.h5"),
+            ],
+            vec![
+                "simulate",
+                "ecl_beam",
+                "--duration",
+                "0.05",
+                "--rate",
+                "2000",
+                "--out",
+                &p("s.uff"),
+            ],
+            vec![
+                "simulate",
+                "ecl_beam",
+                "--duration",
+                "0.05",
+                "--rate",
+                "2000",
+                "--out",
+                &p("s.h5"),
+            ],
+        ] {
+            let (rc, out, err) = nlsim(&args);
+            assert_eq!(rc, 0, "{args:?}: {out}\n{err}");
+        }
+        let script = r#"
+import sys, numpy as np, h5py, pyuff
+d = sys.argv[1]
+f = h5py.File(d + "/f.h5"); hz = f["frequency"][()]
+sets = pyuff.UFF(d + "/f.uff").read_sets()
+assert len(sets) == 4, [s["id1"] for s in sets]   # harmonics 1, 3, 5, 7 (even ones carry none)
+for s, k in zip(sets, [1, 3, 5, 7]):
+    y = f["sensors/mass/response"][:, k] / 2.0           # over F1 = 2 N
+    assert s["func_type"] == 4 and s["rsp_node"] == 1 and s["ref_node"] == 1, s["id1"]
+    assert np.max(np.abs(s["x"] - hz) / hz) < 1e-5
+    assert np.max(np.abs(s["data"] - y)) <= 1e-10 * np.max(np.abs(y)), (k, s["id1"])
+h = h5py.File(d + "/s.h5"); t = h["time"][()]
+sets = pyuff.UFF(d + "/s.uff").read_sets()
+assert [s["id1"].split()[0] for s in sets] == ["tip", "mid", "shaker"]
+for s in sets:
+    name = s["id1"].split()[0]
+    v = h["outputs/" + name][()] if name in h["outputs"] else h["inputs/" + name][()]
+    assert s["func_type"] == 1 and np.max(np.abs(s["x"] - t)) < 1e-12
+    assert np.max(np.abs(s["data"] - v)) <= 1e-10 * np.max(np.abs(v)), name
+# pyuff writes FRFs of the ECL beam's sensors (tip at 21:uz, mid at 11:uz, driven at 21:uz).
+fr = np.linspace(20.0, 30.0, 11)
+for name, binary, even in [("a", 0, 1), ("b", 1, 1), ("c", 0, 0), ("e", 1, 0)]:
+    u = pyuff.UFF(d + "/py_" + name + ".uff")
+    for sen, node in [("tip", 21), ("mid", 11)]:
+        h1 = 1.0 / (1.0 + 1j * fr / 25.0) * (node / 21.0)
+        ds = pyuff.prepare_58(binary=binary, func_type=4, rsp_node=node, rsp_dir=3,
+                              ref_node=21, ref_dir=3, data=h1, x=fr, id1=sen,
+                              rsp_ent_name="ent", ref_ent_name="ent",
+                              abscissa_spacing=even, abscissa_spec_data_type=18,
+                              ordinate_spec_data_type=12, orddenom_spec_data_type=13)
+        u.write_sets(ds, mode="add")
+print("ok")
+"#;
+        let out = Command::new(python_h5py())
+            .args(["-c", script, d.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success() && String::from_utf8_lossy(&out.stdout).contains("ok"),
+            "{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        for name in ["a", "b", "c", "e"] {
+            let f = p(&format!("py_{name}.uff"));
+            let recs = uff::read(Path::new(&f)).unwrap_or_else(|e| panic!("{f}: {e}"));
+            assert_eq!(recs.len(), 2, "{f}");
+            for r in &recs {
+                let scale = if r.response_node == 21 {
+                    1.0
+                } else {
+                    11.0 / 21.0
+                };
+                for (fz, v) in r.frequencies_hz.iter().zip(&r.values) {
+                    let want = c64::new(1.0, fz / 25.0).inv() * scale;
+                    assert!((v - want).norm() <= 1e-9 * want.norm(), "{f}: {fz} Hz");
+                }
+            }
+            let (rc, out, err) = nlsim(&[
+                "calibrate",
+                "ecl_beam",
+                &f,
+                "--param",
+                "tip_spring.k3=6e7:6e11",
+                "--dry-run",
+            ]);
+            assert_eq!(rc, 0, "{f}: {out}\n{err}");
+        }
+    }
     use std::sync::Arc;
 
     fn record(id: &str, dir: i64) -> Uff58 {

@@ -304,6 +304,11 @@ pub fn write_nnm(path: &Path, run: &NnmRun, model_spec: &str, req: &NnmRequest) 
     crate::formats::files::write_atomically(path, HINT, |tmp, format| match format {
         Format::Csv => write_csv(tmp, run, model_spec, req),
         Format::Hdf5 => write_hdf5(tmp, run, model_spec, req),
+        // Not offered (Format::of takes no universal file here); an error, never a panic.
+        Format::Uff => Err(Error::Usage(format!(
+            "{}: universal files are not written by `nnm`; name the file {HINT}",
+            path.display()
+        ))),
     })
 }
 

@@ -14,11 +14,19 @@ pub enum Format {
     Csv,
     /// `.h5` or `.hdf5`
     Hdf5,
+    /// `.uff` or `.unv`: universal file datasets 58 (where the command writes them)
+    Uff,
 }
 
 impl Format {
-    /// The format of `path`, or a usage error naming it with `hint` (what each format holds).
+    /// The format of `path` among CSV and HDF5, or a usage error naming it with `hint` (what
+    /// each format holds).
     pub fn of(path: &Path, hint: &str) -> Result<Self> {
+        Self::of_any(path, hint, false)
+    }
+
+    /// [`Format::of`], universal files too when `uff` (the commands that write them).
+    pub fn of_any(path: &Path, hint: &str, uff: bool) -> Result<Self> {
         match path
             .extension()
             .and_then(|e| e.to_str())
@@ -27,6 +35,7 @@ impl Format {
         {
             Some("csv") => Ok(Format::Csv),
             Some("h5" | "hdf5") => Ok(Format::Hdf5),
+            Some("uff" | "unv") if uff => Ok(Format::Uff),
             _ => Err(Error::Usage(format!(
                 "{}: unknown output format; name the file {hint}",
                 path.display()
@@ -45,6 +54,16 @@ pub fn write_atomically(
     write: impl FnOnce(&Path, Format) -> Result<()>,
 ) -> Result<()> {
     let format = Format::of(path, hint)?;
+    replace_atomically(path, |tmp| write(tmp, format))
+}
+
+/// [`write_atomically`] for a command that also writes universal files.
+pub fn write_atomically_uff(
+    path: &Path,
+    hint: &str,
+    write: impl FnOnce(&Path, Format) -> Result<()>,
+) -> Result<()> {
+    let format = Format::of_any(path, hint, true)?;
     replace_atomically(path, |tmp| write(tmp, format))
 }
 

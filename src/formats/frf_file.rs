@@ -12,11 +12,13 @@ use faer::{Mat, c64};
 #[cfg(feature = "hdf5")]
 use hdf5_metno as hdf5;
 use nlsim_hb::{Branch, HbSystem, PointKind};
+use std::f64::consts::PI;
 use std::fmt::Write as _;
 use std::path::Path;
 
 /// What each output format of `nlsim frf` holds, for the usage error.
-pub const HINT: &str = ".h5 (HDF5, complex harmonics) or .csv (one row per solution point)";
+pub const HINT: &str = ".h5 (HDF5, complex harmonics), .csv (one row per solution point) or \
+                        .uff/.unv (universal file: dataset 58 per sensor and harmonic)";
 
 /// What is stored with the data.
 #[derive(Debug, Clone)]
@@ -37,6 +39,10 @@ pub struct FrfInfo {
     pub peaks: Vec<nlsim_hb::Peak>,
     /// The run's notes ([`crate::commands::frf::run::FrfRun::notes`]).
     pub notes: Vec<String>,
+    /// The DOF of each sensor of the system, in its order (universal files name them).
+    pub sensor_dofs: Vec<nlsim_kernel::DofLabel>,
+    /// The DOF of each input of the system, in its order.
+    pub input_dofs: Vec<nlsim_kernel::DofLabel>,
 }
 
 #[cfg(feature = "hdf5")]
@@ -126,13 +132,93 @@ pub fn write_frf(
     y: &[Mat<c64>],
     info: &FrfInfo,
 ) -> Result<()> {
-    crate::formats::files::write_atomically(path, HINT, |tmp, format| match format {
+    crate::formats::files::write_atomically_uff(path, HINT, |tmp, format| match format {
         Format::Csv => write_csv(tmp, sys, branch, y, info),
+        Format::Uff => write_uff(tmp, sys, branch, y, info),
         #[cfg(feature = "hdf5")]
         Format::Hdf5 => write_hdf5(tmp, sys, branch, y, info),
         #[cfg(not(feature = "hdf5"))]
         Format::Hdf5 => Err(crate::formats::files::without_hdf5(path)),
     })
+}
+
+/// The FRF as universal file datasets 58 (ASCII for `.unv`/`.uff`; [`crate::formats::uff`]):
+/// per sensor and harmonic `k` carrying response, the complex `Y_k / F_1` (the harmonic's
+/// response over the fundamental force of the first input, thesis eq. 14 for `k = 1`) against
+/// the fundamental frequency (Hz, uneven: the branch's points in order), function type 4,
+/// the reference the first input's DOF. A branch through folds goes back and forth in
+/// frequency as it does here.
+fn write_uff(
+    path: &Path,
+    sys: &HbSystem,
+    branch: &Branch,
+    y: &[Mat<c64>],
+    info: &FrfInfo,
+) -> Result<()> {
+    use crate::formats::uff::{Abscissa, UffFunction, node_direction, quantity_code};
+    let set = *sys.harmonics();
+    let (Some(input), Some(&input_dof)) = (sys.inputs().first(), info.input_dofs.first()) else {
+        return Err(Error::Usage(format!(
+            "{}: a universal file of FRFs needs an input (the model's excitation)",
+            path.display()
+        )));
+    };
+    let hz: Vec<f64> = branch.points.iter().map(|p| p.omega / (2.0 * PI)).collect();
+    // The fundamental force of the first input at each point.
+    let f1: Vec<c64> = branch
+        .points
+        .iter()
+        .map(|p| sys.forcing().amplitude(0, set.nu) * p.scale)
+        .collect();
+    if f1.iter().any(|f| f.norm() == 0.0) {
+        return Err(Error::Usage(format!(
+            "{}: input '{}' carries no force at the fundamental: no FRF to write",
+            path.display(),
+            input.0
+        )));
+    }
+    let mut functions = Vec::new();
+    for (s, sen) in sys.sensors().iter().enumerate() {
+        let dof = info.sensor_dofs.get(s).copied().ok_or_else(|| {
+            Error::Usage(format!(
+                "{}: no DOF for sensor '{}'",
+                path.display(),
+                sen.name
+            ))
+        })?;
+        // Harmonics that carry no response (below 1e-12 of the sensor's largest, round-off
+        // of a symmetric element's even harmonics) are left out.
+        let top = (0..branch.points.len())
+            .flat_map(|i| (1..=set.h).map(move |k| (i, k)))
+            .map(|(i, k)| (y[i][(s, k)] / f1[i]).norm())
+            .fold(0.0f64, f64::max);
+        for k in 1..=set.h {
+            let values: Vec<c64> = (0..branch.points.len())
+                .map(|i| y[i][(s, k)] / f1[i])
+                .collect();
+            if values.iter().all(|v| v.norm() <= 1e-12 * top) {
+                continue;
+            }
+            let which = if k == set.nu {
+                "fundamental".to_string()
+            } else {
+                format!("harmonic {k}/{}", set.nu)
+            };
+            functions.push(UffFunction {
+                id: format!("{} {which} / {} F1 ({})", sen.name, input.0, info.mode),
+                function_type: 4,
+                response: node_direction(dof),
+                reference: node_direction(input_dof),
+                abscissa_type: 18,
+                ordinate_type: quantity_code(sen.quantity),
+                denominator_type: 13,
+                abscissa: Abscissa::Uneven(hz.clone()),
+                values,
+                complex: true,
+            });
+        }
+    }
+    crate::formats::uff::write_functions(path, &functions, false)
 }
 
 fn write_csv(

@@ -36,8 +36,9 @@ pub struct RunInfo {
 /// Writes a time history: HDF5 for `.h5`/`.hdf5`, CSV for `.csv`, atomically (temporary file,
 /// then rename).
 pub fn write_history(path: &Path, model: &Model, h: &TimeHistory, info: &RunInfo) -> Result<()> {
-    crate::formats::files::write_atomically(path, HINT, |tmp, format| match format {
+    crate::formats::files::write_atomically_uff(path, HINT, |tmp, format| match format {
         Format::Csv => write_csv(tmp, h, info),
+        Format::Uff => write_uff(tmp, model, h, info),
         #[cfg(feature = "hdf5")]
         Format::Hdf5 => write_hdf5(tmp, model, h, info),
         #[cfg(not(feature = "hdf5"))]
@@ -49,7 +50,72 @@ pub fn write_history(path: &Path, model: &Model, h: &TimeHistory, info: &RunInfo
 }
 
 /// What each output format of `nlsim simulate` holds, for the usage error.
-pub const HINT: &str = ".h5 (HDF5) or .csv";
+pub const HINT: &str =
+    ".h5 (HDF5), .csv or .uff/.unv (universal file: dataset 58 per output and input)";
+
+/// The time history as universal file datasets 58 (ASCII): one time response (function type
+/// 1, even abscissa from 0 s at the sample interval, real) per sensor output in its quantity
+/// and per input force (N), at its DOF.
+fn write_uff(path: &Path, model: &Model, h: &TimeHistory, info: &RunInfo) -> Result<()> {
+    use crate::formats::uff::{Abscissa, UffFunction, node_direction, quantity_code};
+    let labels = model.dofs();
+    let real =
+        |v: &[f64]| -> Vec<faer::c64> { v.iter().map(|&x| faer::c64::new(x, 0.0)).collect() };
+    let mut functions = Vec::new();
+    for o in &h.outputs {
+        let Some(sen) = model.sensors().iter().find(|s| s.name == o.name) else {
+            continue;
+        };
+        functions.push(UffFunction {
+            id: format!(
+                "{} {} ({}, {})",
+                o.name,
+                o.quantity.as_str(),
+                info.method,
+                info.model_spec
+            ),
+            function_type: 1,
+            response: node_direction(labels.label(sen.dof)),
+            reference: (0, 0),
+            abscissa_type: 17,
+            ordinate_type: quantity_code(o.quantity),
+            denominator_type: 0,
+            abscissa: Abscissa::Even {
+                start: 0.0,
+                step: h.dt,
+            },
+            values: real(&o.values),
+            complex: false,
+        });
+    }
+    for (name, v) in &h.inputs {
+        let Some(x) = model.excitation().iter().find(|x| &x.name == name) else {
+            continue;
+        };
+        functions.push(UffFunction {
+            id: format!("{name} force ({}, {})", info.method, info.model_spec),
+            function_type: 1,
+            response: node_direction(labels.label(x.dof)),
+            reference: (0, 0),
+            abscissa_type: 17,
+            ordinate_type: 13,
+            denominator_type: 0,
+            abscissa: Abscissa::Even {
+                start: 0.0,
+                step: h.dt,
+            },
+            values: real(v),
+            complex: false,
+        });
+    }
+    if functions.is_empty() {
+        return Err(Error::Usage(format!(
+            "{}: the run has no sensor output or input force to write as a universal file",
+            path.display()
+        )));
+    }
+    crate::formats::uff::write_functions(path, &functions, false)
+}
 
 fn write_csv(path: &Path, h: &TimeHistory, info: &RunInfo) -> Result<()> {
     let mut s = String::new();

@@ -57,6 +57,11 @@ pub fn write_modes(path: &Path, model_spec: &str, model: &Model, r: &ModeReport)
             let _ = (model_spec, model);
             Err(crate::formats::files::without_hdf5(path))
         }
+        // Not offered (Format::of takes no universal file here); an error, never a panic.
+        Format::Uff => Err(Error::Usage(format!(
+            "{}: universal files are not written by `modes`; name the file {HINT}",
+            path.display()
+        ))),
     })
 }
 

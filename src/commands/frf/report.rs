@@ -421,6 +421,18 @@ impl FrfOutputs {
                 seconds: run.seconds,
                 peaks: run.peaks.clone(),
                 notes: run.notes.clone(),
+                sensor_dofs: sys
+                    .sensors()
+                    .iter()
+                    .filter_map(|s| model.sensors().iter().find(|m| m.name == s.name))
+                    .map(|m| model.dofs().label(m.dof))
+                    .collect(),
+                input_dofs: sys
+                    .inputs()
+                    .iter()
+                    .filter_map(|(n, _)| model.excitation().iter().find(|x| &x.name == n))
+                    .map(|x| model.dofs().label(x.dof))
+                    .collect(),
             };
             crate::formats::frf_file::write_frf(path, sys, branch, y, &info)?;
             console.say(&format!("  written to {}", path.display()));

@@ -334,7 +334,7 @@ impl FrfOutputs {
     /// Refuses unknown output formats before the (possibly long) solve.
     pub fn check(&self) -> Result<()> {
         if let Some(path) = &self.out {
-            crate::formats::files::Format::of(path, crate::formats::frf_file::HINT)?;
+            crate::formats::files::Format::of_any(path, crate::formats::frf_file::HINT, true)?;
         }
         if let Some(p) = self.plot_path() {
             crate::present::plot::check_path(&p)?;

@@ -229,7 +229,7 @@ impl SimOutputs {
     /// Refuses an unknown output format before the run.
     pub fn check(&self) -> Result<()> {
         if let Some(path) = &self.out {
-            crate::formats::files::Format::of(path, crate::formats::history_file::HINT)?;
+            crate::formats::files::Format::of_any(path, crate::formats::history_file::HINT, true)?;
         }
         Ok(())
     }
