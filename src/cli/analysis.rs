@@ -99,7 +99,7 @@ pub struct SimulateArgs {
     /// sine at the first natural frequency.
     #[arg(long)]
     excitation: Vec<String>,
-    /// Output file: .h5 (HDF5) or .csv.
+    /// Output file: .h5 (HDF5), .csv, or .uff/.unv (universal file, dataset 58 per output and input).
     #[arg(long)]
     out: Option<std::path::PathBuf>,
     /// Retained modes of the reduced model (foh, zoh, lsoh, rk45, rk4).
@@ -202,7 +202,7 @@ pub struct FrfArgs {
     no_stability: bool,
     #[command(flatten)]
     lanczos: LanczosArgs,
-    /// Output file: .h5 (HDF5) or .csv.
+    /// Output file: .h5 (HDF5), .csv, or .uff/.unv (universal file, dataset 58 per sensor and harmonic).
     #[arg(long)]
     out: Option<std::path::PathBuf>,
     /// Plot of the first sensor against frequency, one panel per harmonic, FILE.svg or
