@@ -168,6 +168,13 @@ impl Console {
         }
     }
 
+    /// A `done/total` progress callback with the time left ([`Console::phase`]): the
+    /// replaced line on a terminal, one line in a log when the last item is done.
+    pub fn eta<'a>(&'a self, what: &'a str) -> impl FnMut(usize, usize) + 'a {
+        let t = Instant::now();
+        move |done, total| self.phase(what, done, total, t, 0)
+    }
+
     /// A `done/total` progress callback: `  WHAT:  42 % (21/50, 3.1 s)`, ended at the last.
     pub fn counter<'a>(&'a self, what: &'a str) -> impl FnMut(usize, usize) + 'a {
         let t = Instant::now();

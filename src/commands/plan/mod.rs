@@ -47,7 +47,7 @@ pub fn execute(req: &PlanRequest, console: &crate::present::console::Console) ->
         &[],
         &[req.report.as_deref()],
     )?;
-    let progress = std::sync::Mutex::new(console.counter("candidate sweeps"));
+    let progress = std::sync::Mutex::new(console.eta("candidate sweeps"));
     let run = run_plan(req, &|d, n| {
         if let Ok(mut p) = progress.lock() {
             p(d, n)

@@ -56,7 +56,7 @@ pub fn execute(req: &TestRequest, console: &crate::present::console::Console) ->
         &[Some(req.out.as_path())],
         &[req.report.as_deref()],
     )?;
-    let mut progress = console.counter("sweeps");
+    let mut progress = console.eta("sweeps");
     let run = run_test(req, &mut progress)?;
     progress(req.sweeps.len(), req.sweeps.len());
     for line in run.summary() {
