@@ -272,6 +272,7 @@ impl Batch {
                         t.memory_budget,
                     )
                     .map_err(|(k, m)| err(at(k), &format!("frf.{k}"), m))?,
+                    modal_sets: Vec::new(),
                 };
                 req.check()
                     .map_err(|e| err(at("[frf]"), "frf", e.to_string()))?;

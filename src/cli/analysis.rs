@@ -219,7 +219,7 @@ pub struct FrfArgs {
     /// sensor), report.h5 with the data, plots as SVG and PNG.
     #[arg(long)]
     report: Option<std::path::PathBuf>,
-    /// Element parameter overrides, e.g. `--set spring.k3=2e15` (repeatable).
+    /// Parameter overrides, e.g. `--set spring.k3=2e15` (repeatable): element and FE-level parameters of the model, or of the reduced model (`mode2.f=24`, `mode2.zeta`, `mode2.m`, `stiffness_scale`, set after the reduction: what `calibrate` estimates).
     #[arg(long)]
     set: Vec<String>,
 }
@@ -390,6 +390,7 @@ impl FrfArgs {
             stability: !self.no_stability,
             par,
             lanczos: self.lanczos.settings()?,
+            modal_sets: Vec::new(),
         };
         let outputs = FrfOutputs {
             out: self.out.clone(),

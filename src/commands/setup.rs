@@ -2,7 +2,7 @@
 //! Lanczos settings, and reductions shared between runs of one linear model (batches).
 use crate::error::{Error, Result};
 use nlsim_kernel::param::parse_known;
-use nlsim_kernel::{Model, Parameterized, ValidationConfig};
+use nlsim_kernel::{Model, Param, Parameterized, ValidationConfig};
 use nlsim_reduction::{EigenConfig, ModeSelection, ReducedModel, ReductionConfig};
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -34,6 +34,47 @@ pub fn apply_sets(model: &mut Model, sets: &[String]) -> Result<()> {
         model.set_param(&p, v)?;
     }
     Ok(())
+}
+
+/// Applies the `--set` overrides the model knows and returns those of the reduced model
+/// (`modeN.f`, `modeN.zeta`, `modeN.m`, `stiffness_scale`: what `calibrate` estimates on a
+/// modal model), which apply after the reduction; any other unknown name is an error that
+/// lists both kinds.
+pub fn apply_sets_deferred(model: &mut Model, sets: &[String]) -> Result<Vec<(Param, f64)>> {
+    let mut deferred = Vec::new();
+    for s in sets {
+        let (name, v) = s
+            .split_once('=')
+            .ok_or_else(|| Error::Usage(format!("--set '{s}': expected element.param=value")))?;
+        let v: f64 = v
+            .trim()
+            .parse()
+            .map_err(|_| Error::Usage(format!("--set '{s}': '{v}' is not a number")))?;
+        let known = model.parameters();
+        match name.trim().parse::<Param>() {
+            Ok(p) if known.contains(&p) => model.set_param(&p, v)?,
+            Ok(
+                p @ (Param::ModalFrequency(_)
+                | Param::ModalDamping(_)
+                | Param::ModalMass(_)
+                | Param::StiffnessScale),
+            ) => deferred.push((p, v)),
+            _ => {
+                return Err(Error::Usage(format!(
+                    "--set '{s}': unknown parameter '{}'; known parameters: {}, and of the \
+                     reduced model modeN.f, modeN.zeta, modeN.m (N up to the retained modes) \
+                     and stiffness_scale",
+                    name.trim(),
+                    known
+                        .iter()
+                        .map(ToString::to_string)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )));
+            }
+        }
+    }
+    Ok(deferred)
 }
 
 /// The Lanczos settings of a run's reduction (`--basis`, `--restarts` of `simulate`, `frf`

@@ -169,6 +169,9 @@ pub struct FrfRequest {
     pub par: faer::Par,
     /// Lanczos settings of the reduction.
     pub lanczos: Lanczos,
+    /// Parameters of the reduced model set after the reduction (`modeN.f`, `modeN.zeta`,
+    /// `modeN.m`, `stiffness_scale`), from `--set` ([`crate::commands::setup::apply_sets_deferred`]).
+    pub modal_sets: Vec<(nlsim_kernel::Param, f64)>,
 }
 
 impl Default for FrfRequest {
@@ -190,6 +193,7 @@ impl Default for FrfRequest {
             stability: true,
             par: faer::Par::rayon(0),
             lanczos: Lanczos::default(),
+            modal_sets: Vec::new(),
         }
     }
 }

@@ -104,6 +104,11 @@ pub fn run_frf_shared(
     } else {
         HbSystem::from_model(model, &reduced, set, HbConfig::default())?
     };
+    // Parameters of the reduced model (`--set mode1.f=…`), after the reduction.
+    let mut system = system;
+    for (p, v) in &req.modal_sets {
+        nlsim_kernel::Parameterized::set_param(&mut system, p, *v)?;
+    }
     let mut notes = Vec::new();
     let mut cfg = None;
     let t1 = Instant::now();
