@@ -60,17 +60,19 @@ pub fn apply_sets_deferred(model: &mut Model, sets: &[String]) -> Result<Vec<(Pa
                 | Param::StiffnessScale),
             ) => deferred.push((p, v)),
             _ => {
-                return Err(Error::Usage(format!(
-                    "--set '{s}': unknown parameter '{}'; known parameters: {}, and of the \
-                     reduced model modeN.f, modeN.zeta, modeN.m (N up to the retained modes) \
-                     and stiffness_scale",
-                    name.trim(),
-                    known
-                        .iter()
-                        .map(ToString::to_string)
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                )));
+                return Err(nlsim_kernel::Error::UnknownParameter {
+                    name: name.trim().to_string(),
+                    known: format!(
+                        "{}, and of the reduced model modeN.f, modeN.zeta, modeN.m (N up to \
+                         the retained modes) and stiffness_scale",
+                        known
+                            .iter()
+                            .map(ToString::to_string)
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                }
+                .into());
             }
         }
     }
