@@ -283,8 +283,8 @@ impl FrfPlot<'_> {
     where
         DB::ErrorType: 'static,
     {
-        use crate::present::plot::tick_label;
         use crate::present::plot::tick_step;
+        use crate::present::plot::{TICK_FONT, tick_label};
         use plotters::prelude::*;
         let hz = self.hz();
         let n = hz.len();
@@ -420,6 +420,8 @@ impl FrfPlot<'_> {
             let mut chart = chart;
             chart
                 .configure_mesh()
+                .label_style(("sans-serif", TICK_FONT))
+                .axis_desc_style(("sans-serif", TICK_FONT))
                 .x_desc("frequency (Hz)")
                 .y_desc(&y_desc)
                 .x_label_formatter(&x_fmt)
@@ -436,10 +438,12 @@ impl FrfPlot<'_> {
             let mut chart = builder.build_cartesian_2d(x0..x1, (lo..hi).log_scale())?;
             chart
                 .configure_mesh()
+                .label_style(("sans-serif", TICK_FONT))
+                .axis_desc_style(("sans-serif", TICK_FONT))
                 .x_desc("frequency (Hz)")
                 .y_desc(&y_desc)
                 .x_label_formatter(&x_fmt)
-                .y_label_formatter(&|v| tick_label(*v, 0.0, hi))
+                .y_label_formatter(&|v| crate::present::plot::log_tick_label(*v))
                 .draw()?;
             finish!(chart);
         } else {
@@ -455,6 +459,8 @@ impl FrfPlot<'_> {
             let mut chart = builder.build_cartesian_2d(x0..x1, lo..hi)?;
             chart
                 .configure_mesh()
+                .label_style(("sans-serif", TICK_FONT))
+                .axis_desc_style(("sans-serif", TICK_FONT))
                 .x_desc("frequency (Hz)")
                 .y_desc(&y_desc)
                 .x_label_formatter(&x_fmt)
