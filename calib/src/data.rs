@@ -154,7 +154,38 @@ pub struct PointId {
     pub step: usize,
 }
 
+/// The largest fundamental amplitude `|Y_1|` of each of `channels` channels over
+/// `responses` (each channels × harmonics, harmonic 1 in column 0; non-finite entries,
+/// unmeasured ones, ignored): the scale of each channel's noise floor.
+pub fn fundamental_peaks<'a>(
+    channels: usize,
+    responses: impl IntoIterator<Item = &'a Mat<c64>>,
+) -> Vec<f64> {
+    let mut peaks = vec![0.0f64; channels];
+    for y in responses {
+        for (c, p) in peaks.iter_mut().enumerate() {
+            let a = y[(c, 0)].norm();
+            if a.is_finite() {
+                *p = p.max(a);
+            }
+        }
+    }
+    peaks
+}
+
 impl TestData {
+    /// Each channel's largest measured fundamental amplitude over every step
+    /// ([`fundamental_peaks`]).
+    pub fn fundamental_peaks(&self) -> Vec<f64> {
+        fundamental_peaks(
+            self.channels.len(),
+            self.sweeps
+                .iter()
+                .flat_map(|s| &s.steps)
+                .map(|st| &st.response),
+        )
+    }
+
     /// Checks the data: at least one sweep, step and channel, positive finite frequencies,
     /// finite forces with a non-zero fundamental, the declared dimensions, non-negative
     /// finite noise, and frequencies monotone in each sweep's direction. Errors name the

@@ -733,24 +733,20 @@ impl Planner {
     pub fn response_peaks(&self, tests: &[(&Exciter, &Band)]) -> Result<Vec<f64>> {
         let nc = self.system().sensors().len();
         let noise = vec![Noise::relative(0.01); nc];
-        let mut peaks = vec![0.0f64; nc];
+        let mut solved = Vec::new();
         for (exciter, band) in tests {
             band.check()?;
             let (_, _, responses, failed) = self.predict(exciter, band, &noise, &[1])?;
             let freqs = band.frequencies_hz();
-            for (y, f) in responses.iter().zip(&freqs) {
-                if failed.contains(f) {
-                    continue;
-                }
-                for (c, p) in peaks.iter_mut().enumerate() {
-                    let a = y[(c, 0)].norm();
-                    if a.is_finite() {
-                        *p = p.max(a);
-                    }
-                }
-            }
+            solved.extend(
+                responses
+                    .into_iter()
+                    .zip(&freqs)
+                    .filter(|(_, f)| !failed.contains(f))
+                    .map(|(y, _)| y),
+            );
         }
-        Ok(peaks)
+        Ok(crate::data::fundamental_peaks(nc, &solved))
     }
 }
 

@@ -11,25 +11,45 @@ use std::sync::{Arc, Mutex, OnceLock};
 /// Loads and validates a model for a run (definiteness shows later, in the factorisations)
 /// and applies `element.param=value` overrides.
 pub fn load_for_run(spec: &str, sets: &[String]) -> Result<Model> {
-    let mut model = crate::load_model(spec)?.model;
+    let mut model = load_validated(spec)?;
+    apply_sets(&mut model, sets)?;
+    Ok(model)
+}
+
+/// [`load_for_run`] for a command that also takes parameters of the reduced model: the
+/// model with the overrides it knows, and the others ([`apply_sets_deferred`]).
+pub fn load_for_run_deferred(spec: &str, sets: &[String]) -> Result<(Model, Vec<(Param, f64)>)> {
+    let mut model = load_validated(spec)?;
+    let deferred = apply_sets_deferred(&mut model, sets)?;
+    Ok((model, deferred))
+}
+
+/// Loads and validates a model for a run (definiteness shows later, in the factorisations).
+fn load_validated(spec: &str) -> Result<Model> {
+    let model = crate::load_model(spec)?.model;
     model.validate(&ValidationConfig {
         check_definiteness: false,
         ..Default::default()
     })?;
-    apply_sets(&mut model, sets)?;
     Ok(model)
+}
+
+/// One `--set NAME=VALUE` split into the name and the value.
+fn split_set(s: &str) -> Result<(&str, f64)> {
+    let (name, v) = s
+        .split_once('=')
+        .ok_or_else(|| Error::Usage(format!("--set '{s}': expected element.param=value")))?;
+    let v: f64 = v
+        .trim()
+        .parse()
+        .map_err(|_| Error::Usage(format!("--set '{s}': '{v}' is not a number")))?;
+    Ok((name, v))
 }
 
 /// Applies `element.param=value` overrides (the `--set` option).
 pub fn apply_sets(model: &mut Model, sets: &[String]) -> Result<()> {
     for s in sets {
-        let (name, v) = s
-            .split_once('=')
-            .ok_or_else(|| Error::Usage(format!("--set '{s}': expected element.param=value")))?;
-        let v: f64 = v
-            .trim()
-            .parse()
-            .map_err(|_| Error::Usage(format!("--set '{s}': '{v}' is not a number")))?;
+        let (name, v) = split_set(s)?;
         let p = parse_known(name, &model.parameters())?;
         model.set_param(&p, v)?;
     }
@@ -43,13 +63,7 @@ pub fn apply_sets(model: &mut Model, sets: &[String]) -> Result<()> {
 pub fn apply_sets_deferred(model: &mut Model, sets: &[String]) -> Result<Vec<(Param, f64)>> {
     let mut deferred = Vec::new();
     for s in sets {
-        let (name, v) = s
-            .split_once('=')
-            .ok_or_else(|| Error::Usage(format!("--set '{s}': expected element.param=value")))?;
-        let v: f64 = v
-            .trim()
-            .parse()
-            .map_err(|_| Error::Usage(format!("--set '{s}': '{v}' is not a number")))?;
+        let (name, v) = split_set(s)?;
         let known = model.parameters();
         match name.trim().parse::<Param>() {
             Ok(p) if known.contains(&p) => model.set_param(&p, v)?,

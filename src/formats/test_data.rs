@@ -524,9 +524,7 @@ pub fn write_h5(path: &Path, data: &TestData) -> Result<()> {
         str_attr(&f, "command", "test data")?;
         str_attr(&f, "format", "nlsim test data")?;
         str_attr(&f, "input", &data.input)?;
-        f.new_attr::<u64>()
-            .create("harmonics")?
-            .write_scalar(&(data.harmonics as u64))?;
+        crate::formats::files::count_attr(&f, "harmonics", data.harmonics)?;
         let ch = f.create_group("channels")?;
         let names: Vec<&str> = data.channels.iter().map(|c| c.name.as_str()).collect();
         let quantities: Vec<&str> = data.channels.iter().map(|c| c.quantity.as_str()).collect();

@@ -299,12 +299,7 @@ pub fn demo_virtual_test(
         quiet,
         2016,
     )?;
-    let mut peaks = vec![0.0f64; n_sensors];
-    for st in clean.data.sweeps.iter().flat_map(|s| &s.steps) {
-        for (c, p) in peaks.iter_mut().enumerate() {
-            *p = p.max(st.response[(c, 0)].norm());
-        }
-    }
+    let peaks = clean.data.fundamental_peaks();
     let noise = nlsim_calib::scaled_noise(0.02, 0.0, 1e-3, &peaks);
     let open = virtual_test_with(
         &sys,
@@ -358,12 +353,7 @@ pub fn demo_virtual_test(
         ));
         // Steps a run could not solve are named, not dropped in silence.
         for (what, steps) in [("open loop", o), ("controlled", c)] {
-            let failed: Vec<String> = steps
-                .iter()
-                .enumerate()
-                .filter(|(_, st)| !st.force[1].norm().is_finite())
-                .map(|(k, st)| format!("{} ({:.3} Hz, {})", k + 1, st.frequency_hz, st.status))
-                .collect();
+            let failed = crate::commands::test::run::unsolved_steps(steps, 3);
             if !failed.is_empty() {
                 say(&format!(
                     "    {what}: structure not solved at step{} {}: left out, a gap in the plots",

@@ -32,14 +32,11 @@ pub fn execute(
         &[outputs.out.as_deref(), plot.as_deref()],
         &[outputs.report.as_deref()],
     )?;
-    let mut model = crate::load_model(spec)?.model;
-    model.validate(&nlsim_kernel::ValidationConfig {
-        check_definiteness: false,
-        ..Default::default()
-    })?;
-    let mut req = req.clone();
-    req.modal_sets = crate::commands::setup::apply_sets_deferred(&mut model, sets)?;
-    let req = &req;
+    let (model, modal_sets) = crate::commands::setup::load_for_run_deferred(spec, sets)?;
+    let req = &FrfRequest {
+        modal_sets,
+        ..req.clone()
+    };
     let t1 = std::time::Instant::now();
     let mut count = 0usize;
     let mut progress = |p: &nlsim_hb::SolutionPoint| {

@@ -148,21 +148,14 @@ fn channel_noise(
                 sen.name
             )));
         }
-        if n.absolute >= 0.1 * p {
-            warnings.push(format!(
-                "the noise floor of channel '{}', {:.3e} {unit}, is {} its largest predicted \
-                 response ({:.3e} {unit}): it carries little information in any design; check \
-                 the floor's unit, or give noise = {{ floor = … }} (relative to the response)",
-                sen.name,
-                n.absolute,
-                if n.absolute >= p {
-                    "above".to_string()
-                } else {
-                    format!("{:.0} % of", 100.0 * n.absolute / p)
-                },
-                p
-            ));
-        }
+        warnings.extend(crate::commands::test::run::floor_warning(
+            &sen.name,
+            sen.quantity,
+            n.absolute,
+            p,
+            "largest predicted response",
+            "it carries little information in any design",
+        ));
     }
     Ok((peaks, noise, warnings))
 }

@@ -87,12 +87,7 @@ impl TestRun {
                 cs.steps
             ));
             if let Some(o) = &self.open_loop {
-                let failed: Vec<String> = o.steps[i]
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, st)| !st.force[1].norm().is_finite())
-                    .map(|(k, st)| format!("{} ({:.4} Hz, {})", k + 1, st.frequency_hz, st.status))
-                    .collect();
+                let failed = crate::commands::test::run::unsolved_steps(&o.steps[i], 4);
                 if !failed.is_empty() {
                     v.push(format!(
                         "  open loop: structure not solved at step{} {}: left out of its data \

@@ -143,15 +143,7 @@ pub fn run_test(req: &TestRequest, progress: &mut dyn FnMut(usize, usize)) -> Re
             Noise::relative(0.0),
             &mut |_, _| {},
         )?;
-        let mut peaks = vec![0.0f64; n_sensors];
-        for st in quiet.data.sweeps.iter().flat_map(|s| &s.steps) {
-            for (c, p) in peaks.iter_mut().enumerate() {
-                let a = st.response[(c, 0)].norm();
-                if a.is_finite() {
-                    *p = p.max(a);
-                }
-            }
-        }
+        let peaks = quiet.data.fundamental_peaks();
         let noise = nlsim_calib::scaled_noise(
             req.noise.relative,
             req.noise.absolute,
@@ -194,20 +186,15 @@ pub fn run_test(req: &TestRequest, progress: &mut dyn FnMut(usize, usize)) -> Re
         .sensors()
         .iter()
         .zip(noise.iter().zip(&peaks))
-        .filter(|(sen, (n, p))| recorded(&sen.name) && p.is_finite() && n.absolute >= 0.1 * **p)
-        .map(|(sen, (n, &p))| {
-            let unit = crate::formats::files::unit(sen.quantity);
-            format!(
-                "the noise floor of channel '{}', {:.3e} {unit}, is {} its largest response \
-                 ({p:.3e} {unit}): the data carry little of it; check the floor's unit, or \
-                 give noise = {{ floor = … }} (relative to the response)",
-                sen.name,
+        .filter(|(sen, _)| recorded(&sen.name))
+        .filter_map(|(sen, (n, &p))| {
+            floor_warning(
+                &sen.name,
+                sen.quantity,
                 n.absolute,
-                if n.absolute >= p {
-                    "above".to_string()
-                } else {
-                    format!("{:.0} % of", 100.0 * n.absolute / p)
-                },
+                p,
+                "largest response",
+                "the data carry little of it",
             )
         })
         .collect();
@@ -256,6 +243,53 @@ impl ControlStats {
             steps: steps.len(),
         }
     }
+}
+
+/// The steps of a sweep's records whose structure was not solved (left out of the data),
+/// each as `STEP (FREQUENCY Hz, STATUS)`, the step 1-based and the frequency with `digits`
+/// decimals.
+pub fn unsolved_steps(steps: &[nlsim_calib::StepControl], digits: usize) -> Vec<String> {
+    steps
+        .iter()
+        .enumerate()
+        .filter(|(_, st)| !st.force[1].norm().is_finite())
+        .map(|(k, st)| {
+            format!(
+                "{} ({:.*} Hz, {})",
+                k + 1,
+                digits,
+                st.frequency_hz,
+                st.status
+            )
+        })
+        .collect()
+}
+
+/// The warning for a channel whose noise floor buries its response (`floor` at least a
+/// tenth of `peak`, both in the channel's unit), `None` otherwise; `largest` names the peak
+/// (e.g. `largest predicted response`) and `consequence` what it means.
+pub fn floor_warning(
+    channel: &str,
+    quantity: nlsim_kernel::Quantity,
+    floor: f64,
+    peak: f64,
+    largest: &str,
+    consequence: &str,
+) -> Option<String> {
+    if !(peak.is_finite() && floor >= 0.1 * peak) {
+        return None;
+    }
+    let unit = crate::formats::files::unit(quantity);
+    Some(format!(
+        "the noise floor of channel '{channel}', {floor:.3e} {unit}, is {} its {largest} \
+         ({peak:.3e} {unit}): {consequence}; check the floor's unit, or give noise = {{ floor = \
+         … }} (relative to the response)",
+        if floor >= peak {
+            "above".to_string()
+        } else {
+            format!("{:.0} % of", 100.0 * floor / peak)
+        },
+    ))
 }
 
 /// The smallest `|F1| / target` along a sweep's step records: the force drop-out of a
