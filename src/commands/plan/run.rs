@@ -148,7 +148,7 @@ fn channel_noise(
                 sen.name
             )));
         }
-        warnings.extend(crate::commands::test::run::floor_warning(
+        warnings.extend(floor_warning(
             &sen.name,
             sen.quantity,
             n.absolute,
@@ -330,6 +330,33 @@ fn point_dof(model: &Model, p: &PointSpec, what: &str) -> Result<usize> {
             model.name()
         ))
     })
+}
+
+/// The warning for a channel whose noise floor buries its response (`floor` at least a
+/// tenth of `peak`, both in the channel's unit), `None` otherwise; `largest` names the peak
+/// (e.g. `largest predicted response`) and `consequence` what it means.
+pub fn floor_warning(
+    channel: &str,
+    quantity: nlsim_kernel::Quantity,
+    floor: f64,
+    peak: f64,
+    largest: &str,
+    consequence: &str,
+) -> Option<String> {
+    if !(peak.is_finite() && floor >= 0.1 * peak) {
+        return None;
+    }
+    let unit = crate::formats::files::unit(quantity);
+    Some(format!(
+        "the noise floor of channel '{channel}', {floor:.3e} {unit}, is {} its {largest} \
+         ({peak:.3e} {unit}): {consequence}; check the floor's unit, or give noise = {{ floor = \
+         … }} (relative to the response)",
+        if floor >= peak {
+            "above".to_string()
+        } else {
+            format!("{:.0} % of", 100.0 * floor / peak)
+        },
+    ))
 }
 
 /// The information of candidate sweep `i` of `setup`, with its channels' noise.

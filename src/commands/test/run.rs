@@ -188,7 +188,7 @@ pub fn run_test(req: &TestRequest, progress: &mut dyn FnMut(usize, usize)) -> Re
         .zip(noise.iter().zip(&peaks))
         .filter(|(sen, _)| recorded(&sen.name))
         .filter_map(|(sen, (n, &p))| {
-            floor_warning(
+            crate::commands::plan::run::floor_warning(
                 &sen.name,
                 sen.quantity,
                 n.absolute,
@@ -263,33 +263,6 @@ pub fn unsolved_steps(steps: &[nlsim_calib::StepControl], digits: usize) -> Vec<
             )
         })
         .collect()
-}
-
-/// The warning for a channel whose noise floor buries its response (`floor` at least a
-/// tenth of `peak`, both in the channel's unit), `None` otherwise; `largest` names the peak
-/// (e.g. `largest predicted response`) and `consequence` what it means.
-pub fn floor_warning(
-    channel: &str,
-    quantity: nlsim_kernel::Quantity,
-    floor: f64,
-    peak: f64,
-    largest: &str,
-    consequence: &str,
-) -> Option<String> {
-    if !(peak.is_finite() && floor >= 0.1 * peak) {
-        return None;
-    }
-    let unit = crate::formats::files::unit(quantity);
-    Some(format!(
-        "the noise floor of channel '{channel}', {floor:.3e} {unit}, is {} its {largest} \
-         ({peak:.3e} {unit}): {consequence}; check the floor's unit, or give noise = {{ floor = \
-         … }} (relative to the response)",
-        if floor >= peak {
-            "above".to_string()
-        } else {
-            format!("{:.0} % of", 100.0 * floor / peak)
-        },
-    ))
 }
 
 /// The smallest `|F1| / target` along a sweep's step records: the force drop-out of a
