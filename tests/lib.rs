@@ -287,6 +287,16 @@ mod browser {
     out.push(['img', i.getAttribute('src'), i.naturalWidth].join(' '));
   });
   out.push('height ' + document.documentElement.scrollHeight);
+  // Text that does not fit the page: a block wider than its box, or reaching past the page.
+  var page = document.documentElement.clientWidth;
+  out.push('width ' + document.documentElement.scrollWidth + ' ' + page);
+  document.querySelectorAll('pre,table,figure').forEach(function (e) {
+    var r = e.getBoundingClientRect();
+    if (e.scrollWidth > e.clientWidth + 1 || r.right > page + 1) {
+      out.push('overflow ' + e.tagName.toLowerCase() + ' ' + Math.round(r.right) + ' ' +
+               e.textContent.replace(/\s+/g, ' ').slice(0, 60));
+    }
+  });
   var pre = document.createElement('pre');
   pre.id = 'probe';
   pre.textContent = out.join('\n');
@@ -298,7 +308,7 @@ mod browser {
         std::fs::write(&probed, page.replace("</body>", probe)).unwrap();
         let dom = run(
             &format!("file://{}", probed.display()),
-            &["--dump-dom".into()],
+            &["--dump-dom".into(), "--window-size=1280,2000".into()],
         );
         std::fs::remove_file(&probed).unwrap();
         let start = dom.find("<pre id=\"probe\">").expect("the probe ran") + 16;
@@ -323,11 +333,19 @@ mod browser {
                 }
                 "img" => assert!(w[2] != "0", "broken image {}", w[1]),
                 "height" => height = w[1].parse().unwrap(),
+                "width" => assert!(
+                    w[1].parse::<u32>().unwrap() <= w[2].parse::<u32>().unwrap(),
+                    "the page is wider than the window: {line}"
+                ),
+                "overflow" => panic!("text wider than the page: {line}"),
                 _ => panic!("probe line {line}"),
             }
         }
         let want: Vec<String> = figures.iter().map(|s| s.to_string()).collect();
         assert_eq!(seen, want, "figures on the page");
+        for f in figures {
+            check_plot_layout(&dir.join(format!("{f}.svg")));
+        }
         assert!(height > 1000, "page height {height}");
         // The whole page as a user sees it (capped at 16 000 px, chromium's limit).
         let shot =
@@ -374,6 +392,62 @@ mod browser {
             shot.display()
         );
     }
+}
+
+/// Checks, from the geometry an SVG plot carries (`<metadata id="nlsim-layout">`), that no
+/// plotted point lies under a legend and that every legend lies inside the figure and outside
+/// every plotting area; returns the number of plotted points checked.
+fn check_plot_layout(svg: &Path) -> usize {
+    let text = std::fs::read_to_string(svg).unwrap();
+    let start = text
+        .find("<metadata id=\"nlsim-layout\">")
+        .unwrap_or_else(|| panic!("{}: no layout", svg.display()));
+    let end = start + text[start..].find("</metadata>").unwrap();
+    let body = &text[start..end];
+    let rect = |w: &[&str]| -> [i32; 4] { std::array::from_fn(|i| w[i].parse().unwrap()) };
+    let inside =
+        |r: &[i32; 4], (x, y): (i32, i32)| r[0] <= x && x <= r[2] && r[1] <= y && y <= r[3];
+    let (mut size, mut legends, mut panels, mut points) = ((0, 0), vec![], vec![], vec![]);
+    for line in body.lines().skip(1) {
+        let w: Vec<&str> = line.split(' ').collect();
+        match w[0] {
+            "size" => size = (w[1].parse::<i32>().unwrap(), w[2].parse::<i32>().unwrap()),
+            "legend" => legends.push(rect(&w[1..])),
+            "panel" => panels.push(rect(&w[1..])),
+            "points" => points.extend(w[1..].iter().filter(|p| !p.is_empty()).map(|p| {
+                let (x, y) = p.split_once(',').unwrap();
+                (x.parse::<i32>().unwrap(), y.parse::<i32>().unwrap())
+            })),
+            _ => panic!("{}: layout line {line}", svg.display()),
+        }
+    }
+    assert!(
+        !panels.is_empty() && !points.is_empty(),
+        "{}: {body}",
+        svg.display()
+    );
+    for l in &legends {
+        assert!(
+            l[0] >= 0 && l[1] >= 0 && l[2] < size.0 && l[3] < size.1,
+            "{}: legend {l:?} outside the figure {size:?}",
+            svg.display()
+        );
+        for p in &panels {
+            let apart = l[2] < p[0] || p[2] < l[0] || l[3] < p[1] || p[3] < l[1];
+            assert!(
+                apart,
+                "{}: legend {l:?} over plotting area {p:?}",
+                svg.display()
+            );
+        }
+        let covered: Vec<_> = points.iter().filter(|&&q| inside(l, q)).collect();
+        assert!(
+            covered.is_empty(),
+            "{}: points {covered:?} under legend {l:?}",
+            svg.display()
+        );
+    }
+    points.len()
 }
 
 /// The ECL beam reduced to its lowest `modes` modes, as a harmonic balance system with

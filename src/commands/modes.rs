@@ -199,6 +199,7 @@ pub fn write_report(
                 bar_desc: "mode".into(),
                 y_desc: "effective mass (% of the total)".into(),
                 baseline: 0.0,
+                baseline_desc: String::new(),
                 band_desc: String::new(),
                 groups: r
                     .effective

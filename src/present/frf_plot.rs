@@ -100,6 +100,11 @@ pub struct FrfPlot<'a> {
 /// At most this many harmonic panels: the fundamental and the largest others.
 const MAX_PANELS: usize = 5;
 
+/// A harmonic's phase is drawn only where its amplitude reaches this fraction of the figure's
+/// largest amplitude (120 dB below it): below, it is set by the solver's round-off (Newton
+/// stops at a residual about 1e-10 of the response), not by the structure.
+pub const PHASE_FLOOR: f64 = 1e-6;
+
 impl FrfPlot<'_> {
     fn hz(&self) -> Vec<f64> {
         self.branch
@@ -164,9 +169,28 @@ impl FrfPlot<'_> {
     }
 
     /// Phase of harmonic `k` at point `i` in degrees, `(−180, 180]`, in the convention
-    /// `q(t) = Re(Σ Q_k e^{i k Ω t / ν})`.
+    /// `q(t) = Re(Σ Q_k e^{i k Ω t / ν})`; NaN (not drawn) where the harmonic is below
+    /// [`PHASE_FLOOR`] of the largest amplitude of the figure, where its phase is noise.
     fn phase_deg(&self, i: usize, k: usize) -> f64 {
-        self.y[i][(self.sensor, k)].arg().to_degrees()
+        let y = self.y[i][(self.sensor, k)];
+        if y.norm() < PHASE_FLOOR * self.top() {
+            f64::NAN
+        } else {
+            y.arg().to_degrees()
+        }
+    }
+
+    /// The largest amplitude of any harmonic at any point (sensor's unit).
+    fn top(&self) -> f64 {
+        self.y
+            .iter()
+            .flat_map(|m| (0..m.ncols()).map(move |k| m[(self.sensor, k)].norm()))
+            .fold(0.0f64, f64::max)
+    }
+
+    /// Whether some phase of harmonic `k` is left out by [`PHASE_FLOOR`].
+    fn phase_masked(&self, k: usize) -> bool {
+        (0..self.y.len()).any(|i| self.phase_deg(i, k).is_nan())
     }
 }
 
@@ -232,59 +256,65 @@ impl crate::present::plot::Figure for FrfPlot<'_> {
     fn draw<DB: plotters::prelude::DrawingBackend>(
         &self,
         root: &plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
+        layout: &mut crate::present::plot::Layout,
     ) -> crate::present::plot::DrawResult
     where
         DB::ErrorType: 'static,
     {
+        use crate::present::plot::{Entry, Swatch};
         use plotters::prelude::*;
         root.fill(&WHITE)?;
         let root = root.titled(self.title, ("sans-serif", 20))?;
+        // One legend for every panel: the styles are the same in each.
+        let has = |kind: PointKind| self.branch.points.iter().any(|p| p.kind == kind);
+        let mut entries = vec![Entry::new("stable", Swatch::Line(STABLE, 2))];
+        if self.branch.points.iter().any(|p| p.stable() == Some(false)) {
+            entries.push(Entry::new("unstable", Swatch::Line(UNSTABLE, 2)));
+        }
+        if has(PointKind::Fold) {
+            entries.push(Entry::new("fold", Swatch::Dot(BLACK)));
+        }
+        if has(PointKind::Jump) {
+            entries.push(Entry::new("jump (stepped sine)", Swatch::Triangle(BLACK)));
+        }
+        let root = crate::present::plot::legend_band(&root, &entries, layout)?;
         let shown = self.shown();
         let cols = if self.phase { 2 } else { 1 };
         let areas = root.split_evenly((shown.len().max(1), cols));
-        let palette = [BLUE, GREEN, MAGENTA, CYAN, BLACK, RGBColor(150, 100, 0)];
         for (row, &k) in shown.iter().enumerate() {
-            let colour = if k == self.sys.harmonics().nu {
-                BLUE
-            } else {
-                palette[1 + row % (palette.len() - 1)]
-            };
-            let legend = row == 0;
-            self.draw_panel(&areas[row * cols], k, colour, false, legend)?;
+            self.draw_panel(&areas[row * cols], k, false, layout)?;
             if self.phase {
-                self.draw_panel(&areas[row * cols + 1], k, colour, true, false)?;
+                self.draw_panel(&areas[row * cols + 1], k, true, layout)?;
             }
         }
         Ok(())
     }
 }
 
+/// Colour of stable branches in every panel.
+const STABLE: plotters::style::RGBColor = plotters::style::BLUE;
+/// Colour of unstable branches in every panel.
+const UNSTABLE: plotters::style::RGBColor = plotters::style::RED;
+
 impl FrfPlot<'_> {
     /// The smallest magnitude drawn on a log or dB axis: 1e-12 of the largest.
     fn floor(&self) -> f64 {
-        let top = self
-            .y
-            .iter()
-            .flat_map(|m| (0..m.ncols()).map(move |k| m[(self.sensor, k)].norm()))
-            .fold(0.0f64, f64::max);
-        (1e-12 * top).max(f64::MIN_POSITIVE)
+        (1e-12 * self.top()).max(f64::MIN_POSITIVE)
     }
 
-    /// One panel: the magnitude (or phase) of harmonic `k`, stable stretches in `colour`,
-    /// unstable red, folds and jumps marked and named in the legend.
+    /// One panel: the magnitude (or phase) of harmonic `k`, stable stretches blue, unstable
+    /// red, folds and jumps marked; recorded in `layout`.
     fn draw_panel<DB: plotters::prelude::DrawingBackend>(
         &self,
         area: &plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
         k: usize,
-        colour: plotters::style::RGBColor,
         phase: bool,
-        legend: bool,
+        layout: &mut crate::present::plot::Layout,
     ) -> crate::present::plot::DrawResult
     where
         DB::ErrorType: 'static,
     {
-        use crate::present::plot::tick_step;
-        use crate::present::plot::{TICK_FONT, tick_label};
+        use crate::present::plot::{LinearAxis, TICK_FONT};
         use plotters::prelude::*;
         let hz = self.hz();
         let n = hz.len();
@@ -313,7 +343,11 @@ impl FrfPlot<'_> {
         let caption = format!(
             "{}{}",
             self.panel_name(k),
-            if phase { ": phase" } else { "" }
+            match (phase, phase && self.phase_masked(k)) {
+                (false, _) => "",
+                (true, false) => ": phase",
+                (true, true) => ": phase (drawn where |Y| ≥ 1e-6 of the largest)",
+            }
         );
         let y_desc = if phase {
             "phase (deg)".to_string()
@@ -326,8 +360,8 @@ impl FrfPlot<'_> {
             .margin(8)
             .x_label_area_size(40)
             .y_label_area_size(76);
-        let xs = tick_step(x0, x1, 20);
-        let x_fmt = |v: &f64| tick_label(*v, xs, x1.abs());
+        let xa = LinearAxis::new("frequency (Hz)", x0, x1, 20);
+        let x_fmt = |v: &f64| xa.label(*v);
         // Segments of equal stability; a jump starts a new curve, and so do a phase wrap and a
         // skipped frequency.
         let segments = || {
@@ -335,6 +369,11 @@ impl FrfPlot<'_> {
             for i in 0..n {
                 let stable = self.branch.points[i].stable() != Some(false);
                 let jump = self.branch.points[i].kind == PointKind::Jump;
+                // A masked phase (NaN) is left out, the curve broken there.
+                if !vals[i].is_finite() {
+                    out.push((stable, Vec::new()));
+                    continue;
+                }
                 let wrap = phase && i > 0 && (vals[i] - vals[i - 1]).abs() > 180.0;
                 let gap = i > 0
                     && self
@@ -342,6 +381,10 @@ impl FrfPlot<'_> {
                         .iter()
                         .any(|&g| (g - hz[i - 1]) * (hz[i] - g) > 0.0);
                 match out.last_mut() {
+                    Some((s, pts)) if pts.is_empty() => {
+                        *s = stable;
+                        pts.push((hz[i], vals[i]));
+                    }
                     Some((s, pts)) if !jump && !wrap && !gap => {
                         pts.push((hz[i], vals[i]));
                         if *s != stable {
@@ -352,67 +395,37 @@ impl FrfPlot<'_> {
                     _ => out.push((stable, vec![(hz[i], vals[i])])),
                 }
             }
+            out.retain(|(_, p)| !p.is_empty());
             out
         };
         let marks = |kind: PointKind| -> Vec<(f64, f64)> {
             (0..n)
-                .filter(|&i| self.branch.points[i].kind == kind)
+                .filter(|&i| self.branch.points[i].kind == kind && vals[i].is_finite())
                 .map(|i| (hz[i], vals[i]))
                 .collect()
         };
-        let any_unstable = self.branch.points.iter().any(|p| p.stable() == Some(false));
-        let width = if k == self.sys.harmonics().nu { 2 } else { 1 };
         // The drawing is the same on a linear and a log axis; a macro keeps one copy.
         macro_rules! finish {
             ($chart:expr) => {{
                 let mut chart = $chart;
-                let mut labelled = false;
                 for (stable, pts) in segments() {
-                    let style = if stable {
-                        colour.stroke_width(width)
-                    } else {
-                        RED.stroke_width(width)
-                    };
-                    let s = chart.draw_series(LineSeries::new(pts, style))?;
-                    if legend && stable && !labelled {
-                        labelled = true;
-                        s.label("stable").legend(move |(x, y)| {
-                            PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
-                        });
-                    }
-                }
-                if legend && any_unstable {
-                    chart
-                        .draw_series(std::iter::empty::<PathElement<(f64, f64)>>())?
-                        .label("unstable")
-                        .legend(|(x, y)| {
-                            PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2))
-                        });
+                    let colour = if stable { STABLE } else { UNSTABLE };
+                    chart.draw_series(LineSeries::new(pts, colour.stroke_width(2)))?;
                 }
                 let folds = marks(PointKind::Fold);
-                if !folds.is_empty() {
-                    let s = chart
-                        .draw_series(folds.iter().map(|&p| Circle::new(p, 5, BLACK.filled())))?;
-                    if legend {
-                        s.label("fold")
-                            .legend(|(x, y)| Circle::new((x + 10, y), 4, BLACK.filled()));
-                    }
-                }
+                chart.draw_series(folds.iter().map(|&p| Circle::new(p, 5, BLACK.filled())))?;
                 let jumps = marks(PointKind::Jump);
-                if !jumps.is_empty() {
-                    let s = chart.draw_series(
-                        jumps
-                            .iter()
-                            .map(|&p| TriangleMarker::new(p, 6, BLACK.filled())),
-                    )?;
-                    if legend {
-                        s.label("jump (stepped sine)")
-                            .legend(|(x, y)| TriangleMarker::new((x + 10, y), 5, BLACK.filled()));
-                    }
-                }
-                if legend {
-                    crate::present::plot::draw_legend(&mut chart, SeriesLabelPosition::UpperRight)?;
-                }
+                chart.draw_series(
+                    jumps
+                        .iter()
+                        .map(|&p| TriangleMarker::new(p, 6, BLACK.filled())),
+                )?;
+                layout.panel(
+                    &chart,
+                    (0..n)
+                        .filter(|&i| vals[i].is_finite())
+                        .map(|i| (hz[i], vals[i])),
+                );
             }};
         }
         if phase {
@@ -422,7 +435,7 @@ impl FrfPlot<'_> {
                 .configure_mesh()
                 .label_style(("sans-serif", TICK_FONT))
                 .axis_desc_style(("sans-serif", TICK_FONT))
-                .x_desc("frequency (Hz)")
+                .x_desc(&xa.desc)
                 .y_desc(&y_desc)
                 .x_label_formatter(&x_fmt)
                 .y_labels(9)
@@ -430,41 +443,37 @@ impl FrfPlot<'_> {
                 .draw()?;
             finish!(chart);
         } else if self.magnitude == Magnitude::Log {
-            // The legend's panel keeps a band above the curves for it.
-            let (lo, hi) = crate::present::plot::log_axis_range(
-                v0.max(floor) / 1.2,
-                v1.max(floor) * if legend { 6.0 } else { 1.2 },
-            );
+            let (lo, hi) =
+                crate::present::plot::log_axis_range(v0.max(floor) / 1.2, v1.max(floor) * 1.2);
             let mut chart = builder.build_cartesian_2d(x0..x1, (lo..hi).log_scale())?;
             chart
                 .configure_mesh()
                 .label_style(("sans-serif", TICK_FONT))
                 .axis_desc_style(("sans-serif", TICK_FONT))
-                .x_desc("frequency (Hz)")
+                .x_desc(&xa.desc)
                 .y_desc(&y_desc)
                 .x_label_formatter(&x_fmt)
                 .y_label_formatter(&|v| crate::present::plot::log_tick_label(*v))
                 .draw()?;
             finish!(chart);
         } else {
-            let head = if legend { 0.35 } else { 0.05 };
             let (lo, hi) = if self.magnitude == Magnitude::Db {
                 let span = (v1 - v0).max(1.0);
-                (v0 - 0.05 * span, v1 + head * span)
+                (v0 - 0.05 * span, v1 + 0.05 * span)
             } else {
-                (0.0, v1 * (1.03 + head) + 1e-300)
+                (0.0, v1 * 1.05 + 1e-300)
             };
             let (lo, hi) = crate::present::plot::axis_range(lo, hi);
-            let ys = tick_step(lo, hi, 20);
+            let ya = LinearAxis::new(&y_desc, lo, hi, 20);
             let mut chart = builder.build_cartesian_2d(x0..x1, lo..hi)?;
             chart
                 .configure_mesh()
                 .label_style(("sans-serif", TICK_FONT))
                 .axis_desc_style(("sans-serif", TICK_FONT))
-                .x_desc("frequency (Hz)")
-                .y_desc(&y_desc)
+                .x_desc(&xa.desc)
+                .y_desc(&ya.desc)
                 .x_label_formatter(&x_fmt)
-                .y_label_formatter(&|v| tick_label(*v, ys, lo.abs().max(hi.abs())))
+                .y_label_formatter(&|v| ya.label(*v))
                 .draw()?;
             finish!(chart);
         }

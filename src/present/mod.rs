@@ -1,5 +1,6 @@
 //! Presentation: what a person reads. Model summaries ([`summary`], always built), and with
-//! feature `io` the plots as SVG/PNG ([`plot`], the FRF figure [`frf_plot`]), the HTML report
+//! feature `io` the plots as SVG/PNG ([`plot`], their axes [`axis`] and legends
+//! [`legend`], the FRF figure [`frf_plot`]), the HTML report
 //! with the HDF5 data behind its figures ([`report`]) and the terminal ([`console`]: result
 //! lines on stdout that survive a closed pipe, progress lines on stderr only on a terminal).
 //!
@@ -9,9 +10,13 @@
 //! only.
 
 #[cfg(feature = "io")]
+pub mod axis;
+#[cfg(feature = "io")]
 pub mod console;
 #[cfg(feature = "io")]
 pub mod frf_plot;
+#[cfg(feature = "io")]
+pub mod legend;
 #[cfg(feature = "io")]
 pub mod plot;
 #[cfg(feature = "io")]

@@ -88,6 +88,20 @@ pub struct Report {
     h5_tmp: PathBuf,
     h5: RefCell<Option<hdf5::File>>,
     inner: RefCell<Inner>,
+    /// Nesting depth of [`Report::table_text`] guards: lines said meanwhile stay off the page.
+    table_text: std::cell::Cell<u32>,
+}
+
+/// While alive, lines given to [`Report::say`] stay off the page (see
+/// [`Report::table_text`]).
+pub struct TableText<'a>(&'a Report);
+
+impl Drop for TableText<'_> {
+    fn drop(&mut self) {
+        self.0
+            .table_text
+            .set(self.0.table_text.get().saturating_sub(1));
+    }
 }
 
 /// The file name of the page.
@@ -143,6 +157,7 @@ impl Report {
                 names: Default::default(),
                 written: Vec::new(),
             }),
+            table_text: std::cell::Cell::new(0),
         })
     }
 
@@ -182,12 +197,24 @@ impl Report {
         self.with_section(|s| s.skipped = Some(why.to_string()));
     }
 
-    /// Adds a line of the run's summary to the current section.
+    /// Adds a line of the run's summary to the current section (unless a [`TableText`]
+    /// guard is alive).
     pub fn say(&self, line: &str) {
+        if self.table_text.get() > 0 {
+            return;
+        }
         self.with_section(|s| match s.blocks.last_mut() {
             Some(Block::Log(lines)) => lines.push(line.to_string()),
             _ => s.blocks.push(Block::Log(vec![line.to_string()])),
         });
+    }
+
+    /// Keeps the lines said while the returned guard lives off the page: a table drawn in
+    /// text for the terminal and `summary.txt`, which the page shows as a [`Report::table`]
+    /// (a table, not a preformatted block wider than the page).
+    pub fn table_text(&self) -> TableText<'_> {
+        self.table_text.set(self.table_text.get() + 1);
+        TableText(self)
     }
 
     /// Records a seed of the run's random draws (shown in the provenance, stored as an
@@ -528,7 +555,8 @@ impl Drop for Report {
 /// figure or table when printed.
 const CSS: &str = "body{font-family:sans-serif;max-width:1300px;margin:0 auto;padding:0 1em;\
 color:#222}h1{font-size:1.6em}h2{border-bottom:1px solid #ccc;margin-top:1.6em}\
-pre{background:#f6f6f6;padding:.6em;overflow-x:auto;font-size:.85em}\
+pre{background:#f6f6f6;padding:.6em;font-size:.85em;white-space:pre-wrap;\
+overflow-wrap:anywhere}\
 table{border-collapse:collapse;margin:.8em 0}th,td{border:1px solid #ccc;padding:.2em .5em}\
 td.num{text-align:right;font-variant-numeric:tabular-nums}caption{text-align:left;\
 font-weight:bold;padding:.3em 0}table.kv th{text-align:left;background:#f0f0f0}\

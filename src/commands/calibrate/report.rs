@@ -474,6 +474,7 @@ pub fn write_report(dir: &Path, run: &CalibrationRun) -> Result<Vec<PathBuf>> {
                 bar_desc: "fold".into(),
                 y_desc: "fold estimate / estimate (1)".into(),
                 baseline: 1.0,
+                baseline_desc: "full-data estimate".into(),
                 band_desc: "Cramér–Rao ±1σ".into(),
                 groups,
             },

@@ -64,6 +64,7 @@ pub fn run_demo(
         say(&format!("  about        {d}"));
     }
     if !loaded.references.is_empty() {
+        let text = report.table_text();
         say("  references   (values the tests hold this model to)");
         for r in &loaded.references {
             say(&format!(
@@ -71,6 +72,7 @@ pub fn run_demo(
                 r.quantity, r.value, r.unit, r.rtol, r.source
             ));
         }
+        drop(text);
         report.table(
             "model_references",
             crate::present::report::Table {
@@ -119,7 +121,10 @@ pub fn run_demo(
         reduced.modes.clone(),
         cfg.eigen,
     );
-    say(&crate::commands::modes::format_table(&modes));
+    {
+        let _text = report.table_text();
+        say(&crate::commands::modes::format_table(&modes));
+    }
     report.table("modes", crate::commands::modes::table(&modes))?;
     report.data(|root| crate::formats::modes_file::write_group(root, &loaded.model, &modes))?;
     // How much of the static flexibility at each port the truncated modes carry (for a

@@ -163,6 +163,7 @@ pub fn demo_planning(
             hk.join(",")
         )
     };
+    let text = report.table_text();
     say(&format!(
         "  rank  level      band    sensors      harm.   ln det F   Cramér–Rao std ({}, {})  collinearity",
         params[0], params[1]
@@ -183,6 +184,7 @@ pub fn demo_planning(
             say("  ...");
         }
     }
+    drop(text);
     report.table(
         "planning_ranking",
         crate::present::report::Table {
@@ -327,9 +329,12 @@ pub fn demo_virtual_test(
         shaker.stinger_stiffness,
         t.elapsed().as_secs_f64()
     ));
+    let text = report.table_text();
     say(
         "  sweep            open loop: min |F1|/target  max |F3|/|F1|   controlled: iterations mean/max  max force error  steps converged",
     );
+    let mut rows = Vec::new();
+    let mut notes = Vec::new();
     for (s, plan) in plans.iter().enumerate() {
         let o = &open.steps[s];
         let c = &ctl.steps[s];
@@ -351,17 +356,50 @@ pub fn demo_virtual_test(
             cs.converged,
             cs.steps
         ));
+        rows.push(vec![
+            plan.label.clone(),
+            format!("{min_ratio:.3}"),
+            format!("{distortion:.2e}"),
+            format!("{:.1}", cs.mean_iterations),
+            format!("{}", cs.max_iterations),
+            format!("{:.2}", 100.0 * cs.max_force_error),
+            format!("{}/{}", cs.converged, cs.steps),
+        ]);
         // Steps a run could not solve are named, not dropped in silence.
         for (what, steps) in [("open loop", o), ("controlled", c)] {
             let failed = crate::commands::test::run::unsolved_steps(steps, 3);
             if !failed.is_empty() {
-                say(&format!(
-                    "    {what}: structure not solved at step{} {}: left out, a gap in the plots",
+                notes.push(format!(
+                    "  {}, {what}: structure not solved at step{} {}: left out, a gap in the plots",
+                    plan.label,
                     if failed.len() == 1 { "" } else { "s" },
                     failed.join(", ")
                 ));
             }
         }
+    }
+    drop(text);
+    report.table(
+        "virtual_test_runs",
+        crate::present::report::Table {
+            caption: "The virtual test's sweeps: voltage-driven (open loop) and force-controlled"
+                .into(),
+            header: [
+                "sweep",
+                "open loop: min |F1|/target",
+                "open loop: max |F3|/|F1|",
+                "controlled: mean iterations",
+                "controlled: max iterations",
+                "controlled: max force error (%)",
+                "controlled: steps converged",
+            ]
+            .map(String::from)
+            .to_vec(),
+            rows,
+        },
+    )?;
+    for n in &notes {
+        say(n);
     }
     let csv = report.dir().join("virtual_test.csv");
     crate::formats::test_data::write_csv(&csv, &ctl.data)?;

@@ -314,6 +314,24 @@ pub(crate) fn demo_frf(
         out.into_iter().map(|(w, v)| (w / (2.0 * PI), v)).collect()
     };
     let sen = &sys.sensors()[0];
+    // The continuation in the FRF figure's styles: stable blue, unstable red; each part
+    // keeps the point where the other begins, so that the curve is unbroken.
+    let cont = fund(0, &[]);
+    let stable: Vec<bool> = branches[0]
+        .2
+        .points
+        .iter()
+        .map(|p| p.stable() != Some(false))
+        .collect();
+    let part = |want: bool| -> Vec<(f64, f64)> {
+        cont.iter()
+            .enumerate()
+            .map(|(i, &(f, v))| {
+                let keep = stable[i] == want || stable.get(i + 1) == Some(&want);
+                (f, if keep { v } else { f64::NAN })
+            })
+            .collect()
+    };
     let fig = crate::present::plot::Lines {
         title: format!("{}: stepped sines jump at the folds", model.name()),
         x_desc: "frequency (Hz)".into(),
@@ -323,7 +341,8 @@ pub(crate) fn demo_frf(
             crate::formats::files::unit(sen.quantity)
         ),
         series: vec![
-            ("continuation (every branch)".into(), fund(0, &[])),
+            ("continuation, stable".into(), part(true)),
+            ("continuation, unstable".into(), part(false)),
             ("stepped sine up".into(), fund(1, &up_run.skipped)),
             ("stepped sine down".into(), fund(2, &down_run.skipped)),
         ],
@@ -439,6 +458,7 @@ pub(crate) fn demo_calibration(
         config.starts,
         t.elapsed().as_secs_f64()
     ));
+    let text = report.table_text();
     say(
         "  parameter            true          start         metric             estimate      error     Cramér–Rao  10-fold (jackknife)",
     );
@@ -470,6 +490,7 @@ pub(crate) fn demo_calibration(
             ));
         }
     }
+    drop(text);
     report.table(
         "calibration_estimates",
         crate::present::report::Table {
@@ -586,6 +607,7 @@ pub(crate) fn demo_calibration(
         bar_desc: "fold".into(),
         y_desc: "fold estimate / estimate (1)".into(),
         baseline: 1.0,
+        baseline_desc: "full-data estimate".into(),
         band_desc: "Cramér–Rao ±1σ".into(),
         groups,
     };

@@ -468,6 +468,7 @@ pub fn write_plan_report(dir: &Path, run: &PlanRun) -> Result<Vec<PathBuf>> {
             bar_desc: "design".into(),
             y_desc: "std (% of the nominal value)".into(),
             baseline: 0.0,
+            baseline_desc: String::new(),
             band_desc: String::new(),
             groups,
         },
