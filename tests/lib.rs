@@ -1248,6 +1248,60 @@ mod cli {
         let (k3, cr): (f64, f64) = (row[1].parse().unwrap(), row[2].parse().unwrap());
         assert!(cr > 0.0 && cr < 0.02 * 6e9, "Cramér–Rao {cr}");
         assert!((k3 - 6e9).abs() < 3.0 * cr, "k3 {k3} ± {cr}");
+        // The χ²-scaled std rides beside the bound; the demo's noise model is right, so no
+        // warning and the two agree within χ²'s spread.
+        let scaled: f64 = row[8].parse().unwrap();
+        assert!((0.8..1.25).contains(&(scaled / cr)), "{scaled} vs {cr}");
+        assert!(
+            out.contains("chi2-scaled") && !out.contains("warning: reduced chi2"),
+            "{out}"
+        );
+        // The same data with its noise stated 10× too small (relative part and floor): χ²
+        // 100× larger, the bound 10× smaller, and a warning; the scaled std does not depend
+        // on one common factor of σ, so it stays (up to where the optimiser stops).
+        let under = report.join("understated.csv");
+        let text10: String = std::fs::read_to_string(&csv)
+            .unwrap()
+            .lines()
+            .map(|l| match l.split_once(", absolute=") {
+                Some((head, abs)) if l.starts_with("# channel:") => format!(
+                    "{}, absolute={:e}\n",
+                    head.replace("relative=2e-2", "relative=2e-3"),
+                    abs.parse::<f64>().unwrap() / 10.0
+                ),
+                _ => format!("{l}\n"),
+            })
+            .collect();
+        assert!(text10.contains("relative=2e-3"));
+        std::fs::write(&under, text10).unwrap();
+        let est10 = report.join("estimates10.csv");
+        let (rc, out, err) = nlsim(&[
+            "calibrate",
+            "ecl_beam",
+            under.to_str().unwrap(),
+            "--param",
+            "tip_spring.k3=6e7:6e11",
+            "--compare",
+            "1,3",
+            "--modes",
+            "12",
+            "--lhs",
+            "16",
+            "--folds",
+            "0",
+            "--out",
+            est10.to_str().unwrap(),
+        ]);
+        assert_eq!(rc, 0, "{out}{err}");
+        assert!(out.contains("warning: reduced chi2"), "{out}");
+        let text = std::fs::read_to_string(&est10).unwrap();
+        let row: Vec<&str> = text.lines().nth(1).unwrap().split(',').collect();
+        let (cr10, scaled10): (f64, f64) = (row[2].parse().unwrap(), row[8].parse().unwrap());
+        assert!(((cr10 / cr) - 0.1).abs() < 2e-3, "{cr10} vs {cr}");
+        assert!(
+            ((scaled10 / scaled) - 1.0).abs() < 0.02,
+            "{scaled10} vs {scaled}"
+        );
         // A malformed data file names the file, the line and the column.
         let bad = report.join("bad.csv");
         let mut lines: Vec<String> = std::fs::read_to_string(&csv)

@@ -60,5 +60,5 @@ pub use plan::{
 pub use shaker::{
     ControlConfig, Shaker, StepControl, VirtualTest, virtual_test, virtual_test_with,
 };
-pub use stats::CramerRao;
+pub use stats::{CHI2_WARN, CramerRao};
 pub use synthetic::{Gaussian, SweepPlan, synthesize};

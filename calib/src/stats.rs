@@ -23,7 +23,19 @@ pub struct CramerRao {
     pub most_correlated: Option<(usize, usize, f64)>,
     /// `2·cost/(m − n)`: about 1 when the noise model is right.
     pub reduced_chi2: f64,
+    /// Standard deviations with the noise scaled to the misfit, `std_j · √χ²_red`: the
+    /// covariance `s² (JᵀJ)⁻¹`, `s² = χ²_red`, of least squares with an unknown noise level.
+    /// Equal to [`CramerRao::std`] in expectation when the noise model is right; the honest
+    /// spread when the residuals exceed the noise model (understated noise), though not a
+    /// cure for a wrong model.
+    pub scaled_std: Vec<f64>,
 }
+
+/// A reduced χ² above this says the residuals are well beyond the noise model (σ
+/// understated by 40 % or more, or a model that cannot follow the data), and
+/// [`CramerRao::misfit_warning`] says so. With the right noise model χ²_red has mean 1 and
+/// standard deviation √(2/ν): 2 is more than 7 of them away for ν ≥ 100 points.
+pub const CHI2_WARN: f64 = 2.0;
 
 impl CramerRao {
     /// The bound at estimate `p` from `jacobian` (weighted residuals × parameters, physical
@@ -74,6 +86,7 @@ impl CramerRao {
         } else {
             f64::NAN
         };
+        let scaled_std = std.iter().map(|s| s * reduced_chi2.sqrt()).collect();
         Self {
             covariance,
             std,
@@ -81,7 +94,22 @@ impl CramerRao {
             collinearity,
             most_correlated,
             reduced_chi2,
+            scaled_std,
         }
+    }
+
+    /// A one-line warning when the reduced χ² exceeds [`CHI2_WARN`]: the Cramér–Rao std
+    /// assumes the noise model and is `√χ²_red` times smaller than the spread the misfit
+    /// implies.
+    pub fn misfit_warning(&self) -> Option<String> {
+        let c = self.reduced_chi2;
+        (c > CHI2_WARN).then(|| {
+            format!(
+                "reduced chi2 {c:.3} >> 1: the residuals are {:.2}x the noise model (noise                  understated, or a model that cannot follow the data); the Cramér–Rao std                  assumes the noise model and is {:.2}x smaller than the chi2-scaled std",
+                c.sqrt(),
+                c.sqrt()
+            )
+        })
     }
 }
 
@@ -123,6 +151,18 @@ mod tests {
         assert_eq!((i, k), (0, 1));
         assert!((c + 0.2 / (0.6f64 * 0.1).sqrt()).abs() < 1e-12);
         assert!(cr.collinearity > 1.0 && cr.collinearity.is_finite());
+        // Zero residuals: χ² 0, no warning, scaled std 0.
+        assert_eq!(cr.reduced_chi2, 0.0);
+        assert!(cr.misfit_warning().is_none() && cr.scaled_std == vec![0.0, 0.0]);
+        // Residuals r = 3 each over 3 degrees of freedom: χ²_red = 15, std scaled by √15.
+        let cr = CramerRao::new(&j, &[3.0; 5], &[2.0, 3.0]);
+        assert!((cr.reduced_chi2 - 15.0).abs() < 1e-12);
+        assert!((cr.scaled_std[1] - (0.1f64 * 15.0).sqrt()).abs() < 1e-12);
+        let w = cr.misfit_warning().unwrap();
+        assert!(
+            w.contains("reduced chi2 15.000") && w.contains("3.87x"),
+            "{w}"
+        );
     }
 
     #[test]

@@ -288,3 +288,62 @@ fn bad_settings_and_unknown_names_are_errors() {
     };
     assert!(calibrate(&obj, &cfg).is_err());
 }
+
+/// Noise understated 10× (3 % noise weighted as 0.3 %): the reduced χ² is about 100, the
+/// Cramér–Rao std 10× smaller than with the right weights (it assumes the stated noise),
+/// the χ²-scaled std 10× the Cramér–Rao std and equal to the right-noise bound within the
+/// sampling spread of χ², and the warning is given; with the right weights it is not.
+#[test]
+fn understated_noise_is_flagged_and_the_scaled_std_restores_the_spread() {
+    let sys = ecl(3);
+    let fit = |weight: f64| {
+        let d = Arc::new(data(&sys, 0.03, 11, weight));
+        let obj = FrfObjective::new(
+            &sys,
+            d,
+            specs_of(&sys),
+            ObjectiveConfig {
+                harmonics: vec![1, 3],
+                form: Form::Complex,
+                ..ObjectiveConfig::default()
+            },
+        )
+        .unwrap();
+        let cfg = CalibrationConfig {
+            lhs_samples: 8,
+            starts: 1,
+            seed: 3,
+            ..Default::default()
+        };
+        calibrate(&obj, &cfg).unwrap().cramer_rao
+    };
+    let right = fit(0.03);
+    let under = fit(0.003);
+    // ν = 2·(17 + 21)·2·2 − 2 = 302 points: χ²_red = 1 ± 0.08 with the right weights.
+    assert!(
+        (0.75..1.25).contains(&right.reduced_chi2),
+        "{}",
+        right.reduced_chi2
+    );
+    assert!(right.misfit_warning().is_none());
+    assert!(
+        (75.0..125.0).contains(&under.reduced_chi2),
+        "{}",
+        under.reduced_chi2
+    );
+    let w = under.misfit_warning().expect("a warning");
+    assert!(w.contains("the residuals are"), "{w}");
+    for j in 0..2 {
+        let ratio = under.scaled_std[j] / under.std[j];
+        assert!((ratio - under.reduced_chi2.sqrt()).abs() < 1e-9 * ratio);
+        assert!((8.6..11.2).contains(&ratio), "param {j}: scaled/CR {ratio}");
+        // The same estimate up to the optimiser's tolerance, so the bound scales with σ.
+        let cr = under.std[j] / right.std[j];
+        assert!((cr - 0.1).abs() < 2e-3, "param {j}: CR ratio {cr}");
+        // The scaled std is the right-noise bound within χ²'s sampling spread (√χ² ± 8 %).
+        let back = under.scaled_std[j] / right.std[j];
+        assert!((0.85..1.15).contains(&back), "param {j}: {back}");
+        let agree = right.scaled_std[j] / right.std[j];
+        assert!((0.85..1.15).contains(&agree), "param {j}: {agree}");
+    }
+}

@@ -181,6 +181,7 @@ def _calibration_frame(self: Calibration):
     cols = {
         "estimate": self.estimate,
         "cramer_rao_std": self.cramer_rao_std,
+        "chi2_scaled_std": self.chi2_scaled_std,
     }
     if self.kfold_mean is not None:
         cols["kfold_mean"] = self.kfold_mean

@@ -191,6 +191,9 @@ class Calibration:
     def cramer_rao_std(self) -> npt.NDArray[np.float64]:
         """(param,)"""
     @property
+    def chi2_scaled_std(self) -> npt.NDArray[np.float64]:
+        """(param,): cramer_rao_std * sqrt(reduced_chi2)"""
+    @property
     def covariance(self) -> npt.NDArray[np.float64]:
         """(param, param)"""
     @property

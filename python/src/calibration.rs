@@ -68,6 +68,13 @@ impl Calibration {
         vec1(py, self.c.cramer_rao.std.clone())
     }
 
+    /// Cramér–Rao standard deviations scaled by √(reduced χ²): the spread when the residuals
+    /// exceed the noise model, shape `(param,)` (docs/calibration.md).
+    #[getter]
+    fn chi2_scaled_std<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        vec1(py, self.c.cramer_rao.scaled_std.clone())
+    }
+
     /// The Cramér–Rao covariance, shape `(param, param)`.
     #[getter]
     fn covariance<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {

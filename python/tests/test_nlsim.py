@@ -169,6 +169,8 @@ def test_calibration_equals_the_command_line_and_finds_the_truth(tmp_path: Path)
         assert c.jackknife_std[j] == float(r[5])
         assert c.at_bound[j] == (r[6] == "true")
         assert c.poorly_identified[j] == (r[7] == "true")
+        assert c.chi2_scaled_std[j] == float(r[8])
+        assert c.chi2_scaled_std[j] == c.cramer_rao_std[j] * math.sqrt(c.reduced_chi2)
     assert c.status == "converged"
     assert abs(c.estimate[0] - 6e9) < 3 * c.cramer_rao_std[0]
     # 16 Latin-hypercube candidates and the model's own values.

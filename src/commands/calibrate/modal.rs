@@ -117,17 +117,21 @@ impl ModalRun {
                  index {:.2}",
                 c.cost, c.cramer_rao.reduced_chi2, c.cramer_rao.collinearity
             ),
-            format!(
-                "{:<22} {:>14} {:>14}  flags",
-                "parameter", "estimate", "Cramér–Rao"
-            ),
         ];
+        if let Some(w) = c.cramer_rao.misfit_warning() {
+            v.push(format!("warning: {w}"));
+        }
+        v.push(format!(
+            "{:<22} {:>14} {:>14} {:>14}  flags",
+            "parameter", "estimate", "Cramér–Rao", "chi2-scaled"
+        ));
         for (j, p) in c.params.iter().enumerate() {
             v.push(format!(
-                "{:<22} {:>14.6e} {:>14.3e}  {}",
+                "{:<22} {:>14.6e} {:>14.3e} {:>14.3e}  {}",
                 p.to_string(),
                 c.estimate[j],
                 c.cramer_rao.std[j],
+                c.cramer_rao.scaled_std[j],
                 if c.at_bound[j] { "at bound" } else { "" }
             ));
         }
@@ -174,12 +178,12 @@ impl ModalRun {
     /// Estimates and statistics, one row per parameter.
     pub fn estimates_csv(&self) -> String {
         let c = &self.calibration;
-        let mut csv = String::from("param,estimate,cramer_rao_std,at_bound\n");
+        let mut csv = String::from("param,estimate,cramer_rao_std,at_bound,chi2_scaled_std\n");
         for (j, p) in c.params.iter().enumerate() {
             let _ = writeln!(
                 csv,
-                "{p},{:?},{:?},{}",
-                c.estimate[j], c.cramer_rao.std[j], c.at_bound[j]
+                "{p},{:?},{:?},{},{:?}",
+                c.estimate[j], c.cramer_rao.std[j], c.at_bound[j], c.cramer_rao.scaled_std[j]
             );
         }
         csv

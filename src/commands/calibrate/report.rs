@@ -54,6 +54,9 @@ impl CalibrationRun {
                 c.cost, c.cramer_rao.reduced_chi2, c.cramer_rao.collinearity
             ),
         ];
+        if let Some(w) = c.cramer_rao.misfit_warning() {
+            v.push(format!("warning: {w}"));
+        }
         if let Some(fe) = self.prepared.objective.fe_stats() {
             v.push(if fe.parametric {
                 format!(
@@ -96,15 +99,16 @@ impl CalibrationRun {
             ));
         }
         v.push(format!(
-            "{:<22} {:>14} {:>14} {:>14}  flags",
-            "parameter", "estimate", "Cramér–Rao", "k-fold (jk)"
+            "{:<22} {:>14} {:>14} {:>14} {:>14}  flags",
+            "parameter", "estimate", "Cramér–Rao", "chi2-scaled", "k-fold (jk)"
         ));
         for (j, p) in c.params.iter().enumerate() {
             v.push(format!(
-                "{:<22} {:>14.6e} {:>14.3e} {:>14.3e}  {}",
+                "{:<22} {:>14.6e} {:>14.3e} {:>14.3e} {:>14.3e}  {}",
                 p.to_string(),
                 c.estimate[j],
                 c.cramer_rao.std[j],
+                c.cramer_rao.scaled_std[j],
                 c.kfold.as_ref().map_or(f64::NAN, |k| k.jackknife_std[j]),
                 self.flags(j)
             ));
@@ -130,20 +134,21 @@ impl CalibrationRun {
     pub fn estimates_csv(&self) -> String {
         let c = &self.calibration;
         let mut csv = String::from(
-            "param,estimate,cramer_rao_std,kfold_mean,kfold_std,jackknife_std,at_bound,poorly_identified\n",
+            "param,estimate,cramer_rao_std,kfold_mean,kfold_std,jackknife_std,at_bound,poorly_identified,chi2_scaled_std\n",
         );
         for (j, p) in c.params.iter().enumerate() {
             let kf = c.kfold.as_ref();
             let _ = writeln!(
                 csv,
-                "{p},{:?},{:?},{:?},{:?},{:?},{},{}",
+                "{p},{:?},{:?},{:?},{:?},{:?},{},{},{:?}",
                 c.estimate[j],
                 c.cramer_rao.std[j],
                 kf.map_or(f64::NAN, |k| k.mean[j]),
                 kf.map_or(f64::NAN, |k| k.std[j]),
                 kf.map_or(f64::NAN, |k| k.jackknife_std[j]),
                 c.at_bound[j],
-                c.poorly_identified[j]
+                c.poorly_identified[j],
+                c.cramer_rao.scaled_std[j]
             );
         }
         csv
