@@ -1959,6 +1959,126 @@ mod frf_cli {
     use super::*;
     use faer::c64;
     use hdf5_metno as hdf5;
+    use std::f64::consts::PI;
+
+    /// A linear model (no nonlinear element) has an FRF: `frf` refused it ("has no nonlinear
+    /// element"), so a linear baseline needed a dummy cubic with k3 = 0. The two-mass chain
+    /// with Rayleigh damping against the dense solve `Y = −Ω² (K − Ω²M + iΩC)⁻¹ F`: two modes
+    /// of two DOFs are the whole model, so they agree to the CSV's ten significant digits
+    /// (each part rounded to 5e-10 of itself, at most 7.1e-10 of |Y|; 2e-9 allowed); no
+    /// higher harmonic, every point stable. Then `test` and `calibrate` on it.
+    #[test]
+    fn a_linear_model_has_an_frf_and_calibrates() {
+        let d = scratch("frf-linear");
+        let model = d.join("lin.toml");
+        std::fs::write(
+            &model,
+            "name = \"chain2\"\n[matrices]\ndofs = [\"1:u\", \"2:u\"]\n\
+             mass = [[1.0, 0.0], [0.0, 0.5]]\n\
+             stiffness = [[2.0e4, -1.0e4], [-1.0e4, 1.0e4]]\n\
+             [damping]\ntype = \"rayleigh\"\nf1_hz = 10.0\nzeta1 = 0.02\nf2_hz = 40.0\nzeta2 = 0.02\n\
+             [[excitation]]\nname = \"shaker\"\ndof = \"2:u\"\namplitude = 5.0\n\
+             [[sensor]]\nname = \"m2\"\ndof = \"2:u\"\nquantity = \"acceleration\"\n",
+        )
+        .unwrap();
+        let csv = d.join("f.csv");
+        let (rc, out, err) = nlsim(&[
+            "frf",
+            model.to_str().unwrap(),
+            "--from",
+            "5",
+            "--to",
+            "40",
+            "--points",
+            "50",
+            "--harmonics",
+            "3",
+            "--out",
+            csv.to_str().unwrap(),
+        ]);
+        assert_eq!(rc, 0, "{out}{err}");
+        // Rayleigh C = αM + βK with ζ = α/(2ω) + βω/2 at 10 and 40 Hz.
+        let (w1, w2) = (2.0 * PI * 10.0, 2.0 * PI * 40.0);
+        let beta = 2.0 * 0.02 * (w2 - w1) / (w2 * w2 - w1 * w1);
+        let alpha = 2.0 * 0.02 * w1 - beta * w1 * w1;
+        let (m, k) = ([[1.0, 0.0], [0.0, 0.5]], [[2.0e4, -1.0e4], [-1.0e4, 1.0e4]]);
+        let text = std::fs::read_to_string(&csv).unwrap();
+        let header: Vec<&str> = text
+            .lines()
+            .find(|l| l.starts_with("frequency_hz"))
+            .unwrap()
+            .split(',')
+            .collect();
+        let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+        let mut n = 0;
+        for line in text
+            .lines()
+            .filter(|l| !l.starts_with('#') && !l.starts_with("freq"))
+        {
+            let v: Vec<f64> = line.split(',').map(|x| x.parse().unwrap()).collect();
+            let w = 2.0 * PI * v[0];
+            // Z = K − ω²M + iω(αM + βK); Y = −ω² Z⁻¹ (0, 5)ᵀ at DOF 2.
+            let z = |i: usize, j: usize| {
+                c64::new(
+                    k[i][j] - w * w * m[i][j],
+                    w * (alpha * m[i][j] + beta * k[i][j]),
+                )
+            };
+            let det = z(0, 0) * z(1, 1) - z(0, 1) * z(1, 0);
+            let want = z(0, 0) * 5.0 / det * (-w * w);
+            let got = c64::new(v[col("m2_h1_re_m_per_s2")], v[col("m2_h1_im_m_per_s2")]);
+            assert!(
+                (got - want).norm() <= 2e-9 * want.norm(),
+                "{} Hz: {got} vs {want}",
+                v[0]
+            );
+            for h in [0, 2, 3] {
+                assert_eq!(v[col(&format!("m2_h{h}_re_m_per_s2"))], 0.0);
+            }
+            assert_eq!(v[col("stable")], 1.0);
+            n += 1;
+        }
+        assert!(n >= 50, "{n} points");
+        // The linear baseline of a calibration: a virtual test of the chain (2 % noise) and
+        // the second mode's frequency and damping back within 3 Cramér–Rao deviations of the
+        // closed forms: λ² − 4e4 λ + 2e8 = 0 for M⁻¹K, ζ = α/(2ω) + βω/2.
+        let test = d.join("test.toml");
+        std::fs::write(
+            &test,
+            "harmonics = 1\nmodes = 2\nseed = 1\nnoise = { relative = 0.02 }\nout = \"t.csv\"\n\
+             [[sweep]]\nlabel = \"1 N up\"\nfrom = 20.0\nto = 40.0\nsteps = 41\nforce = 1.0\n",
+        )
+        .unwrap();
+        let (rc, out, err) = nlsim(&["test", model.to_str().unwrap(), test.to_str().unwrap()]);
+        assert_eq!(rc, 0, "{out}{err}");
+        let est = d.join("est.csv");
+        let (rc, out, err) = nlsim(&[
+            "calibrate",
+            model.to_str().unwrap(),
+            d.join("t.csv").to_str().unwrap(),
+            "--param",
+            "mode2.f=20:40",
+            "--param",
+            "mode2.zeta=0.001:0.2",
+            "--out",
+            est.to_str().unwrap(),
+        ]);
+        assert_eq!(rc, 0, "{out}{err}");
+        let w2 = (2e4f64 + (4e8f64 - 2e8).sqrt()).sqrt();
+        let truth = [w2 / (2.0 * PI), alpha / (2.0 * w2) + beta * w2 / 2.0];
+        let text = std::fs::read_to_string(&est).unwrap();
+        for (j, line) in text.lines().skip(1).enumerate() {
+            let v: Vec<&str> = line.split(',').collect();
+            let (e, cr): (f64, f64) = (v[1].parse().unwrap(), v[2].parse().unwrap());
+            assert!(
+                cr > 0.0 && (e - truth[j]).abs() < 3.0 * cr,
+                "{}: {e} ± {cr} vs {}",
+                v[0],
+                truth[j]
+            );
+        }
+        let _ = std::fs::remove_dir_all(&d);
+    }
 
     /// `frf --set mode2.f=24` sets a parameter of the reduced model (what `calibrate`
     /// estimates on a modal model), which `frf` refused ("unknown parameter 'mode2.f'"): at a

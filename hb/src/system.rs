@@ -503,12 +503,6 @@ impl HbSystem {
             ..
         } = parts;
         let np = linear.phi.nrows();
-        if elements.is_empty() {
-            return Err(Error::invalid(
-                "harmonic balance",
-                "the model has no nonlinear element; its FRF is linear (use `nlsim modes`)",
-            ));
-        }
         let bad = |what: String, p: usize| {
             Error::invalid(what, format!("port {p} is out of range ({np} ports)"))
         };

@@ -865,10 +865,6 @@ pub fn frf(
     let m = subject.model();
     let name = m.name().to_string();
     for (empty, what) in [
-        (
-            m.elements().is_empty(),
-            "no nonlinear element: its FRF is linear (see nlsim.modes)",
-        ),
         (m.excitation().is_empty(), "no excitation point to force"),
         (m.sensors().is_empty(), "no sensor to report"),
     ] {

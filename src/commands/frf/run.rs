@@ -65,11 +65,6 @@ pub fn run_frf_shared(
 ) -> Result<FrfRun> {
     let set = req.check()?;
     let name = model.name();
-    if model.elements().is_empty() {
-        return Err(Error::Usage(format!(
-            "model '{name}' has no nonlinear element: its FRF is linear (see `nlsim modes`)"
-        )));
-    }
     if model.excitation().is_empty() {
         return Err(Error::Usage(format!(
             "model '{name}' has no excitation point to force"
