@@ -4055,6 +4055,11 @@ seed = 9
                 &["bad.toml:1", "compare", "[4]"],
             ),
             (
+                "fold_by",
+                format!("fold_by = \"levels\"\n{base}"),
+                &["bad.toml:1", "fold_by", "'levels'", "points", "sweeps"],
+            ),
+            (
                 "out",
                 format!("out = \"e.txt\"\n{base}"),
                 &["bad.toml:1", "out", ".csv"],

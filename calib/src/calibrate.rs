@@ -5,6 +5,7 @@
 //! Every random draw comes from the recorded seed, and every parallel task is independent and
 //! sequential inside, so the estimates are bit-identical for any number of threads.
 
+use crate::data::TestData;
 use crate::lhs::{maximin_latin_hypercube, to_range};
 use crate::lm::{LeastSquares, LmConfig, LmReport, levenberg_marquardt};
 use crate::objective::{
@@ -31,8 +32,23 @@ pub struct CalibrationConfig {
     pub starts: usize,
     /// Levenberg–Marquardt settings.
     pub lm: LmConfig,
-    /// Folds of the cross validation (0: none; at least 2 otherwise).
+    /// Folds of the cross validation (0: none; at least 2 otherwise). With
+    /// [`FoldBy::Sweeps`] any non-zero value means one fold per sweep.
     pub folds: usize,
+    /// How points are dealt into folds.
+    pub fold_by: FoldBy,
+}
+
+/// How the cross validation deals the data into folds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FoldBy {
+    /// A seeded shuffle of all points dealt round-robin: every fold holds steps of every
+    /// sweep (the statistics of the parameters).
+    #[default]
+    Points,
+    /// One fold per sweep: each sweep (force level) is held out whole and predicted from
+    /// the others — the validation of a model on a level it was not trained on (thesis §4.6).
+    Sweeps,
 }
 
 impl Default for CalibrationConfig {
@@ -44,6 +60,7 @@ impl Default for CalibrationConfig {
             starts: 3,
             lm: LmConfig::default(),
             folds: 10,
+            fold_by: FoldBy::Points,
         }
     }
 }
@@ -104,6 +121,9 @@ impl CalibrationConfig {
                 "calibration settings",
                 "starts must be at least 1",
             ));
+        }
+        if self.fold_by == FoldBy::Sweeps {
+            return Ok(());
         }
         if self.folds == 1 || self.folds > n_points {
             return Err(Error::invalid(
@@ -335,7 +355,7 @@ pub fn calibrate_from_candidates(
         })
         .collect();
     let status = best.report.status;
-    let kfold = if config.folds >= 2 {
+    let kfold = if config.folds > 0 {
         Some(kfold(objective, &estimate, config, progress)?)
     } else {
         None
@@ -353,6 +373,38 @@ pub fn calibrate_from_candidates(
         cost,
         kfold,
     })
+}
+
+/// The fold of every point of `data` and the number of folds, as `config` deals them
+/// ([`FoldBy`]); `k = 0` when `config.folds` is 0.
+pub fn fold_plan(data: &TestData, config: &CalibrationConfig) -> Result<(Vec<usize>, usize)> {
+    let n_points = data.n_points();
+    config.validate(n_points)?;
+    if config.folds == 0 {
+        return Ok((vec![0; n_points], 0));
+    }
+    match config.fold_by {
+        FoldBy::Points => Ok((
+            fold_assignment(n_points, config.folds, config.seed),
+            config.folds,
+        )),
+        FoldBy::Sweeps => {
+            if data.sweeps.len() < 2 {
+                return Err(Error::invalid(
+                    "calibration settings",
+                    format!(
+                        "fold_by = sweeps holds each sweep out in turn and the data has {} \
+                         sweep(s); give at least 2, or fold by points",
+                        data.sweeps.len()
+                    ),
+                ));
+            }
+            Ok((
+                data.points().iter().map(|p| p.sweep).collect(),
+                data.sweeps.len(),
+            ))
+        }
+    }
 }
 
 /// Fold of every data point: a seeded shuffle of the points dealt round-robin into `k` folds.
@@ -393,9 +445,7 @@ pub fn fold(
     config: &CalibrationConfig,
     f: usize,
 ) -> Result<FoldResult> {
-    let n_points = objective.data().n_points();
-    config.validate(n_points)?;
-    let k = config.folds;
+    let (fold_of, k) = fold_plan(objective.data(), config)?;
     if f >= k {
         return Err(Error::invalid(
             "cross validation",
@@ -412,7 +462,6 @@ pub fn fold(
             ),
         ));
     }
-    let fold_of = fold_assignment(n_points, k, config.seed);
     let (lo, hi) = objective.internal_bounds();
     let rms = |r: &[f64]| (r.iter().map(|v| v * v).sum::<f64>() / r.len().max(1) as f64).sqrt();
     let mut obj = objective.clone();
@@ -448,9 +497,7 @@ pub fn kfold(
     config: &CalibrationConfig,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<KFold> {
-    let n_points = objective.data().n_points();
-    let k = config.folds;
-    config.validate(n_points)?;
+    let (fold_of, k) = fold_plan(objective.data(), config)?;
     let done = AtomicUsize::new(0);
     let results: Vec<Result<FoldResult>> = (0..k)
         .into_par_iter()
@@ -462,7 +509,7 @@ pub fn kfold(
         })
         .collect();
     let folds = results.into_iter().collect::<Result<Vec<_>>>()?;
-    KFold::from_folds(fold_assignment(n_points, k, config.seed), folds)
+    KFold::from_folds(fold_of, folds)
 }
 
 impl KFold {

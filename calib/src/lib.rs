@@ -36,9 +36,10 @@ pub mod stats;
 pub mod synthetic;
 
 pub use calibrate::{
-    Calibration, CalibrationConfig, Candidate, FoldResult, KFold, MAX_FOLDS, MAX_LHS_SAMPLES,
-    MAX_MAXIMIN_SWAPS, MAX_STARTS, Progress, StartRun, calibrate, calibrate_from_candidates,
-    calibrate_with_progress, candidate_points, fold, fold_assignment, kfold,
+    Calibration, CalibrationConfig, Candidate, FoldBy, FoldResult, KFold, MAX_FOLDS,
+    MAX_LHS_SAMPLES, MAX_MAXIMIN_SWAPS, MAX_STARTS, Progress, StartRun, calibrate,
+    calibrate_from_candidates, calibrate_with_progress, candidate_points, fold, fold_assignment,
+    fold_plan, kfold,
 };
 pub use data::{Channel, Noise, PointId, Step, Sweep, SweepDirection, TestData};
 pub use lhs::{Spacing, latin_hypercube, maximin_latin_hypercube};

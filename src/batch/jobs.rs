@@ -441,6 +441,15 @@ impl Batch {
                             ),
                         ));
                     }
+                    if req.config.fold_by == nlsim_calib::FoldBy::Sweeps {
+                        return Err(err(
+                            at("fold_by"),
+                            "calibrate.fold_by",
+                            "'calibrate-folds' deals folds by points; run `nlsim calibrate \
+                             --fold-by sweeps` (one fold per sweep) in one process"
+                                .to_string(),
+                        ));
+                    }
                     BatchCommand::CalibrateFolds(Box::new(req), values)
                 }
             }

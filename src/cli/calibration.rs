@@ -74,6 +74,11 @@ pub struct CalibrateArgs {
     /// Folds of the cross validation (0: none) [default: 10].
     #[arg(long)]
     folds: Option<usize>,
+    /// How the folds are dealt: `points` (a seeded shuffle of the steps) or `sweeps` (each
+    /// sweep, e.g. a force level, held out whole and predicted from the others; one fold per
+    /// sweep) [default: points].
+    #[arg(long, value_parser = ["points", "sweeps"])]
+    fold_by: Option<String>,
     /// Seed of the Latin hypercube and of the folds [default: 1].
     #[arg(long)]
     seed: Option<u64>,
@@ -190,6 +195,10 @@ impl CalibrateArgs {
         }
         if let Some(s) = self.seed {
             c.seed = s;
+        }
+        if let Some(f) = &self.fold_by {
+            c.fold_by = crate::commands::calibrate::request::parse_fold_by(f)
+                .map_err(|m| crate::Error::Usage(format!("--fold-by {m}")))?;
         }
         if let Some(s) = self.shape_noise {
             req.shape_noise = s;

@@ -113,6 +113,21 @@ impl CalibrationRun {
                 self.flags(j)
             ));
         }
+        if let (Some(k), nlsim_calib::FoldBy::Sweeps) =
+            (c.kfold.as_ref(), self.request.config.fold_by)
+        {
+            let per: Vec<String> = d
+                .sweeps
+                .iter()
+                .zip(&k.held_out_rms)
+                .map(|(s, r)| format!("{} {r:.3}", s.label))
+                .collect();
+            v.push(format!(
+                "each sweep held out and predicted from the others: rms weighted residual \
+                 (1 = the noise level) {}",
+                per.join(", ")
+            ));
+        }
         v
     }
 

@@ -226,6 +226,7 @@ pub(crate) struct CalibrationTable {
     lhs: Option<usize>,
     starts: Option<usize>,
     folds: Option<usize>,
+    fold_by: Option<String>,
     seed: Option<u64>,
     maximin_swaps: Option<usize>,
     lm: Option<LmTable>,
@@ -268,6 +269,10 @@ impl CalibrationTable {
             Some(s) => return Err(err("form", format!("'{s}': use complex or log-magnitude"))),
         };
         let d = CalibrationRequest::new("", "", Vec::new());
+        let fold_by = match self.fold_by.as_deref() {
+            None => nlsim_calib::FoldBy::default(),
+            Some(s) => parse_fold_by(s).map_err(|m| err("fold_by", m))?,
+        };
         let branch = match self.branch.as_deref() {
             None => d.branch,
             Some(s) => parse_branch(s).map_err(|m| err("branch", m))?,
@@ -306,6 +311,7 @@ impl CalibrationTable {
                 starts: self.starts.unwrap_or(dc.starts),
                 lm,
                 folds: self.folds.unwrap_or(dc.folds),
+                fold_by,
             },
             fe,
             out: self.out.as_deref().map(rel),
@@ -314,6 +320,17 @@ impl CalibrationTable {
         };
         req.check().map_err(|e| file.located("calibration", e))?;
         Ok(req)
+    }
+}
+
+/// Parses how the cross validation deals its folds: `points` or `sweeps`.
+pub fn parse_fold_by(s: &str) -> std::result::Result<nlsim_calib::FoldBy, String> {
+    match s {
+        "points" => Ok(nlsim_calib::FoldBy::Points),
+        "sweeps" => Ok(nlsim_calib::FoldBy::Sweeps),
+        _ => Err(format!(
+            "'{s}': use points (a seeded shuffle of the steps) or sweeps (each sweep held out)"
+        )),
     }
 }
 

@@ -201,7 +201,7 @@ pub fn estimate_calibration(req: &CalibrationRequest) -> Result<CalibrationEstim
         cost_seconds,
         jacobian_seconds,
         starts: req.config.starts.min(points.len()),
-        folds: req.config.folds,
+        folds: nlsim_calib::fold_plan(obj.data(), &req.config)?.1,
         max_iterations: req.config.lm.max_iterations,
         threads: rayon::current_num_threads(),
     })
