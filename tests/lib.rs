@@ -1223,23 +1223,27 @@ mod cli {
         // deviations (about 0.4 % each with 2 % noise and harmonics 1 and 3).
         let csv = report.join("virtual_test.csv");
         let est = report.join("estimates.csv");
-        let (rc, out, err) = nlsim(&[
-            "calibrate",
-            "ecl_beam",
-            csv.to_str().unwrap(),
-            "--param",
-            "tip_spring.k3=6e7:6e11",
-            "--compare",
-            "1,3",
-            "--modes",
-            "12",
-            "--lhs",
-            "16",
-            "--folds",
-            "4",
-            "--out",
-            est.to_str().unwrap(),
-        ]);
+        // k3 of the tip spring from `data` with `folds` folds, estimates to `out`.
+        let calibrate = |data: &Path, folds: &str, out: &Path| {
+            nlsim(&[
+                "calibrate",
+                "ecl_beam",
+                data.to_str().unwrap(),
+                "--param",
+                "tip_spring.k3=6e7:6e11",
+                "--compare",
+                "1,3",
+                "--modes",
+                "12",
+                "--lhs",
+                "16",
+                "--folds",
+                folds,
+                "--out",
+                out.to_str().unwrap(),
+            ])
+        };
+        let (rc, out, err) = calibrate(&csv, "4", &est);
         assert_eq!(rc, 0, "{out}{err}");
         assert!(out.contains("converged in"), "{out}");
         let text = std::fs::read_to_string(&est).unwrap();
@@ -1275,23 +1279,7 @@ mod cli {
         assert!(text10.contains("relative=2e-3"));
         std::fs::write(&under, text10).unwrap();
         let est10 = report.join("estimates10.csv");
-        let (rc, out, err) = nlsim(&[
-            "calibrate",
-            "ecl_beam",
-            under.to_str().unwrap(),
-            "--param",
-            "tip_spring.k3=6e7:6e11",
-            "--compare",
-            "1,3",
-            "--modes",
-            "12",
-            "--lhs",
-            "16",
-            "--folds",
-            "0",
-            "--out",
-            est10.to_str().unwrap(),
-        ]);
+        let (rc, out, err) = calibrate(&under, "0", &est10);
         assert_eq!(rc, 0, "{out}{err}");
         assert!(out.contains("warning: reduced chi2"), "{out}");
         let text = std::fs::read_to_string(&est10).unwrap();

@@ -289,6 +289,21 @@ fn bad_settings_and_unknown_names_are_errors() {
     assert!(calibrate(&obj, &cfg).is_err());
 }
 
+/// The objective of `data` on harmonics 1 and 3, complex residuals.
+fn complex_h13(sys: &HbSystem, data: TestData) -> FrfObjective {
+    FrfObjective::new(
+        sys,
+        Arc::new(data),
+        specs_of(sys),
+        ObjectiveConfig {
+            harmonics: vec![1, 3],
+            form: Form::Complex,
+            ..ObjectiveConfig::default()
+        },
+    )
+    .unwrap()
+}
+
 /// Noise understated 10× (3 % noise weighted as 0.3 %): the reduced χ² is about 100, the
 /// Cramér–Rao std 10× smaller than with the right weights (it assumes the stated noise),
 /// the χ²-scaled std 10× the Cramér–Rao std and equal to the right-noise bound within the
@@ -297,18 +312,7 @@ fn bad_settings_and_unknown_names_are_errors() {
 fn understated_noise_is_flagged_and_the_scaled_std_restores_the_spread() {
     let sys = ecl(3);
     let fit = |weight: f64| {
-        let d = Arc::new(data(&sys, 0.03, 11, weight));
-        let obj = FrfObjective::new(
-            &sys,
-            d,
-            specs_of(&sys),
-            ObjectiveConfig {
-                harmonics: vec![1, 3],
-                form: Form::Complex,
-                ..ObjectiveConfig::default()
-            },
-        )
-        .unwrap();
+        let obj = complex_h13(&sys, data(&sys, 0.03, 11, weight));
         let cfg = CalibrationConfig {
             lhs_samples: 8,
             starts: 1,
@@ -360,20 +364,10 @@ fn leaving_sweeps_out_predicts_each_level_from_the_others() {
     let truth = sys.param_values(&params(&sys)).unwrap();
     let plans: Vec<SweepPlan> = [0.05, 0.1, 0.15, 0.2]
         .iter()
-        .map(|&f| SweepPlan::linear(&format!("{f} N up"), 22.0, 26.5, 19, f))
+        .map(|&f| SweepPlan::linear(format!("{f} N up"), 22.0, 26.5, 19, f))
         .collect();
     let d = synthesize(&sys, "shaker", &plans, 3, Noise::relative(0.03), 5).unwrap();
-    let obj = FrfObjective::new(
-        &sys,
-        Arc::new(d),
-        specs_of(&sys),
-        ObjectiveConfig {
-            harmonics: vec![1, 3],
-            form: Form::Complex,
-            ..ObjectiveConfig::default()
-        },
-    )
-    .unwrap();
+    let obj = complex_h13(&sys, d);
     let cfg = CalibrationConfig {
         lhs_samples: 8,
         starts: 1,
