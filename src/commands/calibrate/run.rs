@@ -201,7 +201,11 @@ pub fn estimate_calibration(req: &CalibrationRequest) -> Result<CalibrationEstim
         cost_seconds,
         jacobian_seconds,
         starts: req.config.starts.min(points.len()),
-        folds: nlsim_calib::fold_plan(obj.data(), &req.config)?.1,
+        // One fold per sweep when folding by sweeps (the settings are checked by the run).
+        folds: match req.config.fold_by {
+            nlsim_calib::FoldBy::Sweeps if req.config.folds > 0 => obj.data().sweeps.len(),
+            _ => req.config.folds,
+        },
         max_iterations: req.config.lm.max_iterations,
         threads: rayon::current_num_threads(),
     })
