@@ -80,19 +80,7 @@ fn python_h5py() -> String {
 /// Runs `scripts/h5check.py report DIR` (h5py): panics with its report when a check fails;
 /// what it printed otherwise.
 fn h5check_report(dir: &Path) -> String {
-    let check = Command::new(python_h5py())
-        .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/h5check.py"))
-        .args(["report", dir.to_str().unwrap()])
-        .output()
-        .unwrap();
-    let said = String::from_utf8_lossy(&check.stdout).into_owned();
-    assert!(
-        check.status.success(),
-        "h5check report {}: {said}{}",
-        dir.display(),
-        String::from_utf8_lossy(&check.stderr)
-    );
-    said
+    h5check(&["report", dir.to_str().unwrap()])
 }
 
 /// Every kind of HDF5 file nlsim writes holds what `docs/file-formats.md` lists for it
@@ -162,19 +150,6 @@ fn hdf5_files_hold_what_the_docs_list() {
     )
     .unwrap();
     run(&["test", "ecl_beam", &p("t.toml")]);
-    let h5check = |args: &[&str]| {
-        let out = Command::new(python_h5py())
-            .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/h5check.py"))
-            .args(args)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "h5check {args:?}: {}{}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        );
-    };
     for (kind, f) in [
         ("modes", "m.h5"),
         ("simulate", "s.h5"),
@@ -193,6 +168,23 @@ fn hdf5_files_hold_what_the_docs_list() {
         &p("t.h5"),
         &p("rep/report.h5"),
     ]);
+}
+
+/// Runs scripts/h5check.py with `args` and returns what it printed; panics with its report
+/// when a check fails.
+fn h5check(args: &[&str]) -> String {
+    let out = Command::new(python_h5py())
+        .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/h5check.py"))
+        .args(args)
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "h5check {args:?}: {said}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    said
 }
 
 /// Opening report pages in a real browser: Debian's chromium, headless.
@@ -2407,21 +2399,6 @@ mod batch {
 
     fn python() -> String {
         python_h5py()
-    }
-
-    /// Runs scripts/h5check.py with `args`; panics with its report when a check fails.
-    fn h5check(args: &[&str]) {
-        let out = Command::new(python())
-            .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/h5check.py"))
-            .args(args)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "h5check {args:?}: {}{}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        );
     }
 
     fn ok(args: &[&str]) -> String {

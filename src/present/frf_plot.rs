@@ -169,11 +169,11 @@ impl FrfPlot<'_> {
     }
 
     /// Phase of harmonic `k` at point `i` in degrees, `(−180, 180]`, in the convention
-    /// `q(t) = Re(Σ Q_k e^{i k Ω t / ν})`; NaN (not drawn) where the harmonic is below
-    /// [`PHASE_FLOOR`] of the largest amplitude of the figure, where its phase is noise.
-    fn phase_deg(&self, i: usize, k: usize) -> f64 {
+    /// `q(t) = Re(Σ Q_k e^{i k Ω t / ν})`; NaN (not drawn) where the harmonic's amplitude is
+    /// below `min_amp` ([`Self::phase_min_amp`]), where its phase is noise.
+    fn phase_deg(&self, i: usize, k: usize, min_amp: f64) -> f64 {
         let y = self.y[i][(self.sensor, k)];
-        if y.norm() < PHASE_FLOOR * self.top() {
+        if y.norm() < min_amp {
             f64::NAN
         } else {
             y.arg().to_degrees()
@@ -188,9 +188,10 @@ impl FrfPlot<'_> {
             .fold(0.0f64, f64::max)
     }
 
-    /// Whether some phase of harmonic `k` is left out by [`PHASE_FLOOR`].
-    fn phase_masked(&self, k: usize) -> bool {
-        (0..self.y.len()).any(|i| self.phase_deg(i, k).is_nan())
+    /// The amplitude below which a phase is not drawn: [`PHASE_FLOOR`] of the figure's
+    /// largest amplitude.
+    fn phase_min_amp(&self) -> f64 {
+        PHASE_FLOOR * self.top()
     }
 }
 
@@ -207,6 +208,7 @@ impl crate::present::plot::Figure for FrfPlot<'_> {
     fn data(&self) -> Vec<crate::present::plot::SeriesData> {
         let hz = self.hz();
         let floor = self.floor();
+        let min_amp = self.phase_min_amp();
         let mut out = Vec::new();
         let x_label = "frequency (Hz)".to_string();
         for k in self.shown() {
@@ -228,7 +230,9 @@ impl crate::present::plot::Figure for FrfPlot<'_> {
                     x_label: x_label.clone(),
                     y_label: "phase (deg)".into(),
                     x: hz.clone(),
-                    y: (0..hz.len()).map(|i| self.phase_deg(i, k)).collect(),
+                    y: (0..hz.len())
+                        .map(|i| self.phase_deg(i, k, min_amp))
+                        .collect(),
                 });
             }
             for (kind, label) in [(PointKind::Fold, "fold"), (PointKind::Jump, "jump")] {
@@ -319,9 +323,10 @@ impl FrfPlot<'_> {
         let hz = self.hz();
         let n = hz.len();
         let floor = self.floor();
+        let min_amp = self.phase_min_amp();
         let value = |i: usize| {
             if phase {
-                self.phase_deg(i, k)
+                self.phase_deg(i, k, min_amp)
             } else {
                 self.mag(self.amp(i, k), floor)
             }
@@ -343,7 +348,7 @@ impl FrfPlot<'_> {
         let caption = format!(
             "{}{}",
             self.panel_name(k),
-            match (phase, phase && self.phase_masked(k)) {
+            match (phase, phase && vals.iter().any(|v| v.is_nan())) {
                 (false, _) => "",
                 (true, false) => ": phase",
                 (true, true) => ": phase (drawn where |Y| ≥ 1e-6 of the largest)",
