@@ -99,10 +99,15 @@ impl HbSystem {
         // coupled laws; ∂g/∂u̇ per coordinate.
         let mut kt = vec![vec![vec![0.0; n]; ne]; ne];
         let mut ct = vec![vec![0.0; n]; ne];
+        // Laws made of sliders: their tangent is not local in time (see `memory`).
+        let mut memory: Vec<Option<Mat<f64>>> = vec![None; ne];
         for (e, el) in self.elements.iter().enumerate() {
             let c = self.coordinates(e);
             let xe = &x[self.unknowns(e)];
             let m = c.len();
+            if m == 1 && el.law().n_sliders() > 0 {
+                memory[c.start] = plan.evaluate(el.law(), xe, w0, true).jacobian;
+            }
             if m == 1 && el.law().is_nonsmooth() {
                 (kt[c.start][c.start], ct[c.start]) = plan.cell_tangent(el.law(), xe, w0);
                 continue;
@@ -155,8 +160,13 @@ impl HbSystem {
         let m = hill_modes.len();
         let index: Vec<usize> = hill_modes.iter().map(|(r, _)| *r).collect();
         let phi = |e: usize, r: usize| hill_modes[r].1[e];
+        let harmonic = memory
+            .iter()
+            .any(Option::is_some)
+            .then(|| self.effective_tangent_harmonic(&kt, &memory, &dynamic));
         let tangents = HillTangents {
             keff: &keff,
+            harmonic: harmonic.as_deref(),
             ct: &ct,
             phi: &phi,
             m,
@@ -273,22 +283,88 @@ impl HbSystem {
         out
     }
 
-    /// The element tangent seen by the `dynamic` modes, per sample:
-    /// `K_eff(t) = (I + K_t(t) D_eff)⁻¹ K_t(t)` with `D_eff = D + Σ_{r not dynamic} φ_r φ_rᵀ /
-    /// ω_r²` the quasi-static flexibility at the element ports (N/m; `kt` itself when that
-    /// flexibility is zero).
-    fn effective_tangent(&self, kt: &[Vec<Vec<f64>>], dynamic: &[usize]) -> Vec<Vec<Vec<f64>>> {
-        let lin = &self.linear;
+    /// [`HbSystem::effective_tangent`] in the harmonic domain, for solutions with a law made
+    /// of sliders (Jenkins, Iwan): blocks `(a, b)` of `K_eff = (I + T (D_eff ⊗ I))⁻¹ T`, each
+    /// `(2H+1)²`, with `T` the Galerkin matrices of the sampled tangents `kt` but for the
+    /// coordinates of `memory`, whose block is the law's AFT Jacobian.
+    ///
+    /// A stuck slider pushes `k (u(t) − u(t_j))`, `t_j` its last slip: a perturbation moves
+    /// its force through `u(t_j)` too, which the local tangent `k` (stick) or 0 (slip)
+    /// misses. The Jacobian carries that memory for periodic perturbations (`s = 0`): it is
+    /// exact where an exponent crosses zero (folds, branch points), and the approximation
+    /// NLvib's Hill method makes with its harmonic-balance Jacobian. With the local tangent
+    /// the resonance peak of a friction-damped oscillator came out unstable while time
+    /// integration stayed on it (hb's `iwan_joint_harmonics_match_time_integration`).
+    fn effective_tangent_harmonic(
+        &self,
+        kt: &[Vec<Vec<f64>>],
+        memory: &[Option<Mat<f64>>],
+        dynamic: &[usize],
+    ) -> Vec<Vec<Mat<f64>>> {
+        let plan = self.hill_plan();
         let ne = kt.len();
-        let n = kt.first().and_then(|r| r.first()).map_or(0, Vec::len);
-        let d = Mat::from_fn(ne, ne, |a, b| {
+        let nb = self.set.len();
+        let mut t = Mat::<f64>::zeros(ne * nb, ne * nb);
+        for a in 0..ne {
+            for b in 0..ne {
+                let block = match &memory[a] {
+                    Some(j) if a == b => j.clone(),
+                    Some(_) => continue,
+                    None if kt[a][b].iter().all(|&v| v == 0.0) => continue,
+                    None => plan.galerkin(&kt[a][b]),
+                };
+                t.submatrix_mut(a * nb, b * nb, nb, nb).copy_from(&block);
+            }
+        }
+        let d = self.quasi_static_flexibility(dynamic);
+        let keff = if d.norm_max() == 0.0 {
+            t
+        } else {
+            // I + T (D ⊗ I): column block b of T (D ⊗ I) is Σ_l T_{·l} d_lb.
+            let mut a = Mat::<f64>::identity(ne * nb, ne * nb);
+            for b in 0..ne {
+                for l in 0..ne {
+                    let w = d[(l, b)];
+                    if w != 0.0 {
+                        let tl = t.submatrix(0, l * nb, ne * nb, nb).to_owned();
+                        let mut ab = a.submatrix_mut(0, b * nb, ne * nb, nb);
+                        ab += &tl * faer::Scale(w);
+                    }
+                }
+            }
+            a.partial_piv_lu().solve(&t)
+        };
+        (0..ne)
+            .map(|a| {
+                (0..ne)
+                    .map(|b| keff.submatrix(a * nb, b * nb, nb, nb).to_owned())
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// `D_eff = D + Σ_{r not dynamic} φ_r φ_rᵀ / ω_r²` at the element ports (m/N).
+    fn quasi_static_flexibility(&self, dynamic: &[usize]) -> Mat<f64> {
+        let lin = &self.linear;
+        let ne = self.n_coordinates();
+        Mat::from_fn(ne, ne, |a, b| {
             let (pa, pb) = (self.element_ports[a], self.element_ports[b]);
             lin.residual[(pa, pb)]
                 + (0..lin.n_modes())
                     .filter(|r| !dynamic.contains(r))
                     .map(|r| lin.phi[(pa, r)] * lin.phi[(pb, r)] / lin.w2[r])
                     .sum::<f64>()
-        });
+        })
+    }
+
+    /// The element tangent seen by the `dynamic` modes, per sample:
+    /// `K_eff(t) = (I + K_t(t) D_eff)⁻¹ K_t(t)` with `D_eff = D + Σ_{r not dynamic} φ_r φ_rᵀ /
+    /// ω_r²` the quasi-static flexibility at the element ports (N/m; `kt` itself when that
+    /// flexibility is zero).
+    fn effective_tangent(&self, kt: &[Vec<Vec<f64>>], dynamic: &[usize]) -> Vec<Vec<Vec<f64>>> {
+        let ne = kt.len();
+        let n = kt.first().and_then(|r| r.first()).map_or(0, Vec::len);
+        let d = self.quasi_static_flexibility(dynamic);
         if d.norm_max() == 0.0 {
             return kt.to_vec();
         }
@@ -434,6 +510,9 @@ type HillEigenvalues =
 struct HillTangents<'a> {
     /// `K_eff(t)` (elements × elements × samples).
     keff: &'a [Vec<Vec<f64>>],
+    /// `K_eff`'s Galerkin blocks (elements × elements) when a law made of sliders is present
+    /// ([`HbSystem::effective_tangent_harmonic`]); they replace those of `keff`.
+    harmonic: Option<&'a [Vec<Mat<f64>>]>,
     /// `∂g/∂u̇` (elements × samples).
     ct: &'a [Vec<f64>],
     /// Participation of dynamic mode `r` at element `e`.
@@ -482,9 +561,12 @@ impl HbSystem {
         let (m, ne, w0) = (t.m, t.ne, t.w0);
         let size = m * nb;
         // Galerkin matrices of every tangent series that appears.
-        let gk: Vec<Vec<Mat<f64>>> = (0..ne)
-            .map(|a| (0..ne).map(|b| plan.galerkin(&t.keff[a][b])).collect())
-            .collect();
+        let gk: Vec<Vec<Mat<f64>>> = match t.harmonic {
+            Some(h) => h.to_vec(),
+            None => (0..ne)
+                .map(|a| (0..ne).map(|b| plan.galerkin(&t.keff[a][b])).collect())
+                .collect(),
+        };
         let gc: Vec<Mat<f64>> = (0..ne).map(|a| plan.galerkin(&t.ct[a])).collect();
         // ∇: c_k' = k s_k, s_k' = −k c_k.
         let nabla = |j: usize, l: usize| -> f64 {

@@ -16,6 +16,7 @@
 //! evaluated with [`Law::eval_coupled`], not [`Law::eval`].
 
 use crate::error::{Error, Result};
+use crate::iwan::{self, IwanGrid};
 
 /// Force and state derivatives of a law at one point.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -155,6 +156,40 @@ pub enum Law {
         /// Slip force (N).
         fs: f64,
     },
+    /// Power-law spring `g = k |u|^p sign(u)`: odd in `u` for any real `p ≥ 1`, so that
+    /// `p = 2` gives the `u|u|` stiffness whose softening or hardening is linear in the
+    /// amplitude. `k` in N/m^p (negative softens), `p` dimensionless.
+    PowerSpring {
+        /// Coefficient (N/m^p).
+        k: f64,
+        /// Exponent (≥ 1).
+        p: f64,
+    },
+    /// Power-law damper `g = c |u̇|^p sign(u̇)`: `p = 1` viscous, `p = 2` the quadratic damper,
+    /// other `p ≥ 1` the damping of joints whose loss grows as a power of the amplitude
+    /// (dissipation per cycle ∝ amplitude^(p+1)). `c` in N (s/m)^p.
+    PowerDamper {
+        /// Coefficient (N (s/m)^p, ≥ 0).
+        c: f64,
+        /// Exponent (≥ 1).
+        p: f64,
+    },
+    /// Segalman's four-parameter Iwan joint (microslip of a frictional interface up to
+    /// macroslip at `fs`), discretised into parallel Jenkins sliders ([`crate::iwan`], which
+    /// states the discretisation). History state: each slider's position (m). Build it with
+    /// [`Law::iwan`] (the grid is not written by hand).
+    Iwan {
+        /// Macroslip force `F_S` (N).
+        fs: f64,
+        /// Stiffness of the stuck joint `K_T` (N/m).
+        kt: f64,
+        /// Exponent `χ` of the slider population (−1 < χ ≤ 1; dissipation ∝ amplitude^(χ+3)).
+        chi: f64,
+        /// Share `β ≥ 0` of the population's Dirac at macroslip.
+        beta: f64,
+        /// The sliders, kept consistent with the four parameters.
+        grid: IwanGrid,
+    },
     /// A polynomial stiffness coupling `inputs` coordinates: `g_i(u) = Σ_k a_k Π_j u_j^{p_kj}`
     /// over the terms of output `i` (NLvib's polynomial stiffness nonlinearity: `f_NL = Eᵀ z`,
     /// `z_k = Π_j q_j^{p_kj}`). Parameters are the coefficients, named `k<i>_<p_1>_…_<p_m>`
@@ -178,7 +213,90 @@ impl Law {
             Law::QuadraticDamping { .. } => "quadratic_damping",
             Law::Coulomb { .. } => "coulomb",
             Law::Jenkins { .. } => "jenkins",
+            Law::PowerSpring { .. } => "power_spring",
+            Law::PowerDamper { .. } => "power_damper",
+            Law::Iwan { .. } => "iwan",
             Law::CoupledPolynomial { .. } => "coupled_polynomial",
+        }
+    }
+
+    /// Segalman's Iwan joint (`fs` N, `kt` N/m, `chi`, `beta`) on the default grid
+    /// ([`iwan::DEFAULT_SLIDERS`] sliders over [`iwan::DEFAULT_DECADES`] decades).
+    pub fn iwan(fs: f64, kt: f64, chi: f64, beta: f64) -> Result<Self> {
+        Self::iwan_with(
+            fs,
+            kt,
+            chi,
+            beta,
+            iwan::DEFAULT_SLIDERS,
+            iwan::DEFAULT_DECADES,
+        )
+    }
+
+    /// [`Law::iwan`] on `sliders` sliders whose slip displacements span `decades` decades
+    /// below macroslip. Checks every value.
+    pub fn iwan_with(
+        fs: f64,
+        kt: f64,
+        chi: f64,
+        beta: f64,
+        sliders: usize,
+        decades: f64,
+    ) -> Result<Self> {
+        let law = Law::Iwan {
+            fs,
+            kt,
+            chi,
+            beta,
+            grid: IwanGrid::new("iwan", sliders, decades, [fs, kt, chi, beta])?,
+        };
+        law.validate("iwan")?;
+        Ok(law)
+    }
+
+    /// Number of parallel Jenkins sliders the law is made of: 1 for Jenkins, the grid's
+    /// sliders and the Dirac's for Iwan, 0 for the other laws. Slider `s` carries history
+    /// state `s`.
+    pub fn n_sliders(&self) -> usize {
+        match self {
+            Law::Jenkins { .. } => 1,
+            Law::Iwan { grid, .. } => grid.sliders() + 1,
+            _ => 0,
+        }
+    }
+
+    /// Stiffness (N/m) and slip force (N) of slider `s < n_sliders()`.
+    ///
+    /// # Panics
+    /// When the law has no slider `s` (a programming error).
+    #[inline]
+    pub fn slider(&self, s: usize) -> (f64, f64) {
+        match self {
+            Law::Jenkins { kt, fs } if s == 0 => (*kt, *fs),
+            Law::Iwan { grid, .. } => grid.slider(s),
+            _ => panic!("slider {s} of a {} law", self.kind()),
+        }
+    }
+
+    /// `∂k_s/∂p_i` into `dk` and `∂f_s/∂p_i` into `df` (each [`Law::n_params`] long) for
+    /// slider `s`: how the slider's stiffness and slip force move with the law's parameters.
+    ///
+    /// # Panics
+    /// When the law has no slider `s` or the buffers have the wrong length.
+    pub fn slider_dparams(&self, s: usize, dk: &mut [f64], df: &mut [f64]) {
+        match self {
+            Law::Jenkins { .. } if s == 0 => {
+                dk.copy_from_slice(&[1.0, 0.0]);
+                df.copy_from_slice(&[0.0, 1.0]);
+            }
+            Law::Iwan {
+                fs,
+                kt,
+                chi,
+                beta,
+                grid,
+            } => grid.dslider(s, [*fs, *kt, *chi, *beta], dk, df),
+            _ => panic!("slider {s} of a {} law", self.kind()),
         }
     }
 
@@ -242,6 +360,9 @@ impl Law {
             "quadratic_damping" => &["c2"],
             "coulomb" => &["fc", "v_reg"],
             "jenkins" => &["kt", "fs"],
+            "power_spring" => &["k", "p"],
+            "power_damper" => &["c", "p"],
+            "iwan" => &["fs", "kt", "chi", "beta", "sliders", "decades"],
             "bump_stop" => &["k", "gap"],
             "clearance" => &["k1", "k2", "e1", "e2", "r", "s"],
             "polynomial" => &[],
@@ -249,10 +370,7 @@ impl Law {
             other => {
                 return Err(Error::invalid(
                     format!("element '{element}'"),
-                    format!(
-                        "unknown type '{other}'; use cubic, polynomial, clearance, bump_stop, \
-                         quadratic_damping, coulomb, jenkins or coupled_polynomial"
-                    ),
+                    format!("unknown type '{other}'; use {}", Self::KINDS),
                 ));
             }
         };
@@ -298,6 +416,37 @@ impl Law {
                 kt: req("kt")?,
                 fs: req("fs")?,
             },
+            "power_spring" => Law::PowerSpring {
+                k: req("k")?,
+                p: req("p")?,
+            },
+            "power_damper" => Law::PowerDamper {
+                c: req("c")?,
+                p: req("p")?,
+            },
+            "iwan" => {
+                let sliders = match get("sliders") {
+                    None => iwan::DEFAULT_SLIDERS,
+                    Some(v) if v.fract() == 0.0 && (1.0..=1000.0).contains(&v) => v as usize,
+                    Some(v) => {
+                        return Err(Error::InvalidParameter {
+                            name: format!("{element}.sliders"),
+                            value: v,
+                            reason: "the number of sliders must be an integer from 1 to 1000"
+                                .into(),
+                        });
+                    }
+                };
+                let (fs, kt, chi, beta) = (req("fs")?, req("kt")?, req("chi")?, req("beta")?);
+                let decades = get("decades").unwrap_or(iwan::DEFAULT_DECADES);
+                Law::Iwan {
+                    fs,
+                    kt,
+                    chi,
+                    beta,
+                    grid: IwanGrid::new(element, sliders, decades, [fs, kt, chi, beta])?,
+                }
+            }
             "bump_stop" => Law::bump_stop(req("k")?, req("gap")?),
             "clearance" => Law::Clearance {
                 k1: req("k1")?,
@@ -327,6 +476,10 @@ impl Law {
             }
         })
     }
+
+    /// The law types of model files, for messages.
+    pub const KINDS: &'static str = "cubic, polynomial, clearance, bump_stop, quadratic_damping, \
+         coulomb, jenkins, iwan, power_spring, power_damper or coupled_polynomial";
 
     /// A [`Law::CoupledPolynomial`] from coefficients named `k<i>_<p_1>_…_<p_m>`; the number of
     /// powers in the names sets `m` (all names must agree).
@@ -372,7 +525,11 @@ impl Law {
             Law::Cubic { .. } | Law::QuadraticDamping { .. } => 1,
             Law::Polynomial { stiffness, damping } => stiffness.len() + damping.len(),
             Law::Clearance { .. } => 6,
-            Law::Coulomb { .. } | Law::Jenkins { .. } => 2,
+            Law::Coulomb { .. }
+            | Law::Jenkins { .. }
+            | Law::PowerSpring { .. }
+            | Law::PowerDamper { .. } => 2,
+            Law::Iwan { .. } => 4,
             Law::CoupledPolynomial { terms, .. } => terms.len(),
         }
     }
@@ -392,6 +549,9 @@ impl Law {
             Law::Clearance { .. } => ["k1", "k2", "e1", "e2", "r", "s"][i].into(),
             Law::Coulomb { .. } => ["fc", "v_reg"][i].into(),
             Law::Jenkins { .. } => ["kt", "fs"][i].into(),
+            Law::PowerSpring { .. } => ["k", "p"][i].into(),
+            Law::PowerDamper { .. } => ["c", "p"][i].into(),
+            Law::Iwan { .. } => ["fs", "kt", "chi", "beta"][i].into(),
             Law::CoupledPolynomial { terms, .. } => terms[i].name(),
         }
     }
@@ -411,6 +571,9 @@ impl Law {
             Law::Clearance { .. } => ["N/m^r", "N/m^s", "m", "m", "-", "-"][i].into(),
             Law::Coulomb { .. } => ["N", "m/s"][i].into(),
             Law::Jenkins { .. } => ["N/m", "N"][i].into(),
+            Law::PowerSpring { .. } => ["N/m^p", "-"][i].into(),
+            Law::PowerDamper { .. } => ["N (s/m)^p", "-"][i].into(),
+            Law::Iwan { .. } => ["N", "N/m", "-", "-"][i].into(),
             Law::CoupledPolynomial { terms, .. } => format!("N/m^{}", terms[i].degree()),
         }
     }
@@ -437,6 +600,11 @@ impl Law {
             } => [*k1, *k2, *e1, *e2, *r, *s][i],
             Law::Coulomb { fc, v_reg } => [*fc, *v_reg][i],
             Law::Jenkins { kt, fs } => [*kt, *fs][i],
+            Law::PowerSpring { k, p } => [*k, *p][i],
+            Law::PowerDamper { c, p } => [*c, *p][i],
+            Law::Iwan {
+                fs, kt, chi, beta, ..
+            } => [*fs, *kt, *chi, *beta][i],
             Law::CoupledPolynomial { terms, .. } => terms[i].coef,
         }
     }
@@ -482,6 +650,21 @@ impl Law {
                     fs
                 }
             }
+            Law::PowerSpring { k: a, p } | Law::PowerDamper { c: a, p } => {
+                if i == 0 {
+                    a
+                } else {
+                    p
+                }
+            }
+            Law::Iwan {
+                fs, kt, chi, beta, ..
+            } => match i {
+                0 => fs,
+                1 => kt,
+                2 => chi,
+                _ => beta,
+            },
             Law::CoupledPolynomial { terms, .. } => &mut terms[i].coef,
         }
     }
@@ -500,6 +683,16 @@ impl Law {
         if let Err(e) = self.validate(element) {
             *self.param_mut(i) = old;
             return Err(e);
+        }
+        if let Law::Iwan {
+            fs,
+            kt,
+            chi,
+            beta,
+            grid,
+        } = self
+        {
+            grid.refresh(*fs, *kt, *chi, *beta);
         }
         Ok(())
     }
@@ -608,6 +801,51 @@ impl Law {
                 }
                 nonneg("fs", *fs, "a slip force")
             }
+            Law::PowerSpring { p, .. } | Law::PowerDamper { p, .. } => {
+                if let Law::PowerDamper { c, .. } = self {
+                    nonneg("c", *c, "a damping coefficient")?;
+                }
+                if !(1.0..=15.0).contains(p) {
+                    return Err(Error::InvalidParameter {
+                        name: name("p"),
+                        value: *p,
+                        reason: "the exponent must be from 1 to 15 (below 1 the tangent is \
+                                 infinite at rest; use coulomb or iwan for friction)"
+                            .into(),
+                    });
+                }
+                Ok(())
+            }
+            Law::Iwan {
+                fs,
+                kt,
+                chi,
+                beta,
+                grid,
+            } => {
+                iwan::check_grid(element, grid.sliders(), grid.decades())?;
+                for (p, v, what) in [
+                    ("fs", *fs, "the macroslip force"),
+                    ("kt", *kt, "the joint stiffness"),
+                ] {
+                    if v <= 0.0 {
+                        return Err(Error::InvalidParameter {
+                            name: name(p),
+                            value: v,
+                            reason: format!("{what} must be > 0"),
+                        });
+                    }
+                }
+                if !(*chi > -1.0 && *chi <= 1.0) {
+                    return Err(Error::InvalidParameter {
+                        name: name("chi"),
+                        value: *chi,
+                        reason: "the exponent must be in (-1, 1] (lap joints: -1 < chi <= 0)"
+                            .into(),
+                    });
+                }
+                nonneg("beta", *beta, "the share of the macroslip Dirac")
+            }
             Law::CoupledPolynomial { inputs, terms } => {
                 if *inputs < 2 {
                     return Err(Error::invalid(
@@ -660,7 +898,7 @@ impl Law {
     /// Number of history variables the law carries (1 for Jenkins: the slider position).
     pub fn n_states(&self) -> usize {
         match self {
-            Law::Jenkins { .. } => 1,
+            Law::Jenkins { .. } | Law::Iwan { .. } => self.n_sliders(),
             _ => 0,
         }
     }
@@ -668,7 +906,10 @@ impl Law {
     /// True when the force or its derivative has kinks (clearance, Jenkins): harmonic balance
     /// should sample such laws more densely and the time integrator should locate events.
     pub fn is_nonsmooth(&self) -> bool {
-        matches!(self, Law::Clearance { .. } | Law::Jenkins { .. })
+        matches!(
+            self,
+            Law::Clearance { .. } | Law::Jenkins { .. } | Law::Iwan { .. }
+        )
     }
 
     /// Force and derivatives at displacement `u` (m) and velocity `v` (m/s), given the committed
@@ -738,19 +979,37 @@ impl Law {
                 }
             }
             Law::Jenkins { kt, fs } => {
-                let trial = kt * (u - state[0]);
-                if trial.abs() <= *fs {
-                    LawEval {
-                        force: trial,
-                        df_du: *kt,
-                        df_dv: 0.0,
-                    }
-                } else {
-                    LawEval {
-                        force: fs.copysign(trial),
-                        df_du: 0.0,
-                        df_dv: 0.0,
-                    }
+                let (force, df_du) = iwan::slider_force(*kt, *fs, u, state[0]);
+                LawEval {
+                    force,
+                    df_du,
+                    df_dv: 0.0,
+                }
+            }
+            Law::Iwan { grid, .. } => {
+                let mut e = LawEval::default();
+                for (s, &z) in state.iter().enumerate().take(grid.sliders() + 1) {
+                    let (k, f) = grid.slider(s);
+                    let (g, d) = iwan::slider_force(k, f, u, z);
+                    e.force += g;
+                    e.df_du += d;
+                }
+                e
+            }
+            Law::PowerSpring { k, p } => {
+                let a = u.abs();
+                LawEval {
+                    force: k * a.powf(*p) * u.signum(),
+                    df_du: k * p * a.powf(p - 1.0),
+                    df_dv: 0.0,
+                }
+            }
+            Law::PowerDamper { c, p } => {
+                let a = v.abs();
+                LawEval {
+                    force: c * a.powf(*p) * v.signum(),
+                    df_du: 0.0,
+                    df_dv: c * p * a.powf(p - 1.0),
                 }
             }
             // No scalar form: every consumer dispatches on `arity()` first.
@@ -825,11 +1084,17 @@ impl Law {
     /// the spring force is at the slip limit. No-op for memoryless laws.
     #[inline]
     pub fn commit_state(&self, u: f64, _v: f64, state: &mut [f64]) {
-        if let Law::Jenkins { kt, fs } = self {
-            let trial = kt * (u - state[0]);
-            if trial.abs() > *fs {
-                state[0] = u - fs.copysign(trial) / kt;
+        match self {
+            Law::Jenkins { kt, fs } => {
+                iwan::slider_commit(*kt, *fs, u, &mut state[0]);
             }
+            Law::Iwan { grid, .. } => {
+                for (s, z) in state.iter_mut().enumerate().take(grid.sliders() + 1) {
+                    let (k, f) = grid.slider(s);
+                    iwan::slider_commit(k, f, u, z);
+                }
+            }
+            _ => {}
         }
     }
 
@@ -882,15 +1147,37 @@ impl Law {
                 out[0] = t;
                 out[1] = -fc * (1.0 - t * t) * x / v_reg;
             }
-            Law::Jenkins { kt, fs } => {
-                let trial = kt * (u - state[0]);
-                if trial.abs() <= *fs {
-                    out[0] = u - state[0];
-                    out[1] = 0.0;
-                } else {
-                    out[0] = 0.0;
-                    out[1] = 1.0_f64.copysign(trial);
+            Law::Jenkins { .. } | Law::Iwan { .. } => {
+                out.fill(0.0);
+                let np = out.len();
+                let (mut dk, mut df) = ([0.0; 4], [0.0; 4]);
+                for (s, &z) in state.iter().enumerate().take(self.n_sliders()) {
+                    let (k, f) = self.slider(s);
+                    self.slider_dparams(s, &mut dk[..np], &mut df[..np]);
+                    let trial = k * (u - z);
+                    for i in 0..np {
+                        out[i] += if trial.abs() <= f {
+                            dk[i] * (u - z)
+                        } else {
+                            df[i] * trial.signum()
+                        };
+                    }
                 }
+            }
+            Law::PowerSpring { k, p } | Law::PowerDamper { c: k, p } => {
+                let x = if matches!(self, Law::PowerSpring { .. }) {
+                    u
+                } else {
+                    v
+                };
+                let a = x.abs();
+                let m = if x == 0.0 {
+                    0.0
+                } else {
+                    a.powf(*p).copysign(x)
+                };
+                out[0] = m;
+                out[1] = if x == 0.0 { 0.0 } else { k * m * a.ln() };
             }
             // No scalar form (see `dforce_dparams_coupled`).
             Law::CoupledPolynomial { .. } => out.fill(0.0),

@@ -9,7 +9,7 @@
 //! - [`DofMap`] and [`DofLabel`]: human DOF labels such as `12:uz`;
 //! - [`Damping`]: Rayleigh, modal (per mode or per band) or an explicit matrix;
 //! - [`Law`] and [`NonlinearElement`]: the element library with force, state derivatives and
-//!   parameter derivatives;
+//!   parameter derivatives ([`iwan`]: Segalman's Iwan joint as parallel Jenkins sliders);
 //! - [`Model`]: all of it together, with validation that names what is wrong and where;
 //! - [`Param`] and [`Parameterized`]: one identity for every calibratable quantity, and
 //!   [`Status`], the outcome of every iterative solver;
@@ -23,6 +23,7 @@ pub mod damping;
 pub mod dof;
 pub mod element;
 pub mod error;
+pub mod iwan;
 pub mod linalg;
 pub mod model;
 pub mod names;
@@ -36,6 +37,7 @@ pub use damping::{Damping, DampingBand, ModalDamping};
 pub use dof::{Component, DofLabel, DofMap};
 pub use element::{Coupling, Law, LawEval, MonomialTerm, NonlinearElement, PolyTerm};
 pub use error::{Error, Result};
+pub use iwan::IwanGrid;
 pub use model::{
     ElementGroup, Excitation, ForceHarmonic, MatrixDerivative, Model, ModelBuilder, Quantity,
     Sensor, ValidationConfig, ValidationReport,

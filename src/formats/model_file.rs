@@ -889,13 +889,9 @@ fn read_element(t: &mut Tab<'_, '_>, dofs: &DofMap) -> Result<NonlinearElement> 
     let (name, _) = t
         .str("name")?
         .ok_or_else(|| t.missing("name", "an element name, e.g. name = \"tip_spring\""))?;
-    let (kind, kspan) = t.str("type")?.ok_or_else(|| {
-        t.missing(
-            "type",
-            "cubic, polynomial, clearance, bump_stop, quadratic_damping, coulomb, jenkins or \
-             coupled_polynomial",
-        )
-    })?;
+    let (kind, kspan) = t
+        .str("type")?
+        .ok_or_else(|| t.missing("type", Law::KINDS))?;
     if kind == "coupled_polynomial" {
         return read_coupled_element(t, &name, dofs);
     }
@@ -926,6 +922,37 @@ fn read_element(t: &mut Tab<'_, '_>, dofs: &DofMap) -> Result<NonlinearElement> 
             kt: t.req_f64("kt", "kt (stick stiffness) in N/m")?,
             fs: t.req_f64("fs", "fs (slip force) in N")?,
         },
+        "power_spring" => Law::PowerSpring {
+            k: t.req_f64("k", "k in N/m^p (g = k |u|^p sign u)")?,
+            p: t.req_f64("p", "p, the exponent (>= 1)")?,
+        },
+        "power_damper" => Law::PowerDamper {
+            c: t.req_f64("c", "c in N (s/m)^p (g = c |v|^p sign v)")?,
+            p: t.req_f64("p", "p, the exponent (>= 1)")?,
+        },
+        "iwan" => {
+            let mut named = vec![
+                ("fs", t.req_f64("fs", "fs (macroslip force) in N")?),
+                (
+                    "kt",
+                    t.req_f64("kt", "kt (stiffness of the stuck joint) in N/m")?,
+                ),
+                (
+                    "chi",
+                    t.req_f64("chi", "chi, the slider exponent (-1 < chi <= 1)")?,
+                ),
+                (
+                    "beta",
+                    t.req_f64("beta", "beta >= 0, the share of the macroslip Dirac")?,
+                ),
+            ];
+            for key in ["sliders", "decades"] {
+                if let Some(v) = t.f64(key)? {
+                    named.push((key, v));
+                }
+            }
+            Law::from_named(&name, "iwan", &named).map_err(|e| element_error(t, e))?
+        }
         "bump_stop" => Law::bump_stop(
             t.req_f64("k", "k (contact stiffness) in N/m")?,
             t.req_f64("gap", "gap in m")?,
@@ -961,7 +988,7 @@ fn read_element(t: &mut Tab<'_, '_>, dofs: &DofMap) -> Result<NonlinearElement> 
             return Err(t.doc.err(
                 kspan,
                 &t.key("type"),
-                format!("unknown element type '{other}'; use cubic, polynomial, clearance, bump_stop, quadratic_damping, coulomb, jenkins or coupled_polynomial"),
+                format!("unknown element type '{other}'; use {}", Law::KINDS),
             ));
         }
     };
