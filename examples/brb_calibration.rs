@@ -90,6 +90,7 @@ fn test_data(levels: &[((String, usize), Level)], noise: f64) -> TestData {
                     response: faer::Mat::from_fn(1, 1, |_, _| {
                         faer::c64::from_polar(acc, phase + PI)
                     }),
+                    sigma: faer::Mat::new(),
                 })
                 .collect(),
         })

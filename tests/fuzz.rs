@@ -477,6 +477,13 @@ fn fuzz_inner() {
          low,up,23.5,1,0.05,0.001,-0.9,0.4,0.15,0.25\nlow,up,23.5,2,0,0,0.02,0.001,,\n\
          high,down,23.0,1,0.2,0,-1.5,0.9,0.3,0.1\nhigh,down,23.0,2,0.01,0,0.1,0.05,0.01,0\n"
             .to_string(),
+        // With per-step standard deviations.
+        "# nlsim stepped-sine test data\n# input: shaker\n# harmonics: 2\n\
+         # channel: tip, acceleration, relative=0.02, absolute=0\n\
+         sweep,direction,frequency_hz,harmonic,force_re,force_im,tip_re,tip_im,tip_re_std,tip_im_std\n\
+         low,up,22.0,1,0.05,0,-0.513,0.207,0.004,0.002\nlow,up,22.0,2,0.001,0,0.01,0.002,,\n\
+         low,up,23.5,1,0.05,0.001,-0.9,0.4,1e-3,5e-4\nlow,up,23.5,2,0,0,0.02,0.001,1e-4,1e-4\n"
+            .to_string(),
     ];
     let csv_path = dir.join("test.csv");
     panics.extend(survive("test data csv", 10000 * scale(), |_| {

@@ -2131,7 +2131,10 @@ mod frf_cli {
                 v[0]
             );
         }
-        for (bad, key) in [("chi = -0.5", "chi = -1.0"), ("sliders = 30", "sliders = 0")] {
+        for (bad, key) in [
+            ("chi = -0.5", "chi = -1.0"),
+            ("sliders = 30", "sliders = 0"),
+        ] {
             std::fs::write(&model, text.replace(bad, key)).unwrap();
             let (rc, _, err) = nlsim(&["check", model.to_str().unwrap()]);
             let line = text.lines().position(|l| l == bad).unwrap() + 1;
@@ -3652,6 +3655,53 @@ mod test_data_hdf5 {
     use hdf5_metno as hdf5;
     use nlsim::calib::{Noise, SweepPlan, synthesize};
     use nlsim::prelude::*;
+
+    /// Per-step standard deviations (`_re_std`, `_im_std` columns; `sigma` in HDF5) survive
+    /// CSV → HDF5 → CSV bit for bit, empty cells included (the channel's noise model); the
+    /// HDF5 file keeps the layout rules (h5py); a non-positive deviation is refused at its
+    /// line and columns.
+    #[test]
+    fn per_step_standard_deviations_round_trip() {
+        let d = scratch("sigma-round-trip");
+        let csv = d.join("t.csv");
+        let text = "# nlsim stepped-sine test data\n# input: shaker\n# harmonics: 2\n\
+                    # channel: tip, acceleration, relative=0.01, absolute=0\n\
+                    sweep,direction,frequency_hz,harmonic,force_re,force_im,tip_re,tip_im,\
+                    tip_re_std,tip_im_std\n\
+                    low,up,22.0,1,0.05,0,-0.513,0.207,0.004,0.0015\n\
+                    low,up,22.0,2,0,0,0.001,-0.002,,\n\
+                    low,up,23.0,1,0.05,0,-0.61,0.25,0.005,0.002\n\
+                    low,up,23.0,2,0,0,0.0012,-0.0021,1e-4,2e-4\n";
+        std::fs::write(&csv, text).unwrap();
+        let data = nlsim::formats::test_data::read_csv(&csv).unwrap();
+        let st = &data.sweeps[0].steps[0];
+        assert_eq!(st.sigma[(0, 0)], c64::new(0.004, 0.0015));
+        assert!(st.sigma[(0, 1)].re.is_nan());
+        let h5 = d.join("t.h5");
+        nlsim::formats::test_data::write_h5(&h5, &data).unwrap();
+        let back = nlsim::formats::test_data::read_h5(&h5).unwrap();
+        let csv2 = d.join("t2.csv");
+        nlsim::formats::test_data::write_csv(&csv2, &back).unwrap();
+        let again = nlsim::formats::test_data::read_csv(&csv2).unwrap();
+        for got in [&back, &again] {
+            for (a, b) in got.sweeps[0].steps.iter().zip(&data.sweeps[0].steps) {
+                for k in 0..2 {
+                    let (x, y) = (a.sigma[(0, k)], b.sigma[(0, k)]);
+                    assert!(x == y || (x.re.is_nan() && y.re.is_nan()), "{x} vs {y}");
+                }
+            }
+        }
+        h5check(&["read", h5.to_str().unwrap()]);
+        std::fs::write(&csv, text.replace("0.005,0.002", "0.005,-0.002")).unwrap();
+        let err = nlsim::formats::test_data::read_csv(&csv)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("t.csv:8:") && err.contains("tip_im_std"),
+            "{err}"
+        );
+        let _ = std::fs::remove_dir_all(&d);
+    }
 
     fn synthetic() -> TestData {
         let sys = ecl_hb(6);

@@ -79,6 +79,28 @@ pub struct Step {
     /// Measured response harmonics: channels (rows) × `k = 1..=H` (columns), in each
     /// channel's unit; NaN where a harmonic was not measured.
     pub response: Mat<c64>,
+    /// Measured standard deviations of the response harmonics, channels × `k = 1..=H` like
+    /// `response`: the real part of each entry is the standard deviation of the harmonic's
+    /// real part, the imaginary part that of its imaginary part (the channel's unit), e.g.
+    /// the scatter over the periods of the dwell. NaN where the channel's [`Noise`] model
+    /// applies; empty (0 × 0) when the data give none.
+    pub sigma: Mat<c64>,
+}
+
+impl Step {
+    /// The standard deviations `(σ_re, σ_im)` of the real and imaginary parts of channel
+    /// `c`'s harmonic `k` (1-based) measured as `y`: the step's own where it gives them,
+    /// otherwise `noise` of `y` for both.
+    pub fn sigma_parts(&self, c: usize, k: usize, y: c64, noise: &Noise) -> (f64, f64) {
+        if c < self.sigma.nrows() && k >= 1 && k <= self.sigma.ncols() {
+            let s = self.sigma[(c, k - 1)];
+            if !s.re.is_nan() {
+                return (s.re, s.im);
+            }
+        }
+        let s = noise.sigma(y);
+        (s, s)
+    }
 }
 
 /// One stepped-sine sweep (one excitation level or one test run).
@@ -289,6 +311,47 @@ impl TestData {
                         ),
                     );
                 }
+                if st.sigma.nrows() * st.sigma.ncols() > 0
+                    && (st.sigma.nrows() != self.channels.len()
+                        || st.sigma.ncols() != self.harmonics)
+                {
+                    return bad(
+                        at(i),
+                        format!(
+                            "holds {}×{} standard deviations for {}×{} responses",
+                            st.sigma.nrows(),
+                            st.sigma.ncols(),
+                            self.channels.len(),
+                            self.harmonics
+                        ),
+                    );
+                }
+                for c in 0..st.sigma.nrows() {
+                    for k in 0..st.sigma.ncols() {
+                        let v = st.sigma[(c, k)];
+                        let ok = (v.re.is_nan() && v.im.is_nan())
+                            || (v.re > 0.0
+                                && v.im > 0.0
+                                && v.re <= MAX_AMPLITUDE
+                                && v.im <= MAX_AMPLITUDE);
+                        if !ok {
+                            return bad(
+                                format!(
+                                    "{}, channel '{}', harmonic {}",
+                                    at(i),
+                                    self.channels[c].name,
+                                    k + 1
+                                ),
+                                format!(
+                                    "standard deviations ({:e}, {:e}) of the real and imaginary \
+                                     parts must both be positive and finite (or both empty: the \
+                                     channel's noise model)",
+                                    v.re, v.im
+                                ),
+                            );
+                        }
+                    }
+                }
                 if st
                     .force
                     .iter()
@@ -461,6 +524,11 @@ impl TestData {
                         response: Mat::from_fn(idx.len(), st.response.ncols(), |r, k| {
                             st.response[(idx[r], k)]
                         }),
+                        sigma: if st.sigma.nrows() == 0 {
+                            Mat::new()
+                        } else {
+                            Mat::from_fn(idx.len(), st.sigma.ncols(), |r, k| st.sigma[(idx[r], k)])
+                        },
                         ..st.clone()
                     })
                     .collect(),

@@ -821,8 +821,8 @@ impl FrfObjective {
                             if yd.re.is_nan() {
                                 continue;
                             }
-                            let sigma = data.channels[c].noise.sigma(yd);
-                            if sigma <= 0.0 {
+                            let (s_re, s_im) = st.sigma_parts(c, k, yd, &data.channels[c].noise);
+                            if s_re <= 0.0 || s_im <= 0.0 {
                                 return Err(Error::invalid(
                                     format!(
                                         "test data channel '{}', sweep '{}' step {} ({} Hz), \
@@ -848,40 +848,46 @@ impl FrfObjective {
                                 .unwrap_or_default();
                             match self.config.form {
                                 Form::Complex => {
-                                    residuals.push((ym.re - yd.re) / sigma);
-                                    residuals.push((ym.im - yd.im) / sigma);
+                                    residuals.push((ym.re - yd.re) / s_re);
+                                    residuals.push((ym.im - yd.im) / s_im);
                                     if jacobian {
                                         rows.push(
                                             dy.iter()
                                                 .zip(&dvalue)
-                                                .map(|(d, dv)| d.re * dv / sigma)
+                                                .map(|(d, dv)| d.re * dv / s_re)
                                                 .collect(),
                                         );
                                         rows.push(
                                             dy.iter()
                                                 .zip(&dvalue)
-                                                .map(|(d, dv)| d.im * dv / sigma)
+                                                .map(|(d, dv)| d.im * dv / s_im)
                                                 .collect(),
                                         );
                                     }
                                 }
                                 Form::LogMagnitudePhase => {
-                                    let w = yd.norm() / sigma;
+                                    // The noise along Y (its amplitude) and across it (its
+                                    // phase) from that of the real and imaginary parts.
+                                    let (cos, sin) = (yd.re / yd.norm(), yd.im / yd.norm());
+                                    let (sr2, si2) = (s_re * s_re, s_im * s_im);
+                                    let s_amp = (sr2 * cos * cos + si2 * sin * sin).sqrt();
+                                    let s_phase = (sr2 * sin * sin + si2 * cos * cos).sqrt();
+                                    let (wa, wp) = (yd.norm() / s_amp, yd.norm() / s_phase);
                                     let dphase = wrap(ym.arg() - yd.arg());
-                                    residuals.push((ym.norm().ln() - yd.norm().ln()) * w);
-                                    residuals.push(dphase * w);
+                                    residuals.push((ym.norm().ln() - yd.norm().ln()) * wa);
+                                    residuals.push(dphase * wp);
                                     if jacobian {
                                         let rel: Vec<c64> = dy.iter().map(|d| *d / ym).collect();
                                         rows.push(
                                             rel.iter()
                                                 .zip(&dvalue)
-                                                .map(|(d, dv)| d.re * dv * w)
+                                                .map(|(d, dv)| d.re * dv * wa)
                                                 .collect(),
                                         );
                                         rows.push(
                                             rel.iter()
                                                 .zip(&dvalue)
-                                                .map(|(d, dv)| d.im * dv * w)
+                                                .map(|(d, dv)| d.im * dv * wp)
                                                 .collect(),
                                         );
                                     }
@@ -948,11 +954,12 @@ impl FrfObjective {
                     continue;
                 }
                 let (yd, ym) = (st.response[(c, k - 1)], response[(c, k - 1)]);
-                let sigma = ch.noise.sigma(yd);
-                if yd.re.is_nan() || ym.re.is_nan() || sigma <= 0.0 {
+                let (s_re, s_im) = st.sigma_parts(c, k, yd, &ch.noise);
+                if yd.re.is_nan() || ym.re.is_nan() || s_re <= 0.0 || s_im <= 0.0 {
                     continue;
                 }
-                sum += (ym - yd).norm_sqr() / (sigma * sigma);
+                let d = ym - yd;
+                sum += (d.re / s_re).powi(2) + (d.im / s_im).powi(2);
                 n += 1;
             }
         }

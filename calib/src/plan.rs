@@ -439,6 +439,7 @@ fn template(channels: Vec<Channel>, input: &str, harmonics: usize) -> TestData {
                     .map(|k| c64::new(if k == 0 { 1.0 } else { 0.0 }, 0.0))
                     .collect(),
                 response: Mat::from_fn(channels.len(), harmonics, |_, _| nan),
+                sigma: Mat::new(),
             }],
         }],
         channels,
@@ -702,6 +703,7 @@ impl Planner {
                     frequency_hz: f,
                     force: force.clone(),
                     response: Mat::from_fn(data.channels.len(), h_data, |_, _| nan),
+                    sigma: Mat::new(),
                 })
                 .collect(),
         }];

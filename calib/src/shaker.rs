@@ -694,6 +694,7 @@ pub fn virtual_test_with(
                         frequency_hz: f,
                         force: measured_force,
                         response,
+                        sigma: Mat::new(),
                     });
                     record.push(StepControl {
                         frequency_hz: f,

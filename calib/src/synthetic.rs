@@ -82,6 +82,7 @@ pub fn synthesize(
                         .map(|k| c64::new(if k == 1 { p.force } else { 0.0 }, 0.0))
                         .collect(),
                     response: Mat::from_fn(channels.len(), harmonics, |_, _| nan),
+                    sigma: Mat::new(),
                 })
                 .collect(),
         })

@@ -202,6 +202,7 @@ pub unsafe extern "C" fn nlsim_testdata_add_sweep(
                 frequency_hz: freq[s],
                 force: (0..h).map(|k| z(force, s * h + k)).collect(),
                 response: faer::Mat::from_fn(nc, h, |c, k| z(response, (s * nc + c) * h + k)),
+                sigma: faer::Mat::new(),
             })
             .collect();
         d.data.sweeps.push(Sweep {

@@ -263,6 +263,7 @@ fn reference() -> BTreeMap<&'static str, Vec<f64>> {
                 frequency_hz: f,
                 force: vec![faer::c64::new(1.0, 0.0)],
                 response: faer::Mat::from_fn(1, 1, |_, _| y[(0, 1)]),
+                sigma: faer::Mat::new(),
             }
         })
         .collect();

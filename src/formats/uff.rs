@@ -780,6 +780,7 @@ pub fn to_test_data(records: &[Uff58], input: &str, noise: Noise) -> Result<Test
                 let sign = if sign == 0.0 { 1.0 } else { sign };
                 r.values[s] * sign
             }),
+            sigma: Mat::new(),
         })
         .collect();
     let data = TestData {

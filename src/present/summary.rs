@@ -197,6 +197,13 @@ pub fn model_summary(model: &Model, source: &str, validation: Option<&Validation
                 .join(", ")
         }
     );
+    // The reduced model's parameters exist once the model is reduced; `--set` and
+    // `--param` take them as well.
+    let _ = writeln!(
+        s,
+        "  reduced      modeN.f (Hz), modeN.zeta, modeN.m (kg) of every retained mode N, \
+         stiffness_scale: parameters of the reduced model (--set, --param)"
+    );
     if let Some(v) = validation {
         let _ = writeln!(
             s,

@@ -12,7 +12,10 @@
 //! ```
 //!
 //! Amplitudes are complex harmonics `Z` with `z(t) = Re(Z e^{ikΩt})` in SI units (N, m, m/s,
-//! m/s²); an empty response cell is a harmonic not measured. Rows of one sweep are contiguous
+//! m/s²); an empty response cell is a harmonic not measured. The header may go on with
+//! `<channel>_re_std,<channel>_im_std` for every channel: the measured standard deviations of
+//! each harmonic's real and imaginary parts, which replace the channel's noise model where
+//! given (empty cells keep it). Rows of one sweep are contiguous
 //! and in measured order, and each step lists harmonics `1..=H` in turn.
 
 use crate::error::{Error, Result};
@@ -21,6 +24,11 @@ use nlsim_calib::{Channel, Noise, Step, Sweep, SweepDirection, TestData};
 use nlsim_kernel::Quantity;
 use std::fmt::Write as _;
 use std::path::Path;
+
+#[cfg(feature = "hdf5")]
+mod h5;
+#[cfg(feature = "hdf5")]
+pub use h5::{read_h5, write_h5};
 
 /// `1st`, `2nd`, `3rd`, `4th`, …
 fn ordinal(n: usize) -> String {
@@ -60,6 +68,8 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
     let mut harmonics = None;
     let mut channels: Vec<Channel> = Vec::new();
     let mut header: Option<(usize, Vec<String>)> = None;
+    // The header carries `<channel>_re_std,<channel>_im_std` columns.
+    let mut stds = false;
     let mut sweeps: Vec<Sweep> = Vec::new();
     // The step being read: (line, frequency, harmonics seen).
     let mut pending: Option<(usize, usize)> = None;
@@ -214,10 +224,25 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
                     "no '# channel:' line before the column header".into(),
                 ));
             }
+            let mut with_std = want.clone();
+            for c in &channels {
+                with_std.push(format!("{}_re_std", c.name));
+                with_std.push(format!("{}_im_std", c.name));
+            }
+            if cells == with_std {
+                stds = true;
+                header = Some((ln, with_std));
+                continue;
+            }
             if cells != want {
                 return Err(err(
                     ln,
-                    format!("the column header must be '{}'", want.join(",")),
+                    format!(
+                        "the column header must be '{}', optionally followed by the standard \
+                         deviations '{}'",
+                        want.join(","),
+                        with_std[want.len()..].join(",")
+                    ),
                 ));
             }
             header = Some((ln, want));
@@ -282,6 +307,34 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
                 }
             })
             .collect::<Result<_>>()?;
+        let nc = channels.len();
+        let sigma: Vec<c64> = if stds {
+            (0..nc)
+                .map(|c| {
+                    let (a, b) = (6 + 2 * nc + 2 * c, 7 + 2 * nc + 2 * c);
+                    if cells[a].is_empty() && cells[b].is_empty() {
+                        return Ok(c64::new(f64::NAN, f64::NAN));
+                    }
+                    let v = c64::new(num(a)?, num(b)?);
+                    if !(v.re > 0.0 && v.im > 0.0) {
+                        return Err(err(
+                            ln,
+                            format!(
+                                "columns {} and {} ({}, {}): standard deviations must be \
+                                 positive (or both empty: the channel's noise model)",
+                                a + 1,
+                                b + 1,
+                                names[a],
+                                names[b]
+                            ),
+                        ));
+                    }
+                    Ok(v)
+                })
+                .collect::<Result<_>>()?
+        } else {
+            Vec::new()
+        };
         let new_sweep = sweeps.last().is_none_or(|s| s.label != cells[0]);
         if new_sweep {
             if let Some((l, seen)) = pending
@@ -339,6 +392,11 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
                 frequency_hz: f,
                 force: vec![c64::new(0.0, 0.0); h],
                 response: Mat::from_fn(channels.len(), h, |_, _| c64::new(f64::NAN, f64::NAN)),
+                sigma: if stds {
+                    Mat::from_fn(channels.len(), h, |_, _| c64::new(f64::NAN, f64::NAN))
+                } else {
+                    Mat::new()
+                },
             });
             pending = Some((ln, 0));
         }
@@ -362,6 +420,9 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
         st.force[k - 1] = force;
         for (c, y) in response.into_iter().enumerate() {
             st.response[(c, k - 1)] = y;
+        }
+        for (c, v) in sigma.into_iter().enumerate() {
+            st.sigma[(c, k - 1)] = v;
         }
         *seen = k;
     }
@@ -408,6 +469,15 @@ pub fn write_csv(path: &Path, data: &TestData) -> Result<()> {
     for c in &data.channels {
         let _ = write!(s, ",{0}_re,{0}_im", c.name);
     }
+    let stds = data
+        .sweeps
+        .iter()
+        .any(|sw| sw.steps.iter().any(|st| st.sigma.nrows() > 0));
+    if stds {
+        for c in &data.channels {
+            let _ = write!(s, ",{0}_re_std,{0}_im_std", c.name);
+        }
+    }
     s.push('\n');
     for sw in &data.sweeps {
         for st in &sw.steps {
@@ -431,6 +501,17 @@ pub fn write_csv(path: &Path, data: &TestData) -> Result<()> {
                         let _ = write!(s, ",{:?},{:?}", y.re, y.im);
                     }
                 }
+                if stds {
+                    for c in 0..data.channels.len() {
+                        let given = c < st.sigma.nrows() && k < st.sigma.ncols();
+                        match given.then(|| st.sigma[(c, k)]) {
+                            Some(v) if !v.re.is_nan() => {
+                                let _ = write!(s, ",{:?},{:?}", v.re, v.im);
+                            }
+                            _ => s.push_str(",,"),
+                        }
+                    }
+                }
                 s.push('\n');
             }
         }
@@ -444,7 +525,6 @@ pub fn write_csv(path: &Path, data: &TestData) -> Result<()> {
         })
 }
 
-/// Most complex values a test-data HDF5 file may declare (16 bytes each: 1 GiB).
 /// Test data by file extension (`nlsim calibrate`'s `DATA`): CSV, HDF5 (`.h5`, `.hdf5`) or linear FRFs in universal
 /// file dataset 58 (`.uff`, `.unv`, `.uf`; ASCII or binary), whose drive point is the
 /// model's single excitation and whose noise is `uff_noise` of each value.
@@ -488,278 +568,4 @@ pub fn read(path: &Path, model: &nlsim_kernel::Model, uff_noise: f64) -> Result<
             path.display()
         ))),
     }
-}
-
-#[cfg(feature = "hdf5")]
-const H5_MAX_VALUES: usize = 1 << 26;
-
-/// The `unit` attribute of per-channel data in test-data HDF5: each channel's SI unit.
-#[cfg(feature = "hdf5")]
-const CHANNEL_UNIT: &str = "the channel's SI unit: m, m/s or m/s^2 by /channels/quantity";
-
-#[cfg(feature = "hdf5")]
-/// Writes `data` as HDF5 (documented in docs/file-formats.md; `h5py` reads it directly):
-/// root attributes `format = "nlsim test data"`, `input`, `harmonics`; datasets
-/// `channels/name`, `channels/quantity`, `channels/noise_relative`, `channels/noise_absolute`;
-/// one group `sweeps/sweepN` (N from 0, measured order) per sweep with attributes `label`,
-/// `direction` and datasets `frequency_hz` (steps), `force` (steps × H, complex) and
-/// `response` (steps × channels × H, complex; NaN = not measured). Written atomically.
-pub fn write_h5(path: &Path, data: &TestData) -> Result<()> {
-    // What the readers would refuse is not written.
-    data.validate_measured()
-        .map_err(|e| Error::Usage(format!("{}: test data not written: {e}", path.display())))?;
-    use crate::formats::files::h5err;
-    use crate::formats::files::str_attr;
-    use hdf5::types::VarLenUnicode;
-    use hdf5_metno as hdf5;
-    let tmp = crate::formats::files::temp_path(path);
-    let vlen = |v: &[&str]| -> Vec<VarLenUnicode> {
-        v.iter()
-            .map(|s| s.parse().unwrap_or_else(|_| "?".parse().expect("ascii")))
-            .collect()
-    };
-    (|| -> hdf5::Result<()> {
-        let f = hdf5::File::create(&tmp)?;
-        str_attr(&f, "nlsim_version", env!("CARGO_PKG_VERSION"))?;
-        str_attr(&f, "command", "test data")?;
-        str_attr(&f, "format", "nlsim test data")?;
-        str_attr(&f, "input", &data.input)?;
-        crate::formats::files::count_attr(&f, "harmonics", data.harmonics)?;
-        let ch = f.create_group("channels")?;
-        let names: Vec<&str> = data.channels.iter().map(|c| c.name.as_str()).collect();
-        let quantities: Vec<&str> = data.channels.iter().map(|c| c.quantity.as_str()).collect();
-        ch.new_dataset_builder()
-            .with_data(&vlen(&names))
-            .create("name")?;
-        ch.new_dataset_builder()
-            .with_data(&vlen(&quantities))
-            .create("quantity")?;
-        let rel: Vec<f64> = data.channels.iter().map(|c| c.noise.relative).collect();
-        let abs: Vec<f64> = data.channels.iter().map(|c| c.noise.absolute).collect();
-        let d = ch
-            .new_dataset_builder()
-            .with_data(&rel)
-            .create("noise_relative")?;
-        str_attr(&d, "unit", "1")?;
-        let d = ch
-            .new_dataset_builder()
-            .with_data(&abs)
-            .create("noise_absolute")?;
-        str_attr(&d, "unit", CHANNEL_UNIT)?;
-        let sweeps = f.create_group("sweeps")?;
-        let (nc, h) = (data.channels.len(), data.harmonics);
-        for (i, sw) in data.sweeps.iter().enumerate() {
-            let g = sweeps.create_group(&format!("sweep{i}"))?;
-            str_attr(&g, "label", &sw.label)?;
-            str_attr(&g, "direction", sw.direction.as_str())?;
-            let n = sw.steps.len();
-            let freq: Vec<f64> = sw.steps.iter().map(|s| s.frequency_hz).collect();
-            let d = g
-                .new_dataset_builder()
-                .with_data(&freq)
-                .create("frequency_hz")?;
-            str_attr(&d, "unit", "Hz")?;
-            let force: Vec<c64> = sw
-                .steps
-                .iter()
-                .flat_map(|s| s.force.iter().copied())
-                .collect();
-            let d = g.new_dataset::<c64>().shape((n, h)).create("force")?;
-            d.write_raw(&force)?;
-            str_attr(&d, "unit", "N")?;
-            let resp: Vec<c64> = sw
-                .steps
-                .iter()
-                .flat_map(|s| (0..nc).flat_map(move |c| (0..h).map(move |k| s.response[(c, k)])))
-                .collect();
-            let d = g
-                .new_dataset::<c64>()
-                .shape((n, nc, h))
-                .create("response")?;
-            d.write_raw(&resp)?;
-            str_attr(&d, "unit", CHANNEL_UNIT)?;
-        }
-        Ok(())
-    })()
-    .map_err(h5err(path))?;
-    std::fs::rename(&tmp, path).map_err(|source| Error::Io {
-        path: path.to_path_buf(),
-        source,
-    })
-}
-
-#[cfg(feature = "hdf5")]
-/// Reads test data written in the layout of [`write_h5`] (by nlsim or by any HDF5 tool);
-/// errors name the file and the object. Declared sizes are checked against the datasets'
-/// shapes and a budget of 2²⁶ values before anything is read.
-pub fn read_h5(path: &Path) -> Result<TestData> {
-    use hdf5::types::VarLenUnicode;
-    use hdf5_metno as hdf5;
-    let err = |object: &str, message: String| Error::Hdf5 {
-        path: path.to_path_buf(),
-        message: format!("{object}: {message}"),
-    };
-    crate::formats::files::regular_file(path)?;
-    let f = hdf5::File::open(path).map_err(|e| err("file", e.to_string()))?;
-    let str_attr = |loc: &hdf5::Location, object: &str, name: &str| -> Result<String> {
-        loc.attr(name)
-            .and_then(|a| a.read_scalar::<VarLenUnicode>())
-            .map(|s| s.as_str().to_string())
-            .map_err(|e| err(object, format!("attribute '{name}': {e}")))
-    };
-    let format = str_attr(&f, "/", "format")?;
-    if format != "nlsim test data" {
-        return Err(err(
-            "/",
-            format!(
-                "format {} is not 'nlsim test data'",
-                crate::formats::files::quoted(&format)
-            ),
-        ));
-    }
-    let input = str_attr(&f, "/", "input")?;
-    let harmonics = f
-        .attr("harmonics")
-        .and_then(|a| a.read_scalar::<u64>())
-        .map_err(|e| err("/", format!("attribute 'harmonics': {e}")))? as usize;
-    if harmonics == 0 || harmonics > 1000 {
-        return Err(err("/", format!("harmonics = {harmonics} (1..=1000)")));
-    }
-    let dataset = |name: &str, shape: &[usize]| -> Result<hdf5::Dataset> {
-        let d = f.dataset(name).map_err(|e| err(name, e.to_string()))?;
-        let found = d.shape();
-        if found != shape {
-            return Err(err(name, format!("shape {found:?}, expected {shape:?}")));
-        }
-        Ok(d)
-    };
-    let complex_dataset = |name: &str, shape: &[usize]| -> Result<hdf5::Dataset> {
-        let d = dataset(name, shape)?;
-        crate::formats::files::complex_layout(&d).map_err(|m| err(name, m))?;
-        Ok(d)
-    };
-    let nc = f
-        .dataset("channels/name")
-        .map_err(|e| err("channels/name", e.to_string()))?
-        .shape()
-        .first()
-        .copied()
-        .unwrap_or(0);
-    if nc == 0 || nc > 10_000 {
-        return Err(err("channels/name", format!("{nc} channels (1..=10000)")));
-    }
-    let strings = |name: &str| -> Result<Vec<String>> {
-        dataset(name, &[nc])?
-            .read_raw::<VarLenUnicode>()
-            .map(|v| v.iter().map(|s| s.as_str().to_string()).collect())
-            .map_err(|e| err(name, e.to_string()))
-    };
-    let reals = |name: &str| -> Result<Vec<f64>> {
-        dataset(name, &[nc])?
-            .read_raw::<f64>()
-            .map_err(|e| err(name, e.to_string()))
-    };
-    let names = strings("channels/name")?;
-    let quantities = strings("channels/quantity")?;
-    let rel = reals("channels/noise_relative")?;
-    let abs = reals("channels/noise_absolute")?;
-    let mut channels = Vec::with_capacity(nc);
-    for c in 0..nc {
-        channels.push(Channel {
-            name: names[c].clone(),
-            quantity: quantity(&quantities[c]).ok_or_else(|| {
-                err(
-                    "channels/quantity",
-                    format!(
-                        "entry {c}: {} is not displacement, velocity or acceleration",
-                        crate::formats::files::quoted(&quantities[c])
-                    ),
-                )
-            })?,
-            noise: Noise {
-                absolute: abs[c],
-                relative: rel[c],
-            },
-        });
-    }
-    let group = f
-        .group("sweeps")
-        .map_err(|e| err("sweeps", e.to_string()))?;
-    let n_sweeps = group.len() as usize;
-    let mut sweeps = Vec::with_capacity(n_sweeps.min(10_000));
-    let mut budget = H5_MAX_VALUES;
-    for i in 0..n_sweeps {
-        let gname = format!("sweeps/sweep{i}");
-        let g = f.group(&gname).map_err(|_| {
-            err(
-                &gname,
-                format!("missing: the sweeps must be sweep0..sweep{}", n_sweeps - 1),
-            )
-        })?;
-        let label = str_attr(&g, &gname, "label")?;
-        let dir = str_attr(&g, &gname, "direction")?;
-        let direction = match dir.as_str() {
-            "up" => SweepDirection::Up,
-            "down" => SweepDirection::Down,
-            _ => {
-                return Err(err(
-                    &gname,
-                    format!(
-                        "direction {} is not up or down",
-                        crate::formats::files::quoted(&dir)
-                    ),
-                ));
-            }
-        };
-        let fname = format!("{gname}/frequency_hz");
-        let n = f
-            .dataset(&fname)
-            .map_err(|e| err(&fname, e.to_string()))?
-            .shape()
-            .first()
-            .copied()
-            .unwrap_or(0);
-        let values = n.saturating_mul(nc + 1).saturating_mul(harmonics);
-        if values > budget {
-            return Err(err(
-                &gname,
-                format!(
-                    "{n} steps × {nc} channels × {harmonics} harmonics exceed the budget of {H5_MAX_VALUES} values"
-                ),
-            ));
-        }
-        budget -= values;
-        let freq = dataset(&fname, &[n])?
-            .read_raw::<f64>()
-            .map_err(|e| err(&fname, e.to_string()))?;
-        let force_name = format!("{gname}/force");
-        let force = complex_dataset(&force_name, &[n, harmonics])?
-            .read_raw::<c64>()
-            .map_err(|e| err(&force_name, e.to_string()))?;
-        let resp_name = format!("{gname}/response");
-        let resp = complex_dataset(&resp_name, &[n, nc, harmonics])?
-            .read_raw::<c64>()
-            .map_err(|e| err(&resp_name, e.to_string()))?;
-        let steps = (0..n)
-            .map(|s| Step {
-                frequency_hz: freq[s],
-                force: force[s * harmonics..(s + 1) * harmonics].to_vec(),
-                response: Mat::from_fn(nc, harmonics, |c, k| resp[(s * nc + c) * harmonics + k]),
-            })
-            .collect();
-        sweeps.push(Sweep {
-            label,
-            direction,
-            steps,
-        });
-    }
-    let data = TestData {
-        input,
-        channels,
-        harmonics,
-        sweeps,
-    };
-    data.validate_measured()
-        .map_err(|e| err("/", e.to_string()))?;
-    Ok(data)
 }
