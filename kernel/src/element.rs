@@ -987,14 +987,12 @@ impl Law {
                 }
             }
             Law::Iwan { grid, .. } => {
-                let mut e = LawEval::default();
-                for (s, &z) in state.iter().enumerate().take(grid.sliders() + 1) {
-                    let (k, f) = grid.slider(s);
-                    let (g, d) = iwan::slider_force(k, f, u, z);
-                    e.force += g;
-                    e.df_du += d;
+                let (force, df_du) = grid.force(u, state);
+                LawEval {
+                    force,
+                    df_du,
+                    df_dv: 0.0,
                 }
-                e
             }
             Law::PowerSpring { k, p } => {
                 let a = u.abs();

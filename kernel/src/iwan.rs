@@ -92,6 +92,20 @@ impl IwanGrid {
         (self.k[s], self.f[s])
     }
 
+    /// The joint's force (N) and `∂g/∂u` (N/m) at displacement `u` (m) with the sliders at
+    /// `state` (m, one per slider). Kept out of line: the loop would otherwise be inlined
+    /// into every law's evaluation and slow the memoryless ones' hot loops.
+    #[inline(never)]
+    pub fn force(&self, u: f64, state: &[f64]) -> (f64, f64) {
+        let (mut g, mut d) = (0.0, 0.0);
+        for (s, &z) in state.iter().enumerate().take(self.sliders + 1) {
+            let (gs, ds) = slider_force(self.k[s], self.f[s], u, z);
+            g += gs;
+            d += ds;
+        }
+        (g, d)
+    }
+
     /// The cut `c_i` (fraction of `φ_max`), `i = 0..=n`.
     fn cut(&self, i: usize) -> f64 {
         let n = self.sliders;
