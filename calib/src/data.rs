@@ -273,6 +273,14 @@ impl TestData {
             first.insert(sw.label.as_str(), s);
             let at =
                 |i: usize| format!("test data sweep {} ('{}') step {}", s + 1, sw.label, i + 1);
+            let value = |i: usize, c: usize, k: usize| {
+                format!(
+                    "{}, channel '{}', harmonic {}",
+                    at(i),
+                    self.channels[c].name,
+                    k + 1
+                )
+            };
             if sw.steps.is_empty() {
                 return bad(
                     format!("test data sweep {} ('{}')", s + 1, sw.label),
@@ -336,12 +344,7 @@ impl TestData {
                                 && v.im <= MAX_AMPLITUDE);
                         if !ok {
                             return bad(
-                                format!(
-                                    "{}, channel '{}', harmonic {}",
-                                    at(i),
-                                    self.channels[c].name,
-                                    k + 1
-                                ),
+                                value(i, c, k),
                                 format!(
                                     "standard deviations ({:e}, {:e}) of the real and imaginary \
                                      parts must both be positive and finite (or both empty: the \
@@ -380,18 +383,13 @@ impl TestData {
                             || (y.re.is_nan() != y.im.is_nan())
                         {
                             return bad(
-                                format!("{}, channel '{}', harmonic {}", at(i), self.channels[c].name, k + 1),
+                                value(i, c, k),
                                 "response is not finite (use NaN + NaN i for a harmonic not measured)".into(),
                             );
                         }
                         if y.norm() > MAX_AMPLITUDE {
                             return bad(
-                                format!(
-                                    "{}, channel '{}', harmonic {}",
-                                    at(i),
-                                    self.channels[c].name,
-                                    k + 1
-                                ),
+                                value(i, c, k),
                                 format!(
                                     "response of {:e} is above {MAX_AMPLITUDE:e} (no measured response is in SI units; is the unit right?)",
                                     y.norm()

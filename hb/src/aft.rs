@@ -189,8 +189,8 @@ impl AftPlan {
         let vv: Vec<f64> = (0..2 * n)
             .map(|j| if j % 2 == 0 { v[j / 2] } else { vh[j / 2] })
             .collect();
-        let (mut state, mut start) = (Vec::new(), Vec::new());
-        periodic_start_into(law, &uu, &vv, &mut state, &mut start);
+        let (mut state, mut start, mut last) = (Vec::new(), Vec::new(), Vec::new());
+        periodic_start_into(law, &uu, &mut state, &mut start, &mut last);
         let mut g = vec![0.0; 2 * n];
         let (mut point, mut damping) = (vec![0.0; n], vec![0.0; n]);
         for j in 0..2 * n {
@@ -401,12 +401,10 @@ impl AftPlan {
         // that stays where it started does not depend on x).
         let ns = law.n_sliders();
         let history = jacobian.is_some() && ns > 0;
+        periodic_start_into(law, u, state, start, last);
         if history {
-            slider_start(law, u, state, start, last);
             slip_ref.clear();
             slip_ref.resize(n * ns, NO_SLIP);
-        } else {
-            periodic_start_into(law, u, v, state, start);
         }
         for i in 0..n {
             let e = law.eval(u[i], v[i], state);
@@ -643,7 +641,7 @@ impl AftPlan {
         let ns = law.n_sliders();
         if ns > 0 {
             let (mut state, mut start, mut last) = (Vec::new(), Vec::new(), Vec::new());
-            slider_start(law, &u, &mut state, &mut start, &mut last);
+            periodic_start_into(law, &u, &mut state, &mut start, &mut last);
             // The sign of each slider's last slip: the spring force k (u − z) = ±f just after.
             let mut sign: Vec<f64> = (0..ns)
                 .map(|s| match last[s] {
@@ -681,7 +679,7 @@ impl AftPlan {
             }
             return &self.p * &samples;
         }
-        let mut state = periodic_start(law, &u, &v);
+        let mut state = periodic_start(law, &u);
         let mut out = vec![0.0; np];
         for i in 0..self.n {
             law.dforce_dparams(u[i], v[i], &state, &mut out);
@@ -716,17 +714,18 @@ impl pulp::WithSimd for ClearUpper {
 /// The history state at the start of a period of the motion `(u, v)` once it repeats: marched
 /// from zero over at most 16 periods, until the state at the period's end equals the one at
 /// its start to 1e-13 of the motion. Empty for memoryless laws.
-fn periodic_start(law: &Law, u: &[f64], v: &[f64]) -> Vec<f64> {
-    let (mut state, mut start) = (Vec::new(), Vec::new());
-    periodic_start_into(law, u, v, &mut state, &mut start);
+fn periodic_start(law: &Law, u: &[f64]) -> Vec<f64> {
+    let (mut state, mut start, mut last) = (Vec::new(), Vec::new(), Vec::new());
+    periodic_start_into(law, u, &mut state, &mut start, &mut last);
     state
 }
 
-/// [`periodic_start`] for a law made of sliders, recording in `last[s]` the sample (within
-/// the period) of slider `s`'s last slip over the whole march (NO_SLIP if it never slipped):
-/// the marched periods repeat the same samples, so a slip in an earlier period pins the
-/// slider at that sample's displacement.
-fn slider_start(
+/// [`periodic_start`] into `state` (`start` scratch), recording in `last[s]` the sample
+/// (within the period) of slider `s`'s last slip over the whole march (NO_SLIP if it never
+/// slipped): the marched periods repeat the same samples, so a slip in an earlier period
+/// pins the slider at that sample's displacement. The laws with a history are those made of
+/// sliders (`Law::n_states` = `Law::n_sliders`), whose history depends on `u` alone.
+fn periodic_start_into(
     law: &Law,
     u: &[f64],
     state: &mut Vec<f64>,
@@ -738,6 +737,9 @@ fn slider_start(
     state.resize(ns, 0.0);
     last.clear();
     last.resize(ns, NO_SLIP);
+    if ns == 0 {
+        return;
+    }
     let scale = u.iter().fold(0.0f64, |m, a| m.max(a.abs()));
     for _ in 0..16 {
         start.clear();
@@ -749,36 +751,6 @@ fn slider_start(
                     last[s] = i;
                 }
             }
-        }
-        if start
-            .iter()
-            .zip(state.iter())
-            .all(|(a, b)| (a - b).abs() <= 1e-13 * scale)
-        {
-            break;
-        }
-    }
-}
-
-/// [`periodic_start`] into `state`, with `start` as scratch.
-fn periodic_start_into(
-    law: &Law,
-    u: &[f64],
-    v: &[f64],
-    state: &mut Vec<f64>,
-    start: &mut Vec<f64>,
-) {
-    state.clear();
-    state.resize(law.n_states(), 0.0);
-    if state.is_empty() {
-        return;
-    }
-    let scale = u.iter().fold(0.0f64, |m, a| m.max(a.abs()));
-    for _ in 0..16 {
-        start.clear();
-        start.extend_from_slice(state);
-        for (&ui, &vi) in u.iter().zip(v.iter()) {
-            law.commit_state(ui, vi, state);
         }
         if start
             .iter()
