@@ -3061,7 +3061,7 @@ mod shipped_models {
                 | "spring_mass_op4.toml"
                 | "spring_mass_hb.toml" => &[("2", "10"), ("20", "40")],
                 "grouped_chain6.toml" => &[("2", "20")],
-                "ecl_from_fixture.toml" => &[("20", "30")],
+                "ecl_from_fixture.toml" | "ecl_modal.toml" => &[("20", "30")],
                 "lap_joint.toml" => &[("24", "28")],
                 "nlvib_ex6.toml" => &[("0.16", "0.19")],
                 other => panic!("no FRF band chosen for the new example {other}"),
@@ -3088,7 +3088,7 @@ mod shipped_models {
                 assert!(!out.contains("stopped"), "{args:?}: {out}");
             }
         }
-        assert_eq!(names.len(), 10, "{names:?}");
+        assert_eq!(names.len(), 11, "{names:?}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
@@ -7877,3 +7877,6 @@ mod wording {
         );
     }
 }
+
+#[path = "end_to_end/modal_models.rs"]
+mod modal_models;

@@ -33,7 +33,7 @@ fn ecl_designs(c: &mut Criterion) {
         model
             .add_sensor(Sensor {
                 name: format!("n{node}"),
-                dof,
+                at: nlsim_kernel::Site::Dof(dof),
                 quantity: Quantity::Acceleration,
             })
             .unwrap();

@@ -16,11 +16,11 @@ pub fn bracket_with_tip_sensor(target: usize) -> nlsim_kernel::Model {
     let mut model = nlsim_fixtures::bracket_fixture(&cfg, "cubic")
         .expect("the bracket fixture builds")
         .model;
-    let tip = model.excitation()[0].dof;
+    let tip = model.excitation()[0].at.clone();
     model
         .add_sensor(nlsim_kernel::Sensor {
             name: "tip_d".into(),
-            dof: tip,
+            at: tip,
             quantity: nlsim_kernel::Quantity::Displacement,
         })
         .expect("a new sensor name");
@@ -85,7 +85,10 @@ pub fn bracket_fe_case(target: usize) -> FeCase {
     use nlsim_calib::{Noise, ParamSpec, SweepPlan, synthesize};
     use nlsim_kernel::{Param, Parameterized};
     let mut model = bracket_with_tip_sensor(target);
-    let tip = model.excitation()[0].dof;
+    let tip = model.excitation()[0]
+        .at
+        .dof()
+        .expect("the bracket's force acts on a DOF");
     model
         .add_boundary_spring(tip, 1e4)
         .expect("a spring at the tip");

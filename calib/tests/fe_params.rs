@@ -21,7 +21,7 @@ fn chain(damping: Damping) -> Model {
     m.add_element(cubic.unwrap()).unwrap();
     m.add_excitation(Excitation {
         name: "shaker".into(),
-        dof: 59,
+        at: nlsim_kernel::Site::Dof(59),
         amplitude: 1.0,
         harmonics: Vec::new(),
     })
@@ -32,7 +32,7 @@ fn chain(damping: Damping) -> Model {
     ] {
         m.add_sensor(Sensor {
             name: name.into(),
-            dof,
+            at: nlsim_kernel::Site::Dof(dof),
             quantity,
         })
         .unwrap();

@@ -27,7 +27,7 @@ fn beam() -> Model {
     model
         .add_sensor(Sensor {
             name: "quarter".into(),
-            dof,
+            at: nlsim_kernel::Site::Dof(dof),
             quantity: Quantity::Acceleration,
         })
         .unwrap();
@@ -344,7 +344,7 @@ fn greedy_exchange_placement_finds_the_enumerated_optimum() {
         .unwrap()
         .sweep_information(&ex, &band, noise(), &[1, 3])
         .unwrap();
-    let mid_dof = model.sensors()[1].dof;
+    let mid_dof = model.sensors()[1].at.dof().unwrap();
     let ci = cand.iter().position(|&d| d == mid_dof).unwrap();
     let planner_mid = info.fim(&[1], &[0, 1], None);
     let rel = (&terms[ci] - &planner_mid).norm_max() / planner_mid.norm_max();

@@ -974,10 +974,10 @@ pub unsafe extern "C" fn nlsim_model_add_excitation(
         let m = get_model(model)?;
         let mut guard = write(&m);
         let m = Arc::make_mut(&mut guard);
-        let dof = dof_index(m, dof)?;
+        let at = m.site(dof)?;
         m.add_excitation(Excitation {
             name: name.into(),
-            dof,
+            at,
             amplitude: finite(amplitude, "amplitude")?,
             harmonics: Vec::new(),
         })?;
@@ -1006,10 +1006,10 @@ pub unsafe extern "C" fn nlsim_model_add_sensor(
         let m = get_model(model)?;
         let mut guard = write(&m);
         let m = Arc::make_mut(&mut guard);
-        let dof = dof_index(m, dof)?;
+        let at = m.site(dof)?;
         m.add_sensor(Sensor {
             name: name.into(),
-            dof,
+            at,
             quantity: q,
         })?;
         Ok(Done::Complete)
@@ -2031,7 +2031,7 @@ mod tests {
         model
             .add_excitation(Excitation {
                 name: "f".into(),
-                dof: 1,
+                at: nlsim::kernel::Site::Dof(1),
                 amplitude: 1.0,
                 harmonics: Vec::new(),
             })
@@ -2039,7 +2039,7 @@ mod tests {
         model
             .add_sensor(Sensor {
                 name: "y".into(),
-                dof: 1,
+                at: nlsim::kernel::Site::Dof(1),
                 quantity: Quantity::Displacement,
             })
             .unwrap();

@@ -62,14 +62,14 @@ fn example3() -> Model {
     .unwrap();
     m.add_excitation(Excitation {
         name: "f".into(),
-        dof: 1,
+        at: nlsim_kernel::Site::Dof(1),
         amplitude: 0.1,
         harmonics: Vec::new(),
     })
     .unwrap();
     m.add_sensor(Sensor {
         name: "q1".into(),
-        dof: 0,
+        at: nlsim_kernel::Site::Dof(0),
         quantity: Quantity::Displacement,
     })
     .unwrap();
@@ -147,7 +147,7 @@ fn example4_backbone_matches_shooting() {
     model
         .add_excitation(Excitation {
             name: "f".into(),
-            dof: 0,
+            at: nlsim_kernel::Site::Dof(0),
             amplitude: 1.0,
             harmonics: Vec::new(),
         })
@@ -156,7 +156,7 @@ fn example4_backbone_matches_shooting() {
         model
             .add_sensor(Sensor {
                 name: format!("q{}", d + 1),
-                dof: d,
+                at: nlsim_kernel::Site::Dof(d),
                 quantity: Quantity::Displacement,
             })
             .unwrap();
@@ -252,7 +252,7 @@ fn example5() -> Model {
     model
         .add_excitation(Excitation {
             name: "f".into(),
-            dof: 1,
+            at: nlsim_kernel::Site::Dof(1),
             amplitude: 0.0,
             harmonics: Vec::new(),
         })
@@ -359,14 +359,14 @@ fn example6(level: f64) -> Model {
     for d in 0..2 {
         m.add_excitation(Excitation {
             name: format!("f{}", d + 1),
-            dof: d,
+            at: nlsim_kernel::Site::Dof(d),
             amplitude: level,
             harmonics: Vec::new(),
         })
         .unwrap();
         m.add_sensor(Sensor {
             name: format!("q{}", d + 1),
-            dof: d,
+            at: nlsim_kernel::Site::Dof(d),
             quantity: Quantity::Displacement,
         })
         .unwrap();
@@ -1043,7 +1043,7 @@ fn example3_stability_matches_nonsmooth_shooting() {
     model
         .add_sensor(Sensor {
             name: "q2".into(),
-            dof: 1,
+            at: nlsim_kernel::Site::Dof(1),
             quantity: Quantity::Displacement,
         })
         .unwrap();

@@ -241,7 +241,7 @@ fn coupled_polynomial_sensitivities_match_finite_differences() {
     model
         .add_excitation(Excitation {
             name: "f".into(),
-            dof: 0,
+            at: nlsim_kernel::Site::Dof(0),
             amplitude: 20.0,
             harmonics: Vec::new(),
         })
@@ -250,7 +250,7 @@ fn coupled_polynomial_sensitivities_match_finite_differences() {
         model
             .add_sensor(Sensor {
                 name: format!("q{d}"),
-                dof: d,
+                at: nlsim_kernel::Site::Dof(d),
                 quantity: Quantity::Displacement,
             })
             .unwrap();

@@ -335,7 +335,7 @@ fn impacting_chain() -> Model {
     model
         .add_excitation(Excitation {
             name: "shaker".into(),
-            dof: 1,
+            at: nlsim_kernel::Site::Dof(1),
             amplitude: 5.0,
             harmonics: Vec::new(),
         })
@@ -343,7 +343,7 @@ fn impacting_chain() -> Model {
     model
         .add_sensor(Sensor {
             name: "m2".into(),
-            dof: 1,
+            at: nlsim_kernel::Site::Dof(1),
             quantity: Quantity::Displacement,
         })
         .unwrap();
@@ -448,7 +448,7 @@ fn friction_oscillator(force: f64, jenkins: bool) -> Model {
     model
         .add_excitation(Excitation {
             name: "shaker".into(),
-            dof: 0,
+            at: nlsim_kernel::Site::Dof(0),
             amplitude: force,
             harmonics: Vec::new(),
         })
@@ -456,7 +456,7 @@ fn friction_oscillator(force: f64, jenkins: bool) -> Model {
     model
         .add_sensor(Sensor {
             name: "mass".into(),
-            dof: 0,
+            at: nlsim_kernel::Site::Dof(0),
             quantity: Quantity::Displacement,
         })
         .unwrap();

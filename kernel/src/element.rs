@@ -1232,6 +1232,27 @@ impl Coupling {
         })
     }
 
+    /// The coordinate `a − b` (the terms of both, equal DOFs summed, in `a`'s then `b`'s
+    /// order); `None` when it vanishes (`a = b`, or two points of a modal model that move
+    /// alike in every mode).
+    pub fn difference(a: &Coupling, b: &Coupling) -> Option<Coupling> {
+        let mut terms: Vec<(usize, f64)> = Vec::new();
+        let pairs = a
+            .dofs
+            .iter()
+            .zip(&a.weights)
+            .map(|(&d, &w)| (d, w))
+            .chain(b.dofs.iter().zip(&b.weights).map(|(&d, &w)| (d, -w)));
+        for (d, w) in pairs {
+            match terms.iter_mut().find(|(e, _)| *e == d) {
+                Some(t) => t.1 += w,
+                None => terms.push((d, w)),
+            }
+        }
+        terms.retain(|&(_, w)| w != 0.0);
+        Coupling::weighted(&terms).ok()
+    }
+
     /// DOF indices involved.
     pub fn dofs(&self) -> &[usize] {
         &self.dofs

@@ -28,6 +28,7 @@ pub mod linalg;
 pub mod model;
 pub mod names;
 pub mod param;
+pub mod site;
 pub mod sparse;
 #[cfg(any(test, feature = "test-util"))]
 pub mod testing;
@@ -43,6 +44,7 @@ pub use model::{
     Sensor, ValidationConfig, ValidationReport,
 };
 pub use param::{Param, Parameterized, Status};
+pub use site::{ResidualTerm, Site, TestMode};
 pub use sparse::SparseSym;
 
 /// faer, re-exported so that users of nlsim build matrices with the same version.

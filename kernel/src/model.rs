@@ -1,13 +1,14 @@
 //! The structural model: `M q̈ + V q̇ + K q + f_NL(q, q̇) = f(t)` (thesis eq. 4) with labelled
 //! DOFs, excitation and sensor points.
 
-use crate::damping::Damping;
-use crate::dof::DofMap;
+use crate::damping::{Damping, ModalDamping};
+use crate::dof::{DofLabel, DofMap};
 use crate::element::{Coupling, NonlinearElement};
 use crate::error::{Error, Result};
 use crate::param::{
     Param, Parameterized, check_finite, element_parameters, find_element_param, unknown_param,
 };
+use crate::site::{ResidualTerm, Site, TestMode};
 use crate::sparse::SparseSym;
 
 /// What a sensor measures at its DOF.
@@ -56,8 +57,8 @@ impl Quantity {
 pub struct Excitation {
     /// Name (identifier).
     pub name: String,
-    /// DOF index the force acts on.
-    pub dof: usize,
+    /// Where the force acts: a DOF, or a point of a test-based modal model.
+    pub at: Site,
     /// Nominal force amplitude at the fundamental `Ω` (N, or N m on a rotation), a cosine.
     pub amplitude: f64,
     /// Further harmonics of the same point (super- `kΩ` or sub-harmonics `Ω/k`), each with
@@ -134,8 +135,8 @@ impl ForceHarmonic {
 pub struct Sensor {
     /// Name (identifier).
     pub name: String,
-    /// DOF index measured.
-    pub dof: usize,
+    /// What it measures: a DOF, or a point of a test-based modal model.
+    pub at: Site,
     /// Measured quantity.
     pub quantity: Quantity,
 }
@@ -214,6 +215,12 @@ pub struct Model {
     base: Option<Box<(SparseSym, SparseSym)>>,
     groups: Vec<ElementGroup>,
     springs: Vec<(usize, f64)>,
+    /// Named points: combinations of DOFs (a test-based modal model's measured points).
+    points: Vec<(DofLabel, Coupling)>,
+    /// True for a test-based modal model ([`Model::modal`]).
+    modal: bool,
+    /// Measured residual flexibilities between ports (test-based modal models).
+    residual: Vec<ResidualTerm>,
 }
 
 impl Model {
@@ -255,7 +262,182 @@ impl Model {
             base: None,
             groups: Vec::new(),
             springs: Vec::new(),
+            points: Vec::new(),
+            modal: false,
+            residual: Vec::new(),
         })
+    }
+
+    /// A test-based modal model (thesis eq. 9 with the modes taken from a test): one
+    /// coordinate per mode, mass-normalised (`M = I`, `K = diag(ω_r²)`, modal damping `ζ_r`),
+    /// no FE matrices. Its measured points come from [`Model::add_point`] with their
+    /// mass-normalised mode-shape entries (m/√kg), its measured residual flexibilities from
+    /// [`Model::add_residual`]. Modes must be given in ascending frequency, so that mode `r`
+    /// of the file is `mode{r}` of every parameter and table.
+    pub fn modal(name: impl Into<String>, modes: &[TestMode]) -> Result<Self> {
+        if modes.is_empty() {
+            return Err(Error::invalid("modal model", "has no modes"));
+        }
+        let tau = 2.0 * std::f64::consts::PI;
+        for (r, m) in modes.iter().enumerate() {
+            let location = format!("mode {}", r + 1);
+            for (what, v) in [("frequency", m.frequency_hz), ("damping ratio", m.zeta)] {
+                if !v.is_finite() {
+                    return Err(Error::NonFinite {
+                        what: what.into(),
+                        location,
+                        value: v,
+                    });
+                }
+            }
+            if m.frequency_hz < 0.0 {
+                return Err(Error::invalid(
+                    location,
+                    format!("frequency {} Hz is negative", m.frequency_hz),
+                ));
+            }
+            if !(0.0..1.0).contains(&m.zeta) {
+                return Err(Error::invalid(
+                    location,
+                    format!("damping ratio {} must lie in [0, 1)", m.zeta),
+                ));
+            }
+            if r > 0 && m.frequency_hz < modes[r - 1].frequency_hz {
+                return Err(Error::invalid(
+                    location,
+                    format!(
+                        "{} Hz is below mode {}'s {} Hz: give the modes in ascending \
+                         frequency (mode r of the file is mode r of every parameter)",
+                        m.frequency_hz,
+                        r,
+                        modes[r - 1].frequency_hz
+                    ),
+                ));
+            }
+        }
+        let n = modes.len();
+        let mass = SparseSym::diagonal("M", &vec![1.0; n])?;
+        let k: Vec<f64> = modes
+            .iter()
+            .map(|m| (tau * m.frequency_hz).powi(2))
+            .collect();
+        let stiffness = SparseSym::diagonal("K", &k)?;
+        let mut model = Model::new(name, DofMap::scalar(n), mass, stiffness)?;
+        let mut damping = ModalDamping::uniform(0.0);
+        damping.per_mode = modes.iter().map(|m| m.zeta).collect();
+        model.damping = Damping::Modal(damping);
+        model.modal = true;
+        Ok(model)
+    }
+
+    /// True for a test-based modal model ([`Model::modal`]): its DOFs are modal coordinates.
+    pub fn is_modal(&self) -> bool {
+        self.modal
+    }
+
+    /// Declares a named point whose motion is `coupling` over the model's DOFs (for a modal
+    /// model: the point's mass-normalised mode-shape entries, m/√kg). Forces, sensors and
+    /// elements then name it like a DOF ([`Model::site`]). A label must be new and, on a model
+    /// with physical DOFs, not one of them.
+    pub fn add_point(&mut self, label: DofLabel, coupling: Coupling) -> Result<()> {
+        self.check_coupling(&format!("point {label}"), &coupling)?;
+        if self.points.iter().any(|(l, _)| *l == label) {
+            return Err(Error::DuplicateName {
+                what: "point".into(),
+                name: label.to_string(),
+            });
+        }
+        if !self.modal && self.dofs.index_of(&label).is_ok() {
+            return Err(Error::invalid(
+                format!("point {label}"),
+                "is a DOF of the model: a point needs a label of its own",
+            ));
+        }
+        self.points.push((label, coupling));
+        Ok(())
+    }
+
+    /// The named points with their couplings, in the order declared.
+    pub fn points(&self) -> &[(DofLabel, Coupling)] {
+        &self.points
+    }
+
+    /// The site a label names: a declared point, on a modal model its modal coordinate
+    /// `modeN` (mode `N`, 1-based), else the DOF with that label.
+    pub fn site(&self, label: &str) -> Result<Site> {
+        let text = label.trim();
+        if self.modal
+            && let Some(r) = text
+                .strip_prefix("mode")
+                .and_then(|r| r.parse::<usize>().ok())
+        {
+            return if (1..=self.n_dofs()).contains(&r) {
+                Ok(Site::Dof(r - 1))
+            } else {
+                Err(Error::invalid(
+                    format!("modal coordinate '{text}'"),
+                    format!("the model has modes 1 to {}", self.n_dofs()),
+                ))
+            };
+        }
+        let parsed: std::result::Result<DofLabel, _> = text.parse();
+        if let Ok(l) = parsed
+            && let Some((_, c)) = self.points.iter().find(|(p, _)| *p == l)
+        {
+            return Ok(Site::Point {
+                label: l,
+                coupling: c.clone(),
+            });
+        }
+        if self.modal {
+            let listed: Vec<String> = self.points.iter().map(|(l, _)| l.to_string()).collect();
+            return Err(Error::invalid(
+                format!("point '{text}'"),
+                format!(
+                    "is not a point of this modal model; its points: {}; its modal \
+                     coordinates: mode1 to mode{}",
+                    if listed.is_empty() {
+                        "none".to_string()
+                    } else {
+                        listed.join(", ")
+                    },
+                    self.n_dofs()
+                ),
+            ));
+        }
+        Ok(Site::Dof(self.dofs.find(text)?))
+    }
+
+    /// A site's label as text: the DOF's or point's label, `modeN` for a coordinate of a
+    /// modal model.
+    pub fn describe_site(&self, site: &Site) -> String {
+        match site {
+            Site::Dof(d) if self.modal => format!("mode{}", d + 1),
+            _ => site.describe(&self.dofs),
+        }
+    }
+
+    /// Adds a measured residual flexibility between two ports (element, excitation or sensor
+    /// names), which [`crate::Model`]'s reductions add to their residual flexibility. The
+    /// names are checked against the ports when the model is reduced.
+    pub fn add_residual(&mut self, term: ResidualTerm) -> Result<()> {
+        if self
+            .residual
+            .iter()
+            .any(|t| (t.a == term.a && t.b == term.b) || (t.a == term.b && t.b == term.a))
+        {
+            return Err(Error::invalid(
+                format!("residual flexibility between '{}' and '{}'", term.a, term.b),
+                "is given twice",
+            ));
+        }
+        self.residual.push(term);
+        Ok(())
+    }
+
+    /// The measured residual flexibilities ([`Model::add_residual`]).
+    pub fn residual_terms(&self) -> &[ResidualTerm] {
+        &self.residual
     }
 
     /// A builder: `Model::builder(name, dofs, M, K).damping(d).element(e).build()?` adds the
@@ -282,6 +464,7 @@ impl Model {
         mass: Option<SparseSym>,
     ) -> Result<()> {
         let name = name.into();
+        self.refuse_on_modal(&format!("group '{name}'"))?;
         if !crate::param::is_valid_name(&name) {
             return Err(Error::invalid(
                 format!("group name '{name}'"),
@@ -320,6 +503,7 @@ impl Model {
     /// `spring:LABEL.k`. Its stiffness is added to K.
     pub fn add_boundary_spring(&mut self, dof: usize, k: f64) -> Result<()> {
         self.check_dof("boundary spring", dof)?;
+        self.refuse_on_modal("boundary spring")?;
         let label = self.dofs.labels()[dof];
         if self.springs.iter().any(|&(d, _)| d == dof) {
             return Err(Error::DuplicateName {
@@ -418,7 +602,7 @@ impl Model {
 
     /// Adds an excitation point.
     pub fn add_excitation(&mut self, ex: Excitation) -> Result<()> {
-        self.check_dof(&format!("excitation '{}'", ex.name), ex.dof)?;
+        self.check_site(&format!("excitation '{}'", ex.name), &ex.at)?;
         if !ex.amplitude.is_finite() {
             return Err(Error::NonFinite {
                 what: "excitation amplitude".into(),
@@ -471,7 +655,7 @@ impl Model {
 
     /// Adds a sensor.
     pub fn add_sensor(&mut self, s: Sensor) -> Result<()> {
-        self.check_dof(&format!("sensor '{}'", s.name), s.dof)?;
+        self.check_site(&format!("sensor '{}'", s.name), &s.at)?;
         if self.sensors.iter().any(|o| o.name == s.name) {
             return Err(Error::DuplicateName {
                 what: "sensor".into(),
@@ -491,6 +675,30 @@ impl Model {
             });
         }
         Ok(())
+    }
+
+    /// FE-level parts (groups, boundary springs) need FE matrices.
+    fn refuse_on_modal(&self, what: &str) -> Result<()> {
+        if self.modal {
+            return Err(Error::invalid(
+                what,
+                "a test-based modal model has no FE matrices to scale or add a spring to; \
+                 calibrate its modes (modeN.f, modeN.zeta, modeN.m) instead",
+            ));
+        }
+        Ok(())
+    }
+
+    fn check_site(&self, what: &str, site: &Site) -> Result<()> {
+        match site {
+            Site::Dof(d) => self.check_dof(what, *d),
+            Site::Point { coupling, .. } => {
+                for &d in coupling.dofs() {
+                    self.check_dof(what, d)?;
+                }
+                Ok(())
+            }
+        }
     }
 
     fn check_coupling(&self, name: &str, c: &Coupling) -> Result<()> {
@@ -938,26 +1146,27 @@ impl ModelBuilder {
         self.with(|m| m.add_element(element))
     }
 
-    /// Adds an excitation point: `amplitude` (N) at the DOF labelled `dof` (e.g. `"2:ux"`).
+    /// Adds an excitation point: `amplitude` (N) at the DOF or point labelled `dof` (e.g.
+    /// `"2:ux"`; see [`Model::site`]).
     pub fn excitation(self, name: &str, dof: &str, amplitude: f64) -> Self {
         self.with(|m| {
-            let dof = m.dofs.find(dof)?;
+            let at = m.site(dof)?;
             m.add_excitation(Excitation {
                 name: name.into(),
-                dof,
+                at,
                 amplitude,
                 harmonics: Vec::new(),
             })
         })
     }
 
-    /// Adds a sensor measuring `quantity` at the DOF labelled `dof`.
+    /// Adds a sensor measuring `quantity` at the DOF or point labelled `dof`.
     pub fn sensor(self, name: &str, dof: &str, quantity: Quantity) -> Self {
         self.with(|m| {
-            let dof = m.dofs.find(dof)?;
+            let at = m.site(dof)?;
             m.add_sensor(Sensor {
                 name: name.into(),
-                dof,
+                at,
                 quantity,
             })
         })

@@ -897,7 +897,7 @@ mod model {
         let e = m
             .add_sensor(Sensor {
                 name: "s".into(),
-                dof: 9,
+                at: nlsim_kernel::Site::Dof(9),
                 quantity: Quantity::Velocity,
             })
             .unwrap_err();
@@ -905,7 +905,7 @@ mod model {
         let e = m
             .add_excitation(Excitation {
                 name: "f".into(),
-                dof: 0,
+                at: nlsim_kernel::Site::Dof(0),
                 amplitude: f64::INFINITY,
                 harmonics: Vec::new(),
             })

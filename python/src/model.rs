@@ -128,6 +128,13 @@ impl Model {
             .map_err(|e| input(format!("{arg}: {e}")))
     }
 
+    /// The site a label names: a DOF, or a point (or `modeN`) of a test-based modal model.
+    fn site(&self, arg: &str, label: &str) -> PyResult<nlsim::kernel::Site> {
+        self.inner
+            .site(label)
+            .map_err(|e| input(format!("{arg}: {e}")))
+    }
+
     fn param(&self, name: &str) -> PyResult<nlsim::kernel::Param> {
         nlsim::kernel::param::parse_known(name, &self.inner.parameters()).map_err(kernel_err)
     }
@@ -278,11 +285,11 @@ impl Model {
                 "amplitude: {amplitude} is not a finite number"
             )));
         }
-        let dof = self.dof("dof", dof)?;
+        let at = self.site("dof", dof)?;
         self.inner
             .add_excitation(Excitation {
                 name: name.into(),
-                dof,
+                at,
                 amplitude,
                 harmonics: Vec::new(),
             })
@@ -294,11 +301,11 @@ impl Model {
     #[pyo3(signature = (name, dof, quantity="displacement"))]
     fn add_sensor(&mut self, name: &str, dof: &str, quantity: &str) -> PyResult<()> {
         let quantity = Quantity::parse(quantity).map_err(|e| input(format!("quantity: {e}")))?;
-        let dof = self.dof("dof", dof)?;
+        let at = self.site("dof", dof)?;
         self.inner
             .add_sensor(Sensor {
                 name: name.into(),
-                dof,
+                at,
                 quantity,
             })
             .map_err(kernel_err)

@@ -936,6 +936,46 @@ pub(crate) fn factor_below_spectrum(
 
 /// The dense path: exact for small models. `definite`: whether `K` is positive definite, when the caller knows (else a Cholesky of `K`
 /// decides).
+/// The exact modes of a diagonal pencil with positive masses (a test-based modal model, or a
+/// lumped model of uncoupled DOFs): `λ_i = K_ii / M_ii`, `φ_i = e_i / √M_ii`, ascending with
+/// ties in DOF order, so that equal frequencies keep their own shapes instead of any
+/// rotation of them. `None` when either matrix has an off-diagonal entry.
+fn diagonal_eigen(k: &SparseSym, m: &SparseSym) -> Option<nlsim_kernel::linalg::DenseEigen> {
+    let n = k.n();
+    let diag = |a: &SparseSym| -> Option<Vec<f64>> {
+        let mut d = vec![0.0; n];
+        for j in 0..n {
+            let (rows, vals) = a.col(j);
+            for (&i, &v) in rows.iter().zip(vals) {
+                if i != j {
+                    if v != 0.0 {
+                        return None;
+                    }
+                } else {
+                    d[j] = v;
+                }
+            }
+        }
+        Some(d)
+    };
+    let (kd, md) = (diag(k)?, diag(m)?);
+    if md.iter().any(|&x| x <= 0.0) {
+        return None;
+    }
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| (kd[a] / md[a]).total_cmp(&(kd[b] / md[b])));
+    Some(nlsim_kernel::linalg::DenseEigen {
+        values: order.iter().map(|&i| kd[i] / md[i]).collect(),
+        vectors: Mat::from_fn(n, n, |r, c| {
+            if r == order[c] {
+                1.0 / md[r].sqrt()
+            } else {
+                0.0
+            }
+        }),
+    })
+}
+
 fn solve_dense(
     k: &SparseSym,
     m: &SparseSym,
@@ -944,8 +984,13 @@ fn solve_dense(
 ) -> Result<Modes> {
     let t = Instant::now();
     let (kd, md) = (k.to_dense(), m.to_dense());
-    let mut d = nlsim_kernel::linalg::dense_generalized_eigen_low(kd.as_ref(), md.as_ref())?;
     let n = k.n();
+    let exact = diagonal_eigen(k, m);
+    let diagonal = exact.is_some();
+    let mut d = match exact {
+        Some(d) => d,
+        None => nlsim_kernel::linalg::dense_generalized_eigen_low(kd.as_ref(), md.as_ref())?,
+    };
     let wanted = match cfg.selection {
         ModeSelection::Lowest(c) => c.min(n),
         ModeSelection::Below { .. } => n,
@@ -953,7 +998,7 @@ fn solve_dense(
     // A near-null K inverted at 0 (as `dense_generalized_eigen_low` does when K factors):
     // redo at a shift from the spectrum, as the sparse path does.
     let mut sigma = 0.0;
-    if let Some((_, next)) = near_null_gap(&d.values, wanted + 1) {
+    if let Some((_, next)) = near_null_gap(&d.values, wanted + 1).filter(|_| !diagonal) {
         let s = -NEAR_NULL_SHIFT * next;
         let ks = &kd - &md * faer::Scale(s);
         if ks.llt(faer::Side::Lower).is_ok() {

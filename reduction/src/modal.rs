@@ -128,10 +128,14 @@ pub fn model_ports(model: &Model, extra_dofs: &[usize]) -> Result<Vec<Port>> {
         }
     }
     for x in model.excitation() {
-        ports.push(Port::dof(&x.name, PortKind::Excitation, x.dof));
+        ports.push(Port::coupling(
+            &x.name,
+            PortKind::Excitation,
+            &x.at.coupling(),
+        ));
     }
     for s in model.sensors() {
-        ports.push(Port::dof(&s.name, PortKind::Sensor, s.dof));
+        ports.push(Port::coupling(&s.name, PortKind::Sensor, &s.at.coupling()));
     }
     for &d in extra_dofs {
         if d >= model.n_dofs() {
@@ -353,11 +357,12 @@ pub fn reduce_with(
             .sum()
     });
     let t = std::time::Instant::now();
-    let (residual, residual_shift) = if cfg.residual_flexibility && n_ports > 0 {
+    let (mut residual, residual_shift) = if cfg.residual_flexibility && n_ports > 0 {
         residual_flexibility(model, solver, &modes, &ports, &participation, cfg.eigen.par)?
     } else {
         (Mat::zeros(n_ports, n_ports), 0.0)
     };
+    add_measured_residual(model, &ports, &mut residual)?;
     Ok(ReducedModel {
         modes,
         ports,
@@ -367,6 +372,21 @@ pub fn reduce_with(
         damping: model.damping().clone(),
         residual_seconds: t.elapsed().as_secs_f64(),
     })
+}
+
+/// Adds a test-based modal model's measured residual flexibilities
+/// ([`Model::residual_terms`]) to the ports' residual, symmetrically; a term naming a port the
+/// model does not have is an error.
+fn add_measured_residual(model: &Model, ports: &[Port], residual: &mut Mat<f64>) -> Result<()> {
+    for term in model.residual_terms() {
+        let a = port_index(ports, &term.a)?;
+        let b = port_index(ports, &term.b)?;
+        residual[(a, b)] += term.flexibility;
+        if a != b {
+            residual[(b, a)] += term.flexibility;
+        }
+    }
+    Ok(())
 }
 
 /// Replaces `DOF index i` in an error message of the eigen solver by the DOF label.

@@ -23,14 +23,14 @@ fn chain(damping: Damping) -> Model {
     .unwrap();
     m.add_excitation(Excitation {
         name: "shaker".into(),
-        dof: 59,
+        at: nlsim_kernel::Site::Dof(59),
         amplitude: 1.0,
         harmonics: Vec::new(),
     })
     .unwrap();
     m.add_sensor(Sensor {
         name: "mid".into(),
-        dof: 30,
+        at: nlsim_kernel::Site::Dof(30),
         quantity: Quantity::Acceleration,
     })
     .unwrap();

@@ -239,14 +239,14 @@ fn chain_with_ports() -> Model {
     m.add_element(link.unwrap()).unwrap();
     m.add_excitation(Excitation {
         name: "shaker".into(),
-        dof: 59,
+        at: nlsim_kernel::Site::Dof(59),
         amplitude: 1.0,
         harmonics: Vec::new(),
     })
     .unwrap();
     m.add_sensor(Sensor {
         name: "mid".into(),
-        dof: 30,
+        at: nlsim_kernel::Site::Dof(30),
         quantity: Quantity::Acceleration,
     })
     .unwrap();

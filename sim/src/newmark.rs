@@ -65,8 +65,8 @@ pub struct Newmark {
     elements: Vec<NonlinearElement>,
     /// `(element, coordinate)` of every loop coordinate (one per coordinate of each law).
     channels: Vec<(usize, usize)>,
-    inputs: Vec<(String, usize)>,
-    outputs: Vec<(String, usize, Quantity)>,
+    inputs: Vec<(String, Coupling)>,
+    outputs: Vec<(String, Coupling, Quantity)>,
     cfg: NewmarkConfig,
     gamma: f64,
     beta: f64,
@@ -184,12 +184,12 @@ impl Newmark {
         let inputs = model
             .excitation()
             .iter()
-            .map(|x| (x.name.clone(), x.dof))
+            .map(|x| (x.name.clone(), x.at.coupling()))
             .collect();
         let outputs = model
             .sensors()
             .iter()
-            .map(|s| (s.name.clone(), s.dof, s.quantity))
+            .map(|s| (s.name.clone(), s.at.coupling(), s.quantity))
             .collect();
         let norm_v = match &damping {
             DampingOp::None => 0.0,
@@ -288,8 +288,11 @@ impl Newmark {
         let ns = n_steps + 1;
         let force_at = |t: f64, out: &mut [f64]| {
             out.iter_mut().for_each(|x| *x = 0.0);
-            for (s, (_, dof)) in case.forces.iter().zip(&self.inputs) {
-                out[*dof] += s.eval(t);
+            for (s, (_, at)) in case.forces.iter().zip(&self.inputs) {
+                let f = s.eval(t);
+                for (&d, &w) in at.dofs().iter().zip(at.weights()) {
+                    out[d] += w * f;
+                }
             }
         };
         let mut d = vec![0.0; n];
@@ -355,11 +358,11 @@ impl Newmark {
         let mut rec_f = vec![vec![0.0; ns]; nn];
         let mut record = |k: usize, d: &[f64], v: &[f64], a: &[f64], g: &[f64]| {
             let t = k as f64 * self.cfg.dt;
-            for (o, (_, dof, q)) in self.outputs.iter().enumerate() {
+            for (o, (_, at, q)) in self.outputs.iter().enumerate() {
                 rec_out[o][k] = match q {
-                    Quantity::Displacement => d[*dof],
-                    Quantity::Velocity => v[*dof],
-                    Quantity::Acceleration => a[*dof],
+                    Quantity::Displacement => at.coordinate(d),
+                    Quantity::Velocity => at.coordinate(v),
+                    Quantity::Acceleration => at.coordinate(a),
                 };
             }
             for (i, s) in case.forces.iter().enumerate() {

@@ -491,14 +491,14 @@ fn geometric_2dof() -> Model {
     for d in 0..2 {
         m.add_excitation(Excitation {
             name: format!("f{}", d + 1),
-            dof: d,
+            at: nlsim_kernel::Site::Dof(d),
             amplitude: 1.0,
             harmonics: Vec::new(),
         })
         .unwrap();
         m.add_sensor(Sensor {
             name: format!("q{}", d + 1),
-            dof: d,
+            at: nlsim_kernel::Site::Dof(d),
             quantity: Quantity::Displacement,
         })
         .unwrap();

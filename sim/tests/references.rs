@@ -16,11 +16,11 @@ fn beam_with_tip_displacement() -> Model {
 
 /// `model` with a displacement sensor `tip_d` at its excitation point.
 fn with_tip_displacement(mut model: Model) -> Model {
-    let tip = model.excitation()[0].dof;
+    let tip = model.excitation()[0].at.clone();
     model
         .add_sensor(Sensor {
             name: "tip_d".into(),
-            dof: tip,
+            at: tip,
             quantity: Quantity::Displacement,
         })
         .unwrap();

@@ -29,6 +29,11 @@ pub struct ExportArgs {
     /// of dofs.txt): `ascii`, `binary` (little-endian) or `binary-be` (big-endian).
     #[arg(long, value_name = "LAYOUT", value_parser = parse_op4_layout)]
     op4: Option<crate::formats::op4_write::Op4Layout>,
+    /// Write instead `modal.toml`, a test-based modal model of the lowest N modes: shapes at
+    /// the points the elements, forces and sensors use, damping ratios, and the residual
+    /// flexibility of the truncated modes at the ports (docs/model-files.md, `[modal]`).
+    #[arg(long, value_name = "N", value_parser = at_least_one)]
+    modal: Option<usize>,
 }
 
 /// A count of 1 or more (a usage error otherwise, exit code 2 as clap's own).
@@ -285,7 +290,17 @@ impl CheckArgs {
 impl ExportArgs {
     /// `nlsim export`: writes the model's matrices and DOF labels.
     pub fn execute(&self, console: &Console) -> crate::Result<()> {
-        commands::check::export(&self.model, &self.dir, self.op4, console)
+        match self.modal {
+            Some(n) => {
+                if self.op4.is_some() {
+                    return Err(crate::Error::Usage(
+                        "--modal writes a modal model file, --op4 FE matrices: give one".into(),
+                    ));
+                }
+                commands::modal_export::export_modal(&self.model, &self.dir, n, console)
+            }
+            None => commands::check::export(&self.model, &self.dir, self.op4, console),
+        }
     }
 }
 

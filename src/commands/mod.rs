@@ -27,6 +27,7 @@ pub mod calibrate;
 pub mod check;
 pub mod demo;
 pub mod frf;
+pub mod modal_export;
 pub mod modes;
 pub mod nnm;
 pub mod plan;

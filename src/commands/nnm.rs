@@ -219,7 +219,7 @@ pub fn run_nnm(
         let dof = model.elements()[0].coupling().dofs()[0];
         free.add_excitation(Excitation {
             name: "unused".into(),
-            dof,
+            at: nlsim_kernel::Site::Dof(dof),
             amplitude: 0.0,
             harmonics: Vec::new(),
         })?;

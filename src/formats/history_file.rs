@@ -75,7 +75,7 @@ fn write_uff(path: &Path, model: &Model, h: &TimeHistory, info: &RunInfo) -> Res
                 info.model_spec
             ),
             function_type: 1,
-            response: node_direction(labels.label(sen.dof)),
+            response: node_direction(sen.at.label(labels)),
             reference: (0, 0),
             abscissa_type: 17,
             ordinate_type: quantity_code(o.quantity),
@@ -95,7 +95,7 @@ fn write_uff(path: &Path, model: &Model, h: &TimeHistory, info: &RunInfo) -> Res
         functions.push(UffFunction {
             id: format!("{name} force ({}, {})", info.method, info.model_spec),
             function_type: 1,
-            response: node_direction(labels.label(x.dof)),
+            response: node_direction(x.at.label(labels)),
             reference: (0, 0),
             abscissa_type: 17,
             ordinate_type: 13,

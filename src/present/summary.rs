@@ -1,6 +1,6 @@
 //! A readable summary of a model, for `nlsim check` and the demo.
 
-use nlsim_kernel::{Component, Damping, Model, Parameterized, ValidationReport};
+use nlsim_kernel::{Component, Coupling, Damping, Model, Parameterized, Site, ValidationReport};
 use std::fmt::Write;
 
 /// Formats the summary of `model` (and of its validation, when given) as aligned text.
@@ -15,32 +15,13 @@ pub fn model_summary(model: &Model, source: &str, validation: Option<&Validation
     comps.dedup();
     let comp_list: Vec<&str> = comps.iter().map(|c| c.as_str()).collect();
     let _ = writeln!(s, "  model        {}  ({source})", model.name());
-    let _ = writeln!(
-        s,
-        "  DOFs         {} on {} nodes ({})",
-        model.n_dofs(),
-        nodes.len(),
-        comp_list.join(" ")
-    );
-    let _ = writeln!(s, "  mass         {} stored entries", model.mass().nnz());
-    let masses: Vec<String> = [Component::Ux, Component::Uy, Component::Uz, Component::U]
-        .into_iter()
-        .filter(|c| comps.contains(c))
-        .map(|c| format!("{c} {:.4} kg", model.translational_mass(c)))
-        .collect();
-    if !masses.is_empty() {
-        let _ = writeln!(
-            s,
-            "               rigid-body mass along {}",
-            masses.join(", ")
-        );
+    if model.is_modal() {
+        modal_lines(model, &mut s);
+    } else {
+        fe_lines(model, &comps, nodes.len(), &comp_list, &mut s);
     }
-    let _ = writeln!(
-        s,
-        "  stiffness    {} stored entries",
-        model.stiffness().nnz()
-    );
     let damping = match model.damping() {
+        Damping::Modal(_) if model.is_modal() => "each mode's zeta".to_string(),
         Damping::None => "none".to_string(),
         Damping::Rayleigh { alpha, beta } => {
             format!("Rayleigh, alpha = {alpha:.4e} 1/s, beta = {beta:.4e} s")
@@ -62,16 +43,20 @@ pub fn model_summary(model: &Model, source: &str, validation: Option<&Validation
     }
     for (i, e) in model.elements().iter().enumerate() {
         let coordinate = |c: &nlsim_kernel::Coupling| -> String {
+            if let Some(named) = point_coordinate(model, c) {
+                return named;
+            }
             c.dofs()
                 .iter()
                 .zip(c.weights())
                 .map(|(&d, &w)| {
+                    let d = model.describe_site(&Site::Dof(d));
                     if w == 1.0 {
-                        dofs.describe(d)
+                        d
                     } else if w == -1.0 {
-                        format!("-{}", dofs.describe(d))
+                        format!("-{d}")
                     } else {
-                        format!("{w}*{}", dofs.describe(d))
+                        format!("{w}*{d}")
                     }
                 })
                 .collect::<Vec<_>>()
@@ -139,7 +124,7 @@ pub fn model_summary(model: &Model, source: &str, validation: Option<&Validation
             s,
             "{head}{} at {}, {} N{more}",
             x.name,
-            dofs.describe(x.dof),
+            model.describe_site(&x.at),
             x.amplitude
         );
     }
@@ -171,7 +156,7 @@ pub fn model_summary(model: &Model, source: &str, validation: Option<&Validation
                 "{} ({} at {})",
                 x.name,
                 x.quantity.as_str(),
-                dofs.describe(x.dof)
+                model.describe_site(&x.at)
             )
         })
         .collect();
@@ -227,6 +212,87 @@ pub fn counted(n: usize, noun: &str) -> String {
     } else {
         format!("{n} {noun}s")
     }
+}
+
+/// The DOF, mass and stiffness lines of an FE model.
+fn fe_lines(model: &Model, comps: &[Component], nodes: usize, comp_list: &[&str], s: &mut String) {
+    let _ = writeln!(
+        s,
+        "  DOFs         {} on {nodes} nodes ({})",
+        model.n_dofs(),
+        comp_list.join(" ")
+    );
+    let _ = writeln!(s, "  mass         {} stored entries", model.mass().nnz());
+    let masses: Vec<String> = [Component::Ux, Component::Uy, Component::Uz, Component::U]
+        .into_iter()
+        .filter(|c| comps.contains(c))
+        .map(|c| format!("{c} {:.4} kg", model.translational_mass(c)))
+        .collect();
+    if !masses.is_empty() {
+        let _ = writeln!(
+            s,
+            "               rigid-body mass along {}",
+            masses.join(", ")
+        );
+    }
+    let _ = writeln!(
+        s,
+        "  stiffness    {} stored entries",
+        model.stiffness().nnz()
+    );
+}
+
+/// The modes, points and residual terms of a test-based modal model.
+fn modal_lines(model: &Model, s: &mut String) {
+    let tau = 2.0 * std::f64::consts::PI;
+    let zeta = |r: usize, f: f64| match model.damping() {
+        Damping::Modal(m) => m.zeta(r, f),
+        _ => 0.0,
+    };
+    let modes: Vec<String> = (0..model.n_dofs())
+        .map(|r| {
+            let (rows, vals) = model.stiffness().col(r);
+            let k = rows
+                .iter()
+                .zip(vals)
+                .find(|(i, _)| **i == r)
+                .map_or(0.0, |(_, v)| *v);
+            let f = k.max(0.0).sqrt() / tau;
+            format!("mode{} {f:.4} Hz (zeta {})", r + 1, zeta(r, f))
+        })
+        .collect();
+    let _ = writeln!(
+        s,
+        "  modal        a test-based modal model, {} modes: {}",
+        model.n_dofs(),
+        modes.join(", ")
+    );
+    let points: Vec<String> = model.points().iter().map(|(l, _)| l.to_string()).collect();
+    let _ = writeln!(s, "  points       {}", points.join(", "));
+    for (i, t) in model.residual_terms().iter().enumerate() {
+        let head = if i == 0 {
+            "  residual     "
+        } else {
+            "               "
+        };
+        let _ = writeln!(s, "{head}{} - {}: {:.4e} m/N", t.a, t.b, t.flexibility);
+    }
+}
+
+/// A coordinate of a modal model named by its points: `31:uz`, or `31:uz - 1:uz`.
+fn point_coordinate(model: &Model, c: &Coupling) -> Option<String> {
+    let points = model.points();
+    if let Some((l, _)) = points.iter().find(|(_, pc)| pc == c) {
+        return Some(l.to_string());
+    }
+    for (a, ca) in points {
+        for (b, cb) in points {
+            if a != b && Coupling::difference(ca, cb).as_ref() == Some(c) {
+                return Some(format!("{a} - {b}"));
+            }
+        }
+    }
+    None
 }
 
 #[cfg(test)]

@@ -425,13 +425,13 @@ impl FrfOutputs {
                     .sensors()
                     .iter()
                     .filter_map(|s| model.sensors().iter().find(|m| m.name == s.name))
-                    .map(|m| model.dofs().label(m.dof))
+                    .map(|m| m.at.label(model.dofs()))
                     .collect(),
                 input_dofs: sys
                     .inputs()
                     .iter()
                     .filter_map(|(n, _)| model.excitation().iter().find(|x| &x.name == n))
-                    .map(|x| model.dofs().label(x.dof))
+                    .map(|x| x.at.label(model.dofs()))
                     .collect(),
             };
             crate::formats::frf_file::write_frf(path, sys, branch, y, &info)?;

@@ -295,10 +295,10 @@ pub fn plan_candidates(req: &PlanRequest) -> Result<(Model, PlanCandidates)> {
 /// sensors to `model`; errors name the point and its DOF.
 fn add_points(model: &mut Model, req: &PlanRequest) -> Result<()> {
     for a in &req.actuators {
-        let d = point_dof(model, a, "plan actuator")?;
+        let at = point_site(model, a, "plan actuator")?;
         model.add_excitation(Excitation {
             name: a.name.clone(),
-            dof: d,
+            at,
             amplitude: 0.0,
             harmonics: Vec::new(),
         })?;
@@ -310,19 +310,20 @@ fn add_points(model: &mut Model, req: &PlanRequest) -> Result<()> {
 /// DOF is named with `what` (e.g. `plan sensor`) and the point.
 pub(crate) fn add_sensors(model: &mut Model, sensors: &[PointSpec], what: &str) -> Result<()> {
     for s in sensors {
-        let d = point_dof(model, s, what)?;
+        let at = point_site(model, s, what)?;
         model.add_sensor(Sensor {
             name: s.name.clone(),
-            dof: d,
+            at,
             quantity: s.quantity,
         })?;
     }
     Ok(())
 }
 
-/// The DOF of point `p` in `model`; the error names `what`, the point and its DOF.
-fn point_dof(model: &Model, p: &PointSpec, what: &str) -> Result<usize> {
-    model.dofs().find(&p.dof).map_err(|e| {
+/// The site of point `p` in `model` (a DOF, or a point of a modal model); the error names
+/// `what`, the point and its DOF.
+fn point_site(model: &Model, p: &PointSpec, what: &str) -> Result<nlsim_kernel::Site> {
+    model.site(&p.dof).map_err(|e| {
         Error::Usage(format!(
             "{what} '{}': DOF '{}' is not in '{}': {e}",
             p.name,

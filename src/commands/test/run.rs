@@ -39,7 +39,7 @@ pub fn run_test(req: &TestRequest, progress: &mut dyn FnMut(usize, usize)) -> Re
     let mut model = crate::commands::setup::load_for_run(&req.model, &req.set)?;
     let drive = match (&req.drive, &req.drive_dof) {
         (_, Some(dof)) => {
-            let d = model.dofs().find(dof).map_err(|e| {
+            let at = model.site(dof).map_err(|e| {
                 Error::Usage(format!(
                     "test drive_dof '{dof}' is not in '{}': {e}",
                     model.name()
@@ -47,7 +47,7 @@ pub fn run_test(req: &TestRequest, progress: &mut dyn FnMut(usize, usize)) -> Re
             })?;
             model.add_excitation(Excitation {
                 name: "shaker".into(),
-                dof: d,
+                at,
                 amplitude: 0.0,
                 harmonics: Vec::new(),
             })?;

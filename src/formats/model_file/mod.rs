@@ -4,17 +4,23 @@
 //! options: `ecl_beam`, `bracket:refinement=4,nonlinear=bump_stop`. The model file format is
 //! documented in `docs/model-files.md`; every error names the file, the line and the key.
 
+mod elements;
+mod modal;
+mod toml;
+pub mod write;
+
+pub use self::toml::toml_message;
+use self::toml::{Doc, Tab, Val, number};
 use crate::error::{Error, Result};
 use crate::formats::fe_matrices as fe;
 use crate::formats::matrices as mtx;
+use ::toml::de::{DeTable, DeValue};
+use elements::{name_and_site, read_dof, read_element, read_force_harmonic};
 use nlsim_kernel::{
-    Coupling, Damping, DampingBand, DofLabel, DofMap, Excitation, Law, ModalDamping, Model,
-    NonlinearElement, PolyTerm, Quantity, Sensor, SparseSym,
+    Damping, DampingBand, DofLabel, DofMap, Excitation, ModalDamping, Model, Quantity, Sensor,
+    SparseSym,
 };
-use std::ops::Range;
 use std::path::Path;
-use toml::Spanned;
-use toml::de::{DeTable, DeValue};
 
 /// A model with where it came from.
 #[derive(Debug, Clone)]
@@ -73,199 +79,6 @@ fn split_fixture_arg(arg: &str) -> (&str, Vec<(String, String)>) {
     }
 }
 
-/// The text of a model file with its path, for error locations.
-struct Doc<'a> {
-    file: &'a Path,
-    text: &'a str,
-}
-
-impl Doc<'_> {
-    fn err(&self, span: Range<usize>, key: &str, message: impl Into<String>) -> Error {
-        let line = self.text[..span.start.min(self.text.len())]
-            .matches('\n')
-            .count()
-            + 1;
-        Error::Spec {
-            file: self.file.to_path_buf(),
-            line,
-            key: key.to_string(),
-            message: message.into(),
-        }
-    }
-}
-
-/// A table being read: remembers which keys were used so unknown ones can be reported.
-struct Tab<'a, 'i> {
-    doc: &'a Doc<'a>,
-    path: String,
-    span: Range<usize>,
-    t: &'a DeTable<'i>,
-    used: Vec<String>,
-}
-
-type Val<'a, 'i> = &'a Spanned<DeValue<'i>>;
-
-impl<'a, 'i> Tab<'a, 'i> {
-    fn key(&self, k: &str) -> String {
-        if self.path.is_empty() {
-            k.to_string()
-        } else {
-            format!("{}.{k}", self.path)
-        }
-    }
-    fn get(&mut self, k: &str) -> Option<Val<'a, 'i>> {
-        self.used.push(k.to_string());
-        self.t.get(k)
-    }
-    fn err(&self, v: Val<'_, '_>, k: &str, msg: impl Into<String>) -> Error {
-        self.doc.err(v.span(), &self.key(k), msg)
-    }
-    /// A required key `k` is missing; a key of the table that is not one and lies within two
-    /// edits of `k` is named as the likely typo.
-    fn missing(&self, k: &str, what: &str) -> Error {
-        let typo = self
-            .t
-            .iter()
-            .map(|(key, _)| key.get_ref().to_string())
-            .find(|key| {
-                !self.used.iter().any(|u| u == key) && key != k && edit_distance(key, k) <= 2
-            });
-        let hint = typo.map_or_else(String::new, |t| {
-            format!(
-                " (the table has '{}', which is not a key here: a typo of '{k}'?)",
-                crate::formats::files::quoted(&t).trim_matches('\'')
-            )
-        });
-        self.doc.err(
-            self.span.clone(),
-            &self.key(k),
-            format!("missing: {what}{hint}"),
-        )
-    }
-    fn str(&mut self, k: &str) -> Result<Option<(String, Range<usize>)>> {
-        match self.get(k) {
-            None => Ok(None),
-            Some(v) => match v.get_ref() {
-                DeValue::String(s) => Ok(Some((s.to_string(), v.span()))),
-                _ => Err(self.err(v, k, "expected a string")),
-            },
-        }
-    }
-    fn f64(&mut self, k: &str) -> Result<Option<f64>> {
-        match self.get(k) {
-            None => Ok(None),
-            Some(v) => number(v)
-                .map(Some)
-                .ok_or_else(|| self.err(v, k, "expected a finite number")),
-        }
-    }
-    fn req_f64(&mut self, k: &str, what: &str) -> Result<f64> {
-        self.f64(k)?.ok_or_else(|| self.missing(k, what))
-    }
-    fn sub(&mut self, k: &str) -> Result<Option<Tab<'a, 'i>>> {
-        match self.get(k) {
-            None => Ok(None),
-            Some(v) => match v.get_ref() {
-                DeValue::Table(t) => Ok(Some(Tab {
-                    doc: self.doc,
-                    path: self.key(k),
-                    span: v.span(),
-                    t,
-                    used: vec![],
-                })),
-                _ => Err(self.err(v, k, "expected a table")),
-            },
-        }
-    }
-    /// `[[k]]` arrays of tables.
-    fn array_of_tables(&mut self, k: &str) -> Result<Vec<Tab<'a, 'i>>> {
-        let Some(v) = self.get(k) else {
-            return Ok(vec![]);
-        };
-        let DeValue::Array(a) = v.get_ref() else {
-            return Err(self.err(v, k, format!("expected [[{k}]] tables")));
-        };
-        a.iter()
-            .enumerate()
-            .map(|(i, item)| match item.get_ref() {
-                DeValue::Table(t) => Ok(Tab {
-                    doc: self.doc,
-                    path: format!("{}[{}]", self.key(k), i + 1),
-                    span: item.span(),
-                    t,
-                    used: vec![],
-                }),
-                _ => Err(self.err(item, k, format!("expected [[{k}]] tables"))),
-            })
-            .collect()
-    }
-    /// `name` (or `default`) and the required labelled `dof` of an excitation or sensor.
-    fn name_and_dof(
-        &mut self,
-        default: String,
-        dofs: &DofMap,
-        what: &str,
-    ) -> Result<(String, usize)> {
-        let name = self.str("name")?.map_or(default, |s| s.0);
-        let dof = read_dof(self, "dof", dofs)?
-            .ok_or_else(|| self.missing("dof", &format!("{what}, e.g. dof = \"21:uz\"")))?;
-        Ok((name, dof))
-    }
-    /// A model error located at this table.
-    fn at_table(&self, e: nlsim_kernel::Error) -> Error {
-        self.doc.err(self.span.clone(), &self.path, e.to_string())
-    }
-    /// Errors on the first key that was never read.
-    fn finish(&self, allowed_hint: &str) -> Result<()> {
-        for (k, v) in self.t.iter() {
-            if !self.used.iter().any(|u| u == k.get_ref().as_ref()) {
-                return Err(self.doc.err(
-                    k.span().start..v.span().end,
-                    &self.key(k.get_ref()),
-                    format!("unknown key; {allowed_hint}"),
-                ));
-            }
-        }
-        Ok(())
-    }
-}
-
-/// The Levenshtein distance between two short keys (characters inserted, deleted or
-/// replaced).
-fn edit_distance(a: &str, b: &str) -> usize {
-    let b: Vec<char> = b.chars().collect();
-    let mut prev: Vec<usize> = (0..=b.len()).collect();
-    for (i, ca) in a.chars().enumerate() {
-        let mut cur = vec![i + 1; b.len() + 1];
-        for (j, &cb) in b.iter().enumerate() {
-            cur[j + 1] = (prev[j] + usize::from(ca != cb))
-                .min(prev[j + 1] + 1)
-                .min(cur[j] + 1);
-        }
-        prev = cur;
-    }
-    prev[b.len()]
-}
-
-fn number(v: &Spanned<DeValue<'_>>) -> Option<f64> {
-    let x = match v.get_ref() {
-        DeValue::Float(f) => f.as_str().replace('_', "").parse::<f64>().ok()?,
-        DeValue::Integer(i) => {
-            i64::from_str_radix(&i.as_str().replace('_', ""), i.radix()).ok()? as f64
-        }
-        _ => return None,
-    };
-    x.is_finite().then_some(x)
-}
-
-/// A TOML parser's message in nlsim's words: trimmed, and an empty key named as such (serde
-/// writes it as an unknown field ``).
-pub fn toml_message(message: &str) -> String {
-    message
-        .trim()
-        .replace("unknown field ``", "an empty key \"\" is not a field")
-}
-
 /// Parses a model file's text; `file` is used for relative paths and error locations.
 pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
     let doc = Doc { file, text };
@@ -295,17 +108,48 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
             format!("'{u}' is not supported: nlsim works in SI (m, kg, s, N, rad)"),
         ));
     }
-    let mut mats = top.sub("matrices")?.ok_or_else(|| {
-        top.missing(
-            "matrices",
-            "a [matrices] table (fixture = ..., or mass/stiffness)",
-        )
-    })?;
-    let (mut model, description, references, from_fixture) =
-        read_matrices(&mut mats, &name, &base_dir)?;
-    mats.finish("[matrices] takes fixture and options, or mass, stiffness, dofs and format")?;
+    let modal_table = top.sub("modal")?;
+    let matrices_table = top.sub("matrices")?;
+    let mut residuals = Vec::new();
+    let (mut model, description, references, from_fixture) = match (modal_table, matrices_table) {
+        (Some(md), Some(_)) => {
+            return Err(doc.err(
+                md.span.clone(),
+                "modal",
+                "a model has [matrices] (an FE model) or [modal] (a test-based modal model), \
+                 not both",
+            ));
+        }
+        (Some(mut md), None) => {
+            let (model, pending) = modal::read_modal(&mut md, &name)?;
+            md.finish("[modal] takes points, [[modal.mode]] and [[modal.residual]]")?;
+            residuals = pending;
+            (model, None, Vec::new(), false)
+        }
+        (None, Some(mut mats)) => {
+            let read = read_matrices(&mut mats, &name, &base_dir)?;
+            mats.finish(
+                "[matrices] takes fixture and options, or mass, stiffness, dofs and format",
+            )?;
+            read
+        }
+        (None, None) => {
+            return Err(top.missing(
+                "matrices",
+                "a [matrices] table (fixture = ..., or mass/stiffness), or a [modal] table (a \
+                 test-based modal model)",
+            ));
+        }
+    };
 
     if let Some(mut d) = top.sub("damping")? {
+        if model.is_modal() {
+            return Err(doc.err(
+                d.span.clone(),
+                "damping",
+                "a [modal] model's damping is each mode's zeta: remove [damping]",
+            ));
+        }
         let damping = read_damping(&mut d, &base_dir, model.n_dofs())?;
         let span = d.span.clone();
         d.finish("see docs/model-files.md for the keys of each damping type")?;
@@ -314,7 +158,12 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
             .map_err(|e| doc.err(span, "damping", e.to_string()))?;
     }
 
+    let fe_only = "a test-based modal model has no FE matrices to scale or add a spring to; \
+                   calibrate its modes (modeN.f, modeN.zeta, modeN.m) instead";
     for mut g in top.array_of_tables("group")? {
+        if model.is_modal() {
+            return Err(doc.err(g.span.clone(), &g.path, fe_only));
+        }
         let (gname, span) = g.str("name")?.ok_or_else(|| {
             g.missing(
                 "name",
@@ -357,7 +206,10 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
             .map_err(|err| g.at_table(err))?;
     }
     for mut s in top.array_of_tables("spring")? {
-        let dof = read_dof(&mut s, "dof", model.dofs())?
+        if model.is_modal() {
+            return Err(doc.err(s.span.clone(), &s.path, fe_only));
+        }
+        let dof = read_dof(&mut s, "dof", &model)?
             .ok_or_else(|| s.missing("dof", "the DOF the spring grounds, e.g. dof = \"12:uz\""))?;
         let k = s.req_f64("k", "the spring stiffness in N/m (N m/rad on a rotation)")?;
         s.finish("a boundary spring takes dof and k")?;
@@ -380,7 +232,7 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
         )?;
     }
     for mut e in elements {
-        let el = read_element(&mut e, model.dofs())?;
+        let el = read_element(&mut e, &model)?;
         e.finish(if el.is_coupled() {
             "a coupled_polynomial element takes name, type, dofs and coefficients \
              k<i>_<p1>_..._<pm> (one power per coordinate)"
@@ -390,9 +242,10 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
         model.add_element(el).map_err(|err| e.at_table(err))?;
     }
     for (i, mut x) in excitation.into_iter().enumerate() {
-        let (name, dof) = x.name_and_dof(
+        let (name, at) = name_and_site(
+            &mut x,
             format!("force{}", i + 1),
-            model.dofs(),
+            &model,
             "the DOF the force acts on",
         )?;
         let amplitude = x.req_f64("amplitude", "the force amplitude in N")?;
@@ -405,15 +258,19 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
         model
             .add_excitation(Excitation {
                 name,
-                dof,
+                at,
                 amplitude,
                 harmonics,
             })
             .map_err(|err| x.at_table(err))?;
     }
     for (i, mut s) in sensors.into_iter().enumerate() {
-        let (name, dof) =
-            s.name_and_dof(format!("sensor{}", i + 1), model.dofs(), "the measured DOF")?;
+        let (name, at) = name_and_site(
+            &mut s,
+            format!("sensor{}", i + 1),
+            &model,
+            "the measured DOF",
+        )?;
         let quantity = match s.str("quantity")? {
             None => Quantity::Acceleration,
             Some((q, sp)) => {
@@ -422,14 +279,11 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
         };
         s.finish("a sensor takes name, dof, quantity")?;
         model
-            .add_sensor(Sensor {
-                name,
-                dof,
-                quantity,
-            })
+            .add_sensor(Sensor { name, at, quantity })
             .map_err(|err| s.at_table(err))?;
     }
-    top.finish("the top level takes name, units, [matrices], [damping], [[group]], [[spring]], [[element]], [[excitation]], [[sensor]]")?;
+    modal::add_residuals(&top, &mut model, residuals)?;
+    top.finish("the top level takes name, units, [matrices] or [modal], [damping], [[group]], [[spring]], [[element]], [[excitation]], [[sensor]]")?;
     Ok(LoadedModel {
         model,
         source: file.display().to_string(),
@@ -787,224 +641,4 @@ fn read_damping(t: &mut Tab<'_, '_>, base: &Path, n: usize) -> Result<Damping> {
             ));
         }
     })
-}
-
-/// One `[[excitation.harmonic]]`: `order` (an integer `K` for `KΩ`, or `"1/K"` for `Ω/K`),
-/// `amplitude` (N), `phase` (degrees, default 0; the fundamental's cosine is the reference).
-fn read_force_harmonic(h: &mut Tab<'_, '_>) -> Result<nlsim_kernel::ForceHarmonic> {
-    let what = "the harmonic's order: an integer K (the force at KΩ) or \"1/K\" (at Ω/K)";
-    let (numerator, denominator) = match h.get("order") {
-        None => return Err(h.missing("order", what)),
-        Some(v) => {
-            let text = match v.get_ref() {
-                DeValue::String(s) => s.to_string(),
-                DeValue::Integer(i) => i.as_str().to_string(),
-                _ => return Err(h.err(v, "order", format!("expected {what}"))),
-            };
-            nlsim_kernel::ForceHarmonic::parse_ratio(&text).map_err(|m| h.err(v, "order", m))?
-        }
-    };
-    let amplitude = h.req_f64("amplitude", "the harmonic's force amplitude in N")?;
-    let phase = h.f64("phase")?.unwrap_or(0.0).to_radians();
-    Ok(nlsim_kernel::ForceHarmonic {
-        numerator,
-        denominator,
-        amplitude,
-        phase,
-    })
-}
-
-fn read_dof(t: &mut Tab<'_, '_>, key: &str, dofs: &DofMap) -> Result<Option<usize>> {
-    match t.str(key)? {
-        None => Ok(None),
-        Some((label, span)) => dofs
-            .find(&label)
-            .map(Some)
-            .map_err(|e| t.doc.err(span, &t.key(key), e.to_string())),
-    }
-}
-
-/// A `coupled_polynomial` element: `dofs = ["1:ux", "2:ux"]` (its coordinates `u1, u2, …`, one
-/// DOF each) and coefficients `k<i>_<p1>_…_<pm>` (of `u1^p1 … um^pm` in the force on `ui`).
-fn read_coupled_element(
-    t: &mut Tab<'_, '_>,
-    name: &str,
-    dofs: &DofMap,
-) -> Result<NonlinearElement> {
-    let v = t.get("dofs").ok_or_else(|| {
-        t.missing(
-            "dofs",
-            "the DOFs of the coordinates u1, u2, ..., e.g. dofs = [\"1:ux\", \"2:ux\"]",
-        )
-    })?;
-    let DeValue::Array(list) = v.get_ref() else {
-        return Err(t.err(
-            v,
-            "dofs",
-            "expected a list of DOF labels, e.g. [\"1:ux\", \"2:ux\"]",
-        ));
-    };
-    let mut couplings = Vec::with_capacity(list.len());
-    for l in list.iter() {
-        let DeValue::String(label) = l.get_ref() else {
-            return Err(t.err(l, "dofs", "expected DOF labels such as \"12:uz\""));
-        };
-        let d = dofs
-            .find(label)
-            .map_err(|e| t.err(l, "dofs", e.to_string()))?;
-        couplings.push(Coupling::single(d));
-    }
-    let mut pairs: Vec<(String, f64)> = Vec::new();
-    for (k, v) in t.t.iter() {
-        let key = k.get_ref().as_ref();
-        if matches!(key, "name" | "type" | "dofs") {
-            continue;
-        }
-        let Some((_, powers)) = nlsim_kernel::MonomialTerm::parse_name(key) else {
-            continue;
-        };
-        if powers.len() != couplings.len() {
-            return Err(t.err(
-                v,
-                key,
-                format!(
-                    "has {} powers but the element has {} coordinates (dofs): one power per \
-                     coordinate, e.g. k1_2_1 for u1^2 u2",
-                    powers.len(),
-                    couplings.len()
-                ),
-            ));
-        }
-        let coef = number(v).ok_or_else(|| t.err(v, key, "expected a finite number"))?;
-        pairs.push((key.to_string(), coef));
-        t.used.push(key.to_string());
-    }
-    let named: Vec<(&str, f64)> = pairs.iter().map(|(k, v)| (k.as_str(), *v)).collect();
-    let law =
-        Law::from_named(name, "coupled_polynomial", &named).map_err(|e| element_error(t, e))?;
-    NonlinearElement::coupled(name, law, couplings).map_err(|e| element_error(t, e))
-}
-
-fn read_element(t: &mut Tab<'_, '_>, dofs: &DofMap) -> Result<NonlinearElement> {
-    let (name, _) = t
-        .str("name")?
-        .ok_or_else(|| t.missing("name", "an element name, e.g. name = \"tip_spring\""))?;
-    let (kind, kspan) = t
-        .str("type")?
-        .ok_or_else(|| t.missing("type", Law::KINDS))?;
-    if kind == "coupled_polynomial" {
-        return read_coupled_element(t, &name, dofs);
-    }
-    let a = read_dof(t, "dof", dofs)?
-        .ok_or_else(|| t.missing("dof", "the DOF the element acts on, e.g. dof = \"21:uz\""))?;
-    let coupling = match read_dof(t, "dof2", dofs)? {
-        Some(b) if b == a => {
-            return Err(t.missing(
-                "dof2",
-                "a DOF other than dof (the element acts on dof − dof2)",
-            ));
-        }
-        Some(b) => Coupling::relative(a, b),
-        None => Coupling::single(a),
-    };
-    let law = match kind.as_str() {
-        "cubic" => Law::Cubic {
-            k3: t.req_f64("k3", "k3 in N/m^3")?,
-        },
-        "quadratic_damping" => Law::QuadraticDamping {
-            c2: t.req_f64("c2", "c2 in N s^2/m^2")?,
-        },
-        "coulomb" => Law::Coulomb {
-            fc: t.req_f64("fc", "fc (slip force) in N")?,
-            v_reg: t.f64("v_reg")?.unwrap_or(1e-3),
-        },
-        "jenkins" => Law::Jenkins {
-            kt: t.req_f64("kt", "kt (stick stiffness) in N/m")?,
-            fs: t.req_f64("fs", "fs (slip force) in N")?,
-        },
-        "power_spring" => Law::PowerSpring {
-            k: t.req_f64("k", "k in N/m^p (g = k |u|^p sign u)")?,
-            p: t.req_f64("p", "p, the exponent (>= 1)")?,
-        },
-        "power_damper" => Law::PowerDamper {
-            c: t.req_f64("c", "c in N (s/m)^p (g = c |v|^p sign v)")?,
-            p: t.req_f64("p", "p, the exponent (>= 1)")?,
-        },
-        "iwan" => {
-            let mut named = vec![
-                ("fs", t.req_f64("fs", "fs (macroslip force) in N")?),
-                (
-                    "kt",
-                    t.req_f64("kt", "kt (stiffness of the stuck joint) in N/m")?,
-                ),
-                (
-                    "chi",
-                    t.req_f64("chi", "chi, the slider exponent (-1 < chi <= 1)")?,
-                ),
-                (
-                    "beta",
-                    t.req_f64("beta", "beta >= 0, the share of the macroslip Dirac")?,
-                ),
-            ];
-            for key in ["sliders", "decades"] {
-                if let Some(v) = t.f64(key)? {
-                    named.push((key, v));
-                }
-            }
-            Law::from_named(&name, "iwan", &named).map_err(|e| element_error(t, e))?
-        }
-        "bump_stop" => Law::bump_stop(
-            t.req_f64("k", "k (contact stiffness) in N/m")?,
-            t.req_f64("gap", "gap in m")?,
-        ),
-        "clearance" => Law::Clearance {
-            k1: t.req_f64("k1", "k1 in N/m^r")?,
-            k2: t.f64("k2")?.unwrap_or(0.0),
-            e1: t.req_f64("e1", "e1 (gap) in m")?,
-            e2: t.f64("e2")?.unwrap_or(0.0),
-            r: t.f64("r")?.unwrap_or(1.0),
-            s: t.f64("s")?.unwrap_or(1.0),
-        },
-        "polynomial" => {
-            let mut stiffness = Vec::new();
-            let mut damping = Vec::new();
-            for (k, v) in t.t.iter() {
-                let key = k.get_ref().as_ref();
-                let (prefix, rest) = key.split_at(1.min(key.len()));
-                let Ok(power) = rest.parse::<u32>() else {
-                    continue;
-                };
-                let coef = number(v).ok_or_else(|| t.err(v, key, "expected a finite number"))?;
-                match prefix {
-                    "k" => stiffness.push(PolyTerm { power, coef }),
-                    "c" => damping.push(PolyTerm { power, coef }),
-                    _ => continue,
-                }
-                t.used.push(key.to_string());
-            }
-            Law::Polynomial { stiffness, damping }
-        }
-        other => {
-            return Err(t.doc.err(
-                kspan,
-                &t.key("type"),
-                format!("unknown element type '{other}'; use {}", Law::KINDS),
-            ));
-        }
-    };
-    NonlinearElement::new(name, law, coupling).map_err(|e| element_error(t, e))
-}
-
-/// An element's model error at the offending parameter's own line when the file gives it,
-/// otherwise at the element's table.
-fn element_error(t: &Tab<'_, '_>, e: nlsim_kernel::Error) -> Error {
-    if let nlsim_kernel::Error::InvalidParameter { name, .. } = &e
-        && let Some((_, p)) = name.rsplit_once('.')
-        && let Some((k, v)) = t.t.iter().find(|(k, _)| k.get_ref().as_ref() == p)
-    {
-        return t
-            .doc
-            .err(k.span().start..v.span().end, &t.key(p), e.to_string());
-    }
-    t.doc.err(t.span.clone(), &t.path, e.to_string())
 }
