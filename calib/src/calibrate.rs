@@ -587,8 +587,11 @@ pub(crate) fn start_points(
     Ok(starts)
 }
 
-/// The cost of every start point, in parallel (each worker on its own copy of `objective`),
-/// in the order given; `done(finished, total)` after each.
+/// The cost of every start point, in parallel, each on a fresh copy of `objective` (setting
+/// parameters in place rounds differently after different earlier values, e.g. a mode's
+/// damping ratio recovered from `2ζω` when its frequency changes, so a copy reused across
+/// the candidates one worker happens to take would make the costs depend on the thread
+/// count), in the order given; `done(finished, total)` after each.
 pub(crate) fn evaluate_candidates<O: Clone + Send + Sync>(
     objective: &O,
     starts: Vec<Vec<f64>>,
@@ -599,14 +602,12 @@ pub(crate) fn evaluate_candidates<O: Clone + Send + Sync>(
     let finished = AtomicUsize::new(0);
     let costs: Vec<Result<f64>> = starts
         .par_iter()
-        .map_init(
-            || objective.clone(),
-            |obj, v| {
-                let c = cost(obj, v);
-                done(finished.fetch_add(1, Ordering::Relaxed) + 1, total);
-                c
-            },
-        )
+        .map(|v| {
+            let mut obj = objective.clone();
+            let c = cost(&mut obj, v);
+            done(finished.fetch_add(1, Ordering::Relaxed) + 1, total);
+            c
+        })
         .collect();
     starts
         .into_iter()
