@@ -278,43 +278,10 @@ impl Model {
         if modes.is_empty() {
             return Err(Error::invalid("modal model", "has no modes"));
         }
-        let tau = 2.0 * std::f64::consts::PI;
         for (r, m) in modes.iter().enumerate() {
-            let location = format!("mode {}", r + 1);
-            for (what, v) in [("frequency", m.frequency_hz), ("damping ratio", m.zeta)] {
-                if !v.is_finite() {
-                    return Err(Error::NonFinite {
-                        what: what.into(),
-                        location,
-                        value: v,
-                    });
-                }
-            }
-            if m.frequency_hz < 0.0 {
-                return Err(Error::invalid(
-                    location,
-                    format!("frequency {} Hz is negative", m.frequency_hz),
-                ));
-            }
-            if !(0.0..1.0).contains(&m.zeta) {
-                return Err(Error::invalid(
-                    location,
-                    format!("damping ratio {} must lie in [0, 1)", m.zeta),
-                ));
-            }
-            if r > 0 && m.frequency_hz < modes[r - 1].frequency_hz {
-                return Err(Error::invalid(
-                    location,
-                    format!(
-                        "{} Hz is below mode {}'s {} Hz: give the modes in ascending \
-                         frequency (mode r of the file is mode r of every parameter)",
-                        m.frequency_hz,
-                        r,
-                        modes[r - 1].frequency_hz
-                    ),
-                ));
-            }
+            m.check(r, r.checked_sub(1).map(|p| &modes[p]))?;
         }
+        let tau = 2.0 * std::f64::consts::PI;
         let n = modes.len();
         let mass = SparseSym::diagonal("M", &vec![1.0; n])?;
         let k: Vec<f64> = modes
@@ -680,11 +647,7 @@ impl Model {
     /// FE-level parts (groups, boundary springs) need FE matrices.
     fn refuse_on_modal(&self, what: &str) -> Result<()> {
         if self.modal {
-            return Err(Error::invalid(
-                what,
-                "a test-based modal model has no FE matrices to scale or add a spring to; \
-                 calibrate its modes (modeN.f, modeN.zeta, modeN.m) instead",
-            ));
+            return Err(Error::invalid(what, crate::site::NO_FE_MATRICES));
         }
         Ok(())
     }

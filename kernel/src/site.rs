@@ -75,6 +75,57 @@ pub struct TestMode {
     pub zeta: f64,
 }
 
+impl TestMode {
+    /// Checks mode `r` (0-based) of a modal model: finite, `f ≥ 0`, `0 ≤ ζ < 1`, and not below
+    /// the `previous` mode (modes ascend, so that mode `r` of a file is `mode{r+1}` of every
+    /// parameter and table).
+    pub fn check(&self, r: usize, previous: Option<&TestMode>) -> Result<()> {
+        let location = format!("mode {}", r + 1);
+        for (what, v) in [
+            ("frequency", self.frequency_hz),
+            ("damping ratio", self.zeta),
+        ] {
+            if !v.is_finite() {
+                return Err(Error::NonFinite {
+                    what: what.into(),
+                    location,
+                    value: v,
+                });
+            }
+        }
+        if self.frequency_hz < 0.0 {
+            return Err(Error::invalid(
+                location,
+                format!("frequency {} Hz is negative", self.frequency_hz),
+            ));
+        }
+        if !(0.0..1.0).contains(&self.zeta) {
+            return Err(Error::invalid(
+                location,
+                format!("damping ratio {} must lie in [0, 1)", self.zeta),
+            ));
+        }
+        if let Some(p) = previous
+            && self.frequency_hz < p.frequency_hz
+        {
+            return Err(Error::invalid(
+                location,
+                format!(
+                    "{} Hz is below mode {}'s {} Hz: give the modes in ascending frequency \
+                     (mode r of the file is mode r of every parameter)",
+                    self.frequency_hz, r, p.frequency_hz
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Why a test-based modal model refuses FE-level parts (element groups, boundary springs).
+pub const NO_FE_MATRICES: &str = "a test-based modal model has no FE matrices to scale or add \
+                                  a spring to; calibrate its modes (modeN.f, modeN.zeta, \
+                                  modeN.m) instead";
+
 /// A measured residual flexibility between two ports of a test-based modal model, added to
 /// the reduction's residual (`D_ab = D_ba += flexibility`, m/N): the static share of the modes
 /// above the test's band (thesis eq. 10, measured instead of computed).

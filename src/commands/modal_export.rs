@@ -7,7 +7,7 @@
 use crate::error::{Error, Result};
 use crate::formats::model_file::write::{ModalFile, ModeEntry, modal_model_text};
 use crate::present::console::Console;
-use nlsim_kernel::{Coupling, DofMap, Model, Site};
+use nlsim_kernel::{Coupling, DofMap, Model};
 use nlsim_reduction::{ReductionConfig, reduce};
 use std::path::Path;
 
@@ -23,11 +23,6 @@ fn coordinate_labels(dofs: &DofMap, c: &Coupling, what: &str) -> Result<Vec<Stri
              name (one DOF, or the difference of two)"
         ))),
     }
-}
-
-/// The site's DOF label; a point (already a modal model) is refused before.
-fn site_label(dofs: &DofMap, at: &Site) -> String {
-    at.describe(dofs)
 }
 
 /// Builds the modal model file of `model` with its lowest `modes` modes.
@@ -71,7 +66,7 @@ pub fn modal_file(model: &Model, modes: usize) -> Result<(ModalFile, Vec<String>
         add(d, &mut points);
         excitation.push((
             x.name.clone(),
-            site_label(dofs, &x.at),
+            x.at.describe(dofs),
             x.amplitude,
             x.harmonics.clone(),
         ));
@@ -80,7 +75,7 @@ pub fn modal_file(model: &Model, modes: usize) -> Result<(ModalFile, Vec<String>
     for s in model.sensors() {
         let d = s.at.dof().unwrap_or(0);
         add(d, &mut points);
-        sensors.push((s.name.clone(), site_label(dofs, &s.at), s.quantity));
+        sensors.push((s.name.clone(), s.at.describe(dofs), s.quantity));
     }
     if points.is_empty() {
         return Err(Error::Usage(format!(

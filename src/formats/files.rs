@@ -383,6 +383,24 @@ pub fn number(v: f64) -> String {
     }
 }
 
+/// `s` as a TOML basic string (quotes, backslashes and control characters escaped).
+pub fn toml_string(s: &str) -> String {
+    let mut o = String::with_capacity(s.len() + 2);
+    o.push('"');
+    for ch in s.chars() {
+        match ch {
+            '"' => o.push_str("\\\""),
+            '\\' => o.push_str("\\\\"),
+            c if c.is_control() => {
+                o.push_str(&format!("\\u{:04X}", c as u32));
+            }
+            c => o.push(c),
+        }
+    }
+    o.push('"');
+    o
+}
+
 /// Longest part of a user's value quoted in an error message (characters).
 pub const QUOTE_MAX: usize = 60;
 

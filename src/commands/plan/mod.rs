@@ -175,7 +175,8 @@ steps = 5
             "tab\tand\nnewline",
             "é ü",
         ] {
-            let t: T = toml::from_str(&format!("s = {}", toml_string(text))).unwrap();
+            let t: T = toml::from_str(&format!("s = {}", crate::formats::files::toml_string(text)))
+                .unwrap();
             assert_eq!(t.s, text);
         }
     }

@@ -10,6 +10,7 @@ use crate::commands::plan::run::fim_csv;
 use crate::commands::plan::run::plan_candidates;
 use crate::commands::plan::run::rank;
 use crate::error::{Error, Result};
+use crate::formats::files::toml_string;
 use crate::formats::files::write_text_atomically as write_text;
 use crate::present::plot::BarGroup;
 use crate::present::plot::Bars;
@@ -691,22 +692,4 @@ pub(crate) fn write_ranking(out: &hdf5_metno::Group, run: &PlanRun) -> hdf5_metn
         .create("std")?
         .write_raw(&std)?;
     Ok(())
-}
-
-/// `s` as a TOML basic string (quotes, backslashes and control characters escaped).
-pub(crate) fn toml_string(s: &str) -> String {
-    let mut o = String::with_capacity(s.len() + 2);
-    o.push('"');
-    for ch in s.chars() {
-        match ch {
-            '"' => o.push_str("\\\""),
-            '\\' => o.push_str("\\\\"),
-            c if c.is_control() => {
-                let _ = write!(o, "\\u{:04X}", c as u32);
-            }
-            c => o.push(c),
-        }
-    }
-    o.push('"');
-    o
 }

@@ -158,8 +158,7 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
             .map_err(|e| doc.err(span, "damping", e.to_string()))?;
     }
 
-    let fe_only = "a test-based modal model has no FE matrices to scale or add a spring to; \
-                   calibrate its modes (modeN.f, modeN.zeta, modeN.m) instead";
+    let fe_only = nlsim_kernel::site::NO_FE_MATRICES;
     for mut g in top.array_of_tables("group")? {
         if model.is_modal() {
             return Err(doc.err(g.span.clone(), &g.path, fe_only));

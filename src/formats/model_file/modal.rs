@@ -81,9 +81,11 @@ pub(super) fn read_modal(t: &mut Tab<'_, '_>, name: &str) -> Result<(Model, Vec<
             shape.iter_mut().for_each(|s| *s /= mass.sqrt());
         }
         m.finish("a mode takes f_hz, zeta, shape and m")?;
-        modes.push(TestMode { frequency_hz, zeta });
-        // Checked as each mode is added, so that an error is at the mode's own table.
-        Model::modal(name, &modes).map_err(|e| m.at_table(e))?;
+        let mode = TestMode { frequency_hz, zeta };
+        // Checked here, so that an error is at the mode's own table.
+        mode.check(modes.len(), modes.last())
+            .map_err(|e| m.at_table(e))?;
+        modes.push(mode);
         shapes.push(shape);
     }
     let mut model = Model::modal(name, &modes).map_err(|e| t.at_table(e))?;

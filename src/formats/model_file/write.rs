@@ -2,6 +2,7 @@
 //! FE model's modes, read back by [`super::parse_model_file`].
 
 use crate::error::{Error, Result};
+use crate::formats::files::toml_string as text;
 use nlsim_kernel::{Law, NonlinearElement, Quantity};
 use std::fmt::Write;
 
@@ -41,23 +42,6 @@ pub struct ModalFile {
 /// A TOML number that reads back to the same `f64` (Rust's shortest round-trip form).
 fn num(x: f64) -> String {
     format!("{x:e}")
-}
-
-/// A TOML basic string.
-fn text(s: &str) -> String {
-    let mut out = String::from("\"");
-    for c in s.chars() {
-        match c {
-            '"' => out.push_str("\\\""),
-            '\\' => out.push_str("\\\\"),
-            c if c.is_control() => {
-                let _ = write!(out, "\\u{:04X}", c as u32);
-            }
-            c => out.push(c),
-        }
-    }
-    out.push('"');
-    out
 }
 
 /// The model-file keys and values of a law, in the order the file reader takes them; an error
