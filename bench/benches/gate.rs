@@ -243,9 +243,16 @@ fn records(path: &Path) -> BTreeMap<String, f64> {
 }
 
 fn main() {
-    // One thread for faer: ratios of single-threaded kernels are what a shared CI machine
-    // measures repeatably.
+    // One thread for faer and for every rayon region (the reference factorisations and the
+    // reductions default to `Par::rayon(0)`): ratios of single-threaded kernels are what a
+    // shared CI machine measures repeatably. With two pool threads the reference ran on two
+    // and the kernel's time was bimodal across processes (idle pool threads competing for
+    // the two cores), so the gate failed one run in two.
     faer::set_global_parallelism(faer::Par::Seq);
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build_global()
+        .expect("the gate sets the rayon pool before any parallel region");
     let mut c = Criterion::default()
         .warm_up_time(Duration::from_millis(300))
         .measurement_time(Duration::from_secs(2))
