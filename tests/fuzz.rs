@@ -502,6 +502,39 @@ fn fuzz_inner() {
         }
     }));
 
+    // Amplitude-and-phase tables (the Brake–Reuss layout and a two-channel one).
+    let tables = [
+        "control,level,frequency_hz,force_amplitude_n,accel_amplitude_m_s2,phase_rad\n\
+         force,1,79.0,0.24,12.3,-0.11\nforce,1,79.05,0.25,12.9,-0.12\n\
+         response,1,79.2,0.05,5.0,-0.2\nresponse,1,79.25,0.05,5.1,-0.3\n"
+            .to_string(),
+        "# exported\nrun,frequency_hz,force_amplitude_n,force_phase_rad,tip_amplitude_m,\
+         tip_phase_rad,mid_amplitude_m_s,mid_phase_rad\n\
+         a,20.0,1.0,0.1,1e-4,-0.5,2e-3,1.0\na,21.0,1.0,0.1,2e-4,-0.9,3e-3,0.5\n\
+         b,21.0,2.0,0.0,4e-4,-1.0,6e-3,0.4\nb,20.0,2.0,0.0,2e-4,-0.6,4e-3,0.9\n"
+            .to_string(),
+    ];
+    let table_path = dir.join("table.csv");
+    panics.extend(survive("amplitude-phase table", 10000 * scale(), |_| {
+        let text = mutate(rng.pick(&tables).clone().as_str(), &mut rng);
+        match nlsim::formats::test_data::parse_amplitude_phase(
+            &text,
+            &table_path,
+            "shaker",
+            nlsim::calib::Noise::relative(0.02),
+        ) {
+            // What was read is valid test data: nlsim's CSV writer takes it and reads it back.
+            Ok(d) => {
+                let back = dir.join("table-back.csv");
+                nlsim::formats::test_data::write_csv(&back, &d)
+                    .and_then(|()| nlsim::formats::test_data::read_csv(&back))
+                    .err()
+                    .map(|e| e.to_string())
+            }
+            Err(e) => Some(e.to_string()),
+        }
+    }));
+
     // Measured modes (CSV) for a model with DOFs 2:ux..6:ux.
     let chain = nlsim::load_model(
         root()

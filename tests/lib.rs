@@ -3940,7 +3940,7 @@ seed = 9
         let (rc, out, err) = nlsim(&["calibrate", "--config", cfg.to_str().unwrap()]);
         assert_eq!(rc, 0, "{out}{err}");
         assert!(
-            out.contains("converged in") && out.contains("report: 20 files"),
+            out.contains("converged in") && out.contains("report: 21 files"),
             "{out}"
         );
         let report = dir.join("report");
@@ -7880,3 +7880,6 @@ mod wording {
 
 #[path = "end_to_end/modal_models.rs"]
 mod modal_models;
+
+#[path = "end_to_end/validation.rs"]
+mod validation;

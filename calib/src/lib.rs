@@ -31,6 +31,7 @@ pub mod lm;
 pub mod modal;
 pub mod objective;
 pub mod plan;
+pub mod predict;
 pub mod shaker;
 pub mod stats;
 pub mod synthetic;
@@ -58,6 +59,7 @@ pub use plan::{
     Band, Criterion, Design, Exciter, FimSummary, Placement, Planner, RankedDesign, SideTone,
     SweepInformation, dof_information, greedy_placement, rank_designs, scaled_noise, subsets,
 };
+pub use predict::{BandConfig, PredictedValue, Prediction, SweepScore, normal_quantile, predict};
 pub use shaker::{
     ControlConfig, Shaker, StepControl, VirtualTest, virtual_test, virtual_test_with,
 };

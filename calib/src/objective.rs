@@ -200,6 +200,11 @@ pub struct PointResult {
     /// Computed harmonics `k = 1..=H_data` per channel (channels × harmonics) in each
     /// channel's quantity; NaN where the solve failed or the model holds fewer harmonics.
     pub response: Mat<c64>,
+    /// Per calibrated parameter (in spec order), `∂response/∂p` in the channel's unit per
+    /// parameter unit (channels × harmonics, the analytic HB sensitivities of thesis eq. 32
+    /// carried to the sensors); filled only by
+    /// [`FrfObjective::evaluate_with_sensitivities`], else empty.
+    pub sensitivity: Vec<Mat<c64>>,
 }
 
 /// Everything computed at one parameter vector.
@@ -724,6 +729,26 @@ impl FrfObjective {
         mask: Option<&[bool]>,
         jacobian: bool,
     ) -> Result<SweepEvaluation> {
+        self.evaluate(values, mask, jacobian, false)
+    }
+
+    /// [`FrfObjective::evaluate_values`] at `values` with no residuals, and with every
+    /// converged point's [`PointResult::sensitivity`]: what a prediction's band is propagated
+    /// through (`nlsim validate`).
+    pub fn evaluate_with_sensitivities(&mut self, values: &[f64]) -> Result<SweepEvaluation> {
+        let none = vec![false; self.points.len()];
+        self.evaluate(values, Some(&none), false, true)
+    }
+
+    /// The evaluation behind [`FrfObjective::evaluate_values`]; with `point_sensitivities`
+    /// every converged point carries its response sensitivities.
+    fn evaluate(
+        &mut self,
+        values: &[f64],
+        mask: Option<&[bool]>,
+        jacobian: bool,
+        point_sensitivities: bool,
+    ) -> Result<SweepEvaluation> {
         if values.len() != self.specs.len() {
             return Err(Error::DimensionMismatch {
                 what: "calibration parameter values".into(),
@@ -737,7 +762,7 @@ impl FrfObjective {
         let sys_params: Vec<Param> = sys_idx.iter().map(|&i| params[i].clone()).collect();
         let sys_values: Vec<f64> = sys_idx.iter().map(|&i| values[i]).collect();
         self.sys.set_params(&sys_params, &sys_values)?;
-        let variations = match self.update_fe(values, jacobian)? {
+        let variations = match self.update_fe(values, jacobian || point_sensitivities)? {
             Some(v) => v,
             None => return Ok(self.all_failed(Status::NonFinite)),
         };
@@ -781,6 +806,7 @@ impl FrfObjective {
                         response: Mat::from_fn(data.channels.len(), h_data, |_, _| {
                             c64::new(f64::NAN, f64::NAN)
                         }),
+                        sensitivity: Vec::new(),
                     });
                     prev = None;
                     continue;
@@ -805,7 +831,7 @@ impl FrfObjective {
                         }
                     }
                 }
-                let sens = if jacobian && train {
+                let sens = if (jacobian && train) || point_sensitivities {
                     let a = self.sys.sensitivities(&x, omega, 1.0, &sys_params)?;
                     let b = self
                         .sys
@@ -896,10 +922,29 @@ impl FrfObjective {
                         }
                     }
                 }
+                let sensitivity = match (&sens, point_sensitivities) {
+                    (Some(ss), true) => {
+                        let h = h_data.min(h_model);
+                        ss.iter()
+                            .map(|d| {
+                                Mat::from_fn(data.channels.len(), h_data, |c, j| {
+                                    if j < h {
+                                        d.dy[(self.sensor_of[c], j + 1)]
+                                            * self.quantity_factor(c, j + 1, omega)
+                                    } else {
+                                        c64::new(f64::NAN, f64::NAN)
+                                    }
+                                })
+                            })
+                            .collect()
+                    }
+                    _ => Vec::new(),
+                };
                 points.push(PointResult {
                     id,
                     status,
                     response,
+                    sensitivity,
                 });
                 prev = Some((x, omega));
             }
@@ -1084,6 +1129,7 @@ impl FrfObjective {
                     id,
                     status,
                     response: Mat::from_fn(nc, h, |_, _| c64::new(f64::NAN, f64::NAN)),
+                    sensitivity: Vec::new(),
                 })
                 .collect(),
             failed: self.points.clone(),

@@ -105,7 +105,9 @@ impl CramerRao {
         let c = self.reduced_chi2;
         (c > CHI2_WARN).then(|| {
             format!(
-                "reduced chi2 {c:.3} >> 1: the residuals are {:.2}x the noise model (noise                  understated, or a model that cannot follow the data); the Cramér–Rao std                  assumes the noise model and is {:.2}x smaller than the chi2-scaled std",
+                "reduced chi2 {c:.3} >> 1: the residuals are {:.2}x the noise model (noise \
+                 understated, or a model that cannot follow the data); the Cramér–Rao std \
+                 assumes the noise model and is {:.2}x smaller than the chi2-scaled std",
                 c.sqrt(),
                 c.sqrt()
             )

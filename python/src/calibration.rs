@@ -247,7 +247,11 @@ pub fn calibrate(
         .map_err(|e| input(e.to_string()))?;
     let m = model.inner.clone();
     let result = run(py, threads, move |stop: &Stop| -> nlsim::Result<_> {
-        let data = Arc::new(nlsim::formats::test_data::read(&data, &m, uff_noise)?);
+        let options = nlsim::formats::test_data::DataOptions {
+            noise: uff_noise,
+            ..Default::default()
+        };
+        let data = Arc::new(nlsim::formats::test_data::read(&data, &m, &options)?);
         let reduction = nlsim::reduction::ReductionConfig::lowest(modes.min(m.n_dofs()));
         let objective = FrfObjective::from_model(
             &m,

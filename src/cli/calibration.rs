@@ -50,6 +50,20 @@ pub struct CalibrateArgs {
     /// the measured ones) [default: 20, at most the model's DOFs].
     #[arg(long)]
     modes: Option<usize>,
+    /// Relative noise of each value of data that carry no noise model (UFF 58 FRFs,
+    /// amplitude-and-phase tables) [default: 0.01].
+    #[arg(long)]
+    data_noise: Option<f64>,
+    /// Added to every measured response phase, in degrees: the data's phase convention
+    /// (e.g. 180 for accelerations whose phase was recorded as a displacement's)
+    /// [default: 0].
+    #[arg(long, allow_hyphen_values = true)]
+    phase_offset_deg: Option<f64>,
+    /// The sweeps calibrated on, by label, `*` pattern or 1-based index (comma-separated,
+    /// e.g. `--train 'force-*'`); the others are held out, for `nlsim validate` to predict
+    /// [default: every sweep].
+    #[arg(long, value_delimiter = ',')]
+    train: Option<Vec<String>>,
     /// Modal data: standard deviation of one component of a unit-normalised measured
     /// shape [default: 0.02].
     #[arg(long)]
@@ -98,6 +112,56 @@ pub struct CalibrateArgs {
     /// and plots as SVG and PNG (per-harmonic FRFs, k-fold bars, convergence).
     #[arg(long)]
     report: Option<std::path::PathBuf>,
+}
+
+/// The arguments of `nlsim validate`.
+#[derive(Args, Debug)]
+pub struct ValidateArgs {
+    /// A calibration's result: `calibration.toml` in the report folder of `nlsim calibrate
+    /// --report DIR`.
+    calibration: std::path::PathBuf,
+    /// Other test data to predict (read with the calibration's data options) [default: the
+    /// calibration's data file].
+    #[arg(long)]
+    data: Option<std::path::PathBuf>,
+    /// The sweeps predicted, by label, `*` pattern or 1-based index (comma-separated)
+    /// [default: those held out of the training; every sweep of --data].
+    #[arg(long, value_delimiter = ',')]
+    sweeps: Option<Vec<String>>,
+    /// Two-sided coverage of the band, in (0, 1) [default: 0.95].
+    #[arg(long)]
+    level: Option<f64>,
+    /// Scale of the band's variances: `chi2` (by the training's reduced chi2 where it
+    /// exceeds 1) or `none` (the Cramér–Rao covariance and the noise model as they are)
+    /// [default: chi2].
+    #[arg(long, value_parser = ["chi2", "none"])]
+    scale: Option<String>,
+    /// Report folder: summary, scores.csv, prediction.csv, a plot per sweep and harmonic
+    /// (measured, predicted, band) and report.h5.
+    #[arg(long)]
+    report: Option<std::path::PathBuf>,
+}
+
+impl ValidateArgs {
+    /// The request of `nlsim validate`.
+    pub fn request(&self) -> commands::validate::ValidateRequest {
+        let mut r = commands::validate::ValidateRequest::new(self.calibration.clone());
+        r.data = self.data.clone();
+        r.sweeps = self.sweeps.clone().unwrap_or_default();
+        if let Some(l) = self.level {
+            r.level = l;
+        }
+        if self.scale.as_deref() == Some("none") {
+            r.scale = commands::validate::BandScale::None;
+        }
+        r.report = self.report.clone();
+        r
+    }
+
+    /// `nlsim validate`.
+    pub fn execute(&self, console: &Console) -> crate::Result<()> {
+        commands::validate::execute(&self.request(), console)
+    }
 }
 
 /// The arguments of `nlsim plan`.
@@ -202,6 +266,15 @@ impl CalibrateArgs {
         }
         if let Some(s) = self.shape_noise {
             req.shape_noise = s;
+        }
+        if let Some(v) = self.data_noise {
+            req.data_options.noise = v;
+        }
+        if let Some(v) = self.phase_offset_deg {
+            req.data_options.phase_offset_deg = v;
+        }
+        if let Some(t) = &self.train {
+            req.train = t.clone();
         }
         if self.fe_reduction.is_some() || self.fe_tolerance.is_some() {
             let kind = self.fe_reduction.as_deref().or(match &req.fe {

@@ -67,6 +67,12 @@ pub enum Command {
     /// options given beside it override the file).
     #[command(allow_negative_numbers = true)]
     Calibrate(CalibrateArgs),
+    /// Predict test data with a calibration's result (its report's calibration.toml): by
+    /// default the sweeps held out of the training, with a band from the parameter
+    /// covariance through the HB sensitivities plus the noise model, scored per sweep (rms
+    /// log-amplitude and phase errors, points inside the band, chi2, peaks). See
+    /// docs/calibration.md.
+    Validate(ValidateArgs),
     /// Pre-test planning: rank candidate tests (drive points, force levels, multi-sine
     /// signals, frequency bands, sensor sets, measured harmonics) by the Fisher information
     /// of the parameters from the analytic sensitivities, with Cramér–Rao bounds and
@@ -119,6 +125,7 @@ pub fn dispatch(cli: &Cli, console: &Console) -> crate::Result<()> {
         Command::Nnm(a) => a.execute(par, console),
         Command::Demo(a) => a.execute(console),
         Command::Calibrate(a) => a.execute(console),
+        Command::Validate(a) => a.execute(console),
         Command::Plan(a) => crate::commands::plan::execute(&a.request()?, console),
         Command::Test(a) => crate::commands::test::execute(&a.request()?, console),
         Command::Batch(a) => a.execute(console),

@@ -13,6 +13,7 @@
 //! | `calibrate` | [`calibrate::request`] | [`calibrate::run`], [`calibrate::modal`] | [`calibrate::report`] |
 //! | `plan` | [`plan::request`] | [`plan::run`] | [`plan::report`] |
 //! | `test` | [`test::request`] | [`test::run`] | [`test::report`] |
+//! | `validate` | [`validate::run`] | [`validate::run`] | [`validate::report`] |
 //! | `demo` | [`demo`] | [`demo::stages`], [`demo::planning`] | |
 //!
 //! [`setup`] holds what several commands share to set up a run (model loading with `--set`,
@@ -34,3 +35,4 @@ pub mod plan;
 pub mod setup;
 pub mod simulate;
 pub mod test;
+pub mod validate;

@@ -383,6 +383,28 @@ pub fn number(v: f64) -> String {
     }
 }
 
+/// `s` as a file-name part: every character but ASCII letters, digits, `-` and `_` made `_`.
+pub fn file_name_part(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "-_".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// `s` as one CSV field: quoted (quotes doubled) when it holds a comma, a quote or a newline.
+pub fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
 /// `s` as a TOML basic string (quotes, backslashes and control characters escaped).
 pub fn toml_string(s: &str) -> String {
     let mut o = String::with_capacity(s.len() + 2);

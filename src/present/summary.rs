@@ -263,8 +263,9 @@ fn modal_lines(model: &Model, s: &mut String) {
         .collect();
     let _ = writeln!(
         s,
-        "  modal        a test-based modal model, {} modes: {}",
+        "  modal        a test-based modal model, {} mode{}: {}",
         model.n_dofs(),
+        if model.n_dofs() == 1 { "" } else { "s" },
         modes.join(", ")
     );
     let points: Vec<String> = model.points().iter().map(|(l, _)| l.to_string()).collect();

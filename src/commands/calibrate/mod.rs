@@ -33,11 +33,13 @@
 pub mod modal;
 pub mod report;
 pub mod request;
+pub mod result;
 pub mod run;
 
 pub use modal::*;
 pub use report::*;
 pub use request::*;
+pub use result::*;
 pub use run::*;
 
 /// `nlsim calibrate`: the request checked; measured modes (a modal CSV) go to

@@ -226,13 +226,13 @@ impl CalibrationRun {
                         s,
                         "{},{},{},{},{:?},{:?},{:?},{},{},{:?},{:?},{:?},{:?},{}",
                         p.id.sweep + 1,
-                        csv_field(&sw.label),
+                        crate::formats::files::csv_field(&sw.label),
                         sw.direction.as_str(),
                         p.id.step + 1,
                         st.frequency_hz,
                         st.force[0].re,
                         st.force[0].im,
-                        csv_field(&ch.name),
+                        crate::formats::files::csv_field(&ch.name),
                         k + 1,
                         y.re,
                         y.im,
@@ -334,20 +334,12 @@ pub(crate) fn convergence_plot(
     Ok(files.to_vec())
 }
 
-/// A CSV field, quoted when it holds a comma or a quote.
-fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
-    }
-}
-
 /// Most FRF plots a report draws (channels × compared harmonics); the fit table holds all.
 pub const MAX_FRF_PLOTS: usize = 24;
 
 /// Writes the report of `run` into `dir` (created if needed): `summary.txt`,
-/// `estimates.csv`, `candidates.csv`, `convergence.csv`, `kfold.csv`, `fit.csv`, and plots
+/// `estimates.csv`, `candidates.csv`, `convergence.csv`, `kfold.csv`, `fit.csv`,
+/// `calibration.toml` (the run and its result, which `nlsim validate` reads), and plots
 /// (SVG and PNG) — per channel and compared harmonic the measured and calibrated response per unit
 /// fundamental force along each sweep (`frf_CHANNEL_hK`, at most [`MAX_FRF_PLOTS`]),
 /// the fold estimates normalised by the estimate with the Cramér–Rao band (`kfold`,
@@ -398,6 +390,11 @@ pub fn write_report(dir: &Path, run: &CalibrationRun) -> Result<Vec<PathBuf>> {
     text("convergence.csv", run.convergence_csv())?;
     text("kfold.csv", run.kfold_csv())?;
     text("fit.csv", run.fit_csv())?;
+    // What `nlsim validate` reads: the run as a calibration file with its result.
+    text(
+        "calibration.toml",
+        crate::commands::calibrate::result::result_toml(run),
+    )?;
     let c = &run.calibration;
     let d = run.prepared.objective.data();
     let mut plots = 0;
@@ -448,17 +445,7 @@ pub fn write_report(dir: &Path, run: &CalibrationRun) -> Result<Vec<PathBuf>> {
                 ),
                 series,
             };
-            let safe: String = ch
-                .name
-                .chars()
-                .map(|c| {
-                    if c.is_ascii_alphanumeric() || "-_".contains(c) {
-                        c
-                    } else {
-                        '_'
-                    }
-                })
-                .collect();
+            let safe = crate::formats::files::file_name_part(&ch.name);
             written.extend(report.figure(&format!("frf_{safe}_h{k}"), &fig)?);
             plots += 1;
         }

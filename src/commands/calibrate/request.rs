@@ -2,6 +2,7 @@
 //! `docs/calibration.md`), checked before the run.
 use crate::error::{Error, Result};
 use crate::formats::settings::SettingsFile;
+use crate::formats::test_data::DataOptions;
 use nlsim_calib::{
     BranchChoice, CalibrationConfig, FeReduction, Form, LmConfig, ParamSpec, ParametricConfig,
     Spacing,
@@ -33,8 +34,12 @@ pub struct CalibrationRequest {
     pub harmonics: usize,
     /// Retained modes of the reduced model.
     pub modes: usize,
-    /// Relative noise assumed for linear FRFs read from UFF 58 (which carry none).
-    pub uff_noise: f64,
+    /// What the data file does not say: the noise of data without a noise model (UFF 58,
+    /// amplitude-and-phase tables) and the phase convention.
+    pub data_options: DataOptions,
+    /// The sweeps calibrated on (labels, `*` patterns or 1-based indices; empty: all). The
+    /// others are held out: written into the result for `nlsim validate` to predict.
+    pub train: Vec<String>,
     /// Standard deviation of one component of a unit-normalised measured mode shape, for
     /// modal data ([`crate::commands::calibrate::modal`]).
     pub shape_noise: f64,
@@ -51,6 +56,9 @@ pub struct CalibrationRequest {
     /// The calibration (or jobs) file this request was read from, if any: an input no output
     /// may name.
     pub source: Option<PathBuf>,
+    /// The `[result]` table of a calibration's result file (`calibration.toml`), which
+    /// `nlsim validate` reads; a calibration run ignores it.
+    pub result: Option<StoredResult>,
 }
 
 impl CalibrationRequest {
@@ -68,13 +76,15 @@ impl CalibrationRequest {
             branch: BranchChoice::NearestToData,
             harmonics: 3,
             modes: 20,
-            uff_noise: 0.01,
+            data_options: DataOptions::default(),
+            train: Vec::new(),
             shape_noise: 0.02,
             config: CalibrationConfig::default(),
             fe: FeReduction::default(),
             out: None,
             report: None,
             source: None,
+            result: None,
         }
     }
 
@@ -114,8 +124,14 @@ impl CalibrationRequest {
         if self.modes == 0 {
             return bad("modes", "retain at least one mode".into());
         }
-        if !(self.uff_noise.is_finite() && self.uff_noise > 0.0) {
-            return bad("uff_noise", format!("{} must be positive", self.uff_noise));
+        if let Err((key, why)) = self.data_options.check() {
+            return bad(key, why);
+        }
+        if let Some(t) = self.train.iter().find(|t| t.trim().is_empty()) {
+            return bad(
+                "train",
+                format!("{t:?}: name a sweep label, a pattern or an index"),
+            );
         }
         if !(self.shape_noise.is_finite() && self.shape_noise > 0.0) {
             return bad(
@@ -219,7 +235,10 @@ pub(crate) struct CalibrationTable {
     branch: Option<String>,
     harmonics: Option<usize>,
     modes: Option<usize>,
-    uff_noise: Option<f64>,
+    #[serde(alias = "uff_noise")]
+    data_noise: Option<f64>,
+    phase_offset_deg: Option<f64>,
+    train: Option<Vec<String>>,
     shape_noise: Option<f64>,
     fe_reduction: Option<String>,
     fe_tolerance: Option<f64>,
@@ -232,6 +251,7 @@ pub(crate) struct CalibrationTable {
     lm: Option<LmTable>,
     out: Option<String>,
     report: Option<String>,
+    result: Option<StoredResult>,
 }
 
 impl CalibrationTable {
@@ -302,7 +322,13 @@ impl CalibrationTable {
             branch,
             harmonics: self.harmonics.unwrap_or(d.harmonics),
             modes: self.modes.unwrap_or(d.modes),
-            uff_noise: self.uff_noise.unwrap_or(d.uff_noise),
+            data_options: DataOptions {
+                noise: self.data_noise.unwrap_or(d.data_options.noise),
+                phase_offset_deg: self
+                    .phase_offset_deg
+                    .unwrap_or(d.data_options.phase_offset_deg),
+            },
+            train: self.train.unwrap_or_default(),
             shape_noise: self.shape_noise.unwrap_or(d.shape_noise),
             config: CalibrationConfig {
                 lhs_samples: self.lhs.unwrap_or(dc.lhs_samples),
@@ -317,7 +343,11 @@ impl CalibrationTable {
             out: self.out.as_deref().map(rel),
             report: self.report.as_deref().map(rel),
             source: Some(path.to_path_buf()),
+            result: self.result,
         };
+        if let Some(r) = &req.result {
+            r.check(req.params.len()).map_err(|(key, m)| err(key, m))?;
+        }
         req.check().map_err(|e| file.located("calibration", e))?;
         Ok(req)
     }
@@ -382,5 +412,73 @@ pub fn parse_fe_reduction(
         )),
         Some("full") => Ok(FeReduction::Full),
         Some(s) => Err(("fe_reduction", format!("'{s}': use parametric or full"))),
+    }
+}
+
+/// The `[result]` table: what a calibration found.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StoredResult {
+    /// How the best optimisation ended (`converged`, …).
+    pub status: String,
+    /// The estimates, in the order of the `[[param]]` entries (parameter units).
+    pub estimate: Vec<f64>,
+    /// The Cramér–Rao covariance bound (parameter units squared), rows in parameter order.
+    pub covariance: Vec<Vec<f64>>,
+    /// `2·cost/(m − n)` of the training fit.
+    pub reduced_chi2: f64,
+    /// Training points (steps).
+    pub points: usize,
+    /// Training residuals `m`.
+    pub residuals: usize,
+}
+
+impl StoredResult {
+    /// Checks the sizes against `n` parameters; the message names the key.
+    pub fn check(&self, n: usize) -> std::result::Result<(), (&'static str, String)> {
+        if self.estimate.len() != n {
+            return Err((
+                "result.estimate",
+                format!("{} values for {n} parameters", self.estimate.len()),
+            ));
+        }
+        if self.estimate.iter().any(|v| !v.is_finite()) {
+            return Err(("result.estimate", "a value is not finite".into()));
+        }
+        if self.covariance.len() != n || self.covariance.iter().any(|r| r.len() != n) {
+            return Err((
+                "result.covariance",
+                format!("must be {n} rows of {n} values (the parameters' order)"),
+            ));
+        }
+        for (i, r) in self.covariance.iter().enumerate() {
+            for (j, v) in r.iter().enumerate() {
+                if v.is_nan() || (*v - self.covariance[j][i]).abs() > 1e-9 * v.abs().max(1e-300) {
+                    return Err((
+                        "result.covariance",
+                        format!("entry ({}, {}) is NaN or not symmetric", i + 1, j + 1),
+                    ));
+                }
+            }
+            if r[i] < 0.0 {
+                return Err((
+                    "result.covariance",
+                    format!("diagonal entry {} is negative", i + 1),
+                ));
+            }
+        }
+        if !(self.reduced_chi2.is_finite() && self.reduced_chi2 >= 0.0) {
+            return Err((
+                "result.reduced_chi2",
+                format!("{} is not a non-negative number", self.reduced_chi2),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The covariance as a matrix.
+    pub fn covariance_matrix(&self) -> faer::Mat<f64> {
+        let n = self.covariance.len();
+        faer::Mat::from_fn(n, n, |i, j| self.covariance[i][j])
     }
 }

@@ -21,15 +21,37 @@ pub struct Prepared {
     pub seconds: f64,
 }
 
+/// The test data `req` calibrates on: its data file read with its data options, restricted
+/// to the sweeps of `train` (all without).
+pub fn training_data(
+    req: &CalibrationRequest,
+    model: &nlsim_kernel::Model,
+) -> Result<nlsim_calib::TestData> {
+    let data = read_test_data(&req.data, model, &req.data_options)?;
+    crate::formats::test_data::select_sweeps(&data, &req.train, "train")
+        .map_err(|e| Error::Usage(format!("{}: {e}", req.data.display())))
+}
+
 /// Loads the model and the data of `req` and builds the objective.
 pub fn prepare(req: &CalibrationRequest) -> Result<Prepared> {
     req.check()?;
     let t = Instant::now();
     let model = crate::commands::setup::load_for_run(&req.model, &req.set)?;
-    let data = Arc::new(read_test_data(&req.data, &model, req.uff_noise)?);
+    let data = Arc::new(training_data(req, &model)?);
+    prepare_on(req, &model, data, t)
+}
+
+/// The objective of `req` on `model` (loaded with its overrides) and `data`; `t` is when the
+/// loading started.
+pub fn prepare_on(
+    req: &CalibrationRequest,
+    model: &nlsim_kernel::Model,
+    data: Arc<nlsim_calib::TestData>,
+    t: Instant,
+) -> Result<Prepared> {
     let cfg = nlsim_reduction::ReductionConfig::lowest(req.modes.min(model.n_dofs()));
     let objective = FrfObjective::from_model_with(
-        &model,
+        model,
         &cfg,
         &req.fe,
         HarmonicSet::new(req.harmonics, 1)?,

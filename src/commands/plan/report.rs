@@ -320,14 +320,14 @@ impl PlanRun {
                 "{},{},{},{},{},{},{:?},{:?},{},{},{},{:?},{:?},{:?},{:?},{:?},{},{:?},{},{:?}",
                 i + 1,
                 r.design.sweep + 1,
-                csv_field(&drive),
+                crate::formats::files::csv_field(&drive),
                 level,
-                csv_field(&signal),
-                csv_field(&c.band.label),
+                crate::formats::files::csv_field(&signal),
+                crate::formats::files::csv_field(&c.band.label),
                 c.band.from_hz,
                 c.band.to_hz,
                 c.band.steps,
-                csv_field(&sensors),
+                crate::formats::files::csv_field(&sensors),
                 harm,
                 m.log_det,
                 m.trace,
@@ -355,15 +355,6 @@ fn criterion_desc(c: Criterion) -> &'static str {
         Criterion::A => "A-optimality (tr F^-1, smaller is better)",
         Criterion::E => "E-optimality (smallest eigenvalue, larger is better)",
         Criterion::MaxVariance => "the largest relative variance max diag F^-1 (smaller is better)",
-    }
-}
-
-/// A CSV field, quoted when it holds a comma or a quote.
-fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
     }
 }
 

@@ -27,8 +27,10 @@ use std::path::Path;
 
 #[cfg(feature = "hdf5")]
 mod h5;
+mod table;
 #[cfg(feature = "hdf5")]
 pub use h5::{read_h5, write_h5};
+pub use table::{is_amplitude_phase, parse_amplitude_phase};
 
 /// `1st`, `2nd`, `3rd`, `4th`, …
 fn ordinal(n: usize) -> String {
@@ -49,6 +51,27 @@ fn quantity(s: &str) -> Option<Quantity> {
         "acceleration" => Some(Quantity::Acceleration),
         _ => None,
     }
+}
+
+/// Cell `j` of a CSV row as a finite number; the message names the column (1-based), its
+/// name from `names` and the cell.
+fn finite_cell(
+    cells: &[&str],
+    names: &[impl AsRef<str>],
+    j: usize,
+) -> std::result::Result<f64, String> {
+    cells[j]
+        .parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite())
+        .ok_or_else(|| {
+            format!(
+                "column {} ({}): {} is not a finite number",
+                j + 1,
+                names[j].as_ref(),
+                crate::formats::files::quoted(cells[j])
+            )
+        })
 }
 
 /// Reads test data from the CSV layout above; errors name the file, line and column.
@@ -256,23 +279,7 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
                 format!("{} columns, expected {}", cells.len(), names.len()),
             ));
         }
-        let num = |c: usize| -> Result<f64> {
-            cells[c]
-                .parse::<f64>()
-                .ok()
-                .filter(|v| v.is_finite())
-                .ok_or_else(|| {
-                    err(
-                        ln,
-                        format!(
-                            "column {} ({}): {} is not a finite number",
-                            c + 1,
-                            names[c],
-                            crate::formats::files::quoted(cells[c])
-                        ),
-                    )
-                })
-        };
+        let num = |c: usize| finite_cell(&cells, names, c).map_err(|m| err(ln, m));
         let direction = match cells[1] {
             "up" => SweepDirection::Up,
             "down" => SweepDirection::Down,
@@ -525,10 +532,197 @@ pub fn write_csv(path: &Path, data: &TestData) -> Result<()> {
         })
 }
 
-/// Test data by file extension (`nlsim calibrate`'s `DATA`): CSV, HDF5 (`.h5`, `.hdf5`) or linear FRFs in universal
-/// file dataset 58 (`.uff`, `.unv`, `.uf`; ASCII or binary), whose drive point is the
-/// model's single excitation and whose noise is `uff_noise` of each value.
-pub fn read(path: &Path, model: &nlsim_kernel::Model, uff_noise: f64) -> Result<TestData> {
+/// What a test-data file does not say, given beside it (calibration-file keys, options of
+/// `nlsim calibrate` and `nlsim validate`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct DataOptions {
+    /// Relative noise of every value of data that carry no noise model (UFF 58 and
+    /// amplitude-and-phase tables), a fraction of the amplitude (default 0.01).
+    pub noise: f64,
+    /// Added to every measured response phase, degrees (default 0): the data's phase
+    /// convention, e.g. 180 for acceleration amplitudes whose phase was recorded as that of a
+    /// displacement-like response (−90° at resonance), or a sensor mounted the other way.
+    pub phase_offset_deg: f64,
+}
+
+impl Default for DataOptions {
+    fn default() -> Self {
+        Self {
+            noise: 0.01,
+            phase_offset_deg: 0.0,
+        }
+    }
+}
+
+impl DataOptions {
+    /// `Err` naming the setting when the noise is not positive or the offset not finite.
+    pub fn check(&self) -> std::result::Result<(), (&'static str, String)> {
+        if !(self.noise.is_finite() && self.noise > 0.0) {
+            return Err(("data_noise", format!("{} must be positive", self.noise)));
+        }
+        if !self.phase_offset_deg.is_finite() || self.phase_offset_deg.abs() > 360.0 {
+            return Err((
+                "phase_offset_deg",
+                format!(
+                    "{} is not an angle in [-360, 360] degrees",
+                    self.phase_offset_deg
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Turns every measured response by the phase offset; per-step standard deviations of
+    /// the real and imaginary parts follow when the offset is a multiple of 90° (else `Err`:
+    /// the turned parts would be correlated).
+    fn apply(&self, path: &Path, data: &mut TestData) -> Result<()> {
+        if self.phase_offset_deg == 0.0 {
+            return Ok(());
+        }
+        let quarter = self.phase_offset_deg / 90.0;
+        let has_std = data
+            .sweeps
+            .iter()
+            .any(|s| s.steps.iter().any(|st| st.sigma.nrows() > 0));
+        if has_std && quarter.fract() != 0.0 {
+            return Err(Error::Usage(format!(
+                "{}: phase_offset_deg = {} with per-step standard deviations of the real and \
+                 imaginary parts: use a multiple of 90 degrees",
+                path.display(),
+                self.phase_offset_deg
+            )));
+        }
+        let turn = c64::from_polar(1.0, self.phase_offset_deg.to_radians());
+        // Exact at multiples of 90°: no rounding of cos(π/2) into the parts.
+        let turn = if quarter.fract() == 0.0 {
+            match (quarter as i64).rem_euclid(4) {
+                0 => c64::new(1.0, 0.0),
+                1 => c64::new(0.0, 1.0),
+                2 => c64::new(-1.0, 0.0),
+                _ => c64::new(0.0, -1.0),
+            }
+        } else {
+            turn
+        };
+        let swap = (quarter as i64).rem_euclid(2) == 1;
+        for st in data.sweeps.iter_mut().flat_map(|s| s.steps.iter_mut()) {
+            for y in st.response.col_iter_mut().flat_map(|c| c.iter_mut()) {
+                if !y.re.is_nan() {
+                    *y *= turn;
+                }
+            }
+            if swap {
+                for v in st.sigma.col_iter_mut().flat_map(|c| c.iter_mut()) {
+                    *v = c64::new(v.im, v.re);
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The indices (ascending) of the sweeps of `data` that `selection` names — each entry a
+/// sweep label, a pattern with `*` wildcards (`force-*`) or a 1-based index; `what` names the
+/// selection in errors (e.g. `train`). `Err` for an entry that matches no sweep.
+pub fn sweep_indices(data: &TestData, selection: &[String], what: &str) -> Result<Vec<usize>> {
+    let labels: Vec<&str> = data.sweeps.iter().map(|s| s.label.as_str()).collect();
+    let mut keep = vec![false; labels.len()];
+    for entry in selection {
+        let hits: Vec<usize> = match entry.parse::<usize>() {
+            Ok(i) if labels.iter().all(|l| l != entry) => {
+                if i == 0 || i > labels.len() {
+                    return Err(Error::Usage(format!(
+                        "{what}: sweep {i} does not exist (the data have {} sweeps)",
+                        labels.len()
+                    )));
+                }
+                vec![i - 1]
+            }
+            _ => (0..labels.len())
+                .filter(|&i| glob(entry, labels[i]))
+                .collect(),
+        };
+        if hits.is_empty() {
+            return Err(Error::Usage(format!(
+                "{what}: {} matches no sweep (the data have: {})",
+                crate::formats::files::quoted(entry),
+                labels.join(", ")
+            )));
+        }
+        for i in hits {
+            keep[i] = true;
+        }
+    }
+    Ok((0..keep.len()).filter(|&i| keep[i]).collect())
+}
+
+/// The sweeps of `data` that `selection` names ([`sweep_indices`]), in data order; all of
+/// them for an empty selection.
+pub fn select_sweeps(data: &TestData, selection: &[String], what: &str) -> Result<TestData> {
+    if selection.is_empty() {
+        return Ok(data.clone());
+    }
+    Ok(data.select_sweeps(&sweep_indices(data, selection, what)?)?)
+}
+
+/// Whether `text` matches `pattern`, where `*` stands for any run of characters.
+fn glob(pattern: &str, text: &str) -> bool {
+    let parts: Vec<&str> = pattern.split('*').collect();
+    if parts.len() == 1 {
+        return pattern == text;
+    }
+    let (first, last) = (parts[0], parts[parts.len() - 1]);
+    if !text.starts_with(first) || text.len() < first.len() + last.len() || !text.ends_with(last) {
+        return false;
+    }
+    let mut rest = &text[first.len()..text.len() - last.len()];
+    for p in &parts[1..parts.len() - 1] {
+        match rest.find(p) {
+            Some(i) => rest = &rest[i + p.len()..],
+            None => return false,
+        }
+    }
+    true
+}
+
+/// Test data by file extension (`nlsim calibrate`'s `DATA`): CSV (nlsim's stepped-sine
+/// layout, or an amplitude-and-phase table, recognised by its header), HDF5 (`.h5`,
+/// `.hdf5`) or linear FRFs in universal file dataset 58 (`.uff`, `.unv`, `.uf`; ASCII or
+/// binary). Data without a drive point name (tables, UFF) are driven at the model's single
+/// excitation, and data without a noise model get `options.noise` of each value; the phase
+/// offset of `options` is applied to every response.
+pub fn read(path: &Path, model: &nlsim_kernel::Model, options: &DataOptions) -> Result<TestData> {
+    options
+        .check()
+        .map_err(|(k, m)| Error::Usage(format!("{}: {k}: {m}", path.display())))?;
+    let mut data = read_as_given(path, model, options)?;
+    options.apply(path, &mut data)?;
+    Ok(data)
+}
+
+/// The model's single excitation, the drive point of data that name none.
+fn single_input<'a>(path: &Path, model: &'a nlsim_kernel::Model, what: &str) -> Result<&'a str> {
+    let inputs: Vec<&str> = model.excitation().iter().map(|e| e.name.as_str()).collect();
+    let [input] = inputs.as_slice() else {
+        return Err(Error::Usage(format!(
+            "{}: {what} name no drive point in the model's terms, so the model needs \
+             exactly one excitation (it has: {})",
+            path.display(),
+            if inputs.is_empty() {
+                "none".to_string()
+            } else {
+                inputs.join(", ")
+            }
+        )));
+    };
+    Ok(input)
+}
+
+fn read_as_given(
+    path: &Path,
+    model: &nlsim_kernel::Model,
+    options: &DataOptions,
+) -> Result<TestData> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -541,26 +735,27 @@ pub fn read(path: &Path, model: &nlsim_kernel::Model, uff_noise: f64) -> Result<
              batch kinds and no harmonic balance",
             path.display()
         ))),
-        "csv" => read_csv(path),
+        "csv" => {
+            let text = crate::formats::files::read_text(path)?;
+            if is_amplitude_phase(&text) {
+                let input = single_input(path, model, "amplitude-and-phase tables")?;
+                parse_amplitude_phase(&text, path, input, Noise::relative(options.noise))
+            } else {
+                parse_csv(&text, path)
+            }
+        }
         #[cfg(feature = "hdf5")]
         "h5" | "hdf5" => read_h5(path),
         #[cfg(not(feature = "hdf5"))]
         "h5" | "hdf5" => Err(crate::formats::files::without_hdf5(path)),
         "uff" | "unv" | "uf" => {
             let records = crate::formats::uff::read(path)?;
-            let inputs: Vec<&str> = model.excitation().iter().map(|e| e.name.as_str()).collect();
-            let [input] = inputs.as_slice() else {
-                return Err(Error::Usage(format!(
-                    "{}: FRFs name no drive point in the model's terms, so the model needs \
-                     exactly one excitation (it has: {})",
-                    path.display(),
-                    inputs.join(", ")
-                )));
-            };
-            crate::formats::uff::to_test_data(&records, input, Noise::relative(uff_noise)).map_err(
-                // Invalid records are bad input; the line names the file.
-                |e| Error::Usage(format!("{}: {e}", path.display())),
-            )
+            let input = single_input(path, model, "FRFs")?;
+            crate::formats::uff::to_test_data(&records, input, Noise::relative(options.noise))
+                .map_err(
+                    // Invalid records are bad input; the line names the file.
+                    |e| Error::Usage(format!("{}: {e}", path.display())),
+                )
         }
         _ => Err(Error::Usage(format!(
             "{}: test data must be .csv, .h5/.hdf5 or universal file dataset 58 \

@@ -1,0 +1,215 @@
+//! Prediction with a band (`nlsim validate`, thesis §4.6): the ECL beam's cubic tip spring
+//! and first-mode damping calibrated on two force levels predict two others.
+
+use faer::Mat;
+use nlsim_calib::{
+    BandConfig, CalibrationConfig, FrfObjective, Noise, ObjectiveConfig, ParamSpec, SweepPlan,
+    TestData, calibrate, predict, synthesize,
+};
+use nlsim_hb::{HarmonicSet, HbConfig, HbSystem};
+use nlsim_kernel::{Param, Parameterized};
+use nlsim_reduction::{ReductionConfig, reduce};
+use std::sync::Arc;
+
+fn ecl() -> HbSystem {
+    let fx = nlsim_fixtures::ecl_beam();
+    let red = reduce(&fx.model, &ReductionConfig::lowest(4)).unwrap();
+    HbSystem::from_model(
+        &fx.model,
+        &red,
+        HarmonicSet::new(3, 1).unwrap(),
+        HbConfig::default(),
+    )
+    .unwrap()
+}
+
+fn specs(sys: &HbSystem) -> Vec<ParamSpec> {
+    let mode = sys
+        .linear()
+        .dominant_mode(sys.sensors()[0].port, 0..2)
+        .unwrap();
+    vec![
+        ParamSpec::new(Param::element("tip_spring", "k3"), 1e8, 1e11),
+        ParamSpec::new(Param::ModalDamping(mode), 0.002, 0.05),
+    ]
+}
+
+/// The system's values of the calibrated parameters.
+fn truth(sys: &HbSystem) -> Vec<f64> {
+    let params: Vec<Param> = specs(sys).iter().map(|s| s.param.clone()).collect();
+    sys.param_values(&params).unwrap()
+}
+
+fn levels(forces: &[f64]) -> Vec<SweepPlan> {
+    forces
+        .iter()
+        .map(|&f| SweepPlan::linear(format!("{f} N up"), 22.0, 26.5, 19, f))
+        .collect()
+}
+
+fn objective(sys: &HbSystem, data: TestData) -> FrfObjective {
+    FrfObjective::new(sys, Arc::new(data), specs(sys), ObjectiveConfig::default()).unwrap()
+}
+
+/// On noise-free held-out data the prediction at the true parameters equals the data to the
+/// harmonic balance's accuracy, whatever the band.
+#[test]
+fn noise_free_held_out_data_are_predicted_to_solver_accuracy() {
+    let sys = ecl();
+    let truth = truth(&sys);
+    let held = synthesize(
+        &sys,
+        "shaker",
+        &levels(&[0.1, 0.15]),
+        3,
+        Noise::relative(0.0),
+        1,
+    )
+    .unwrap();
+    let channels = held.channels.len();
+    let mut obj = objective(&sys, held);
+    let cov = Mat::from_fn(2, 2, |i, j| {
+        if i == j {
+            (0.01 * truth[i]).powi(2)
+        } else {
+            0.0
+        }
+    });
+    let p = predict(&mut obj, &truth, &cov, &BandConfig::default()).unwrap();
+    assert_eq!(p.values.len(), 2 * 19 * channels);
+    for v in &p.values {
+        assert!(v.log_error().abs() < 1e-9, "{v:?}");
+        assert!(v.phase_error().abs() < 1e-9, "{v:?}");
+    }
+    for s in &p.sweeps {
+        assert_eq!(s.inside_amplitude, 1.0);
+        assert_eq!(s.failed, 0);
+        assert!(s.rms_log < 1e-9);
+    }
+}
+
+/// The band's parameter part is the linearised propagation `|∂ ln|Y|/∂p| σ_p`: checked against
+/// central differences of the prediction at every point, one parameter at a time.
+#[test]
+fn the_parameter_band_matches_central_differences() {
+    let sys = ecl();
+    let truth = truth(&sys);
+    let data = synthesize(&sys, "shaker", &levels(&[0.15]), 3, Noise::relative(0.0), 1).unwrap();
+    let mut obj = objective(&sys, data);
+    for j in 0..2 {
+        let sd = 1e-3 * truth[j];
+        let cov = Mat::from_fn(2, 2, |a, b| if a == j && b == j { sd * sd } else { 0.0 });
+        let p = predict(&mut obj, &truth, &cov, &BandConfig::default()).unwrap();
+        let h = 1e-4 * truth[j];
+        let at = |d: f64, obj: &mut FrfObjective| {
+            let mut v = truth.clone();
+            v[j] += d;
+            predict(obj, &v, &Mat::zeros(2, 2), &BandConfig::default()).unwrap()
+        };
+        let (up, down) = (at(h, &mut obj), at(-h, &mut obj));
+        for (i, v) in p.values.iter().enumerate() {
+            let dlog = (up.values[i].predicted.norm().ln() - down.values[i].predicted.norm().ln())
+                / (2.0 * h);
+            let dph = nlsim_calib::objective::wrap(
+                up.values[i].predicted.arg() - down.values[i].predicted.arg(),
+            ) / (2.0 * h);
+            // Central differences carry O(h²) truncation and the solver's 1e-10 noise / h.
+            let tol = 1e-4 * (dlog.abs() * sd).max(1e-6 * sd / h);
+            assert!(
+                (v.sd_log_param - dlog.abs() * sd).abs() < tol.max(1e-9),
+                "param {j}, value {i}: band {:e} vs differences {:e}",
+                v.sd_log_param,
+                dlog.abs() * sd
+            );
+            assert!(
+                (v.sd_phase_param - dph.abs() * sd).abs() < (1e-4 * dph.abs() * sd).max(1e-9),
+                "param {j}, value {i}: phase band {:e} vs differences {:e}",
+                v.sd_phase_param,
+                dph.abs() * sd
+            );
+        }
+    }
+}
+
+/// On synthetic data with the right noise model (2 %), the 95 % band of a calibration on the
+/// 0.05 N and 0.2 N levels covers 90–99 % of the held-out 0.1 N and 0.15 N levels' values
+/// (fresh noise), pooled over 20 seeds — the check of the band.
+#[test]
+fn the_95_percent_band_covers_held_out_values_at_its_level() {
+    let sys = ecl();
+    let cfg = CalibrationConfig {
+        lhs_samples: 8,
+        starts: 1,
+        folds: 0,
+        ..Default::default()
+    };
+    let (mut inside_a, mut inside_p, mut n) = (0.0, 0.0, 0usize);
+    for seed in 0..20u64 {
+        let train = synthesize(
+            &sys,
+            "shaker",
+            &levels(&[0.05, 0.2]),
+            3,
+            Noise::relative(0.02),
+            seed,
+        )
+        .unwrap();
+        let cal = calibrate(&objective(&sys, train), &cfg).unwrap();
+        assert!(cal.status.is_converged(), "seed {seed}: {}", cal.status);
+        let held = synthesize(
+            &sys,
+            "shaker",
+            &levels(&[0.1, 0.15]),
+            3,
+            Noise::relative(0.02),
+            1000 + seed,
+        )
+        .unwrap();
+        let mut obj = objective(&sys, held);
+        let p = predict(
+            &mut obj,
+            &cal.estimate,
+            &cal.cramer_rao.covariance,
+            &BandConfig::default(),
+        )
+        .unwrap();
+        for s in &p.sweeps {
+            assert_eq!(s.failed, 0);
+            inside_a += s.inside_amplitude * s.values as f64;
+            inside_p += s.inside_phase * s.values as f64;
+            n += s.values;
+        }
+    }
+    let (ca, cp) = (inside_a / n as f64, inside_p / n as f64);
+    eprintln!(
+        "coverage of the 95 % band over {n} held-out values: amplitude {ca:.4}, phase {cp:.4}"
+    );
+    assert!((0.90..=0.99).contains(&ca), "amplitude coverage {ca}");
+    assert!((0.90..=0.99).contains(&cp), "phase coverage {cp}");
+}
+
+/// Bad settings are errors, not panics.
+#[test]
+fn bad_band_settings_and_covariances_are_refused() {
+    let sys = ecl();
+    let data = synthesize(&sys, "shaker", &levels(&[0.1]), 3, Noise::relative(0.0), 1).unwrap();
+    let mut obj = objective(&sys, data);
+    let v = [1e9, 0.01];
+    let e = predict(&mut obj, &v, &Mat::zeros(3, 3), &BandConfig::default()).unwrap_err();
+    assert!(e.to_string().contains("covariance"), "{e}");
+    let mut nan = Mat::zeros(2, 2);
+    nan[(1, 1)] = f64::NAN;
+    let e = predict(&mut obj, &v, &nan, &BandConfig::default()).unwrap_err();
+    assert!(e.to_string().contains("entry (2, 2)"), "{e}");
+    let e = predict(
+        &mut obj,
+        &v,
+        &Mat::zeros(2, 2),
+        &BandConfig {
+            level: 0.0,
+            scale: 1.0,
+        },
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("band level"), "{e}");
+}
