@@ -94,6 +94,7 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
     // The header carries `<channel>_re_std,<channel>_im_std` columns.
     let mut stds = false;
     let mut sweeps: Vec<Sweep> = Vec::new();
+    let mut labels = std::collections::HashSet::new();
     // The step being read: (line, frequency, harmonics seen).
     let mut pending: Option<(usize, usize)> = None;
     let n_lines = text.lines().count();
@@ -352,7 +353,8 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
                     format!("the step lists {seen} harmonics, expected {h}"),
                 ));
             }
-            if sweeps.iter().any(|s| s.label == cells[0]) {
+            // A set of the labels seen: one lookup per sweep, not a scan of every earlier one.
+            if !labels.insert(cells[0].to_string()) {
                 return Err(err(
                     ln,
                     format!(
@@ -592,19 +594,17 @@ impl DataOptions {
                 self.phase_offset_deg
             )));
         }
-        let turn = c64::from_polar(1.0, self.phase_offset_deg.to_radians());
         // Exact at multiples of 90°: no rounding of cos(π/2) into the parts.
-        let turn = if quarter.fract() == 0.0 {
-            match (quarter as i64).rem_euclid(4) {
-                0 => c64::new(1.0, 0.0),
-                1 => c64::new(0.0, 1.0),
-                2 => c64::new(-1.0, 0.0),
-                _ => c64::new(0.0, -1.0),
-            }
-        } else {
-            turn
+        let quarters = (quarter.fract() == 0.0).then(|| (quarter as i64).rem_euclid(4));
+        let turn = match quarters {
+            Some(0) => c64::new(1.0, 0.0),
+            Some(1) => c64::new(0.0, 1.0),
+            Some(2) => c64::new(-1.0, 0.0),
+            Some(_) => c64::new(0.0, -1.0),
+            None => c64::from_polar(1.0, self.phase_offset_deg.to_radians()),
         };
-        let swap = (quarter as i64).rem_euclid(2) == 1;
+        // An odd number of quarter turns swaps the real and imaginary parts' deviations.
+        let swap = quarters.is_some_and(|q| q % 2 == 1);
         for st in data.sweeps.iter_mut().flat_map(|s| s.steps.iter_mut()) {
             for y in st.response.col_iter_mut().flat_map(|c| c.iter_mut()) {
                 if !y.re.is_nan() {

@@ -197,7 +197,8 @@ pub fn parse_amplitude_phase(
         }
     }
     let mut sweeps: Vec<Sweep> = Vec::new();
-    // The keys of the sweep being read and its first two frequencies' order.
+    let mut labels = std::collections::HashSet::new();
+    // The keys of the sweep being read.
     let mut keys_of_last: Option<Vec<String>> = None;
     for (ln, line) in rows {
         let cells: Vec<&str> = line.split(',').map(str::trim).collect();
@@ -248,7 +249,8 @@ pub fn parse_amplitude_phase(
             if let Some(why) = nlsim_calib::data::label_fault(&label) {
                 return Err(err(ln, format!("sweep label {}: {why}", quoted(&label))));
             }
-            if sweeps.iter().any(|s| s.label == label) {
+            // A set of the labels seen: one lookup per sweep, not a scan of every earlier one.
+            if !labels.insert(label.clone()) {
                 return Err(err(
                     ln,
                     format!("rows of sweep {} are not contiguous", quoted(&label)),
