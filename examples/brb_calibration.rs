@@ -97,6 +97,7 @@ fn test_data(levels: &[((String, usize), Level)], noise: f64) -> TestData {
         .collect();
     TestData {
         input: "shaker".into(),
+        drive: nlsim_calib::Drive::Force,
         channels: vec![Channel {
             name: "accel".into(),
             quantity: Quantity::Acceleration,

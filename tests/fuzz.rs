@@ -484,6 +484,12 @@ fn fuzz_inner() {
          low,up,22.0,1,0.05,0,-0.513,0.207,0.004,0.002\nlow,up,22.0,2,0.001,0,0.01,0.002,,\n\
          low,up,23.5,1,0.05,0.001,-0.9,0.4,1e-3,5e-4\nlow,up,23.5,2,0,0,0.02,0.001,1e-4,1e-4\n"
             .to_string(),
+        // A voltage record (no force gauge).
+        "# nlsim stepped-sine test data\n# input: shaker, voltage\n# harmonics: 1\n\
+         # channel: tip, acceleration, relative=0.02, absolute=0\n\
+         sweep,direction,frequency_hz,harmonic,force_re,force_im,tip_re,tip_im\n\
+         low,up,22.0,1,0.01,0.004,-0.513,0.207\nlow,up,23.5,1,0.01,0.004,-0.9,0.4\n"
+            .to_string(),
     ];
     let csv_path = dir.join("test.csv");
     panics.extend(survive("test data csv", 10000 * scale(), |_| {
@@ -512,6 +518,9 @@ fn fuzz_inner() {
          tip_phase_rad,mid_amplitude_m_s,mid_phase_rad\n\
          a,20.0,1.0,0.1,1e-4,-0.5,2e-3,1.0\na,21.0,1.0,0.1,2e-4,-0.9,3e-3,0.5\n\
          b,21.0,2.0,0.0,4e-4,-1.0,6e-3,0.4\nb,20.0,2.0,0.0,2e-4,-0.6,4e-3,0.9\n"
+            .to_string(),
+        "level,frequency_hz,voltage_amplitude_v,voltage_phase_rad,tip_amplitude_m_s2,tip_phase_rad\n\
+         1,79.0,0.5,0.0,12.3,-0.11\n1,79.05,0.5,0.0,12.9,-0.12\n"
             .to_string(),
     ];
     let table_path = dir.join("table.csv");

@@ -7883,3 +7883,6 @@ mod modal_models;
 
 #[path = "end_to_end/validation.rs"]
 mod validation;
+
+#[path = "end_to_end/gains.rs"]
+mod gains;

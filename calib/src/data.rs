@@ -58,6 +58,47 @@ impl Noise {
     }
 }
 
+/// What a test recorded at its drive point.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Drive {
+    /// The force on the structure (N), from a force gauge: what the model is driven with,
+    /// times the input gain (1 unless set or calibrated).
+    #[default]
+    Force,
+    /// A voltage (V): the signal sent to the shaker's amplifier, when no force gauge was
+    /// fitted. The model is driven with the input gain times it — the gain in N/V when the
+    /// shaker counts as a force source, or in V at the coil per recorded volt when the
+    /// calibration models the shaker ([`crate::Shaker`]).
+    Voltage,
+}
+
+impl Drive {
+    /// `force` or `voltage`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Drive::Force => "force",
+            Drive::Voltage => "voltage",
+        }
+    }
+
+    /// The recorded unit: `N` or `V`.
+    pub fn unit(self) -> &'static str {
+        match self {
+            Drive::Force => "N",
+            Drive::Voltage => "V",
+        }
+    }
+
+    /// The drive of a name (`force`, `voltage`), if it is one.
+    pub fn parse(name: &str) -> Option<Self> {
+        match name {
+            "force" => Some(Drive::Force),
+            "voltage" => Some(Drive::Voltage),
+            _ => None,
+        }
+    }
+}
+
 /// A response channel.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Channel {
@@ -74,7 +115,8 @@ pub struct Channel {
 pub struct Step {
     /// Excitation frequency `Ω/2π` (Hz).
     pub frequency_hz: f64,
-    /// Measured force harmonics `k = 1..=H` at the drive point (N), index `k − 1`.
+    /// Measured drive harmonics `k = 1..=H` at the drive point, index `k − 1`: the force (N)
+    /// or, for [`Drive::Voltage`] data, the voltage (V).
     pub force: Vec<c64>,
     /// Measured response harmonics: channels (rows) × `k = 1..=H` (columns), in each
     /// channel's unit; NaN where a harmonic was not measured.
@@ -119,6 +161,8 @@ pub struct Sweep {
 pub struct TestData {
     /// Name of the drive point: the model input it is compared with.
     pub input: String,
+    /// What was recorded at the drive point: force or voltage.
+    pub drive: Drive,
     /// Response channels.
     pub channels: Vec<Channel>,
     /// Harmonics `H` held per step (1 = fundamental only).

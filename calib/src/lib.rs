@@ -24,6 +24,7 @@
 //! `Err` means invalid input. Nothing here prints, reads files or exits.
 
 pub mod calibrate;
+pub mod coupling;
 pub mod data;
 pub mod lhs;
 mod linalg;
@@ -34,6 +35,7 @@ pub mod plan;
 pub mod predict;
 pub mod shaker;
 pub mod stats;
+mod step;
 pub mod synthetic;
 
 pub use calibrate::{
@@ -42,7 +44,7 @@ pub use calibrate::{
     calibrate_from_candidates, calibrate_with_progress, candidate_points, fold, fold_assignment,
     fold_plan, kfold,
 };
-pub use data::{Channel, Noise, PointId, Step, Sweep, SweepDirection, TestData};
+pub use data::{Channel, Drive, Noise, PointId, Step, Sweep, SweepDirection, TestData};
 pub use lhs::{Spacing, latin_hypercube, maximin_latin_hypercube};
 pub use linalg::Svd;
 pub use lm::{Evaluation, LeastSquares, LmConfig, LmReport, StopReason, levenberg_marquardt};

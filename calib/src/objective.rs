@@ -21,10 +21,7 @@ use crate::data::{PointId, TestData};
 use crate::lhs::Spacing;
 use crate::lm::{Evaluation, LeastSquares};
 use faer::{Mat, c64};
-use nlsim_hb::{
-    ForceTerm, Forcing, HarmonicSet, HbConfig, HbSystem, HbWorkspace, LinearPart, LinearVariation,
-    Sensitivity,
-};
+use nlsim_hb::{HarmonicSet, HbConfig, HbSystem, HbWorkspace, LinearPart, LinearVariation};
 use nlsim_kernel::{Error, Model, Param, Parameterized, Quantity, Result, Status};
 use nlsim_reduction::{
     EigenSolver, ParametricConfig, ParametricReduction, ReductionConfig, SensitivityConfig,
@@ -33,6 +30,10 @@ use nlsim_reduction::{
 use std::f64::consts::PI;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+
+mod drive;
+pub(crate) use crate::step::solve_step;
+use drive::{Gains, Previous};
 
 /// A parameter to calibrate, with its box and how its range is sampled and scaled.
 #[derive(Debug, Clone, PartialEq)]
@@ -380,6 +381,10 @@ pub struct FrfObjective {
     training: Vec<bool>,
     /// Every point of the data, in [`TestData::points`] order.
     points: Vec<PointId>,
+    /// The data's gains: fixed values, or the nominal ones of calibrated gains.
+    gains: Gains,
+    /// The shaker a voltage record drives the model through, when modelled.
+    shaker: Option<crate::coupling::Shaker>,
 }
 
 fn exponent(q: Quantity) -> i32 {
@@ -564,9 +569,37 @@ impl FrfObjective {
         if let Some(link) = &fe {
             known.extend(link.fe_parameters());
         }
+        known.push(Param::InputGain);
+        known.extend(
+            data.channels
+                .iter()
+                .map(|c| Param::SensorGain(c.name.clone())),
+        );
         for (i, s) in specs.iter().enumerate() {
             s.check()?;
             if fe.as_ref().is_some_and(|l| l.fe.contains(&i)) {
+                continue;
+            }
+            if s.param.is_gain() {
+                if !known.contains(&s.param) {
+                    return Err(Error::UnknownParameter {
+                        name: s.param.to_string(),
+                        known: known
+                            .iter()
+                            .map(ToString::to_string)
+                            .collect::<Vec<_>>()
+                            .join(", "),
+                    });
+                }
+                if s.lower.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+                    return Err(Error::invalid(
+                        format!("parameter '{}'", s.param),
+                        format!(
+                            "a gain is positive: its lower bound {} must be > 0",
+                            s.lower
+                        ),
+                    ));
+                }
                 continue;
             }
             sys.param(&s.param)?;
@@ -653,6 +686,11 @@ impl FrfObjective {
             data,
             specs,
             config,
+            gains: Gains {
+                input: 1.0,
+                sensors: vec![1.0; sys.sensors().len()],
+            },
+            shaker: None,
             sensor_of,
             input,
         })
@@ -662,7 +700,10 @@ impl FrfObjective {
     /// (the data's channels and drive point checked as in [`FrfObjective::new`]): what the
     /// test planner uses to evaluate candidate tests.
     pub fn with_data(&self, data: Arc<TestData>, config: ObjectiveConfig) -> Result<Self> {
-        Self::build(&self.sys, self.fe.clone(), data, self.specs.clone(), config)
+        let mut obj = Self::build(&self.sys, self.fe.clone(), data, self.specs.clone(), config)?;
+        obj.gains = self.gains.clone();
+        obj.set_shaker(self.shaker)?;
+        Ok(obj)
     }
 
     /// The parameters.
@@ -758,10 +799,13 @@ impl FrfObjective {
         }
         let params: Vec<Param> = self.specs.iter().map(|s| s.param.clone()).collect();
         let fe_idx: Vec<usize> = self.fe.as_ref().map_or(Vec::new(), |l| l.fe.clone());
-        let sys_idx: Vec<usize> = (0..params.len()).filter(|i| !fe_idx.contains(i)).collect();
+        let sys_idx: Vec<usize> = (0..params.len())
+            .filter(|i| !fe_idx.contains(i) && !params[*i].is_gain())
+            .collect();
         let sys_params: Vec<Param> = sys_idx.iter().map(|&i| params[i].clone()).collect();
         let sys_values: Vec<f64> = sys_idx.iter().map(|&i| values[i]).collect();
         self.sys.set_params(&sys_params, &sys_values)?;
+        let gains = self.gains_at(values)?;
         let variations = match self.update_fe(values, jacobian || point_sensitivities)? {
             Some(v) => v,
             None => return Ok(self.all_failed(Status::NonFinite)),
@@ -782,61 +826,63 @@ impl FrfObjective {
         let mut failed = Vec::new();
         let mut index = 0usize;
         for (s, sw) in data.sweeps.iter().enumerate() {
-            let mut prev: Option<(Vec<f64>, f64)> = None;
+            let mut prev: Option<Previous> = None;
             for (i, st) in sw.steps.iter().enumerate() {
                 let id = PointId { sweep: s, step: i };
                 let train = mask[index];
                 index += 1;
                 let omega = 2.0 * PI * st.frequency_hz;
-                let terms = (1..=h_data.min(h_model))
-                    .filter(|&k| st.force[k - 1].norm() > 0.0)
-                    .map(|k| ForceTerm {
-                        input: self.input,
-                        harmonic: k,
-                        amplitude: st.force[k - 1],
-                    })
-                    .collect();
-                self.sys.set_forcing(Forcing { terms })?;
-                let (mut x, status) = solve_step(&self.sys, &mut self.ws, omega, prev.as_ref())?;
-                if !status.is_converged() {
-                    failed.push(id);
-                    points.push(PointResult {
-                        id,
-                        status,
-                        response: Mat::from_fn(data.channels.len(), h_data, |_, _| {
-                            c64::new(f64::NAN, f64::NAN)
-                        }),
-                        sensitivity: Vec::new(),
-                    });
-                    prev = None;
-                    continue;
-                }
-                let mut response = self.point_response(&x, omega);
+                let solved = self.solve_driven(st, omega, &gains, prev.as_ref())?;
+                let (solved, status) = match solved {
+                    Ok(v) => (v, Status::Converged),
+                    Err(status) => {
+                        failed.push(id);
+                        points.push(PointResult {
+                            id,
+                            status,
+                            response: Mat::from_fn(data.channels.len(), h_data, |_, _| {
+                                c64::new(f64::NAN, f64::NAN)
+                            }),
+                            sensitivity: Vec::new(),
+                        });
+                        prev = None;
+                        continue;
+                    }
+                };
+                let mut solved = solved;
+                let mut y = self.sys.sensor_response(&solved.x, omega, 1.0);
+                let mut response = self.channel_response(&y, omega, &gains);
                 if self.config.branch == BranchChoice::NearestToData {
                     let misfit = self.misfit(st, &response);
                     if misfit > BRANCH_CHECK {
                         // Far from the measurement: the test may sit on another branch
                         // (it jumped earlier or later than the model's continuation).
-                        let mut other = self.sys.linear_guess(omega, 1.0);
-                        if self
-                            .sys
-                            .solve_with(&mut self.ws, omega, 1.0, &mut other)?
-                            .converged()
-                        {
-                            let r = self.point_response(&other, omega);
+                        if let Ok(other) = self.solve_driven(st, omega, &gains, None)? {
+                            let y2 = self.sys.sensor_response(&other.x, omega, 1.0);
+                            let r = self.channel_response(&y2, omega, &gains);
                             if self.misfit(st, &r) < misfit {
-                                x = other;
+                                solved = other;
+                                y = y2;
                                 response = r;
                             }
                         }
+                        // The forcing of the solution kept.
+                        self.set_solved_force(&solved)?;
                     }
                 }
                 let sens = if (jacobian && train) || point_sensitivities {
-                    let a = self.sys.sensitivities(&x, omega, 1.0, &sys_params)?;
+                    let a = self.sys.sensitivities(&solved.x, omega, 1.0, &sys_params)?;
                     let b = self
                         .sys
-                        .variation_sensitivities(&x, omega, 1.0, &variations)?;
-                    Some(in_spec_order(a, &sys_idx, b, &fe_idx))
+                        .variation_sensitivities(&solved.x, omega, 1.0, &variations)?;
+                    let mut d: Vec<Option<Mat<c64>>> = vec![None; params.len()];
+                    for (sv, &j) in a.into_iter().zip(&sys_idx) {
+                        d[j] = Some(sv.dy);
+                    }
+                    for (sv, &j) in b.into_iter().zip(&fe_idx) {
+                        d[j] = Some(sv.dy);
+                    }
+                    Some(self.complete_sensitivities(st, omega, &solved, &y, &gains, d)?)
                 } else {
                     None
                 };
@@ -867,9 +913,7 @@ impl FrfObjective {
                             let dy: Vec<c64> = sens
                                 .as_ref()
                                 .map(|ss| {
-                                    ss.iter()
-                                        .map(|d| d.dy[(self.sensor_of[c], k)] * f)
-                                        .collect()
+                                    ss.iter().map(|d| d[(self.sensor_of[c], k)] * f).collect()
                                 })
                                 .unwrap_or_default();
                             match self.config.form {
@@ -929,7 +973,7 @@ impl FrfObjective {
                             .map(|d| {
                                 Mat::from_fn(data.channels.len(), h_data, |c, j| {
                                     if j < h {
-                                        d.dy[(self.sensor_of[c], j + 1)]
+                                        d[(self.sensor_of[c], j + 1)]
                                             * self.quantity_factor(c, j + 1, omega)
                                     } else {
                                         c64::new(f64::NAN, f64::NAN)
@@ -946,7 +990,11 @@ impl FrfObjective {
                     response,
                     sensitivity,
                 });
-                prev = Some((x, omega));
+                prev = Some(Previous {
+                    x: solved.x,
+                    phi: solved.coupled.map(|c| c.phi),
+                    omega,
+                });
             }
         }
         let jac = jacobian.then(|| Mat::from_fn(rows.len(), self.specs.len(), |i, j| rows[i][j]));
@@ -970,21 +1018,6 @@ impl FrfObjective {
             f *= iw;
         }
         if pd >= pm { f } else { f.inv() }
-    }
-
-    /// The data channels' harmonics `1..=H_data` (channels × harmonics) of the solution `x`
-    /// at `omega`; NaN beyond the model's harmonics.
-    fn point_response(&self, x: &[f64], omega: f64) -> Mat<c64> {
-        let h_data = self.data.harmonics;
-        let h = h_data.min(self.sys.harmonics().h);
-        let y = self.sys.sensor_response(x, omega, 1.0);
-        Mat::from_fn(self.data.channels.len(), h_data, |c, j| {
-            if j < h {
-                y[(self.sensor_of[c], j + 1)] * self.quantity_factor(c, j + 1, omega)
-            } else {
-                c64::new(f64::NAN, f64::NAN)
-            }
-        })
     }
 
     /// The mean squared normalised complex residual of `response` against step `st` over
@@ -1139,6 +1172,9 @@ impl FrfObjective {
     /// The current value of a calibrated parameter: on the FE model for an FE-level one,
     /// else on the system.
     pub fn param_value(&self, p: &Param) -> Result<f64> {
+        if p.is_gain() {
+            return self.gain(p);
+        }
         match &self.fe {
             Some(link) if link.fe.iter().any(|&i| self.specs[i].param == *p) => link.param(p),
             _ => self.sys.param(p),
@@ -1153,58 +1189,6 @@ impl FrfObjective {
         }
         Ok(0.5 * ev.residuals.iter().map(|r| r * r).sum::<f64>())
     }
-}
-
-/// One step of a stepped sine on `sys` at `omega` (rad/s): Newton from the previous step's
-/// solution `prev` (solution, frequency); else through four intermediate frequencies from
-/// it; else from the linear response. The last iterate and how its solve ended.
-pub(crate) fn solve_step(
-    sys: &HbSystem,
-    ws: &mut HbWorkspace,
-    omega: f64,
-    prev: Option<&(Vec<f64>, f64)>,
-) -> Result<(Vec<f64>, Status)> {
-    if let Some((x0, w0)) = prev {
-        let mut x = x0.clone();
-        if sys.solve_with(ws, omega, 1.0, &mut x)?.converged() {
-            return Ok((x, Status::Converged));
-        }
-        x.copy_from_slice(x0);
-        let mut ok = true;
-        for j in 1..=4 {
-            let w = w0 + (omega - w0) * j as f64 / 4.0;
-            let mut xs = x.clone();
-            if !sys.solve_with(ws, w, 1.0, &mut xs)?.converged() {
-                ok = false;
-                break;
-            }
-            x = xs;
-        }
-        if ok {
-            return Ok((x, Status::Converged));
-        }
-    }
-    let mut x = sys.linear_guess(omega, 1.0);
-    let rep = sys.solve_with(ws, omega, 1.0, &mut x)?;
-    Ok((x, rep.status))
-}
-
-/// Sensitivities `a` (of the parameters at spec indices `ia`) and `b` (at `ib`) merged in
-/// spec order.
-fn in_spec_order(
-    a: Vec<Sensitivity>,
-    ia: &[usize],
-    b: Vec<Sensitivity>,
-    ib: &[usize],
-) -> Vec<Sensitivity> {
-    let mut all: Vec<(usize, Sensitivity)> = ia
-        .iter()
-        .copied()
-        .zip(a)
-        .chain(ib.iter().copied().zip(b))
-        .collect();
-    all.sort_by_key(|(i, _)| *i);
-    all.into_iter().map(|(_, s)| s).collect()
 }
 
 /// The variations of the linear part along `params` from their derivatives: eigenvalues

@@ -429,6 +429,7 @@ fn template(channels: Vec<Channel>, input: &str, harmonics: usize) -> TestData {
     let nan = c64::new(f64::NAN, f64::NAN);
     TestData {
         input: input.into(),
+        drive: crate::data::Drive::Force,
         harmonics,
         sweeps: vec![Sweep {
             label: "template".into(),

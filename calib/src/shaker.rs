@@ -4,128 +4,16 @@
 //! measured force harmonics meet their targets. The output is test data in the calibration's
 //! format ([`TestData`]).
 //!
-//! The shaker (armature mass `m_a`, suspension `k_a`, `c_a`, coil resistance `R` and
-//! inductance `L`, force constant `Bl`, stinger stiffness `k_s`) is linear; per harmonic
-//! `s = ikΩ` its equations
-//!
-//! `L s I + R I + Bl s X_a = V`, `(m_a s² + c_a s + k_a) X_a = Bl I − k_s (X_a − X_d)`
-//!
-//! leave the stinger force on the structure as `F = G(s) V − Z(s) X_d`, with
-//! `D = m_a s² + c_a s + k_a + k_s + Bl² s/(L s + R)`, `G = k_s Bl/((L s + R) D)` and
-//! `Z = k_s − k_s²/D`: the shaker's drive-point impedance. `F` and the nonlinear structure's
-//! drive displacement `X_d(F)` are solved together by Newton on the force harmonics, with
-//! `∂X_d/∂F` from [`HbSystem::input_response_jacobian`]. Near a resonance the structure moves
-//! freely, the back-EMF and the armature's inertia take the force away — the force drop-out a
-//! voltage-driven test shows — and the nonlinearity's harmonics in `X_d` come back as force
-//! harmonics.
+//! The shaker and its coupling to the structure are in [`crate::coupling`].
 
-use crate::data::{Noise, Step, Sweep, TestData};
-use crate::objective::solve_step;
+use crate::coupling::{Coupled, Rig, complex_of, real_of, solve_dense};
+pub use crate::coupling::{SHAKER_MAX, SHAKER_MIN, Shaker};
+use crate::data::{Drive, Noise, Step, Sweep, TestData};
 use crate::synthetic::{Gaussian, SweepPlan};
 use faer::{Mat, c64};
-use nlsim_hb::{ForceTerm, Forcing, HbSystem, HbWorkspace};
+use nlsim_hb::HbSystem;
 use nlsim_kernel::{Error, Result, Status};
 use std::f64::consts::PI;
-
-/// An electrodynamic shaker on a stinger (SI units).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Shaker {
-    /// Armature (moving coil and table) mass `m_a` (kg).
-    pub armature_mass: f64,
-    /// Suspension (flexure) stiffness `k_a` (N/m).
-    pub suspension_stiffness: f64,
-    /// Suspension damping `c_a` (N s/m).
-    pub suspension_damping: f64,
-    /// Coil resistance `R` (Ω), amplifier output included.
-    pub resistance: f64,
-    /// Coil inductance `L` (H).
-    pub inductance: f64,
-    /// Force constant `Bl` (N/A = V s/m).
-    pub force_constant: f64,
-    /// Axial stiffness of the stinger `k_s` (N/m).
-    pub stinger_stiffness: f64,
-}
-
-impl Default for Shaker {
-    /// A small modal shaker (values chosen by nlsim, of the order of catalogue data for a
-    /// 100 N shaker): `m_a` 0.03 kg, `k_a` 3 kN/m, `c_a` 2 N s/m, `R` 1.5 Ω, `L` 0.2 mH,
-    /// `Bl` 4 N/A, stinger 200 kN/m.
-    fn default() -> Self {
-        Self {
-            armature_mass: 0.03,
-            suspension_stiffness: 3e3,
-            suspension_damping: 2.0,
-            resistance: 1.5,
-            inductance: 2e-4,
-            force_constant: 4.0,
-            stinger_stiffness: 2e5,
-        }
-    }
-}
-
-/// Smallest non-zero value of a shaker field (SI units).
-pub const SHAKER_MIN: f64 = 1e-12;
-/// Largest value of a shaker field (SI units).
-pub const SHAKER_MAX: f64 = 1e12;
-
-impl Shaker {
-    /// Checks that every value is finite, 0 or within [`SHAKER_MIN`]..[`SHAKER_MAX`], masses, resistance, force constant and stinger
-    /// stiffness positive, the others non-negative.
-    pub fn check(&self) -> Result<()> {
-        let fields = [
-            ("armature_mass", self.armature_mass, true),
-            ("suspension_stiffness", self.suspension_stiffness, false),
-            ("suspension_damping", self.suspension_damping, false),
-            ("resistance", self.resistance, true),
-            ("inductance", self.inductance, false),
-            ("force_constant", self.force_constant, true),
-            ("stinger_stiffness", self.stinger_stiffness, true),
-        ];
-        for (name, v, positive) in fields {
-            // Beyond these the coupling's products (`Bl²`, `k_s²`, `s² m`) over- or
-            // underflow at structural frequencies: no shaker is built that way.
-            if v != 0.0 && !(SHAKER_MIN..=SHAKER_MAX).contains(&v) {
-                return Err(Error::InvalidParameter {
-                    name: format!("shaker.{name}"),
-                    value: v,
-                    reason: format!(
-                        "must be 0 or within {SHAKER_MIN:e}..{SHAKER_MAX:e} (SI units)"
-                    ),
-                });
-            }
-            if !v.is_finite() || v < 0.0 || (positive && v == 0.0) {
-                return Err(Error::InvalidParameter {
-                    name: format!("shaker.{name}"),
-                    value: v,
-                    reason: if positive {
-                        "must be positive and finite".into()
-                    } else {
-                        "must be non-negative and finite".into()
-                    },
-                });
-            }
-        }
-        Ok(())
-    }
-
-    /// `(G, Z)` at angular frequency `w` (rad/s): the stinger force is `F = G V − Z X_d`
-    /// (`G` in N/V, `Z` in N/m).
-    pub fn coupling(&self, w: f64) -> (c64, c64) {
-        let s = c64::new(0.0, w);
-        let e = s * self.inductance + self.resistance;
-        let bl = self.force_constant;
-        let d = s * s * self.armature_mass
-            + s * self.suspension_damping
-            + self.suspension_stiffness
-            + self.stinger_stiffness
-            + s * (bl * bl) / e;
-        let ks = self.stinger_stiffness;
-        (
-            c64::new(ks * bl, 0.0) / (e * d),
-            c64::new(ks, 0.0) - (ks * ks) / d,
-        )
-    }
-}
 
 /// The off-line force controller.
 #[derive(Debug, Clone, PartialEq)]
@@ -183,86 +71,50 @@ pub struct VirtualTest {
     pub steps: Vec<Vec<StepControl>>,
 }
 
-/// The structure's unknowns, the coupling residual `Q` and its Jacobian at one force.
-type Residual = (Vec<f64>, Vec<f64>, Mat<f64>);
-
-/// The coupled structure–shaker solution at one frequency for one voltage.
-struct Coupled {
-    x: Vec<f64>,
-    /// Real force coefficients (2H+1).
-    phi: Vec<f64>,
-    /// `∂φ/∂v` (real layout, (2H+1) × (2H+1)).
-    dphi_dv: Mat<f64>,
-}
-
-/// The voltage-driven shaker on `sys` at input `input`.
-struct Rig<'a> {
-    sys: HbSystem,
-    ws: HbWorkspace,
-    shaker: &'a Shaker,
-    input: usize,
-}
-
-fn real_of(set: &nlsim_hb::HarmonicSet, z: &[c64]) -> Vec<f64> {
-    let mut v = vec![0.0; set.len()];
-    for (k, z) in z.iter().enumerate() {
-        set.set_complex(&mut v, k, *z);
+impl VirtualTest {
+    /// The test as a voltage-driven lab records it: the data with the drive column holding
+    /// the voltage of each step divided by `amplifier_gain` (the signal into an amplifier of
+    /// that gain, V at the coil per V in; [`Drive::Voltage`]) instead of the measured force.
+    /// The generator's voltage is known exactly: no noise is added to it. Errors when the
+    /// gain is not positive and finite.
+    pub fn voltage_data(&self, amplifier_gain: f64) -> Result<TestData> {
+        if !(amplifier_gain.is_finite() && amplifier_gain > 0.0) {
+            return Err(Error::invalid(
+                "amplifier gain",
+                format!("must be positive and finite, not {amplifier_gain}"),
+            ));
+        }
+        let mut data = self.data.clone();
+        data.drive = Drive::Voltage;
+        let mut records = self
+            .steps
+            .iter()
+            .filter(|r| r.iter().any(|s| s.force[1].re.is_finite()));
+        for sweep in &mut data.sweeps {
+            let rec: Vec<&StepControl> = records
+                .next()
+                .map(|r| r.iter().filter(|s| s.force[1].re.is_finite()).collect())
+                .unwrap_or_default();
+            if rec.len() != sweep.steps.len() {
+                return Err(Error::invalid(
+                    "virtual test",
+                    format!(
+                        "sweep '{}': its record does not match its data",
+                        sweep.label
+                    ),
+                ));
+            }
+            for (step, r) in sweep.steps.iter_mut().zip(rec) {
+                for (k, f) in step.force.iter_mut().enumerate() {
+                    *f = r.voltage[k + 1] / amplifier_gain;
+                }
+            }
+        }
+        Ok(data)
     }
-    v
-}
-
-fn complex_of(set: &nlsim_hb::HarmonicSet, v: &[f64]) -> Vec<c64> {
-    (0..=set.h).map(|k| set.complex(v, k)).collect()
-}
-
-/// Real-layout matrix of multiplying harmonic `k` by `z[k]`.
-fn block_diag(set: &nlsim_hb::HarmonicSet, z: &[c64]) -> Mat<f64> {
-    let nh = set.len();
-    let mut a = Mat::<f64>::zeros(nh, nh);
-    a[(0, 0)] = z[0].re;
-    for k in 1..=set.h {
-        let (r, c) = (2 * k - 1, 2 * k - 1);
-        a[(r, c)] = z[k].re;
-        a[(r, c + 1)] = z[k].im;
-        a[(r + 1, c)] = -z[k].im;
-        a[(r + 1, c + 1)] = z[k].re;
-    }
-    a
-}
-
-/// Solves `a y = b` for a small dense square `a`; `None` when singular.
-fn solve_dense(a: &Mat<f64>, b: &[f64]) -> Option<Vec<f64>> {
-    use faer::linalg::solvers::Solve;
-    let lu = a.partial_piv_lu();
-    let u = lu.U();
-    if (0..a.nrows()).any(|i| u[(i, i)] == 0.0 || !u[(i, i)].is_finite()) {
-        return None;
-    }
-    let x = lu.solve(Mat::from_fn(b.len(), 1, |i, _| b[i]));
-    Some((0..b.len()).map(|i| x[(i, 0)]).collect())
 }
 
 impl Rig<'_> {
-    fn set_force(&mut self, phi: &[f64]) -> Result<()> {
-        let set = *self.sys.harmonics();
-        let f = complex_of(&set, phi);
-        self.sys.set_forcing(Forcing {
-            terms: f
-                .iter()
-                .enumerate()
-                .map(|(k, &amplitude)| ForceTerm {
-                    input: self.input,
-                    harmonic: k,
-                    amplitude: if k == 0 {
-                        c64::new(amplitude.re, 0.0)
-                    } else {
-                        amplitude
-                    },
-                })
-                .collect(),
-        })
-    }
-
     /// The controller at one step: Newton on the voltage coefficients `active` with the
     /// coupled system's `∂F/∂V`, each change halved until the force error decreases, from
     /// `volt` and the coupled state `start` (`None`: the low-amplitude branch). Returns the
@@ -280,7 +132,7 @@ impl Rig<'_> {
     ) -> Result<(std::result::Result<Coupled, Status>, Vec<c64>, usize)> {
         let set = *self.sys.harmonics();
         let tr = real_of(&set, target);
-        let mut outcome = self.solve(omega, &volt, start)?;
+        let mut outcome = self.solve_nested(omega, &volt, start)?;
         let mut iterations = 0;
         while let Ok(c) = &outcome {
             let ferr = force_error(&set, &c.phi, target, active);
@@ -310,7 +162,7 @@ impl Rig<'_> {
                     vr[j] += beta * dv[a];
                 }
                 let v = complex_of(&set, &vr);
-                let trial = self.solve(omega, &v, Some((&here.0, &here.1, omega)))?;
+                let trial = self.solve_nested(omega, &v, Some((&here.0, &here.1, omega)))?;
                 if trial
                     .as_ref()
                     .is_ok_and(|t| force_error(&set, &t.phi, target, active) < ferr)
@@ -325,161 +177,6 @@ impl Rig<'_> {
             volt = v;
         }
         Ok((outcome, volt, iterations))
-    }
-
-    /// The force coefficients of the shaker on the linear structure (the nonlinear elements
-    /// left out): `F_k = G_k V_k / (1 + Z_k H_dd(kΩ))`; also sets it as the forcing.
-    fn linear_force(&mut self, omega: f64, g: &[c64], z: &[c64], volt: &[c64]) -> Result<Vec<f64>> {
-        let set = *self.sys.harmonics();
-        let port = self.sys.inputs()[self.input].1;
-        let f: Vec<c64> = (0..=set.h)
-            .map(|k| {
-                let h = self
-                    .sys
-                    .linear()
-                    .receptance(k as f64 * omega, &[port], &[port])[(0, 0)];
-                g[k] * volt[k] / (c64::new(1.0, 0.0) + z[k] * h)
-            })
-            .collect();
-        let phi = real_of(&set, &f);
-        self.set_force(&phi)?;
-        Ok(phi)
-    }
-
-    /// Force and structure for voltage harmonics `volt` at `omega`, from `start` (force
-    /// coefficients, structure unknowns and the frequency they belong to). `Ok(Err(status))`
-    /// when the structure or the coupling does not converge.
-    fn solve(
-        &mut self,
-        omega: f64,
-        volt: &[c64],
-        start: Option<(&[f64], &[f64], f64)>,
-    ) -> Result<std::result::Result<Coupled, Status>> {
-        let set = *self.sys.harmonics();
-        let nh = set.len();
-        let (g, z): (Vec<c64>, Vec<c64>) = (0..=set.h)
-            .map(|k| self.shaker.coupling(k as f64 * omega))
-            .unzip();
-        let gr = block_diag(&set, &g);
-        let zr = block_diag(&set, &z);
-        let vr = real_of(&set, volt);
-        let gv: Vec<f64> = (0..nh)
-            .map(|i| (0..nh).map(|j| gr[(i, j)] * vr[j]).sum())
-            .collect();
-        let mut cold = start.is_none();
-        let (mut phi, x0, w0) = match start {
-            Some((p, x, w)) => (p.to_vec(), x.to_vec(), w),
-            None => (
-                self.linear_force(omega, &g, &z, volt)?,
-                self.sys.linear_guess(omega, 1.0),
-                omega,
-            ),
-        };
-        let scale = gv.iter().fold(0.0f64, |a, v| a.max(v.abs())).max(1e-300);
-        let norm = |q: &[f64]| q.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-        // Q(φ) = φ − G v + Z X_d(φ) and its Jacobian I + Z ∂X_d/∂φ, the structure solved
-        // from `prev`.
-        let eval =
-            |rig: &mut Self, phi: &[f64], prev: &(Vec<f64>, f64)| -> Result<Option<Residual>> {
-                rig.set_force(phi)?;
-                let (mut x, status) = solve_step(&rig.sys, &mut rig.ws, omega, Some(prev))?;
-                if !status.is_converged() {
-                    // A ramp of the force level from the linear response.
-                    x = rig.sys.linear_guess(omega, 0.125);
-                    for j in 1..=8 {
-                        let level = j as f64 / 8.0;
-                        let rep = rig.sys.solve_with(&mut rig.ws, omega, level, &mut x)?;
-                        if !rep.converged() {
-                            return Ok(None);
-                        }
-                    }
-                }
-                let (disp, jac) = rig.sys.input_response_jacobian(&x, omega, 1.0, rig.input)?;
-                let xd = real_of(
-                    &set,
-                    &(0..=set.h)
-                        .map(|k| disp[(rig.input, k)])
-                        .collect::<Vec<_>>(),
-                );
-                let q: Vec<f64> = (0..nh)
-                    .map(|i| phi[i] - gv[i] + (0..nh).map(|j| zr[(i, j)] * xd[j]).sum::<f64>())
-                    .collect();
-                let jq = Mat::from_fn(nh, nh, |i, j| {
-                    (i == j) as u8 as f64
-                        + (0..nh)
-                            .map(|l| zr[(i, l)] * jac[(rig.input * nh + l, j)])
-                            .sum::<f64>()
-                });
-                Ok(Some((x, q, jq)))
-            };
-        let first = match eval(self, &phi, &(x0, w0))? {
-            Some(r) => r,
-            // The warm start's force has no solution near the previous one (a jump past a
-            // fold): start from the coupled linear response instead.
-            None if !cold => {
-                cold = true;
-                phi = self.linear_force(omega, &g, &z, volt)?;
-                let lin = self.sys.linear_guess(omega, 1.0);
-                match eval(self, &phi, &(lin, omega))? {
-                    Some(r) => r,
-                    None => return Ok(Err(Status::NonFinite)),
-                }
-            }
-            None => return Ok(Err(Status::NonFinite)),
-        };
-        let (mut x, mut q, mut jq) = first;
-        for _ in 0..60 {
-            if norm(&q) <= 1e-10 * scale {
-                // dφ/dv = Jq⁻¹ G.
-                let mut dphi_dv = Mat::<f64>::zeros(nh, nh);
-                for c in 0..nh {
-                    let col: Vec<f64> = (0..nh).map(|i| gr[(i, c)]).collect();
-                    let Some(s) = solve_dense(&jq, &col) else {
-                        return Ok(Err(Status::Singular));
-                    };
-                    for i in 0..nh {
-                        dphi_dv[(i, c)] = s[i];
-                    }
-                }
-                return Ok(Ok(Coupled { x, phi, dphi_dv }));
-            }
-            let Some(step) = solve_dense(&jq, &q) else {
-                return Ok(Err(Status::Singular));
-            };
-            // Halve the step until ‖Q‖ decreases (the structure may jump between branches
-            // when the force changes much).
-            let prev = (x.clone(), omega);
-            let mut alpha = 1.0;
-            let mut taken = None;
-            for _ in 0..12 {
-                let trial: Vec<f64> = phi.iter().zip(&step).map(|(p, s)| p - alpha * s).collect();
-                if let Some(r) = eval(self, &trial, &prev)?
-                    && norm(&r.1) < (1.0 - 1e-4 * alpha) * norm(&q)
-                {
-                    taken = Some((trial, r));
-                    break;
-                }
-                alpha *= 0.5;
-            }
-            let Some((trial, r)) = taken else {
-                if cold {
-                    return Ok(Err(Status::StepTooSmall));
-                }
-                // No branch near the warm start (a fold was passed): start again from the
-                // coupled linear response, the low-amplitude branch.
-                cold = true;
-                phi = self.linear_force(omega, &g, &z, volt)?;
-                let lin = self.sys.linear_guess(omega, 1.0);
-                let Some(r) = eval(self, &phi, &(lin, omega))? else {
-                    return Ok(Err(Status::NonFinite));
-                };
-                (x, q, jq) = r;
-                continue;
-            };
-            phi = trial;
-            (x, q, jq) = r;
-        }
-        Ok(Err(Status::IterationLimit))
     }
 }
 
@@ -600,9 +297,11 @@ pub fn virtual_test_with(
         }
     }
     let nh = set.len();
+    let mut own_sys = sys.clone();
+    let mut own_ws = sys.workspace(16 << 20);
     let mut rig = Rig {
-        ws: sys.workspace(16 << 20),
-        sys: sys.clone(),
+        sys: &mut own_sys,
+        ws: &mut own_ws,
         shaker,
         input: input_idx,
     };
@@ -729,6 +428,7 @@ pub fn virtual_test_with(
     let channels = crate::synthetic::sensor_channels_with(sys, noise);
     let data = TestData {
         input: input.into(),
+        drive: Drive::Force,
         channels,
         harmonics,
         sweeps: sweeps.into_iter().filter(|s| !s.steps.is_empty()).collect(),

@@ -89,6 +89,7 @@ pub fn synthesize(
         .collect();
     let mut data = TestData {
         input: input.into(),
+        drive: crate::data::Drive::Force,
         channels,
         harmonics,
         sweeps,

@@ -96,6 +96,7 @@ pub unsafe extern "C" fn nlsim_testdata_new(
         *data = insert(Object::TestData(Arc::new(RwLock::new(TestDataBuilder {
             data: TestData {
                 input: input.into(),
+                drive: nlsim::calib::Drive::Force,
                 channels: Vec::new(),
                 harmonics,
                 sweeps: Vec::new(),

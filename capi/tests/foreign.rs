@@ -269,6 +269,7 @@ fn reference() -> BTreeMap<&'static str, Vec<f64>> {
         .collect();
     let data = TestData {
         input: "shaker".into(),
+        drive: nlsim::calib::Drive::Force,
         channels: vec![Channel {
             name: "tip_d".into(),
             quantity: Quantity::Displacement,

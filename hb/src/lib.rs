@@ -50,5 +50,6 @@ pub use linear::{LinearPart, LinearVariation};
 pub use stability::Stability;
 pub use start::{SubharmonicStart, find_subharmonic, subharmonic_content};
 pub use system::{
-    HbConfig, HbSystem, HbSystemBuilder, HbWorkspace, NewtonReport, Sensitivity, SensorSpec,
+    HbConfig, HbSystem, HbSystemBuilder, HbWorkspace, InputCoupling, NewtonReport, Sensitivity,
+    SensorSpec,
 };

@@ -89,6 +89,24 @@ pub struct Sensitivity {
     pub dy: Mat<c64>,
 }
 
+/// The residual and an input port's displacement with their Jacobians
+/// ([`HbSystem::input_coupling`]); real layout, `n` unknowns, `2H+1` force coefficients.
+#[derive(Debug, Clone)]
+pub struct InputCoupling {
+    /// `R(x)` (n, m).
+    pub r: Vec<f64>,
+    /// `∂R/∂x` (n × n).
+    pub r_x: Mat<f64>,
+    /// `∂R/∂F` (n × (2H+1), m/N).
+    pub r_f: Mat<f64>,
+    /// `X_d` (2H+1, m).
+    pub xd: Vec<f64>,
+    /// `∂X_d/∂x` ((2H+1) × n).
+    pub xd_x: Mat<f64>,
+    /// `∂X_d/∂F` ((2H+1) × (2H+1), m/N).
+    pub xd_f: Mat<f64>,
+}
+
 /// What a sensitivity is taken along: a parameter of the system, or a variation of its
 /// linear part's data.
 enum Direction<'a> {
@@ -657,6 +675,36 @@ impl HbSystem {
     pub fn set_forcing(&mut self, forcing: Forcing) -> Result<()> {
         forcing.validate(&self.set, self.inputs.len())?;
         self.forcing = forcing;
+        Ok(())
+    }
+
+    /// Adds a sensor `name` of `quantity` at port `port` (an output only: the solution does
+    /// not change). Errors when the port is out of range or the name is taken.
+    pub fn add_sensor(
+        &mut self,
+        name: impl Into<String>,
+        port: usize,
+        quantity: Quantity,
+    ) -> Result<()> {
+        let name = name.into();
+        let np = self.linear.phi.nrows();
+        if port >= np {
+            return Err(Error::invalid(
+                format!("sensor '{name}'"),
+                format!("port {port} is out of range ({np} ports)"),
+            ));
+        }
+        if self.sensors.iter().any(|s| s.name == name) {
+            return Err(Error::invalid(
+                format!("sensor '{name}'"),
+                "the system has a sensor of that name",
+            ));
+        }
+        self.sensors.push(SensorSpec {
+            name,
+            port,
+            quantity,
+        });
         Ok(())
     }
 
@@ -1394,6 +1442,100 @@ impl HbSystem {
         input: usize,
     ) -> Result<(Mat<c64>, Mat<f64>)> {
         self.check_unknowns("harmonic balance unknowns", x)?;
+        self.check_input(input)?;
+        let nh = self.set.len();
+        let rec = self.receptances(omega, false);
+        let ev = self.evaluate(&rec, x, omega, scale, false);
+        let ports = self.input_ports();
+        let y = self.recover(&ports, omega, scale, &ev.g, false);
+        let disp = Mat::from_fn(ports.len(), self.set.h + 1, |i, k| {
+            self.set.complex(&y[i * nh..(i + 1) * nh], k)
+        });
+        let jac = self.force_jacobian_rows(x, omega, scale, input, &ports)?;
+        Ok((disp, jac))
+    }
+
+    /// The residual `R(x) = x + H_NL,NL G(x) − λ H_NL,ext F` and the displacement `X_d` of
+    /// input `input`'s port (real layout, m) at `x`, with their Jacobians with respect to
+    /// the unknowns and to that input's real force coefficients: `∂R/∂x`, `∂R/∂F =
+    /// −λ H_NL,in`, `∂X_d/∂x = −H_in,NL ∂G/∂x`, `∂X_d/∂F = λ H_in,in`. What a structure and
+    /// an exciter whose force depends on the drive point's motion are solved with together,
+    /// `x` and `F` as one set of unknowns: unlike a solve for `x` at each force, that stays
+    /// regular where the force-driven structure folds.
+    pub fn input_coupling(
+        &self,
+        x: &[f64],
+        omega: f64,
+        scale: f64,
+        input: usize,
+    ) -> Result<InputCoupling> {
+        self.check_unknowns("harmonic balance unknowns", x)?;
+        self.check_input(input)?;
+        let nh = self.set.len();
+        let n = self.n_unknowns();
+        let rec = self.receptances(omega, false);
+        let ev = self.evaluate(&rec, x, omega, scale, true);
+        let port = [self.input_ports()[input]];
+        let h_nl_in = expand(
+            &self.set,
+            &self.harmonic_receptances(omega, &self.element_ports, &port, false),
+        );
+        let h_in_nl = expand(
+            &self.set,
+            &self.harmonic_receptances(omega, &port, &self.element_ports, false),
+        );
+        let h_in_in = expand(
+            &self.set,
+            &self.harmonic_receptances(omega, &port, &port, false),
+        );
+        let xd = self.recover(&port, omega, scale, &ev.g, false);
+        let mut xd_x = Mat::<f64>::zeros(nh, n);
+        for j in 0..n {
+            let mut e = vec![0.0; n];
+            e[j] = 1.0;
+            let col = self.apply_dg(&ev.dg, &e);
+            for i in 0..nh {
+                xd_x[(i, j)] = -(0..n).map(|l| h_in_nl[(i, l)] * col[l]).sum::<f64>();
+            }
+        }
+        Ok(InputCoupling {
+            r: ev.r,
+            r_x: ev.jacobian.unwrap_or_else(|| Mat::zeros(n, n)),
+            r_f: Mat::from_fn(n, nh, |i, j| -scale * h_nl_in[(i, j)]),
+            xd,
+            xd_x,
+            xd_f: Mat::from_fn(nh, nh, |i, j| scale * h_in_in[(i, j)]),
+        })
+    }
+
+    /// The Jacobian of every sensor's response with respect to the real force coefficients
+    /// of input `input` at solution `x` (as [`HbSystem::input_response_jacobian`], on the
+    /// sensors' ports): one matrix per force coefficient `c` of the real layout
+    /// `[F_0, Re F_1, −Im F_1, …]`, sensors × harmonics `k = 0..=H` in each sensor's quantity
+    /// per newton (like [`Sensitivity::dy`]). With it a response follows a force that itself
+    /// depends on the parameters (a gain on the recorded force, a shaker's coupling):
+    /// `dY/dp = ∂Y/∂p + Σ_c ∂Y/∂F_c dF_c/dp`.
+    pub fn sensor_force_jacobian(
+        &self,
+        x: &[f64],
+        omega: f64,
+        scale: f64,
+        input: usize,
+    ) -> Result<Vec<Mat<c64>>> {
+        self.check_unknowns("harmonic balance unknowns", x)?;
+        self.check_input(input)?;
+        let nh = self.set.len();
+        let jac = self.force_jacobian_rows(x, omega, scale, input, &self.sensor_ports())?;
+        Ok((0..nh)
+            .map(|c| {
+                let col: Vec<f64> = (0..jac.nrows()).map(|i| jac[(i, c)]).collect();
+                self.to_quantities(&col, omega, nh)
+            })
+            .collect())
+    }
+
+    /// An error unless `input` is an input of the system.
+    fn check_input(&self, input: usize) -> Result<()> {
         if input >= self.inputs.len() {
             return Err(Error::invalid(
                 "input response",
@@ -1403,44 +1545,58 @@ impl HbSystem {
                 ),
             ));
         }
+        Ok(())
+    }
+
+    /// `dX_rows/dF = λ (H_rows,in − H_rows,NL ∂G/∂x J⁻¹ H_NL,in)` in the real layout
+    /// ((rows·(2H+1)) × (2H+1), m/N) for the force coefficients of input `input`.
+    fn force_jacobian_rows(
+        &self,
+        x: &[f64],
+        omega: f64,
+        scale: f64,
+        input: usize,
+        rows: &[usize],
+    ) -> Result<Mat<f64>> {
         let nh = self.set.len();
         let n = self.n_unknowns();
-        let rec = self.receptances(omega, false);
-        let ev = self.evaluate(&rec, x, omega, scale, true);
         let ports = self.input_ports();
-        let y = self.recover(&ports, omega, scale, &ev.g, false);
-        let disp = Mat::from_fn(ports.len(), self.set.h + 1, |i, k| {
-            self.set.complex(&y[i * nh..(i + 1) * nh], k)
-        });
-        let h_in_in = expand(
+        let h_rows_in = expand(
             &self.set,
-            &self.harmonic_receptances(omega, &ports, &ports[input..=input], false),
+            &self.harmonic_receptances(omega, rows, &ports[input..=input], false),
         );
-        let h_in_nl = expand(
-            &self.set,
-            &self.harmonic_receptances(omega, &ports, &self.element_ports, false),
-        );
-        let h_nl_in = expand(
-            &self.set,
-            &self.harmonic_receptances(omega, &self.element_ports, &ports[input..=input], false),
-        );
-        let mut jac = Mat::from_fn(ports.len() * nh, nh, |i, j| scale * h_in_in[(i, j)]);
+        let mut jac = Mat::from_fn(rows.len() * nh, nh, |i, j| scale * h_rows_in[(i, j)]);
         if n > 0 {
+            let rec = self.receptances(omega, false);
+            let ev = self.evaluate(&rec, x, omega, scale, true);
+            let h_rows_nl = expand(
+                &self.set,
+                &self.harmonic_receptances(omega, rows, &self.element_ports, false),
+            );
+            let h_nl_in = expand(
+                &self.set,
+                &self.harmonic_receptances(
+                    omega,
+                    &self.element_ports,
+                    &ports[input..=input],
+                    false,
+                ),
+            );
             let hz = omega / (2.0 * PI);
             let lu = Lu::new(ev.jacobian.as_ref().expect("asked for"), &|| {
                 format!("input response Jacobian at {hz:.6} Hz")
             })?;
             for c in 0..nh {
-                // dx/dF_c = λ J⁻¹ H_NL,in e_c; then −H_in,NL ∂G/∂x dx.
+                // dx/dF_c = λ J⁻¹ H_NL,in e_c; then −H_rows,NL ∂G/∂x dx.
                 let rhs: Vec<f64> = (0..n).map(|i| scale * h_nl_in[(i, c)]).collect();
                 let dx = lu.solve(&rhs);
                 let gdx = self.apply_dg(&ev.dg, &dx);
                 for i in 0..jac.nrows() {
-                    jac[(i, c)] -= (0..n).map(|j| h_in_nl[(i, j)] * gdx[j]).sum::<f64>();
+                    jac[(i, c)] -= (0..n).map(|j| h_rows_nl[(i, j)] * gdx[j]).sum::<f64>();
                 }
             }
         }
-        Ok((disp, jac))
+        Ok(jac)
     }
 
     /// Derivatives of the modal amplitudes `η_k` (see [`HbSystem::modal_amplitudes`]) along

@@ -5,7 +5,8 @@
 //! (`tip.k3`), a modal parameter of the reduced model (`mode1.f`, `mode1.zeta`), the global
 //! stiffness scale (`stiffness_scale`), or an FE-level parameter of the full model: the
 //! stiffness or mass scale of a labelled group of elements (`group:flange.k_scale`,
-//! `group:flange.m_scale`) or a grounded spring at a DOF (`spring:12:uz.k`). The text form
+//! `group:flange.m_scale`) or a grounded spring at a DOF (`spring:12:uz.k`); or a gain of the
+//! test data a model is calibrated on (`input_gain`, `sensor_gain:tip`). The text form
 //! parses and prints round trip (`p.to_string().parse() == Ok(p)`), and it is the name used
 //! in model files, jobs files, calibration settings and result files.
 //!
@@ -40,6 +41,8 @@ use std::str::FromStr;
 /// | [`Param::GroupStiffness`] | `group:NAME.k_scale` | 1 (factor on the group's K) |
 /// | [`Param::GroupMass`] | `group:NAME.m_scale` | 1 (factor on the group's M) |
 /// | [`Param::BoundarySpring`] | `spring:NODE:COMP.k` | N/m (N m/rad on a rotation) |
+/// | [`Param::InputGain`] | `input_gain` | per recorded unit: N/N, N/V, or V/V into a modelled shaker |
+/// | [`Param::SensorGain`] | `sensor_gain:NAME` | 1 (recorded per true response) |
 ///
 /// Element names may not take the form `modeN` (see
 /// [`NonlinearElement::new`](crate::NonlinearElement::new)), so every text has one meaning.
@@ -73,6 +76,16 @@ pub enum Param {
     GroupMass(String),
     /// A grounded linear spring at one DOF (boundary stiffness): `K_dd += k`.
     BoundarySpring(DofLabel),
+    /// The gain of the test data's drive record: the model is driven with `g` times the
+    /// recorded drive harmonics (a force gauge's sensitivity error on force data; N/V for a
+    /// voltage record driving a shaker taken as a force source; volts at the coil per
+    /// recorded volt when the calibration models the shaker). A property of the test data,
+    /// not of the model: calibrated or set in a calibration, refused by a model.
+    InputGain,
+    /// The gain of test-data channel `NAME` (a sensor of the model): the channel records
+    /// `s` times the true response (a sensor's sensitivity error). A property of the test
+    /// data, like [`Param::InputGain`].
+    SensorGain(String),
 }
 
 impl Param {
@@ -82,6 +95,12 @@ impl Param {
             element: element.into(),
             param: param.into(),
         }
+    }
+
+    /// Whether this is a gain of test data ([`Param::InputGain`], [`Param::SensorGain`]):
+    /// held by a calibration's objective, not by a model.
+    pub fn is_gain(&self) -> bool {
+        matches!(self, Param::InputGain | Param::SensorGain(_))
     }
 
     /// The unit of the value, as text (`Hz`, `1`, `N/m`; an element parameter's unit comes
@@ -96,6 +115,8 @@ impl Param {
             | Param::GroupMass(_) => "1",
             Param::ModalMass(_) => "kg",
             Param::BoundarySpring(_) => "N/m",
+            Param::InputGain => "per recorded unit",
+            Param::SensorGain(_) => "1",
         }
     }
 }
@@ -111,6 +132,8 @@ impl fmt::Display for Param {
             Param::GroupStiffness(g) => write!(f, "group:{g}.k_scale"),
             Param::GroupMass(g) => write!(f, "group:{g}.m_scale"),
             Param::BoundarySpring(d) => write!(f, "spring:{d}.k"),
+            Param::InputGain => f.write_str("input_gain"),
+            Param::SensorGain(s) => write!(f, "sensor_gain:{s}"),
         }
     }
 }
@@ -125,12 +148,22 @@ impl FromStr for Param {
                 format!("parameter '{s}'"),
                 format!(
                     "{why}; expected ELEMENT.PARAM (tip.k3), modeN.f, modeN.zeta, \
-                     modeN.m, stiffness_scale, group:NAME.k_scale, group:NAME.m_scale or spring:NODE:COMP.k"
+                     modeN.m, stiffness_scale, group:NAME.k_scale, group:NAME.m_scale, spring:NODE:COMP.k, \
+                     input_gain or sensor_gain:NAME"
                 ),
             )
         };
         if s == "stiffness_scale" {
             return Ok(Param::StiffnessScale);
+        }
+        if s == "input_gain" {
+            return Ok(Param::InputGain);
+        }
+        if let Some(sensor) = s.strip_prefix("sensor_gain:") {
+            if !is_valid_name(sensor) {
+                return Err(bad("a sensor name has letters, digits, '_' and '-' only"));
+            }
+            return Ok(Param::SensorGain(sensor.into()));
         }
         let (head, tail) = s.rsplit_once('.').ok_or_else(|| bad("no '.'"))?;
         if let Some(group) = head.strip_prefix("group:") {
@@ -207,8 +240,16 @@ pub trait Parameterized {
     }
 }
 
-/// The error for a parameter the object does not hold, listing those it does.
+/// The error for a parameter the object does not hold, listing those it does (a gain, which
+/// no model holds, gets its own message).
 pub fn unknown_param(p: &Param, known: &[Param]) -> Error {
+    if p.is_gain() {
+        return Error::invalid(
+            format!("parameter '{p}'"),
+            "a gain belongs to the test data, not to a model: set or calibrate it in \
+             `nlsim calibrate` (its value then carries into `nlsim validate`)",
+        );
+    }
     Error::UnknownParameter {
         name: p.to_string(),
         known: known

@@ -1003,6 +1003,8 @@ mod params {
             name().prop_map(Param::GroupStiffness),
             name().prop_map(Param::GroupMass),
             (0u64..u64::MAX, comp).prop_map(|(n, c)| Param::BoundarySpring(DofLabel::new(n, c))),
+            Just(Param::InputGain),
+            name().prop_map(Param::SensorGain),
         ]
     }
 

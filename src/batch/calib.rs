@@ -145,7 +145,7 @@ pub(super) fn write_calib_summary(
 
 /// Data points of a calibration request's test data (`None` if it cannot be read now).
 fn req_points(req: &CalibrationRequest) -> Option<usize> {
-    let model = crate::commands::setup::load_for_run(&req.model, &req.set).ok()?;
+    let model = crate::commands::setup::load_for_run(&req.model, &req.model_sets()).ok()?;
     crate::commands::calibrate::run::training_data(req, &model)
         .ok()
         .map(|d| d.n_points())

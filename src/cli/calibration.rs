@@ -200,6 +200,14 @@ pub struct TestArgs {
     /// Run voltage-driven only (no force control).
     #[arg(long)]
     open_loop: bool,
+    /// What the data record at the drive point: `force` (a force gauge) or `voltage` (the
+    /// amplifier's input, no force gauge) [default: the file's `record`, else force].
+    #[arg(long, value_parser = ["force", "voltage"])]
+    record: Option<String>,
+    /// The amplifier's gain (V at the coil per V in) a voltage record is divided by
+    /// [default: the file's `amplifier_gain`, else 1].
+    #[arg(long)]
+    amplifier_gain: Option<f64>,
     /// Report folder: summary, control.csv and force/response plots [default: the
     /// file's, else TEST's name with `-report`, beside it].
     #[arg(long)]
@@ -363,6 +371,13 @@ impl TestArgs {
             req.control.enabled = false;
             req.compare_open_loop = false;
         }
+        if let Some(r) = self.record.as_deref().and_then(nlsim_calib::Drive::parse) {
+            req.record = r;
+        }
+        if let Some(g) = self.amplifier_gain {
+            req.amplifier_gain = g;
+        }
+        req.check()?;
         req.report = Some(
             self.report
                 .clone()

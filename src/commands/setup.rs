@@ -67,6 +67,9 @@ pub fn apply_sets_deferred(model: &mut Model, sets: &[String]) -> Result<Vec<(Pa
         let known = model.parameters();
         match name.trim().parse::<Param>() {
             Ok(p) if known.contains(&p) => model.set_param(&p, v)?,
+            Ok(p) if p.is_gain() => {
+                return Err(nlsim_kernel::param::unknown_param(&p, &known).into());
+            }
             Ok(
                 p @ (Param::ModalFrequency(_)
                 | Param::ModalDamping(_)

@@ -123,3 +123,34 @@ mod plain_type_tests {
         );
     }
 }
+
+/// The `[shaker]` table of a test or calibration file: an electrodynamic shaker on a stinger
+/// ([`nlsim_calib::Shaker`]); absent keys take the default shaker's values.
+#[derive(Debug, Clone, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct ShakerTable {
+    armature_mass: Option<f64>,
+    suspension_stiffness: Option<f64>,
+    suspension_damping: Option<f64>,
+    resistance: Option<f64>,
+    inductance: Option<f64>,
+    force_constant: Option<f64>,
+    stinger_stiffness: Option<f64>,
+}
+
+impl ShakerTable {
+    /// The shaker of `table`: the default one with the keys given replaced.
+    pub(crate) fn shaker(table: Option<&ShakerTable>) -> nlsim_calib::Shaker {
+        let ds = nlsim_calib::Shaker::default();
+        let Some(s) = table else { return ds };
+        nlsim_calib::Shaker {
+            armature_mass: s.armature_mass.unwrap_or(ds.armature_mass),
+            suspension_stiffness: s.suspension_stiffness.unwrap_or(ds.suspension_stiffness),
+            suspension_damping: s.suspension_damping.unwrap_or(ds.suspension_damping),
+            resistance: s.resistance.unwrap_or(ds.resistance),
+            inductance: s.inductance.unwrap_or(ds.inductance),
+            force_constant: s.force_constant.unwrap_or(ds.force_constant),
+            stinger_stiffness: s.stinger_stiffness.unwrap_or(ds.stinger_stiffness),
+        }
+    }
+}

@@ -785,6 +785,7 @@ pub fn to_test_data(records: &[Uff58], input: &str, noise: Noise) -> Result<Test
         .collect();
     let data = TestData {
         input: input.to_string(),
+        drive: nlsim_calib::Drive::Force,
         channels,
         harmonics: 1,
         sweeps: vec![Sweep {

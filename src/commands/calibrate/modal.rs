@@ -47,7 +47,7 @@ pub struct ModalRun {
 pub fn run_modal_calibration(req: &CalibrationRequest) -> Result<ModalRun> {
     req.check()?;
     let t = Instant::now();
-    let model = crate::commands::setup::load_for_run(&req.model, &req.set)?;
+    let model = crate::commands::setup::load_for_run(&req.model, &req.model_sets())?;
     let file = read_modal_csv(&req.data, &model, req.shape_noise)?;
     let measured = file.data.modes.len();
     if measured > model.n_dofs() {

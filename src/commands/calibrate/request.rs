@@ -59,9 +59,44 @@ pub struct CalibrationRequest {
     /// The `[result]` table of a calibration's result file (`calibration.toml`), which
     /// `nlsim validate` reads; a calibration run ignores it.
     pub result: Option<StoredResult>,
+    /// The shaker a voltage-driven test's record drives the model through (`[shaker]`);
+    /// `None`: the recorded drive times the input gain is the force.
+    pub shaker: Option<nlsim_calib::Shaker>,
+}
+
+/// Whether a `NAME=VALUE` override names a gain of the test data (`input_gain`,
+/// `sensor_gain:NAME`).
+fn is_gain_set(kv: &str) -> bool {
+    kv.split_once('=')
+        .and_then(|(k, _)| k.trim().parse::<Param>().ok())
+        .is_some_and(|p| p.is_gain())
 }
 
 impl CalibrationRequest {
+    /// The `set` overrides of the model: every one but the gains of the test data.
+    pub fn model_sets(&self) -> Vec<String> {
+        self.set
+            .iter()
+            .filter(|s| !is_gain_set(s))
+            .cloned()
+            .collect()
+    }
+
+    /// The gains of the test data that `set` fixes (`input_gain=2.5`, `sensor_gain:tip=1.02`).
+    pub fn gain_sets(&self) -> Result<Vec<(Param, f64)>> {
+        self.set
+            .iter()
+            .filter(|s| is_gain_set(s))
+            .map(|kv| {
+                let (k, v) = kv.split_once('=').unwrap_or((kv, ""));
+                let value: f64 = v.trim().parse().map_err(|_| {
+                    Error::Usage(format!("--set '{kv}': '{}' is not a number", v.trim()))
+                })?;
+                Ok((k.trim().parse::<Param>()?, value))
+            })
+            .collect()
+    }
+
     /// A request with the default settings: compare the fundamental as complex
     /// differences, H = 3, 20 modes, 1 % UFF noise, shape noise 0.02,
     /// [`CalibrationConfig::default`].
@@ -85,6 +120,7 @@ impl CalibrationRequest {
             report: None,
             source: None,
             result: None,
+            shaker: None,
         }
     }
 
@@ -252,6 +288,7 @@ pub(crate) struct CalibrationTable {
     out: Option<String>,
     report: Option<String>,
     result: Option<StoredResult>,
+    shaker: Option<crate::formats::settings::ShakerTable>,
 }
 
 impl CalibrationTable {
@@ -344,6 +381,10 @@ impl CalibrationTable {
             report: self.report.as_deref().map(rel),
             source: Some(path.to_path_buf()),
             result: self.result,
+            shaker: self
+                .shaker
+                .as_ref()
+                .map(|t| crate::formats::settings::ShakerTable::shaker(Some(t))),
         };
         if let Some(r) = &req.result {
             r.check(req.params.len()).map_err(|(key, m)| err(key, m))?;

@@ -115,6 +115,20 @@ pub fn result_toml(run: &CalibrationRun) -> String {
     if cfg.fold_by == nlsim_calib::FoldBy::Sweeps {
         s.push_str("fold_by = \"sweeps\"\n");
     }
+    if let Some(sh) = &req.shaker {
+        let _ = writeln!(
+            s,
+            "\n[shaker]\narmature_mass = {}\nsuspension_stiffness = {}\nsuspension_damping = {}\n\
+             resistance = {}\ninductance = {}\nforce_constant = {}\nstinger_stiffness = {}",
+            num(sh.armature_mass),
+            num(sh.suspension_stiffness),
+            num(sh.suspension_damping),
+            num(sh.resistance),
+            num(sh.inductance),
+            num(sh.force_constant),
+            num(sh.stinger_stiffness)
+        );
+    }
     if !req.set.is_empty() {
         s.push_str("\n[set]\n");
         for kv in &req.set {

@@ -36,7 +36,7 @@ pub fn training_data(
 pub fn prepare(req: &CalibrationRequest) -> Result<Prepared> {
     req.check()?;
     let t = Instant::now();
-    let model = crate::commands::setup::load_for_run(&req.model, &req.set)?;
+    let model = crate::commands::setup::load_for_run(&req.model, &req.model_sets())?;
     let data = Arc::new(training_data(req, &model)?);
     prepare_on(req, &model, data, t)
 }
@@ -50,7 +50,7 @@ pub fn prepare_on(
     t: Instant,
 ) -> Result<Prepared> {
     let cfg = nlsim_reduction::ReductionConfig::lowest(req.modes.min(model.n_dofs()));
-    let objective = FrfObjective::from_model_with(
+    let mut objective = FrfObjective::from_model_with(
         model,
         &cfg,
         &req.fe,
@@ -64,11 +64,44 @@ pub fn prepare_on(
             branch: req.branch,
         },
     )?;
+    apply_drive(req, &mut objective)?;
     Ok(Prepared {
         model_name: model.name().to_string(),
         objective,
         seconds: t.elapsed().as_secs_f64(),
     })
+}
+
+/// Sets the gains `req` fixes and its shaker on `objective`; a voltage record needs its
+/// gain stated, set or calibrated.
+fn apply_drive(req: &CalibrationRequest, objective: &mut FrfObjective) -> Result<()> {
+    let at = |e: nlsim_kernel::Error| Error::Usage(format!("{}: {e}", req.data.display()));
+    let gains = req.gain_sets()?;
+    for (p, v) in &gains {
+        objective.set_gain(p, *v).map_err(at)?;
+    }
+    objective.set_shaker(req.shaker).map_err(at)?;
+    let gain_given = gains
+        .iter()
+        .any(|(p, _)| *p == nlsim_kernel::Param::InputGain)
+        || req
+            .params
+            .iter()
+            .any(|s| s.param == nlsim_kernel::Param::InputGain);
+    if objective.data().drive == nlsim_calib::Drive::Voltage && !gain_given {
+        let unit = if req.shaker.is_some() {
+            "V at the coil per recorded V"
+        } else {
+            "N/V"
+        };
+        return Err(Error::Usage(format!(
+            "{}: the drive '{}' was recorded as a voltage: calibrate its gain \
+             (--param input_gain=LOWER:UPPER) or fix it (--set input_gain=VALUE), in {unit}",
+            req.data.display(),
+            objective.data().input
+        )));
+    }
+    Ok(())
 }
 
 /// A finished calibration with what it ran on.

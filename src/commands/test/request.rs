@@ -3,7 +3,7 @@
 use crate::commands::plan::request::PointSpec;
 use crate::commands::plan::request::PointTable;
 use crate::error::{Error, Result};
-use crate::formats::settings::SettingsFile;
+use crate::formats::settings::{SettingsFile, ShakerTable};
 use nlsim_calib::{ControlConfig, Noise, Shaker, SweepPlan};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -62,6 +62,11 @@ pub struct TestRequest {
     pub channels: Vec<String>,
     /// The test file this request was read from, if any: an input no output may name.
     pub source: Option<PathBuf>,
+    /// What the data record at the drive point: the force (a force gauge), or the voltage
+    /// into the amplifier when the lab has no force gauge.
+    pub record: nlsim_calib::Drive,
+    /// The amplifier's gain (V at the coil per V in) a voltage record is divided by.
+    pub amplifier_gain: f64,
 }
 
 impl TestRequest {
@@ -90,6 +95,8 @@ impl TestRequest {
             sensors: Vec::new(),
             channels: Vec::new(),
             source: None,
+            record: nlsim_calib::Drive::Force,
+            amplifier_gain: 1.0,
         }
     }
 
@@ -171,6 +178,12 @@ impl TestRequest {
         }
         if let Err(e) = self.shaker.check() {
             return bad("shaker", e.to_string());
+        }
+        if !(self.amplifier_gain.is_finite() && self.amplifier_gain > 0.0) {
+            return bad(
+                "amplifier_gain",
+                format!("{} must be positive and finite", self.amplifier_gain),
+            );
         }
         let c = &self.control;
         if !(c.tolerance.is_finite() && c.tolerance > 0.0) || c.max_iterations == 0 {
@@ -283,18 +296,6 @@ struct SweepTable {
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct ShakerTable {
-    armature_mass: Option<f64>,
-    suspension_stiffness: Option<f64>,
-    suspension_damping: Option<f64>,
-    resistance: Option<f64>,
-    inductance: Option<f64>,
-    force_constant: Option<f64>,
-    stinger_stiffness: Option<f64>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
 struct ControlTable {
     enabled: Option<bool>,
     tolerance: Option<f64>,
@@ -326,6 +327,8 @@ struct TestTable {
     sensor: Vec<PointTable>,
     #[serde(default)]
     channels: Vec<String>,
+    record: Option<String>,
+    amplifier_gain: Option<f64>,
 }
 
 impl TestTable {
@@ -334,19 +337,7 @@ impl TestTable {
         let err = |key: &str, message: String| file.err(key, message);
         let rel = |p: &str| file.rel(p);
         let d = TestRequest::new("", Vec::new());
-        let ds = Shaker::default();
-        let shaker = match &self.shaker {
-            None => ds,
-            Some(s) => Shaker {
-                armature_mass: s.armature_mass.unwrap_or(ds.armature_mass),
-                suspension_stiffness: s.suspension_stiffness.unwrap_or(ds.suspension_stiffness),
-                suspension_damping: s.suspension_damping.unwrap_or(ds.suspension_damping),
-                resistance: s.resistance.unwrap_or(ds.resistance),
-                inductance: s.inductance.unwrap_or(ds.inductance),
-                force_constant: s.force_constant.unwrap_or(ds.force_constant),
-                stinger_stiffness: s.stinger_stiffness.unwrap_or(ds.stinger_stiffness),
-            },
-        };
+        let shaker = ShakerTable::shaker(self.shaker.as_ref());
         let dc = ControlConfig::default();
         let (control, compare) = match &self.control {
             None => (dc, d.compare_open_loop),
@@ -380,6 +371,15 @@ impl TestTable {
                 .unwrap_or_else(|| format!("{} N {:.6}-{:.6} Hz", s.force, s.from, s.to));
             sweeps.push(SweepPlan::linear(label, s.from, s.to, s.steps, s.force));
         }
+        let record = match self.record.as_deref() {
+            None => d.record,
+            Some(r) => nlsim_calib::Drive::parse(r).ok_or_else(|| {
+                err(
+                    "record",
+                    format!("'{r}': the drive is recorded as force or voltage"),
+                )
+            })?,
+        };
         let req = TestRequest {
             model,
             set: self.set.iter().map(|(k, v)| format!("{k}={v:e}")).collect(),
@@ -400,6 +400,8 @@ impl TestTable {
             sensors,
             channels: self.channels,
             source: Some(path.to_path_buf()),
+            record,
+            amplifier_gain: self.amplifier_gain.unwrap_or(d.amplifier_gain),
         };
         req.check().map_err(|e| file.located("test", e))?;
         Ok(req)

@@ -154,7 +154,10 @@ pub fn run_test(req: &TestRequest, progress: &mut dyn FnMut(usize, usize)) -> Re
     } else {
         (vec![req.noise; n_sensors], vec![f64::NAN; n_sensors])
     };
-    let test = keep(run(&req.control, &noise, req.force_noise, progress)?)?;
+    let mut test = keep(run(&req.control, &noise, req.force_noise, progress)?)?;
+    if req.record == nlsim_calib::Drive::Voltage {
+        test.data = test.voltage_data(req.amplifier_gain)?;
+    }
     let open_loop = if req.compare_open_loop {
         let open = ControlConfig {
             enabled: false,

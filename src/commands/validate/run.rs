@@ -78,7 +78,7 @@ pub struct ValidationRun {
 pub fn run_validation(req: &ValidateRequest) -> Result<ValidationRun> {
     let t = Instant::now();
     let (cal, result) = load_result(&req.calibration)?;
-    let model = crate::commands::setup::load_for_run(&cal.model, &cal.set)?;
+    let model = crate::commands::setup::load_for_run(&cal.model, &cal.model_sets())?;
     let data_path = req.data.clone().unwrap_or_else(|| cal.data.clone());
     let all = read(&data_path, &model, &cal.data_options)?;
     let (data, selection) = if !req.sweeps.is_empty() {

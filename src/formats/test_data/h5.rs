@@ -40,6 +40,7 @@ pub fn write_h5(path: &Path, data: &TestData) -> Result<()> {
         str_attr(&f, "command", "test data")?;
         str_attr(&f, "format", "nlsim test data")?;
         str_attr(&f, "input", &data.input)?;
+        str_attr(&f, "drive", data.drive.as_str())?;
         crate::formats::files::count_attr(&f, "harmonics", data.harmonics)?;
         let ch = f.create_group("channels")?;
         let names: Vec<&str> = data.channels.iter().map(|c| c.name.as_str()).collect();
@@ -82,7 +83,7 @@ pub fn write_h5(path: &Path, data: &TestData) -> Result<()> {
                 .collect();
             let d = g.new_dataset::<c64>().shape((n, h)).create("force")?;
             d.write_raw(&force)?;
-            str_attr(&d, "unit", "N")?;
+            str_attr(&d, "unit", data.drive.unit())?;
             let resp: Vec<c64> = sw
                 .steps
                 .iter()
@@ -154,6 +155,21 @@ pub fn read_h5(path: &Path) -> Result<TestData> {
         ));
     }
     let input = str_attr(&f, "/", "input")?;
+    // Optional: what the `force` datasets hold (force unless it says `voltage`).
+    let drive = if f.attr_names().is_ok_and(|n| n.iter().any(|a| a == "drive")) {
+        let d = str_attr(&f, "/", "drive")?;
+        nlsim_calib::Drive::parse(&d).ok_or_else(|| {
+            err(
+                "/",
+                format!(
+                    "attribute 'drive' = {} is not 'force' or 'voltage'",
+                    crate::formats::files::quoted(&d)
+                ),
+            )
+        })?
+    } else {
+        nlsim_calib::Drive::Force
+    };
     let harmonics = f
         .attr("harmonics")
         .and_then(|a| a.read_scalar::<u64>())
@@ -311,6 +327,7 @@ pub fn read_h5(path: &Path) -> Result<TestData> {
     }
     let data = TestData {
         input,
+        drive,
         channels,
         harmonics,
         sweeps,

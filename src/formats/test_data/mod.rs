@@ -88,6 +88,7 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
         message,
     };
     let mut input = None;
+    let mut drive = nlsim_calib::Drive::Force;
     let mut harmonics = None;
     let mut channels: Vec<Channel> = Vec::new();
     let mut header: Option<(usize, Vec<String>)> = None;
@@ -122,7 +123,23 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
                 if input.is_some() {
                     return Err(err(ln, "a second '# input:' line".into()));
                 }
-                input = Some(v.trim().to_string());
+                // `NAME` or `NAME, voltage` (or `, force`): what was recorded there.
+                let (name, kind) = match v.split_once(',') {
+                    Some((n, k)) => (n.trim(), Some(k.trim())),
+                    None => (v.trim(), None),
+                };
+                if let Some(k) = kind {
+                    drive = nlsim_calib::Drive::parse(k).ok_or_else(|| {
+                        err(
+                            ln,
+                            format!(
+                                "input: the drive record {} is not 'force' or 'voltage'",
+                                crate::formats::files::quoted(k)
+                            ),
+                        )
+                    })?;
+                }
+                input = Some(name.to_string());
             } else if let Some(v) = meta.strip_prefix("harmonics:") {
                 if harmonics.is_some() {
                     return Err(err(ln, "a second '# harmonics:' line".into()));
@@ -446,6 +463,7 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<TestData> {
     }
     let data = TestData {
         input: input.ok_or_else(|| err(1, "no '# input:' line naming the drive point".into()))?,
+        drive,
         channels,
         harmonics: harmonics.ok_or_else(|| err(1, "no '# harmonics:' line".into()))?,
         sweeps,
@@ -462,7 +480,14 @@ pub fn write_csv(path: &Path, data: &TestData) -> Result<()> {
         .map_err(|e| Error::Usage(format!("{}: test data not written: {e}", path.display())))?;
     let mut s = String::new();
     let _ = writeln!(s, "# nlsim stepped-sine test data");
-    let _ = writeln!(s, "# input: {}", data.input);
+    match data.drive {
+        nlsim_calib::Drive::Force => {
+            let _ = writeln!(s, "# input: {}", data.input);
+        }
+        nlsim_calib::Drive::Voltage => {
+            let _ = writeln!(s, "# input: {}, voltage", data.input);
+        }
+    }
     let _ = writeln!(s, "# harmonics: {}", data.harmonics);
     for c in &data.channels {
         let _ = writeln!(

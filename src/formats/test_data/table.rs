@@ -8,6 +8,8 @@
 //! ```
 //!
 //! - `frequency_hz` and `force_amplitude_n` are required; `force_phase_rad` is optional (0).
+//!   A voltage-driven test without a force gauge gives `voltage_amplitude_v` (and
+//!   optionally `voltage_phase_rad`) instead: the data's drive is then the voltage.
 //! - Each response channel is a column `NAME_amplitude_UNIT` with `UNIT` `m`, `m_s` or
 //!   `m_s2` (displacement, velocity, acceleration) and its phase `NAME_phase_rad`; with one
 //!   channel the phase may be the bare `phase_rad`. Phases are of the response relative to
@@ -26,14 +28,16 @@ use nlsim_kernel::Quantity;
 use std::path::Path;
 
 /// Whether `text` is an amplitude-and-phase table: its first line that is neither empty nor
-/// a `#` comment names the columns `frequency_hz` and `force_amplitude_n`.
+/// a `#` comment names the columns `frequency_hz` and `force_amplitude_n` (or
+/// `voltage_amplitude_v`).
 pub fn is_amplitude_phase(text: &str) -> bool {
     text.lines()
         .map(str::trim)
         .find(|l| !l.is_empty() && !l.starts_with('#'))
         .is_some_and(|h| {
             let cols: Vec<&str> = h.split(',').map(str::trim).collect();
-            cols.contains(&"frequency_hz") && cols.contains(&"force_amplitude_n")
+            cols.contains(&"frequency_hz")
+                && (cols.contains(&"force_amplitude_n") || cols.contains(&"voltage_amplitude_v"))
         })
 }
 
@@ -85,11 +89,28 @@ pub fn parse_amplitude_phase(
     let names: Vec<&str> = header.split(',').map(str::trim).collect();
     let mut channels: Vec<Channel> = Vec::new();
     let mut columns = Vec::with_capacity(names.len());
+    let mut drive: Option<nlsim_calib::Drive> = None;
     for name in &names {
         let col = match *name {
             "frequency_hz" => Column::Frequency,
-            "force_amplitude_n" => Column::ForceAmplitude,
-            "force_phase_rad" => Column::ForcePhase,
+            "force_amplitude_n" | "voltage_amplitude_v" => {
+                let d = if *name == "force_amplitude_n" {
+                    nlsim_calib::Drive::Force
+                } else {
+                    nlsim_calib::Drive::Voltage
+                };
+                if drive.is_some_and(|k| k != d) {
+                    return Err(err(
+                        hl,
+                        "the header names both force_amplitude_n and voltage_amplitude_v: \
+                         one drive record per table"
+                            .into(),
+                    ));
+                }
+                drive = Some(d);
+                Column::ForceAmplitude
+            }
+            "force_phase_rad" | "voltage_phase_rad" => Column::ForcePhase,
             n => match amplitude_column(n) {
                 Some((ch, q)) => {
                     if channels.iter().any(|c| c.name == ch) {
@@ -192,7 +213,9 @@ pub fn parse_amplitude_phase(
         if !columns.contains(&need) {
             return Err(err(
                 hl,
-                "the header names no frequency_hz or no force_amplitude_n".into(),
+                "the header names no frequency_hz or no force_amplitude_n (or \
+                 voltage_amplitude_v)"
+                    .into(),
             ));
         }
     }
@@ -232,7 +255,11 @@ pub fn parse_amplitude_phase(
             return Err(err(ln, format!("frequency_hz: {f} is not positive")));
         }
         if fa <= 0.0 {
-            return Err(err(ln, format!("force_amplitude_n: {fa} is not positive")));
+            let col = match drive {
+                Some(nlsim_calib::Drive::Voltage) => "voltage_amplitude_v",
+                _ => "force_amplitude_n",
+            };
+            return Err(err(ln, format!("{col}: {fa} is not positive")));
         }
         if let Some(c) = amp.iter().position(|a| *a < 0.0) {
             return Err(err(
@@ -306,6 +333,7 @@ pub fn parse_amplitude_phase(
     }
     let data = TestData {
         input: input.to_string(),
+        drive: drive.unwrap_or_default(),
         channels,
         harmonics: 1,
         sweeps,
