@@ -184,26 +184,93 @@ pub(crate) fn solve_dense(a: &Mat<f64>, b: &[f64]) -> Option<Vec<f64>> {
     Some((0..b.len()).map(|i| x[(i, 0)]).collect())
 }
 
+/// Sets the force coefficients `phi` (real layout) on input `input` as the forcing of `sys`.
+pub(crate) fn set_force(sys: &mut HbSystem, input: usize, phi: &[f64]) -> Result<()> {
+    let set = *sys.harmonics();
+    let f = complex_of(&set, phi);
+    sys.set_forcing(Forcing {
+        terms: f
+            .iter()
+            .enumerate()
+            .map(|(k, &amplitude)| ForceTerm {
+                input,
+                harmonic: k,
+                amplitude: if k == 0 {
+                    c64::new(amplitude.re, 0.0)
+                } else {
+                    amplitude
+                },
+            })
+            .collect(),
+    })
+}
+
+/// The shaker's terms at one frequency and voltage: `G_k`, `Z_k` per harmonic, their
+/// real-layout matrices and `G v` (real layout).
+struct Terms {
+    g: Vec<c64>,
+    z: Vec<c64>,
+    gr: Mat<f64>,
+    zr: Mat<f64>,
+    gv: Vec<f64>,
+}
+
+/// The coupling residual's Jacobian `I + Z ∂X_d/∂φ` from `jx`, the input ports' `∂X/∂φ`
+/// of [`HbSystem::input_response_jacobian`] (rows of input `input`), `nh = 2H+1`.
+fn coupling_jacobian(zr: &Mat<f64>, jx: &Mat<f64>, input: usize, nh: usize) -> Mat<f64> {
+    Mat::from_fn(nh, nh, |i, j| {
+        (i == j) as u8 as f64
+            + (0..nh)
+                .map(|l| zr[(i, l)] * jx[(input * nh + l, j)])
+                .sum::<f64>()
+    })
+}
+
+/// The coupled solution `(x, φ)` with its Jacobian `jq`, and `dφ/dv = J_Q⁻¹ G`;
+/// [`Status::Singular`] when `jq` is.
+fn coupled(
+    x: Vec<f64>,
+    phi: Vec<f64>,
+    jq: Mat<f64>,
+    gr: &Mat<f64>,
+) -> std::result::Result<Coupled, Status> {
+    let nh = gr.nrows();
+    let mut dphi_dv = Mat::<f64>::zeros(nh, nh);
+    for c in 0..nh {
+        let col: Vec<f64> = (0..nh).map(|i| gr[(i, c)]).collect();
+        let sol = solve_dense(&jq, &col).ok_or(Status::Singular)?;
+        for i in 0..nh {
+            dphi_dv[(i, c)] = sol[i];
+        }
+    }
+    Ok(Coupled {
+        x,
+        phi,
+        dphi_dv,
+        jq,
+    })
+}
+
 impl Rig<'_> {
     /// Sets the force coefficients `phi` (real layout) as the forcing of the system.
     pub(crate) fn set_force(&mut self, phi: &[f64]) -> Result<()> {
+        set_force(self.sys, self.input, phi)
+    }
+
+    /// The shaker's terms at `omega` (rad/s) for voltage harmonics `volt`.
+    fn terms(&self, omega: f64, volt: &[c64]) -> Terms {
         let set = *self.sys.harmonics();
-        let f = complex_of(&set, phi);
-        self.sys.set_forcing(Forcing {
-            terms: f
-                .iter()
-                .enumerate()
-                .map(|(k, &amplitude)| ForceTerm {
-                    input: self.input,
-                    harmonic: k,
-                    amplitude: if k == 0 {
-                        c64::new(amplitude.re, 0.0)
-                    } else {
-                        amplitude
-                    },
-                })
-                .collect(),
-        })
+        let nh = set.len();
+        let (g, z): (Vec<c64>, Vec<c64>) = (0..=set.h)
+            .map(|k| self.shaker.coupling(k as f64 * omega))
+            .unzip();
+        let gr = block_diag(&set, &g);
+        let zr = block_diag(&set, &z);
+        let vr = real_of(&set, volt);
+        let gv: Vec<f64> = (0..nh)
+            .map(|i| (0..nh).map(|j| gr[(i, j)] * vr[j]).sum())
+            .collect();
+        Terms { g, z, gr, zr, gv }
     }
     /// The force coefficients of the shaker on the linear structure (the nonlinear elements
     /// left out): `F_k = G_k V_k / (1 + Z_k H_dd(kΩ))`; also sets it as the forcing.
@@ -240,15 +307,7 @@ impl Rig<'_> {
         let nh = set.len();
         let n = self.sys.n_unknowns();
         let rtol = self.sys.config().rtol;
-        let (g, z): (Vec<c64>, Vec<c64>) = (0..=set.h)
-            .map(|k| self.shaker.coupling(k as f64 * omega))
-            .unzip();
-        let gr = block_diag(&set, &g);
-        let zr = block_diag(&set, &z);
-        let vr = real_of(&set, volt);
-        let gv: Vec<f64> = (0..nh)
-            .map(|i| (0..nh).map(|j| gr[(i, j)] * vr[j]).sum())
-            .collect();
+        let Terms { gr, zr, gv, .. } = self.terms(omega, volt);
         let norm = |q: &[f64]| q.iter().fold(0.0f64, |a, v| a.max(v.abs()));
         let q_scale = norm(&gv).max(1e-300);
         let (mut phi, mut x) = (start.0.to_vec(), start.1.to_vec());
@@ -289,30 +348,9 @@ impl Rig<'_> {
             }
             if done {
                 // The force's derivatives through the structure, as the nested solve gives.
-                let (disp, jx) = self.sys.input_response_jacobian(&x, omega, 1.0, input)?;
-                let _ = disp;
-                let jq = Mat::from_fn(nh, nh, |i, j| {
-                    (i == j) as u8 as f64
-                        + (0..nh)
-                            .map(|l| zr[(i, l)] * jx[(input * nh + l, j)])
-                            .sum::<f64>()
-                });
-                let mut dphi_dv = Mat::<f64>::zeros(nh, nh);
-                for c in 0..nh {
-                    let col: Vec<f64> = (0..nh).map(|i| gr[(i, c)]).collect();
-                    let Some(sol) = solve_dense(&jq, &col) else {
-                        return Ok(Err(Status::Singular));
-                    };
-                    for i in 0..nh {
-                        dphi_dv[(i, c)] = sol[i];
-                    }
-                }
-                return Ok(Ok(Coupled {
-                    x,
-                    phi,
-                    dphi_dv,
-                    jq,
-                }));
+                let (_, jx) = self.sys.input_response_jacobian(&x, omega, 1.0, input)?;
+                let jq = coupling_jacobian(&zr, &jx, input, nh);
+                return Ok(coupled(x, phi, jq, &gr));
             }
             let Some(step) = solve_dense(&jac, &f) else {
                 return Ok(Err(Status::Singular));
@@ -364,10 +402,7 @@ impl Rig<'_> {
         {
             return Ok(Ok(c));
         }
-        let set = *self.sys.harmonics();
-        let (g, z): (Vec<c64>, Vec<c64>) = (0..=set.h)
-            .map(|k| self.shaker.coupling(k as f64 * omega))
-            .unzip();
+        let Terms { g, z, .. } = self.terms(omega, volt);
         let phi = self.linear_force(omega, &g, &z, volt)?;
         let x = self.sys.linear_guess(omega, 1.0);
         if let Ok(c) = self.solve_joint(omega, volt, (&phi, &x))? {
@@ -386,15 +421,7 @@ impl Rig<'_> {
     ) -> Result<std::result::Result<Coupled, Status>> {
         let set = *self.sys.harmonics();
         let nh = set.len();
-        let (g, z): (Vec<c64>, Vec<c64>) = (0..=set.h)
-            .map(|k| self.shaker.coupling(k as f64 * omega))
-            .unzip();
-        let gr = block_diag(&set, &g);
-        let zr = block_diag(&set, &z);
-        let vr = real_of(&set, volt);
-        let gv: Vec<f64> = (0..nh)
-            .map(|i| (0..nh).map(|j| gr[(i, j)] * vr[j]).sum())
-            .collect();
+        let Terms { g, z, gr, zr, gv } = self.terms(omega, volt);
         let mut cold = start.is_none();
         let (mut phi, x0, w0) = match start {
             Some((p, x, w)) => (p.to_vec(), x.to_vec(), w),
@@ -434,13 +461,7 @@ impl Rig<'_> {
                     .map(|i| (0..nh).map(|j| zr[(i, j)] * xd[j]).sum::<f64>())
                     .collect();
                 let q: Vec<f64> = (0..nh).map(|i| phi[i] - gv[i] + zx[i]).collect();
-                let jq = Mat::from_fn(nh, nh, |i, j| {
-                    (i == j) as u8 as f64
-                        + (0..nh)
-                            .map(|l| zr[(i, l)] * jac[(rig.input * nh + l, j)])
-                            .sum::<f64>()
-                });
-                Ok(Some((x, q, jq)))
+                Ok(Some((x, q, coupling_jacobian(&zr, &jac, rig.input, nh))))
             };
         let first = match eval(self, &phi, &(x0, w0))? {
             Some(r) => r,
@@ -460,23 +481,7 @@ impl Rig<'_> {
         let (mut x, mut q, mut jq) = first;
         for _ in 0..60 {
             if norm(&q) <= 1e-10 * scale {
-                // dφ/dv = Jq⁻¹ G.
-                let mut dphi_dv = Mat::<f64>::zeros(nh, nh);
-                for c in 0..nh {
-                    let col: Vec<f64> = (0..nh).map(|i| gr[(i, c)]).collect();
-                    let Some(s) = solve_dense(&jq, &col) else {
-                        return Ok(Err(Status::Singular));
-                    };
-                    for i in 0..nh {
-                        dphi_dv[(i, c)] = s[i];
-                    }
-                }
-                return Ok(Ok(Coupled {
-                    x,
-                    phi,
-                    dphi_dv,
-                    jq,
-                }));
+                return Ok(coupled(x, phi, jq, &gr));
             }
             let Some(step) = solve_dense(&jq, &q) else {
                 return Ok(Err(Status::Singular));

@@ -991,9 +991,8 @@ impl FrfObjective {
                     sensitivity,
                 });
                 prev = Some(Previous {
-                    x: solved.x,
+                    state: (solved.x, omega),
                     phi: solved.coupled.map(|c| c.phi),
-                    omega,
                 });
             }
         }

@@ -35,6 +35,11 @@ fn quiet() -> Noise {
     }
 }
 
+/// The largest residual in magnitude.
+fn largest(r: &[f64]) -> f64 {
+    r.iter().fold(0.0f64, |a, v| a.max(v.abs()))
+}
+
 /// Checks every column of the objective's Jacobian at internal point `u` against central
 /// differences of its residuals (step 1e-5 of the internal variable).
 fn check_jacobian(obj: &mut FrfObjective, u: &[f64], tol: f64) {
@@ -118,10 +123,7 @@ fn gain_jacobian_matches_central_differences() {
         let at_truth = obj
             .evaluate_values(&[truth[0], truth[1], 2.5, 1.03], None, false)
             .unwrap();
-        let worst = at_truth
-            .residuals
-            .iter()
-            .fold(0.0f64, |a, r| a.max(r.abs()));
+        let worst = largest(&at_truth.residuals);
         assert!(worst < 1e-6, "{form:?}: residual {worst} at the truth");
         let u = obj.to_internal(&[truth[0] * 1.6, truth[1] * 0.8, 2.2, 0.98]);
         check_jacobian(&mut obj, &u, 1e-4);
@@ -180,18 +182,12 @@ fn shaker_coupled_jacobian_matches_central_differences() {
     let as_source = obj
         .evaluate_values(&[truth[0], truth[1], 8.0], None, false)
         .unwrap();
-    let far = as_source
-        .residuals
-        .iter()
-        .fold(0.0f64, |a, r| a.max(r.abs()));
+    let far = largest(&as_source.residuals);
     obj.set_shaker(Some(shaker)).unwrap();
     let at_truth = obj
         .evaluate_values(&[truth[0], truth[1], 8.0], None, false)
         .unwrap();
-    let worst = at_truth
-        .residuals
-        .iter()
-        .fold(0.0f64, |a, r| a.max(r.abs()));
+    let worst = largest(&at_truth.residuals);
     assert!(
         worst < 1e-4 && far > 1e3 * worst,
         "residual {worst} at the truth through the shaker, {far} as a force source"

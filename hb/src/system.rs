@@ -1445,13 +1445,13 @@ impl HbSystem {
         self.check_input(input)?;
         let nh = self.set.len();
         let rec = self.receptances(omega, false);
-        let ev = self.evaluate(&rec, x, omega, scale, false);
+        let ev = self.evaluate(&rec, x, omega, scale, true);
         let ports = self.input_ports();
         let y = self.recover(&ports, omega, scale, &ev.g, false);
         let disp = Mat::from_fn(ports.len(), self.set.h + 1, |i, k| {
             self.set.complex(&y[i * nh..(i + 1) * nh], k)
         });
-        let jac = self.force_jacobian_rows(x, omega, scale, input, &ports)?;
+        let jac = self.force_jacobian_rows(&ev, omega, scale, input, &ports)?;
         Ok((disp, jac))
     }
 
@@ -1525,7 +1525,9 @@ impl HbSystem {
         self.check_unknowns("harmonic balance unknowns", x)?;
         self.check_input(input)?;
         let nh = self.set.len();
-        let jac = self.force_jacobian_rows(x, omega, scale, input, &self.sensor_ports())?;
+        let rec = self.receptances(omega, false);
+        let ev = self.evaluate(&rec, x, omega, scale, true);
+        let jac = self.force_jacobian_rows(&ev, omega, scale, input, &self.sensor_ports())?;
         Ok((0..nh)
             .map(|c| {
                 let col: Vec<f64> = (0..jac.nrows()).map(|i| jac[(i, c)]).collect();
@@ -1549,10 +1551,11 @@ impl HbSystem {
     }
 
     /// `dX_rows/dF = λ (H_rows,in − H_rows,NL ∂G/∂x J⁻¹ H_NL,in)` in the real layout
-    /// ((rows·(2H+1)) × (2H+1), m/N) for the force coefficients of input `input`.
+    /// ((rows·(2H+1)) × (2H+1), m/N) for the force coefficients of input `input`, at the
+    /// evaluation `ev` (with its Jacobian) of a solution.
     fn force_jacobian_rows(
         &self,
-        x: &[f64],
+        ev: &Evaluation,
         omega: f64,
         scale: f64,
         input: usize,
@@ -1567,8 +1570,6 @@ impl HbSystem {
         );
         let mut jac = Mat::from_fn(rows.len() * nh, nh, |i, j| scale * h_rows_in[(i, j)]);
         if n > 0 {
-            let rec = self.receptances(omega, false);
-            let ev = self.evaluate(&rec, x, omega, scale, true);
             let h_rows_nl = expand(
                 &self.set,
                 &self.harmonic_receptances(omega, rows, &self.element_ports, false),

@@ -18,7 +18,7 @@
 //! [`HbSystem::sensor_force_jacobian`](nlsim_hb::HbSystem::sensor_force_jacobian).
 
 use super::{FrfObjective, solve_step};
-use crate::coupling::{Coupled, Rig, Shaker, block_diag, real_of, solve_dense};
+use crate::coupling::{Coupled, Rig, Shaker, block_diag, real_of, set_force, solve_dense};
 use crate::data::{Drive, Step};
 use faer::{Mat, c64};
 use nlsim_hb::{ForceTerm, Forcing};
@@ -40,12 +40,10 @@ pub(crate) struct Gains {
 /// The previous step's solution a sweep continues from.
 #[derive(Debug, Clone)]
 pub(crate) struct Previous {
-    /// Harmonic balance unknowns.
-    pub x: Vec<f64>,
+    /// Harmonic balance unknowns and the angular frequency (rad/s) they solve.
+    pub state: (Vec<f64>, f64),
     /// The shaker's force coefficients (real layout), when a shaker is modelled.
     pub phi: Option<Vec<f64>>,
-    /// Angular frequency (rad/s).
-    pub omega: f64,
 }
 
 /// The solution at one step.
@@ -212,8 +210,8 @@ impl FrfObjective {
                     })
                     .collect();
                 self.sys.set_forcing(Forcing { terms })?;
-                let start = prev.map(|p| (p.x.clone(), p.omega));
-                let (x, status) = solve_step(&self.sys, &mut self.ws, omega, start.as_ref())?;
+                let start = prev.map(|p| &p.state);
+                let (x, status) = solve_step(&self.sys, &mut self.ws, omega, start)?;
                 Ok(if status.is_converged() {
                     Ok(Solved { x, coupled: None })
                 } else {
@@ -231,7 +229,7 @@ impl FrfObjective {
                 let start = prev.and_then(|p| {
                     p.phi
                         .as_ref()
-                        .map(|phi| (phi.as_slice(), p.x.as_slice(), p.omega))
+                        .map(|phi| (phi.as_slice(), p.state.0.as_slice(), p.state.1))
                 });
                 let mut outcome = rig.solve_coupled(omega, &volt, start)?;
                 if outcome.is_err()
@@ -281,14 +279,8 @@ impl FrfObjective {
 
     /// Sets the forcing of solution `solved` on the system again (after another solve).
     pub(crate) fn set_solved_force(&mut self, solved: &Solved) -> Result<()> {
-        if let (Some(c), Some(shaker)) = (&solved.coupled, self.shaker) {
-            let mut rig = Rig {
-                sys: &mut self.sys,
-                ws: &mut self.ws,
-                shaker: &shaker,
-                input: self.input,
-            };
-            rig.set_force(&c.phi)?;
+        if let Some(c) = &solved.coupled {
+            set_force(&mut self.sys, self.input, &c.phi)?;
         }
         // Force drive: the forcing depends on the step alone, the same for both solves.
         Ok(())

@@ -346,10 +346,6 @@ pub const MAX_FRF_PLOTS: usize = 24;
 /// thesis Fig. 14) and the cost along each optimisation (`convergence`). Returns the
 /// files written.
 pub fn write_report(dir: &Path, run: &CalibrationRun) -> Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(dir).map_err(|source| Error::Io {
-        path: dir.to_path_buf(),
-        source,
-    })?;
     let report = crate::present::report::Report::create(
         dir,
         &format!("nlsim calibrate: {}", run.prepared.model_name),

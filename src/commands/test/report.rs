@@ -4,7 +4,7 @@ use crate::commands::test::run::ControlStats;
 use crate::commands::test::run::TestRun;
 use crate::commands::test::run::distortion;
 use crate::commands::test::run::min_force_ratio;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::formats::files::write_text_atomically as write_text;
 use crate::present::plot::Lines;
 use nlsim_kernel::Status;
@@ -171,10 +171,6 @@ impl TestRun {
 /// the drive point per sweep, controlled and voltage-driven (`force`), and the first
 /// channel's fundamental response (`response`). Returns the files written.
 pub fn write_test_report(dir: &Path, run: &TestRun) -> Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(dir).map_err(|source| Error::Io {
-        path: dir.to_path_buf(),
-        source,
-    })?;
     let report = crate::present::report::Report::create(
         dir,
         &format!("nlsim test: {}", run.model_name),

@@ -2,7 +2,7 @@
 //! value with its band as CSV, and a report folder with a plot per sweep and compared
 //! harmonic (measured, predicted, band; the numbers in `report.h5`).
 use crate::commands::validate::run::{BandScale, ValidationRun};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::present::plot::Lines;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -189,10 +189,6 @@ impl ValidationRun {
 /// plot of `|Y|/|F₁|` measured, predicted and the band's edges (SVG, PNG, numbers in
 /// `report.h5`), and the page. Returns the files written.
 pub fn write_report(dir: &Path, run: &ValidationRun) -> Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(dir).map_err(|source| Error::Io {
-        path: dir.to_path_buf(),
-        source,
-    })?;
     let report = crate::present::report::Report::create(
         dir,
         &format!("nlsim validate: {}", run.model_name),
