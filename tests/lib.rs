@@ -3340,6 +3340,73 @@ print("ok")
             assert_eq!(rc, 0, "{f}: {out}\n{err}");
         }
     }
+    /// Mode shapes as universal datasets 55 (`modes --out F.uff`), read by pyuff as the
+    /// independent reader: frequencies, damping ratios and every shape entry equal those of
+    /// the HDF5 modes file to the written `E13.5` (6 significant digits: half a unit of the
+    /// last place is 5e-6 of the value), nodes and DOFs placed by their labels, DOFs the model
+    /// lacks at a node written as zero.
+    #[test]
+    fn pyuff_reads_the_mode_shapes_nlsim_writes() {
+        let d = scratch("uff55-pyuff");
+        let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+        for out in ["m.uff", "m.h5"] {
+            let (rc, o, e) = nlsim(&["modes", "ecl_beam", "--count", "5", "--out", &p(out)]);
+            assert_eq!(rc, 0, "{out}: {o}\n{e}");
+        }
+        let script = r#"
+import sys, numpy as np, h5py, pyuff
+d = sys.argv[1]
+h = h5py.File(d + "/m.h5")
+hz = h["modes/frequency_hz"][()]; zeta = h["modes/damping_ratio"][()]
+shapes = h["modes/shapes"][()]
+labels = [l.decode() if isinstance(l, bytes) else l for l in h["dofs/labels"][()]]
+sets = pyuff.UFF(d + "/m.uff").read_sets()
+assert len(sets) == len(hz) >= 5, (len(sets), len(hz))
+comp = {"ux": "r1", "uy": "r2", "uz": "r3", "rx": "r4", "ry": "r5", "rz": "r6"}
+checked = 0
+for r, s in enumerate(sets):
+    assert s["type"] == 55 and s["analysis_type"] == 2 and s["mode_n"] == r + 1
+    assert s["n_data_per_node"] == 6 and s["data_type"] == 2 and s["spec_data_type"] == 8
+    assert abs(s["freq"] - hz[r]) <= 5e-6 * hz[r], (r, s["freq"], hz[r])
+    assert abs(s["modal_damp_vis"] - zeta[r]) <= 5e-6 * zeta[r], (r, s["modal_damp_vis"])
+    assert s["modal_m"] == 1.0
+    nodes = list(s["node_nums"])
+    assert nodes == sorted(nodes)
+    have = set()
+    for j, l in enumerate(labels):
+        node, c = l.split(":")
+        k = nodes.index(int(node))
+        v = s[comp[c]][k]
+        want = shapes[r, j]
+        assert abs(v - want) <= 5.0001e-6 * abs(want) + 1e-300, (r, l, v, want)
+        have.add((k, comp[c])); checked += 1
+    for k in range(len(nodes)):
+        for c in comp.values():
+            if (k, c) not in have:
+                assert s[c][k] == 0.0, (r, nodes[k], c)
+print("ok", checked)
+"#;
+        let out = Command::new(python_h5py())
+            .args(["-c", script, d.to_str().unwrap()])
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success() && text.contains("ok"),
+            "{text}{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        // A model of scalar coordinates: one value per node (characteristic 1).
+        let (rc, o, e) = nlsim(&["modes", "duffing_fig3", "--out", &p("s.uff")]);
+        assert_eq!(rc, 0, "{o}\n{e}");
+        let text = std::fs::read_to_string(p("s.uff")).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(
+            lines[7],
+            format!("{:>10}{:>10}{:>10}{:>10}{:>10}{:>10}", 1, 2, 1, 8, 2, 1)
+        );
+    }
+
     use std::sync::Arc;
 
     fn record(id: &str, dir: i64) -> Uff58 {

@@ -276,7 +276,7 @@ pub fn solve(
 pub fn execute(req: &ModesRequest, console: &crate::present::console::Console) -> Result<()> {
     if let Some(path) = &req.out {
         // Refuse an unknown format before the (possibly long) solve.
-        crate::formats::files::Format::of(path, crate::formats::modes_file::HINT)?;
+        crate::formats::files::Format::of_any(path, crate::formats::modes_file::HINT, true)?;
     }
     crate::formats::files::check_outputs(
         &[Some(std::path::Path::new(&req.model))],

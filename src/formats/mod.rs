@@ -48,3 +48,4 @@ pub mod op4_write;
 pub mod settings;
 pub mod test_data;
 pub mod uff;
+pub mod uff55;

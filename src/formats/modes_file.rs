@@ -43,12 +43,13 @@ impl ModeReport {
     }
 }
 
-/// Writes the modes to `path`: HDF5 for `.h5`/`.hdf5`, CSV (the table) for `.csv`. The file is
+/// Writes the modes to `path`: HDF5 for `.h5`/`.hdf5`, CSV (the table) for `.csv`, universal
+/// datasets 55 (shapes with frequency and damping, [`crate::formats::uff55`]) for `.uff`/`.unv`. The file is
 /// written next to its destination and renamed into place, so a failed run leaves no partial
 /// file and an existing one untouched.
 /// `model_spec` is the model argument as given (stored with the data).
 pub fn write_modes(path: &Path, model_spec: &str, model: &Model, r: &ModeReport) -> Result<()> {
-    crate::formats::files::write_atomically(path, HINT, |tmp, format| match format {
+    crate::formats::files::write_atomically_uff(path, HINT, |tmp, format| match format {
         Format::Csv => write_csv(tmp, r),
         #[cfg(feature = "hdf5")]
         Format::Hdf5 => write_hdf5(tmp, model_spec, model, r),
@@ -57,16 +58,19 @@ pub fn write_modes(path: &Path, model_spec: &str, model: &Model, r: &ModeReport)
             let _ = (model_spec, model);
             Err(crate::formats::files::without_hdf5(path))
         }
-        // Not offered (Format::of takes no universal file here); an error, never a panic.
-        Format::Uff => Err(Error::Usage(format!(
-            "{}: universal files are not written by `modes`; name the file {HINT}",
-            path.display()
-        ))),
+        Format::Uff => {
+            let text = crate::formats::uff55::modes_text(path, model, &r.modes, &r.damping)?;
+            std::fs::write(tmp, text).map_err(|source| Error::Io {
+                path: tmp.to_path_buf(),
+                source,
+            })
+        }
     })
 }
 
 /// What each output format of `nlsim modes` holds, for the usage error.
-pub const HINT: &str = ".h5 (HDF5, with mode shapes) or .csv (the table)";
+pub const HINT: &str =
+    ".h5 (HDF5, with mode shapes), .csv (the table) or .uff/.unv (universal dataset 55 per mode)";
 
 fn write_csv(path: &Path, r: &ModeReport) -> Result<()> {
     let mut s = String::from("mode,frequency_hz,eigenvalue_rad2_s2,damping_ratio");
