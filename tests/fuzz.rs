@@ -544,6 +544,50 @@ fn fuzz_inner() {
         }
     }));
 
+    // Raw time histories and step tables (`nlsim harmonics`), and the dwell fit on what
+    // they hold: a record that reads must fit or be refused, never panic.
+    let mut rec = String::from("# raw\ntime_s,shaker,tip\n");
+    for i in 0..120 {
+        let t = i as f64 / 100.0;
+        let w = 2.0 * std::f64::consts::PI * 5.0 * t;
+        rec.push_str(&format!(
+            "{t},{},{}\n",
+            0.2 * w.sin(),
+            3.0 * (w - 0.4).sin()
+        ));
+    }
+    let records = [rec];
+    let rec_path = dir.join("records.csv");
+    panics.extend(survive("time histories", 2000 * scale(), |_| {
+        let text = mutate(rng.pick(&records).clone().as_str(), &mut rng);
+        match nlsim::formats::time_records::parse_records(&text, &rec_path) {
+            Ok(r) => {
+                let names: Vec<&str> = r.names.iter().map(String::as_str).collect();
+                let signals: Vec<&[f64]> = r.columns.iter().map(Vec::as_slice).collect();
+                let _ = nlsim::calib::detect_steps(signals[0], r.rate_hz, 5e-3);
+                nlsim::calib::extract_dwell(
+                    &names,
+                    &signals,
+                    r.rate_hz,
+                    None,
+                    &nlsim::calib::DwellConfig::default(),
+                )
+                .err()
+                .map(|e| e.to_string())
+            }
+            Err(e) => Some(e.to_string()),
+        }
+    }));
+    let tables =
+        ["# steps\nstart_s,end_s,frequency_hz,sweep\n0,0.5,5.0,up\n0.5,1.1,5.5,up\n".to_string()];
+    let steps_path = dir.join("steps.csv");
+    panics.extend(survive("step table", 2000 * scale(), |_| {
+        let text = mutate(rng.pick(&tables).clone().as_str(), &mut rng);
+        nlsim::formats::time_records::parse_step_table(&text, &steps_path)
+            .err()
+            .map(|e| e.to_string())
+    }));
+
     // Measured modes (CSV) for a model with DOFs 2:ux..6:ux.
     let chain = nlsim::load_model(
         root()

@@ -7953,3 +7953,6 @@ mod validation;
 
 #[path = "end_to_end/gains.rs"]
 mod gains;
+
+#[path = "end_to_end/harmonics.rs"]
+mod harmonics;

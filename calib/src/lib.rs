@@ -26,6 +26,7 @@
 pub mod calibrate;
 pub mod coupling;
 pub mod data;
+pub mod dwell;
 pub mod lhs;
 mod linalg;
 pub mod lm;
@@ -45,6 +46,7 @@ pub use calibrate::{
     fold_plan, kfold,
 };
 pub use data::{Channel, Drive, Noise, PointId, Step, Sweep, SweepDirection, TestData};
+pub use dwell::{Dwell, DwellConfig, StepWindow, detect_steps, extract_dwell};
 pub use lhs::{Spacing, latin_hypercube, maximin_latin_hypercube};
 pub use linalg::Svd;
 pub use lm::{Evaluation, LeastSquares, LmConfig, LmReport, StopReason, levenberg_marquardt};

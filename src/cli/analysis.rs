@@ -99,8 +99,10 @@ pub struct SimulateArgs {
     /// `none`, `sine:freq=HZ[,amp=N][,phase=DEG]`,
     /// `multisine:freq=HZ,h1=N[@DEG],h2=..,h1/3=..` (cosines: `hK=A@DEG` is
     /// A cos(K Ω t + DEG), as in `frf`; without harmonics each point's own from the model),
-    /// `sweep:f0=HZ,f1=HZ[,amp=N][,duration=S][,log=true]` or `file:PATH[,rate=HZ]`
-    /// (one force per line). `amp` defaults to the point's nominal amplitude. Default: a
+    /// `sweep:f0=HZ,f1=HZ[,amp=N][,duration=S][,log=true]`,
+    /// `stepped:f0=HZ,f1=HZ,steps=N,dwell=S[,amp=N]` (N dwells of S seconds, evenly spaced
+    /// frequencies, phase-continuous: the raw records of a stepped sine, for `nlsim
+    /// harmonics`) or `file:PATH[,rate=HZ]` (one force per line). `amp` defaults to the point's nominal amplitude. Default: a
     /// sine at the first natural frequency.
     #[arg(long)]
     excitation: Vec<String>,

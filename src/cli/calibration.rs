@@ -164,6 +164,102 @@ impl ValidateArgs {
     }
 }
 
+/// The arguments of `nlsim harmonics`.
+#[derive(Args, Debug)]
+pub struct HarmonicsArgs {
+    /// Model file (.toml) or built-in model: its sensors name the channels and give their
+    /// quantities.
+    model: String,
+    /// Time histories (CSV: `time_s,DRIVE,SENSOR,…`, evenly sampled).
+    records: std::path::PathBuf,
+    /// Step table (CSV: `start_s,end_s[,frequency_hz][,sweep]`) [default: the steps found
+    /// from the drive's frequency].
+    #[arg(long)]
+    steps: Option<std::path::PathBuf>,
+    /// The drive's column [default: the model's first excitation].
+    #[arg(long)]
+    drive: Option<String>,
+    /// What the drive column holds: `force` (N) or `voltage` (the amplifier's, V).
+    #[arg(long, value_parser = ["force", "voltage"], default_value = "force")]
+    record: String,
+    /// Harmonics fitted per dwell (1 to 64).
+    #[arg(long, default_value_t = 3)]
+    harmonics: usize,
+    /// Relative tolerance of the steady state: periods whose fundamental differs from the
+    /// settled one by more (beyond 3 times the scatter) are the transient.
+    #[arg(long, default_value_t = 1e-3)]
+    settle_tol: f64,
+    /// Fewest settled periods a dwell needs; dwells with fewer are left out and named.
+    #[arg(long, default_value_t = 4)]
+    min_periods: usize,
+    /// Take the step table's frequencies as exact (the generator's) instead of refining
+    /// them from the drive.
+    #[arg(long)]
+    exact_frequency: bool,
+    /// Relative frequency change that starts a new step when the steps are found from the
+    /// drive.
+    #[arg(long, default_value_t = 5e-3)]
+    step_tol: f64,
+    /// Test data written, .csv or .h5 [default: RECORDS with `-harmonics.csv`, beside it].
+    #[arg(long)]
+    out: Option<std::path::PathBuf>,
+}
+
+impl HarmonicsArgs {
+    /// The request of `nlsim harmonics`; a usage error for values out of range.
+    pub fn request(&self) -> crate::Result<commands::harmonics::HarmonicsRequest> {
+        if !(1..=64).contains(&self.harmonics) {
+            return Err(crate::Error::Usage(format!(
+                "--harmonics {}: fit 1 to 64 harmonics",
+                self.harmonics
+            )));
+        }
+        for (name, v) in [
+            ("--settle-tol", self.settle_tol),
+            ("--step-tol", self.step_tol),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(crate::Error::Usage(format!(
+                    "{name} {v}: give a positive relative tolerance"
+                )));
+            }
+        }
+        if self.min_periods == 0 {
+            return Err(crate::Error::Usage(
+                "--min-periods 0: a dwell needs at least one settled period".into(),
+            ));
+        }
+        if self.exact_frequency && self.steps.is_none() {
+            return Err(crate::Error::Usage(
+                "--exact-frequency takes the step table's frequencies: give --steps TABLE".into(),
+            ));
+        }
+        let out = self.out.clone().unwrap_or_else(|| {
+            let stem = self
+                .records
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "records".into());
+            self.records.with_file_name(format!("{stem}-harmonics.csv"))
+        });
+        Ok(commands::harmonics::HarmonicsRequest {
+            model: self.model.clone(),
+            records: self.records.clone(),
+            steps: self.steps.clone(),
+            drive: self.drive.clone(),
+            record: nlsim_calib::Drive::parse(&self.record).unwrap_or(nlsim_calib::Drive::Force),
+            dwell: nlsim_calib::DwellConfig {
+                harmonics: self.harmonics,
+                settle_tolerance: self.settle_tol,
+                min_periods: self.min_periods,
+                estimate_frequency: !self.exact_frequency,
+            },
+            step_tolerance: self.step_tol,
+            out,
+        })
+    }
+}
+
 /// The arguments of `nlsim plan`.
 #[derive(Args, Debug)]
 pub struct PlanArgs {

@@ -73,6 +73,12 @@ pub enum Command {
     /// log-amplitude and phase errors, points inside the band, chi2, peaks). See
     /// docs/calibration.md.
     Validate(ValidateArgs),
+    /// Harmonics from the time histories of a stepped-sine test: the dwells found from a
+    /// step table or from the drive's frequency, each dwell's transient left out, the drive
+    /// and response harmonics fitted on whole periods at the refined frequency, their
+    /// standard deviations from the period-to-period scatter; writes test data that `nlsim
+    /// calibrate` reads (docs/file-formats.md, "Time histories").
+    Harmonics(HarmonicsArgs),
     /// Pre-test planning: rank candidate tests (drive points, force levels, multi-sine
     /// signals, frequency bands, sensor sets, measured harmonics) by the Fisher information
     /// of the parameters from the analytic sensitivities, with Cramér–Rao bounds and
@@ -126,6 +132,7 @@ pub fn dispatch(cli: &Cli, console: &Console) -> crate::Result<()> {
         Command::Demo(a) => a.execute(console),
         Command::Calibrate(a) => a.execute(console),
         Command::Validate(a) => a.execute(console),
+        Command::Harmonics(a) => crate::commands::harmonics::execute(&a.request()?, console),
         Command::Plan(a) => crate::commands::plan::execute(&a.request()?, console),
         Command::Test(a) => crate::commands::test::execute(&a.request()?, console),
         Command::Batch(a) => a.execute(console),

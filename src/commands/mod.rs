@@ -28,6 +28,7 @@ pub mod calibrate;
 pub mod check;
 pub mod demo;
 pub mod frf;
+pub mod harmonics;
 pub mod modal_export;
 pub mod modes;
 pub mod nnm;

@@ -6,6 +6,9 @@ use nlsim_sim::{Harmonic, Signal};
 use std::fmt::Write as _;
 use std::path::Path;
 
+/// Most samples a `stepped` excitation spec generates (8·10⁸ bytes).
+pub const MAX_STEPPED_SAMPLES: usize = 100_000_000;
+
 /// Parses an excitation spec (see `nlsim simulate --help`):
 ///
 /// - `none`
@@ -16,6 +19,10 @@ use std::path::Path;
 ///   `docs/model-files.md`); without harmonics, each point's own (fundamental and
 ///   `[[excitation.harmonic]]`)
 /// - `sweep:f0=HZ,f1=HZ[,amp=N][,duration=S][,log=true]`
+/// - `stepped:f0=HZ,f1=HZ,steps=N,dwell=S[,amp=N]` — a stepped sine as a generator plays
+///   it: `N` dwells of `S` seconds each at frequencies evenly spaced from `f0` to `f1`, the
+///   phase continuous across the switches (`amp · sin φ(t)`), sampled at the run's rate
+///   (at most [`MAX_STEPPED_SAMPLES`] samples)
 /// - `file:PATH[,rate=HZ]` — one force per line (N); `#` comments; default rate: the run's
 ///
 /// `amp` defaults to `default_amp` (the excitation point's nominal amplitude), a sweep's
@@ -135,6 +142,64 @@ pub(crate) fn parse_signal(
                 logarithmic: log,
             }
         }
+        "stepped" => {
+            allow(&kv, &["f0", "f1", "steps", "dwell", "amp"])?;
+            let need = |k: &str| -> Result<f64> {
+                take(&kv, k)?.ok_or_else(|| usage(format!("needs {k}=…")))
+            };
+            let (f0, f1, dwell) = (need("f0")?, need("f1")?, need("dwell")?);
+            let steps = need("steps")?;
+            if !(steps >= 1.0 && steps.fract() == 0.0 && steps <= 1e6) {
+                return Err(usage(format!(
+                    "steps={steps}: give a whole number from 1 to 1e6"
+                )));
+            }
+            if !(f0 > 0.0 && f1 > 0.0) {
+                return Err(usage(format!(
+                    "f0={f0}, f1={f1}: frequencies must be > 0 Hz"
+                )));
+            }
+            if dwell <= 0.0 {
+                return Err(usage(format!("dwell={dwell}: a dwell lasts more than 0 s")));
+            }
+            if f0.max(f1) >= 0.5 * rate {
+                return Err(usage(format!(
+                    "{} Hz is at or above the Nyquist frequency {} Hz of the {rate} Hz rate; \
+                     give a rate above {} Hz",
+                    f0.max(f1),
+                    0.5 * rate,
+                    2.0 * f0.max(f1)
+                )));
+            }
+            let per = (dwell * rate).round();
+            let total = per * steps;
+            if !(per >= 1.0 && total <= MAX_STEPPED_SAMPLES as f64) {
+                return Err(usage(format!(
+                    "{steps} dwells of {dwell} s at {rate} Hz are {total} samples; give \
+                     from 1 sample per dwell to {MAX_STEPPED_SAMPLES} in all"
+                )));
+            }
+            let amplitude = take(&kv, "amp")?.unwrap_or(default_amp);
+            let n = steps as usize;
+            let mut values = Vec::with_capacity(total as usize);
+            let mut phase = 0.0f64;
+            for i in 0..n {
+                let f = if n == 1 {
+                    f0
+                } else {
+                    f0 + (f1 - f0) * i as f64 / (n - 1) as f64
+                };
+                let dphi = 2.0 * std::f64::consts::PI * f / rate;
+                for _ in 0..per as usize {
+                    values.push(amplitude * phase.sin());
+                    phase = (phase + dphi) % (2.0 * std::f64::consts::PI);
+                }
+            }
+            Signal::Sampled {
+                rate_hz: rate,
+                values,
+            }
+        }
         "file" => {
             let (path, opts) = match rest.rsplit_once(",rate=") {
                 Some((p, r)) => (p, Some(num("rate", r)?)),
@@ -144,7 +209,7 @@ pub(crate) fn parse_signal(
         }
         other => {
             return Err(usage(format!(
-                "unknown kind '{other}' (expected none, sine, multisine, sweep or file)"
+                "unknown kind '{other}' (expected none, sine, multisine, sweep, stepped or file)"
             )));
         }
     };
@@ -152,7 +217,7 @@ pub(crate) fn parse_signal(
         .validate(&format!("excitation '{spec}'"))
         .map_err(|e| Error::Usage(e.to_string()))?;
     let defaulted = match kind {
-        "sine" | "sweep" => !kv.iter().any(|(k, _)| k == "amp"),
+        "sine" | "sweep" | "stepped" => !kv.iter().any(|(k, _)| k == "amp"),
         "multisine" => !kv.iter().any(|(k, _)| k != "freq"),
         _ => false,
     };
@@ -263,6 +328,43 @@ fn short(v: f64) -> String {
 
 #[cfg(test)]
 mod tests {
+    /// A stepped sine: its dwells at evenly spaced frequencies, `steps · dwell · rate`
+    /// samples, the phase continuous across the switches (each sample follows the last by
+    /// the phase step of the frequency of its dwell), and out-of-range values refused.
+    #[test]
+    fn stepped_sines_switch_with_a_continuous_phase() {
+        let rate = 1000.0;
+        let Signal::Sampled { rate_hz, values } = parse_excitation(
+            "stepped:f0=10,f1=30,steps=3,dwell=0.5,amp=2",
+            1.0,
+            1.0,
+            rate,
+        )
+        .unwrap() else {
+            panic!("not sampled");
+        };
+        assert_eq!(rate_hz, rate);
+        assert_eq!(values.len(), 1500);
+        let mut phase = 0.0f64;
+        for (i, v) in values.iter().enumerate() {
+            assert!((v - 2.0 * phase.sin()).abs() < 1e-9, "sample {i}");
+            let f = [10.0, 20.0, 30.0][i / 500];
+            phase += 2.0 * std::f64::consts::PI * f / rate;
+        }
+        for bad in [
+            "stepped:f0=10,f1=30,steps=0,dwell=1",
+            "stepped:f0=10,f1=30,steps=2.5,dwell=1",
+            "stepped:f0=10,f1=600,steps=2,dwell=1",
+            "stepped:f0=0,f1=30,steps=2,dwell=1",
+            "stepped:f0=10,f1=30,steps=2,dwell=-1",
+            "stepped:f0=10,f1=30,steps=2",
+            "stepped:f0=10,f1=30,steps=2,dwell=1,log=true",
+            "stepped:f0=10,f1=30,steps=1000000,dwell=1000",
+        ] {
+            assert!(parse_excitation(bad, 1.0, 1.0, rate).is_err(), "{bad}");
+        }
+    }
+
     use super::*;
 
     #[test]

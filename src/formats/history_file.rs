@@ -117,6 +117,21 @@ fn write_uff(path: &Path, model: &Model, h: &TimeHistory, info: &RunInfo) -> Res
     crate::formats::uff::write_functions(path, &functions, false)
 }
 
+/// The CSV column of sensor output `name` measuring `quantity`:
+/// `NAME_QUANTITY_UNIT` (`tip_acceleration_m_per_s2`); `nlsim harmonics` reads it back.
+pub fn output_column(name: &str, quantity: nlsim_kernel::Quantity) -> String {
+    format!(
+        "{name}_{}_{}",
+        quantity.as_str(),
+        unit(quantity).replace('/', "_per_").replace("^2", "2")
+    )
+}
+
+/// The CSV column of input force `name`: `NAME_force_N`.
+pub fn force_column(name: &str) -> String {
+    format!("{name}_force_N")
+}
+
 fn write_csv(path: &Path, h: &TimeHistory, info: &RunInfo) -> Result<()> {
     let mut s = String::new();
     let _ = writeln!(
@@ -138,16 +153,10 @@ fn write_csv(path: &Path, h: &TimeHistory, info: &RunInfo) -> Result<()> {
     }
     s.push_str("time_s");
     for o in &h.outputs {
-        let _ = write!(
-            s,
-            ",{}_{}_{}",
-            o.name,
-            o.quantity.as_str(),
-            unit(o.quantity).replace('/', "_per_").replace("^2", "2")
-        );
+        let _ = write!(s, ",{}", output_column(&o.name, o.quantity));
     }
     for (name, _) in &h.inputs {
-        let _ = write!(s, ",{name}_force_N");
+        let _ = write!(s, ",{}", force_column(name));
     }
     for name in &h.element_names {
         let _ = write!(s, ",{name}_u_m,{name}_force_N");

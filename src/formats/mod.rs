@@ -47,5 +47,6 @@ pub mod op4;
 pub mod op4_write;
 pub mod settings;
 pub mod test_data;
+pub mod time_records;
 pub mod uff;
 pub mod uff55;

@@ -1,0 +1,466 @@
+//! `nlsim harmonics`: the time histories a test lab records during a stepped sine turned
+//! into nlsim's stepped-sine test data (thesis §4.2): the dwells found from a step table or
+//! from the drive's frequency, each dwell's transient found and left out, the drive and
+//! response harmonics `1..=H` fitted by least squares on a whole number of periods at the
+//! refined frequency ([`nlsim_calib::extract_dwell`]), and each harmonic's standard
+//! deviation from the period-to-period scatter written as the step's noise.
+
+use crate::error::{Error, Result};
+use crate::formats::time_records::{StepRow, TimeRecords};
+use faer::{Mat, c64};
+use nlsim_calib::{
+    Channel, Drive, DwellConfig, Noise, Step, Sweep, SweepDirection, TestData, detect_steps,
+    extract_dwell,
+};
+use std::path::PathBuf;
+
+/// Relative floor of every written standard deviation: a millionth of the channel's largest
+/// fundamental over the record (a 24-bit recorder's range is about 1e-7 of full scale), so
+/// that noise-free records do not weigh a calibration without bound.
+pub const SIGMA_FLOOR: f64 = 1e-6;
+
+/// What `nlsim harmonics` does.
+#[derive(Debug, Clone)]
+pub struct HarmonicsRequest {
+    /// The model (file or built-in name): its sensors name the channels and give their
+    /// quantities, its first excitation names the drive.
+    pub model: String,
+    /// The time histories (CSV).
+    pub records: PathBuf,
+    /// The step table (CSV); `None`: steps found from the drive.
+    pub steps: Option<PathBuf>,
+    /// The drive's column [default: the model's first excitation].
+    pub drive: Option<String>,
+    /// What the drive column holds: force (N) or the amplifier's voltage (V).
+    pub record: Drive,
+    /// Dwell settings (harmonics, steady-state tolerance, fewest periods, refinement).
+    pub dwell: DwellConfig,
+    /// Relative frequency change that starts a new step when steps are found from the drive.
+    pub step_tolerance: f64,
+    /// The test data written (.csv or .h5).
+    pub out: PathBuf,
+}
+
+/// One dwell's outcome, for the summary.
+#[derive(Debug, Clone)]
+pub struct DwellLine {
+    /// Sweep label.
+    pub sweep: String,
+    /// The refined frequency (Hz).
+    pub frequency_hz: f64,
+    /// Where it came from: `line N` of the step table or `samples A–B`.
+    pub origin: String,
+    /// Periods fitted and discarded, the drift left.
+    pub periods: usize,
+    /// Periods discarded as the transient.
+    pub unsettled: usize,
+    /// What is left of the transient.
+    pub drift: f64,
+    /// Whether it was kept.
+    pub kept: bool,
+}
+
+/// The outcome of [`run`].
+#[derive(Debug, Clone)]
+pub struct HarmonicsRun {
+    /// The test data.
+    pub data: TestData,
+    /// Every dwell, kept or left out.
+    pub dwells: Vec<DwellLine>,
+    /// Sampling rate of the records (Hz).
+    pub rate_hz: f64,
+}
+
+/// A dwell to fit: samples `start..end`, a frequency if known, its sweep, where it came from.
+struct Window {
+    start: usize,
+    end: usize,
+    frequency_hz: Option<f64>,
+    sweep: String,
+    origin: String,
+}
+
+fn windows_from_table(
+    rows: &[StepRow],
+    rec: &TimeRecords,
+    table: &std::path::Path,
+) -> Result<Vec<Window>> {
+    let n = rec.columns[0].len();
+    let last = rec.start_s + (n - 1) as f64 / rec.rate_hz;
+    rows.iter()
+        .map(|r| {
+            let at = |t: f64| ((t - rec.start_s) * rec.rate_hz).round();
+            let (s, e) = (at(r.start_s), at(r.end_s));
+            if s < 0.0 || e > (n - 1) as f64 {
+                return Err(Error::DataFile {
+                    file: table.to_path_buf(),
+                    line: r.line,
+                    message: format!(
+                        "the step {}–{} s reaches outside the record ({}–{last} s)",
+                        r.start_s, r.end_s, rec.start_s
+                    ),
+                });
+            }
+            Ok(Window {
+                start: s as usize,
+                end: e as usize + 1,
+                frequency_hz: r.frequency_hz,
+                sweep: r.sweep.clone(),
+                origin: format!("{}:{}", table.display(), r.line),
+            })
+        })
+        .collect()
+}
+
+/// Refuses a signal clipped by its recorder: its largest or smallest value held for 4 or
+/// more samples in a row, at least twice (every period of a clipped sine).
+fn check_clipping(name: &str, x: &[f64], rec: &TimeRecords, path: &std::path::Path) -> Result<()> {
+    let (lo, hi) = x
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    if hi <= lo {
+        return Ok(());
+    }
+    for bound in [hi, lo] {
+        let mut runs = Vec::new();
+        let mut run = 0usize;
+        for (i, &v) in x.iter().enumerate() {
+            if v == bound {
+                run += 1;
+                if run == 4 {
+                    runs.push(i + 1 - 4);
+                }
+            } else {
+                run = 0;
+            }
+        }
+        if runs.len() >= 2 {
+            return Err(Error::DataFile {
+                file: path.to_path_buf(),
+                line: rec.lines[runs[0]],
+                message: format!(
+                    "channel '{name}' is clipped: it holds {bound} for 4 or more samples in a \
+                     row {} times, first at sample {}; record it with a larger range",
+                    runs.len(),
+                    runs[0] + 1
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Reads the records, fits every dwell, and assembles the test data (nothing written).
+pub fn run(req: &HarmonicsRequest) -> Result<HarmonicsRun> {
+    let loaded = crate::load_model(&req.model)?;
+    let model = &loaded.model;
+    let rec = crate::formats::time_records::read_records(&req.records)?;
+    let drive = match &req.drive {
+        Some(d) => d.clone(),
+        None => model
+            .excitation()
+            .first()
+            .map(|e| e.name.clone())
+            .ok_or_else(|| {
+                Error::Usage(format!(
+                    "model '{}' has no excitation to name the drive; give --drive COLUMN",
+                    req.model
+                ))
+            })?,
+    };
+    // Columns by name, or as `nlsim simulate` writes them (`NAME_QUANTITY_UNIT`,
+    // `NAME_force_N`); element columns of a simulation are passed over.
+    use crate::formats::history_file::{force_column, output_column};
+    let Some(d) = rec
+        .names
+        .iter()
+        .position(|n| *n == drive || *n == force_column(&drive))
+    else {
+        return Err(Error::Usage(format!(
+            "{}: no column '{drive}' for the drive; the columns are {}",
+            req.records.display(),
+            rec.names.join(", ")
+        )));
+    };
+    let mut channels = Vec::new();
+    let mut columns = vec![d];
+    for (j, name) in rec.names.iter().enumerate() {
+        if j == d {
+            continue;
+        }
+        if let Some(s) = model
+            .sensors()
+            .iter()
+            .find(|s| s.name == *name || output_column(&s.name, s.quantity) == *name)
+        {
+            channels.push((s.name.clone(), s.quantity));
+            columns.push(j);
+            continue;
+        }
+        let passed_over = model
+            .elements()
+            .iter()
+            .any(|e| *name == format!("{}_u_m", e.name()) || *name == force_column(e.name()))
+            || model
+                .excitation()
+                .iter()
+                .any(|e| *name == force_column(&e.name));
+        if passed_over {
+            continue;
+        }
+        let known: Vec<&str> = model.sensors().iter().map(|s| s.name.as_str()).collect();
+        return Err(Error::Usage(format!(
+            "{}: column '{name}' is no sensor of model '{}' (its sensors: {}) nor the drive \
+             '{drive}'",
+            req.records.display(),
+            req.model,
+            known.join(", ")
+        )));
+    }
+    if channels.is_empty() {
+        return Err(Error::Usage(format!(
+            "{}: only the drive '{drive}' is recorded; add a sensor's column",
+            req.records.display()
+        )));
+    }
+    for &j in &columns {
+        check_clipping(&rec.names[j], &rec.columns[j], &rec, &req.records)?;
+    }
+    let windows = match &req.steps {
+        Some(table) => {
+            let rows = crate::formats::time_records::read_step_table(table)?;
+            windows_from_table(&rows, &rec, table)?
+        }
+        None => {
+            let found = detect_steps(&rec.columns[d], rec.rate_hz, req.step_tolerance);
+            if found.is_empty() {
+                return Err(Error::Usage(format!(
+                    "{}: no dwell of 3 periods or more found in the drive '{drive}'; give the \
+                     steps with --steps TABLE",
+                    req.records.display()
+                )));
+            }
+            sweeps_of(&found)
+                .into_iter()
+                .map(|(label, w)| Window {
+                    start: w.start,
+                    end: w.end,
+                    frequency_hz: Some(w.frequency_hz),
+                    sweep: label,
+                    origin: format!("samples {}–{}", w.start + 1, w.end),
+                })
+                .collect()
+        }
+    };
+    let names: Vec<&str> = columns.iter().map(|&j| rec.names[j].as_str()).collect();
+    let h = req.dwell.harmonics;
+    let mut dwells = Vec::new();
+    let mut steps: Vec<(String, Step)> = Vec::new();
+    for w in &windows {
+        let signals: Vec<&[f64]> = columns
+            .iter()
+            .map(|&j| &rec.columns[j][w.start..w.end])
+            .collect();
+        let fit = extract_dwell(&names, &signals, rec.rate_hz, w.frequency_hz, &req.dwell)
+            .map_err(|e| {
+                Error::Usage(format!(
+                    "{}: step at {}: {e}",
+                    req.records.display(),
+                    w.origin
+                ))
+            })?;
+        dwells.push(DwellLine {
+            sweep: w.sweep.clone(),
+            frequency_hz: fit.frequency_hz,
+            origin: w.origin.clone(),
+            periods: fit.periods,
+            unsettled: fit.unsettled_periods,
+            drift: fit.drift,
+            kept: fit.settled,
+        });
+        if !fit.settled {
+            continue;
+        }
+        let nc = channels.len();
+        steps.push((
+            w.sweep.clone(),
+            Step {
+                frequency_hz: fit.frequency_hz,
+                force: (0..h).map(|k| fit.harmonics[(0, k)]).collect(),
+                response: Mat::from_fn(nc, h, |c, k| fit.harmonics[(c + 1, k)]),
+                sigma: Mat::from_fn(nc, h, |c, k| fit.sigma[(c + 1, k)]),
+            },
+        ));
+    }
+    if steps.is_empty() {
+        return Err(Error::Failed(format!(
+            "{}: none of the {} dwells settled; nothing to write (lower --min-periods, or \
+             record longer dwells)",
+            req.records.display(),
+            windows.len()
+        )));
+    }
+    // The floor of the standard deviations, per channel.
+    let floors: Vec<f64> = (0..channels.len())
+        .map(|c| {
+            SIGMA_FLOOR
+                * steps
+                    .iter()
+                    .map(|(_, s)| s.response[(c, 0)].norm())
+                    .fold(0.0, f64::max)
+        })
+        .collect();
+    for (_, s) in &mut steps {
+        for c in 0..channels.len() {
+            for k in 0..h {
+                let v = s.sigma[(c, k)];
+                s.sigma[(c, k)] = if v.re.is_nan() {
+                    v
+                } else {
+                    c64::new(v.re.max(floors[c]), v.im.max(floors[c]))
+                };
+            }
+        }
+    }
+    let mut sweeps: Vec<Sweep> = Vec::new();
+    for (label, step) in steps {
+        match sweeps.iter_mut().find(|s| s.label == label) {
+            Some(s) => s.steps.push(step),
+            None => sweeps.push(Sweep {
+                label,
+                direction: SweepDirection::Up,
+                steps: vec![step],
+            }),
+        }
+    }
+    for s in &mut sweeps {
+        let f: Vec<f64> = s.steps.iter().map(|st| st.frequency_hz).collect();
+        let up = f.windows(2).all(|w| w[1] > w[0]);
+        let down = f.windows(2).all(|w| w[1] < w[0]);
+        s.direction = match (up, down) {
+            (true, _) => SweepDirection::Up,
+            (false, true) => SweepDirection::Down,
+            _ => {
+                return Err(Error::Usage(format!(
+                    "sweep '{}': its steps' frequencies neither rise nor fall throughout \
+                     ({}); give each direction its own sweep label in the step table",
+                    s.label,
+                    f.iter()
+                        .map(|v| format!("{v:.4}"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )));
+            }
+        };
+    }
+    let data = TestData {
+        input: drive,
+        drive: req.record,
+        channels: channels
+            .iter()
+            .zip(&floors)
+            .map(|((name, quantity), &floor)| Channel {
+                name: name.clone(),
+                quantity: *quantity,
+                noise: Noise {
+                    absolute: floor,
+                    relative: 0.0,
+                },
+            })
+            .collect(),
+        harmonics: h,
+        sweeps,
+    };
+    Ok(HarmonicsRun {
+        data,
+        dwells,
+        rate_hz: rec.rate_hz,
+    })
+}
+
+/// Found dwells grouped into sweeps: a new sweep wherever the frequency turns.
+fn sweeps_of(found: &[nlsim_calib::StepWindow]) -> Vec<(String, nlsim_calib::StepWindow)> {
+    let mut out = Vec::with_capacity(found.len());
+    let mut sweep = 1;
+    let mut rising: Option<bool> = None;
+    for (i, w) in found.iter().enumerate() {
+        if i > 0 {
+            let up = w.frequency_hz > found[i - 1].frequency_hz;
+            if rising.is_some_and(|r| r != up) {
+                sweep += 1;
+                rising = None;
+            } else {
+                rising = Some(up);
+            }
+        }
+        out.push((format!("sweep{sweep}"), *w));
+    }
+    out
+}
+
+/// `nlsim harmonics`: the run, its summary, the test data written.
+pub fn execute(req: &HarmonicsRequest, console: &crate::present::console::Console) -> Result<()> {
+    crate::formats::files::check_outputs(
+        &[Some(req.records.as_path()), req.steps.as_deref()],
+        &[Some(req.out.as_path())],
+        &[],
+    )?;
+    console.progress("fitting the harmonics of every dwell");
+    let r = run(req);
+    console.progress_end();
+    let r = r?;
+    let kept = r.dwells.iter().filter(|d| d.kept).count();
+    console.say(&format!(
+        "harmonics 1..{} of {} channel(s) and the drive '{}' ({}) from {}: {} of {} dwells \
+         settled, {} Hz sampling",
+        r.data.harmonics,
+        r.data.channels.len(),
+        r.data.input,
+        match r.data.drive {
+            Drive::Force => "force",
+            Drive::Voltage => "voltage",
+        },
+        req.records.display(),
+        kept,
+        r.dwells.len(),
+        r.rate_hz
+    ));
+    for s in &r.data.sweeps {
+        let d: Vec<&DwellLine> = r
+            .dwells
+            .iter()
+            .filter(|d| d.sweep == s.label && d.kept)
+            .collect();
+        let periods = d.iter().map(|d| d.periods);
+        let unsettled = d.iter().map(|d| d.unsettled);
+        console.say(&format!(
+            "  sweep '{}' ({}): {} steps {:.4}–{:.4} Hz; {}–{} periods fitted, {}–{} discarded \
+             as transients; largest drift left {:.1e}",
+            s.label,
+            s.direction.as_str(),
+            s.steps.len(),
+            s.steps.first().map_or(0.0, |x| x.frequency_hz),
+            s.steps.last().map_or(0.0, |x| x.frequency_hz),
+            periods.clone().min().unwrap_or(0),
+            periods.max().unwrap_or(0),
+            unsettled.clone().min().unwrap_or(0),
+            unsettled.max().unwrap_or(0),
+            d.iter().map(|d| d.drift).fold(0.0, f64::max)
+        ));
+    }
+    for d in r.dwells.iter().filter(|d| !d.kept) {
+        console.say(&format!(
+            "  left out: the dwell at {} ({:.4} Hz): not settled ({} settled periods of the \
+             {} asked for, drift {:.1e})",
+            d.origin, d.frequency_hz, d.periods, req.dwell.min_periods, d.drift
+        ));
+    }
+    match req.out.extension().and_then(|e| e.to_str()) {
+        Some("h5" | "hdf5") => crate::formats::test_data::write_h5(&req.out, &r.data)?,
+        _ => crate::formats::test_data::write_csv(&req.out, &r.data)?,
+    }
+    console.say(&format!("  written to {}", req.out.display()));
+    Ok(())
+}

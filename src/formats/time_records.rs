@@ -1,0 +1,300 @@
+//! Raw time histories of a test and its step table, as `nlsim harmonics` reads them
+//! (docs/file-formats.md, "Time histories").
+//!
+//! Time histories (CSV): `#` comment lines and blank lines anywhere, a header `time_s,NAME,…`
+//! (the drive's and the sensors' names), then one row per sample, evenly spaced in time
+//! (each time within 1 % of a sample interval of the even grid from the first to the last).
+//!
+//! Step table (CSV): a header with `start_s` and `end_s` and optionally `frequency_hz` and
+//! `sweep`, in any order, then one row per dwell: its time window (s), its drive frequency
+//! if known (refined from the drive), the label of the sweep it belongs to (default `sweep1`).
+//!
+//! Both are read line by line from text whose size was known before reading (the parsed
+//! numbers take no more memory than their text); errors name the file, line and column.
+
+use crate::error::{Error, Result};
+use std::path::Path;
+
+/// Time histories read from a CSV file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TimeRecords {
+    /// Sampling rate (Hz), from the time column.
+    pub rate_hz: f64,
+    /// Time of the first sample (s).
+    pub start_s: f64,
+    /// The signals' names, as in the header (the time column not included).
+    pub names: Vec<String>,
+    /// The signals, one per name, each the same number of samples.
+    pub columns: Vec<Vec<f64>>,
+    /// 1-based line of each sample (for error messages).
+    pub lines: Vec<usize>,
+}
+
+/// One row of a step table.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepRow {
+    /// 1-based line in the table.
+    pub line: usize,
+    /// Start of the dwell (s).
+    pub start_s: f64,
+    /// End of the dwell (s).
+    pub end_s: f64,
+    /// The drive frequency (Hz), if the table gives it.
+    pub frequency_hz: Option<f64>,
+    /// The sweep's label.
+    pub sweep: String,
+}
+
+fn data_error(path: &Path, line: usize, message: String) -> Error {
+    Error::DataFile {
+        file: path.to_path_buf(),
+        line,
+        message,
+    }
+}
+
+fn number(cell: &str, column: usize, name: &str) -> std::result::Result<f64, String> {
+    cell.trim()
+        .parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite())
+        .ok_or_else(|| {
+            format!(
+                "column {column} ({name}): {} is not a finite number",
+                crate::formats::files::quoted(cell.trim())
+            )
+        })
+}
+
+/// The lines that hold data: 1-based line number and text, comments and blank lines left
+/// out.
+fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
+    text.lines().enumerate().filter_map(|(i, l)| {
+        let t = l.trim();
+        (!t.is_empty() && !t.starts_with('#')).then_some((i + 1, t))
+    })
+}
+
+/// Reads time histories from `path` (see the module documentation).
+pub fn read_records(path: &Path) -> Result<TimeRecords> {
+    let text = crate::formats::files::read_text(path)?;
+    parse_records(&text, path)
+}
+
+/// Parses the time-history CSV `text` of `path`.
+pub fn parse_records(text: &str, path: &Path) -> Result<TimeRecords> {
+    let mut lines = data_lines(text);
+    let Some((hline, header)) = lines.next() else {
+        return Err(data_error(
+            path,
+            1,
+            "no header: the first line that is not a comment names the columns, \
+             `time_s,DRIVE,SENSOR,…`"
+                .into(),
+        ));
+    };
+    let names: Vec<String> = header.split(',').map(|c| c.trim().to_string()).collect();
+    if names[0] != "time_s" {
+        return Err(data_error(
+            path,
+            hline,
+            format!(
+                "the first column is {}; it must be time_s (the sample times in seconds)",
+                crate::formats::files::quoted(&names[0])
+            ),
+        ));
+    }
+    if names.len() < 2 {
+        return Err(data_error(
+            path,
+            hline,
+            "only a time column: name the drive and the sensors after it".into(),
+        ));
+    }
+    let mut seen = std::collections::HashSet::new();
+    for (j, n) in names.iter().enumerate() {
+        if n.is_empty() {
+            return Err(data_error(
+                path,
+                hline,
+                format!("column {} has no name", j + 1),
+            ));
+        }
+        if !seen.insert(n.as_str()) {
+            return Err(data_error(
+                path,
+                hline,
+                format!("column {} repeats the name '{n}'", j + 1),
+            ));
+        }
+    }
+    let mut time = Vec::new();
+    let mut columns = vec![Vec::new(); names.len() - 1];
+    let mut at = Vec::new();
+    for (line, l) in lines {
+        let cells: Vec<&str> = l.split(',').collect();
+        if cells.len() != names.len() {
+            return Err(data_error(
+                path,
+                line,
+                format!(
+                    "{} cells; the header names {} columns",
+                    cells.len(),
+                    names.len()
+                ),
+            ));
+        }
+        for (j, c) in cells.iter().enumerate() {
+            let v = number(c, j + 1, &names[j]).map_err(|m| data_error(path, line, m))?;
+            if j == 0 {
+                time.push(v);
+            } else {
+                columns[j - 1].push(v);
+            }
+        }
+        at.push(line);
+    }
+    let n = time.len();
+    if n < 2 {
+        return Err(data_error(
+            path,
+            at.first().copied().unwrap_or(hline),
+            format!("{n} sample(s); a time history needs at least 2"),
+        ));
+    }
+    let dt = (time[n - 1] - time[0]) / (n - 1) as f64;
+    if dt <= 0.0 {
+        return Err(data_error(
+            path,
+            at[n - 1],
+            "the times do not increase: time_s must rise from the first sample to the last".into(),
+        ));
+    }
+    for (i, &t) in time.iter().enumerate() {
+        let even = time[0] + i as f64 * dt;
+        if (t - even).abs() > 0.01 * dt {
+            return Err(data_error(
+                path,
+                at[i],
+                format!(
+                    "time {t} s is off the even sampling ({even} s at {:.6} Hz from the first \
+                     and last times) by {:.3} sample intervals; resample the record evenly",
+                    1.0 / dt,
+                    (t - even).abs() / dt
+                ),
+            ));
+        }
+    }
+    Ok(TimeRecords {
+        rate_hz: 1.0 / dt,
+        start_s: time[0],
+        names: names[1..].to_vec(),
+        columns,
+        lines: at,
+    })
+}
+
+/// Reads a step table from `path` (see the module documentation).
+pub fn read_step_table(path: &Path) -> Result<Vec<StepRow>> {
+    let text = crate::formats::files::read_text(path)?;
+    parse_step_table(&text, path)
+}
+
+/// Parses the step-table CSV `text` of `path`.
+pub fn parse_step_table(text: &str, path: &Path) -> Result<Vec<StepRow>> {
+    let mut lines = data_lines(text);
+    let Some((hline, header)) = lines.next() else {
+        return Err(data_error(
+            path,
+            1,
+            "no header: name the columns start_s,end_s[,frequency_hz][,sweep]".into(),
+        ));
+    };
+    let names: Vec<&str> = header.split(',').map(str::trim).collect();
+    let col = |want: &str| names.iter().position(|n| *n == want);
+    for (j, n) in names.iter().enumerate() {
+        if !["start_s", "end_s", "frequency_hz", "sweep"].contains(n) {
+            return Err(data_error(
+                path,
+                hline,
+                format!(
+                    "column {} is {}; a step table has start_s, end_s, frequency_hz and sweep",
+                    j + 1,
+                    crate::formats::files::quoted(n)
+                ),
+            ));
+        }
+        if names[..j].contains(n) {
+            return Err(data_error(
+                path,
+                hline,
+                format!("column {} repeats '{n}'", j + 1),
+            ));
+        }
+    }
+    let (Some(start), Some(end)) = (col("start_s"), col("end_s")) else {
+        return Err(data_error(
+            path,
+            hline,
+            "a step table needs the columns start_s and end_s".into(),
+        ));
+    };
+    let (freq, sweep) = (col("frequency_hz"), col("sweep"));
+    let mut rows = Vec::new();
+    for (line, l) in lines {
+        let cells: Vec<&str> = l.split(',').map(str::trim).collect();
+        if cells.len() != names.len() {
+            return Err(data_error(
+                path,
+                line,
+                format!(
+                    "{} cells; the header names {} columns",
+                    cells.len(),
+                    names.len()
+                ),
+            ));
+        }
+        let num =
+            |j: usize| number(cells[j], j + 1, names[j]).map_err(|m| data_error(path, line, m));
+        let (s, e) = (num(start)?, num(end)?);
+        if e <= s {
+            return Err(data_error(
+                path,
+                line,
+                format!("the step ends at {e} s, not after its start at {s} s"),
+            ));
+        }
+        let f = match freq {
+            Some(j) if !cells[j].is_empty() => {
+                let f = num(j)?;
+                if f <= 0.0 {
+                    return Err(data_error(
+                        path,
+                        line,
+                        format!(
+                            "column {} (frequency_hz): {f} Hz; it must be positive",
+                            j + 1
+                        ),
+                    ));
+                }
+                Some(f)
+            }
+            _ => None,
+        };
+        let label = match sweep {
+            Some(j) if !cells[j].is_empty() => cells[j].to_string(),
+            _ => "sweep1".to_string(),
+        };
+        rows.push(StepRow {
+            line,
+            start_s: s,
+            end_s: e,
+            frequency_hz: f,
+            sweep: label,
+        });
+    }
+    if rows.is_empty() {
+        return Err(data_error(path, hline, "no step below the header".into()));
+    }
+    Ok(rows)
+}
