@@ -15,6 +15,12 @@
 //!   the whole default calibration on the parametric model (`calibration/parametric`: 65
 //!   candidates, 3 starts, 10 folds; goal under 20 s).
 //!
+//! - `dwell/…`: harmonics of one stepped-sine dwell from its time histories
+//!   ([`nlsim_calib::extract_dwell`]): 10⁵ samples of a drive and three responses (4·10⁵
+//!   samples in all), 3 harmonics, 41.37 samples per period, the frequency refined and the
+//!   transient found; throughput in samples (of every channel) per second (goal ≥ 10⁷ per
+//!   core).
+//!
 //! Run with `cargo bench -p nlsim-bench --bench calib -- --quick --noplot`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -96,5 +102,41 @@ fn bracket_fe(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench, bracket_fe);
+fn dwell(c: &mut Criterion) {
+    use std::f64::consts::PI;
+    let n = 100_000;
+    let (f, rate) = (24.17, 24.17 * 41.37);
+    let signal = |amp: f64, lag: f64, decay: f64| -> Vec<f64> {
+        (0..n)
+            .map(|i| {
+                let t = i as f64 / rate;
+                let w = 2.0 * PI * f * t;
+                amp * (w - lag).sin()
+                    + 0.05 * amp * (3.0 * w).cos()
+                    + decay * (-t / 0.3).exp() * (2.0 * PI * 31.0 * t).sin()
+            })
+            .collect()
+    };
+    let signals = [
+        signal(0.2, 0.0, 0.0),
+        signal(3.0, 0.4, 1.0),
+        signal(1.0, 0.5, 0.3),
+        signal(0.1, 2.0, 0.05),
+    ];
+    let refs: Vec<&[f64]> = signals.iter().map(Vec::as_slice).collect();
+    let names = ["drive", "a", "b", "c"];
+    let cfg = nlsim_calib::DwellConfig::default();
+    let mut g = c.benchmark_group("dwell");
+    g.throughput(criterion::Throughput::Elements((4 * n) as u64));
+    g.bench_function("extract_4x100k", |b| {
+        b.iter(|| {
+            black_box(
+                nlsim_calib::extract_dwell(&names, &refs, rate, Some(f * 1.01), &cfg).unwrap(),
+            )
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench, bracket_fe, dwell);
 criterion_main!(benches);
