@@ -43,7 +43,14 @@ bench:
 	cargo bench -p nlsim-bench --bench gate -- --quick --noplot
 
 # Fails when a kernel's time relative to its in-repo reference regressed more than 2x
-# (bench/benches/gate.rs; about 30 s after the build).
+# (bench/benches/gate.rs; about 30 s after the build). A failing run is repeated in a new
+# process, twice at most: the condensed HB point's time is bimodal across processes on
+# this shared machine (about 20 or 60 us, the mode fixed for a process's life), so one slow
+# process failed the gate in one run of about five with no change to the code; a real
+# regression fails all three.
 bench-gate:
 	@scripts/ensure-deps.sh
-	cargo bench -p nlsim-bench --bench gate -- --quick --noplot
+	@for run in 1 2 3; do \
+	  if cargo bench -p nlsim-bench --bench gate -- --quick --noplot; then exit 0; fi; \
+	  echo "bench-gate: run $$run of 3 failed"; \
+	done; exit 1
