@@ -17,8 +17,10 @@
 //! fundamental phase across periods (its slope is `θ_true − θ`), three passes. The steady
 //! state is found per period: the fundamental amplitude of every signal, period by period,
 //! against its mean over the second half of the dwell (`|A_b − Ā| ≤ tol Ā + 3 s`, `s` the
-//! period-to-period scatter there); the periods before the last one outside that band are
-//! discarded. The harmonics are then fitted on the largest integer number of periods at the
+//! noise's period-to-period scatter there, from successive differences, which a slow
+//! transient does not inflate); the periods before the last one outside that band are
+//! discarded, and a dwell whose fitted halves still differ beyond `tol` and the noise is not
+//! settled. The harmonics are then fitted on the largest integer number of periods at the
 //! end of the dwell, and their standard deviations are the period-to-period scatter of the
 //! real and imaginary parts over `√(periods)`. Every harmonic is finally turned so that the
 //! drive's fundamental is real and positive (`X_k ← X_k e^{−ikφ₁}`): a shift of the time
@@ -121,21 +123,27 @@ impl Gram {
     }
 }
 
+/// A least-squares fit of one window ([`fit`]).
+struct Fit {
+    /// The mean `X₀`.
+    mean: f64,
+    /// `X_1..X_h`, time origin as asked.
+    harmonics: Vec<c64>,
+    /// The standard deviation the noise gives an amplitude fitted on this window:
+    /// `σ √(2/L)` with `σ` the residual's per-sample standard deviation. A transient near
+    /// the drive frequency is fitted into the harmonics, not the residual, so this stays the
+    /// noise's.
+    amplitude_sd: f64,
+}
+
 /// Least-squares mean and harmonics `1..=h` of `x[start..start + len]` at `theta` rad per
-/// sample, with the time origin at sample `origin`: `(X₀, [X_1..X_h])`.
-fn fit(
-    x: &[f64],
-    theta: f64,
-    h: usize,
-    start: usize,
-    len: usize,
-    origin: f64,
-    gram: &Gram,
-) -> (f64, Vec<c64>) {
+/// sample, with the time origin at sample `origin`.
+fn fit(x: &[f64], theta: f64, h: usize, start: usize, len: usize, origin: f64, gram: &Gram) -> Fit {
     use faer::linalg::solvers::Solve as _;
     let centre = start as f64 + 0.5 * (len as f64 - 1.0);
     let m0 = start as f64 - centre;
     let mut acc = vec![c64::new(0.0, 0.0); h + 1];
+    let mut squares = 0.0;
     let mut z = c64::new(0.0, 0.0);
     let step = c64::new(theta.cos(), theta.sin());
     for (i, &v) in x[start..start + len].iter().enumerate() {
@@ -144,6 +152,7 @@ fn fit(
             z = c64::new(a.cos(), a.sin());
         }
         acc[0].re += v;
+        squares += v * v;
         let mut zk = z;
         for a in acc.iter_mut().skip(1) {
             *a += zk * v;
@@ -152,11 +161,17 @@ fn fit(
         z *= step;
     }
     let pc = Mat::from_fn(h + 1, 1, |a, _| acc[a].re);
+    let ps = Mat::from_fn(h, 1, |a, _| acc[a + 1].im);
     let alpha = gram.cos.solve(&pc);
     let beta = match &gram.sin {
-        Some(s) => s.solve(Mat::from_fn(h, 1, |a, _| acc[a + 1].im)),
+        Some(s) => s.solve(&ps),
         None => Mat::zeros(0, 1),
     };
+    // Residual sum of squares: xᵀx − bᵀ G⁻¹ b for each block of the normal equations.
+    let explained: f64 = (0..=h).map(|a| pc[(a, 0)] * alpha[(a, 0)]).sum::<f64>()
+        + (0..h).map(|a| ps[(a, 0)] * beta[(a, 0)]).sum::<f64>();
+    let dof = len.saturating_sub(2 * h + 1).max(1) as f64;
+    let amplitude_sd = ((squares - explained).max(0.0) / dof).sqrt() * (2.0 / len as f64).sqrt();
     let shift = centre - origin;
     let harmonics = (1..=h)
         .map(|k| {
@@ -165,7 +180,11 @@ fn fit(
             local * c64::new(a.cos(), a.sin())
         })
         .collect();
-    (alpha[(0, 0)], harmonics)
+    Fit {
+        mean: alpha[(0, 0)],
+        harmonics,
+        amplitude_sd,
+    }
 }
 
 /// The drive frequency from its upward mean crossings (Hz), when none is given: good to
@@ -188,8 +207,8 @@ fn crossing_frequency(drive: &[f64], rate_hz: f64) -> Option<f64> {
     (count >= 3 && last > first).then(|| (count - 1) as f64 / (last - first) * rate_hz)
 }
 
-/// Per-period fits of the fundamental of every signal over `[start, end)`, origin at
-/// `origin`: `(block start, [X_1 per signal])` for each whole period.
+/// Per-period fits of every signal over `[start, end)`, origin at `origin`: `(block start,
+/// [fit per signal])` for each whole period.
 fn period_fits(
     signals: &[&[f64]],
     theta: f64,
@@ -197,7 +216,7 @@ fn period_fits(
     start: usize,
     end: usize,
     origin: f64,
-) -> Vec<(usize, Vec<Vec<c64>>)> {
+) -> Vec<(usize, Vec<Fit>)> {
     let period = 2.0 * PI / theta;
     let count = ((end - start) as f64 / period).floor() as usize;
     let mut out = Vec::with_capacity(count);
@@ -209,7 +228,7 @@ fn period_fits(
         };
         let fits = signals
             .iter()
-            .map(|x| fit(x, theta, h, s, e - s, origin, &gram).1)
+            .map(|x| fit(x, theta, h, s, e - s, origin, &gram))
             .collect();
         out.push((s, fits));
     }
@@ -229,7 +248,7 @@ fn refine(drive: &[f64], mut theta: f64, h: usize, start: usize, end: usize) -> 
         let mut phases = Vec::with_capacity(blocks.len());
         let mut prev: Option<f64> = None;
         for (s, fits) in &blocks {
-            let mut p = fits[0][0].arg();
+            let mut p = fits[0].harmonics[0].arg();
             if let Some(q) = prev {
                 p = q + (p - q + PI).rem_euclid(2.0 * PI) - PI;
             }
@@ -350,18 +369,27 @@ pub fn extract_dwell(
     // Steady state: each period's fundamental against the second half's.
     let blocks = period_fits(signals, theta, h, 0, n, 0.0);
     let nb = blocks.len();
-    let amplitude = |b: usize, s: usize| blocks[b].1[s][0].norm();
+    let amplitude = |b: usize, s: usize| blocks[b].1[s].harmonics[0].norm();
     let half = nb / 2;
     let reference = half..nb;
     let mut unsettled_from_end = None;
     let mut trending = false;
+    let mut noise_sd = vec![0.0; signals.len()];
     if nb >= 2 {
         for s in 0..signals.len() {
             let vals: Vec<f64> = reference.clone().map(|b| amplitude(b, s)).collect();
             let m = vals.len() as f64;
             let mean = vals.iter().sum::<f64>() / m;
-            let sd =
-                (vals.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (m - 1.0).max(1.0)).sqrt();
+            // The noise's scatter of a period's amplitude, from the fits' residuals (median
+            // over the reference half): a transient beating with the drive varies the
+            // amplitudes from period to period but is fitted, not left in the residual.
+            let mut sds: Vec<f64> = reference
+                .clone()
+                .map(|b| blocks[b].1[s].amplitude_sd)
+                .collect();
+            sds.sort_by(f64::total_cmp);
+            let sd = sds[sds.len() / 2];
+            noise_sd[s] = sd;
             let band = cfg.settle_tolerance * mean + 3.0 * sd;
             if let Some(b) = (0..nb)
                 .rev()
@@ -403,17 +431,17 @@ pub fn extract_dwell(
             format!("the {len}-sample window cannot separate {h} harmonics"),
         )
     })?;
-    let fits: Vec<(f64, Vec<c64>)> = signals
+    let fits: Vec<Fit> = signals
         .iter()
         .map(|x| fit(x, theta, h, first, len, origin, &gram))
         .collect();
     // Turn the time origin so that the drive's fundamental is real and positive.
-    let phi = fits[0].1[0].arg();
+    let phi = fits[0].harmonics[0].arg();
     let turn = |k: usize, z: c64| {
         let a = -(k as f64) * phi;
         z * c64::new(a.cos(), a.sin())
     };
-    let harmonics = Mat::from_fn(signals.len(), h, |s, k| turn(k + 1, fits[s].1[k]));
+    let harmonics = Mat::from_fn(signals.len(), h, |s, k| turn(k + 1, fits[s].harmonics[k]));
     // Scatter of the period fits over the fitted window.
     let per = period_fits(signals, theta, h, first, n, origin);
     let mut sigma = Mat::from_fn(signals.len(), h, |_, _| c64::new(f64::NAN, f64::NAN));
@@ -421,7 +449,10 @@ pub fn extract_dwell(
         let m = per.len() as f64;
         for s in 0..signals.len() {
             for k in 0..h {
-                let vals: Vec<c64> = per.iter().map(|(_, f)| turn(k + 1, f[s][k])).collect();
+                let vals: Vec<c64> = per
+                    .iter()
+                    .map(|(_, f)| turn(k + 1, f[s].harmonics[k]))
+                    .collect();
                 let mean = vals.iter().sum::<c64>() / m;
                 let var = |part: fn(c64) -> f64| {
                     vals.iter()
@@ -433,17 +464,24 @@ pub fn extract_dwell(
             }
         }
     }
-    // What is left of the transient: the halves of the fitted window.
+    // What is left of the transient: the halves of the fitted window, beyond what the
+    // noise moves them (each half the mean of P/2 periods).
     let mut drift = 0.0f64;
     if periods_fit >= 2 {
-        let half_len = ((periods_fit / 2) as f64 * period).round() as usize;
+        let half = periods_fit / 2;
+        let half_len = (half as f64 * period).round() as usize;
         if let Some(g) = Gram::new(theta, half_len, h) {
-            for x in signals {
-                let a = fit(x, theta, h, first, half_len, origin, &g).1[0];
-                let b = fit(x, theta, h, n - half_len, half_len, origin, &g).1[0];
+            for (s, x) in signals.iter().enumerate() {
+                let a = fit(x, theta, h, first, half_len, origin, &g).harmonics[0];
+                let b = fit(x, theta, h, n - half_len, half_len, origin, &g).harmonics[0];
                 let full = a.norm().max(b.norm());
                 if full > 0.0 {
-                    drift = drift.max((a.norm() - b.norm()).abs() / full);
+                    let change = (a.norm() - b.norm()).abs();
+                    drift = drift.max(change / full);
+                    let noise = 3.0 * noise_sd[s] * (2.0 / half as f64).sqrt();
+                    if change > cfg.settle_tolerance * full + noise {
+                        trending = true;
+                    }
                 }
             }
         }
@@ -452,7 +490,7 @@ pub fn extract_dwell(
         frequency_hz: theta * rate_hz / (2.0 * PI),
         harmonics,
         sigma,
-        mean: fits.iter().map(|f| f.0).collect(),
+        mean: fits.iter().map(|f| f.mean).collect(),
         first_sample: first,
         samples: len,
         periods: periods_fit,

@@ -50,7 +50,7 @@ pub struct DwellLine {
     pub frequency_hz: f64,
     /// Where it came from: `line N` of the step table or `samples A–B`.
     pub origin: String,
-    /// Periods fitted and discarded, the drift left.
+    /// Whole periods fitted.
     pub periods: usize,
     /// Periods discarded as the transient.
     pub unsettled: usize,
@@ -451,10 +451,20 @@ pub fn execute(req: &HarmonicsRequest, console: &crate::present::console::Consol
         ));
     }
     for d in r.dwells.iter().filter(|d| !d.kept) {
+        let why = if d.periods < req.dwell.min_periods {
+            format!(
+                "{} settled period(s), at least {} needed",
+                d.periods, req.dwell.min_periods
+            )
+        } else {
+            format!(
+                "still drifting over its second half (drift {:.1e})",
+                d.drift
+            )
+        };
         console.say(&format!(
-            "  left out: the dwell at {} ({:.4} Hz): not settled ({} settled periods of the \
-             {} asked for, drift {:.1e})",
-            d.origin, d.frequency_hz, d.periods, req.dwell.min_periods, d.drift
+            "  left out: the dwell at {} ({:.4} Hz): not settled: {why}",
+            d.origin, d.frequency_hz
         ));
     }
     match req.out.extension().and_then(|e| e.to_str()) {

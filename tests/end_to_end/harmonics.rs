@@ -119,11 +119,13 @@ fn raw_records_calibrate_like_harmonic_data() {
             );
         }
     }
-    // A step table gives the same steps; the table's frequencies refined from the drive.
+    // A step table gives the same steps; the table's frequencies refined from the drive. A
+    // dwell cut 0.6 s after its switch (14 periods, the transient throughout) is left out
+    // and named.
     std::fs::write(
         p("steps.csv"),
         "start_s,end_s,frequency_hz,sweep\n0,4.99,21.5,up\n5,9.99,22.25,up\n10,14.99,23.0,up\n\
-         15,19.99,23.75,up\n20,24.99,24.5,up\n",
+         15,19.99,23.75,up\n20,24.99,24.5,up\n5,5.6,22.25,cut\n",
     )
     .unwrap();
     let (rc, out, err) = nlsim(&[
@@ -140,6 +142,12 @@ fn raw_records_calibrate_like_harmonic_data() {
         out.contains("sweep 'up' (up): 5 steps 21.5000–24.5000 Hz"),
         "{out}"
     );
+    assert!(out.contains("5 of 6 dwells settled"), "{out}");
+    assert!(
+        out.contains("left out: the dwell at ") && out.contains("steps.csv:7 (22.25"),
+        "{out}"
+    );
+    assert!(out.contains("not settled"), "{out}");
 }
 
 /// Writes `text` to `name` in `dir` and runs `nlsim harmonics ecl_beam` on it (with `extra`
