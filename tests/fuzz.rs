@@ -631,8 +631,8 @@ fn fuzz_inner() {
     let recs = vec![rec("tip", 3), rec("NONE", -2)];
     let uff_ascii = dir.join("a.uff");
     let uff_binary = dir.join("b.uff");
-    nlsim::formats::uff::write(&uff_ascii, &recs, false).unwrap();
-    nlsim::formats::uff::write(&uff_binary, &recs, true).unwrap();
+    nlsim::formats::uff_write::write(&uff_ascii, &recs, false).unwrap();
+    nlsim::formats::uff_write::write(&uff_binary, &recs, true).unwrap();
     let ascii = [std::fs::read_to_string(&uff_ascii).unwrap()];
     let binary = std::fs::read(&uff_binary).unwrap();
     let to_data = |r: nlsim::Result<Vec<nlsim::formats::uff::Uff58>>| -> Option<String> {
@@ -664,6 +664,60 @@ fn fuzz_inner() {
             }
         });
         to_data(nlsim::formats::uff::parse(&b, Path::new("b.uff")))
+    }));
+
+    // Universal-file time records (function type 1) as `nlsim harmonics` reads them, and
+    // the dwell fit on what they hold.
+    let time_fn = |id: &str, ordinate: i64, lag: f64| nlsim::formats::uff_write::UffFunction {
+        id: id.into(),
+        function_type: 1,
+        response: (21, 3),
+        reference: (0, 0),
+        abscissa_type: 17,
+        ordinate_type: ordinate,
+        denominator_type: 0,
+        abscissa: nlsim::formats::uff_write::Abscissa::Even {
+            start: 0.0,
+            step: 0.01,
+        },
+        values: (0..120)
+            .map(|i| {
+                faer::c64::new(
+                    (2.0 * std::f64::consts::PI * 0.05 * i as f64 - lag).sin(),
+                    0.0,
+                )
+            })
+            .collect(),
+        complex: false,
+    };
+    let uff_time = dir.join("t.uff");
+    nlsim::formats::uff_write::write_functions(
+        &uff_time,
+        &[time_fn("shaker", 13, 0.0), time_fn("NONE", 12, 0.4)],
+        false,
+    )
+    .unwrap();
+    let times = [std::fs::read_to_string(&uff_time).unwrap()];
+    panics.extend(survive("uff58 time records", 3000 * scale(), |_| {
+        let text = mutate(rng.pick(&times).clone().as_str(), &mut rng);
+        let r = nlsim::formats::uff::parse(text.as_bytes(), &uff_time)
+            .and_then(|v| nlsim::formats::time_records::from_uff(&v, &uff_time));
+        match r {
+            Ok(r) => {
+                let names: Vec<&str> = r.names.iter().map(String::as_str).collect();
+                let signals: Vec<&[f64]> = r.columns.iter().map(Vec::as_slice).collect();
+                nlsim::calib::extract_dwell(
+                    &names,
+                    &signals,
+                    r.rate_hz,
+                    None,
+                    &nlsim::calib::DwellConfig::default(),
+                )
+                .err()
+                .map(|e| e.to_string())
+            }
+            Err(e) => Some(e.to_string()),
+        }
     }));
 
     // Calibration, plan and test files (parsed and checked; no model is loaded).

@@ -3434,7 +3434,7 @@ print("ok", checked)
         let recs = vec![record("tip", 3), record("NONE", -2)];
         for binary in [false, true] {
             let p = dir.join(if binary { "b.uff" } else { "a.uff" });
-            uff::write(&p, &recs, binary).unwrap();
+            nlsim::formats::uff_write::write(&p, &recs, binary).unwrap();
             let back = uff::read(&p).unwrap();
             assert_eq!(back.len(), 2);
             for (a, b) in recs.iter().zip(&back) {
@@ -3544,7 +3544,7 @@ NONE
         let dir = scratch("uff-count");
         let recs = vec![record("tip", 3), record("mid", 2)];
         let p = dir.join("b.uff");
-        uff::write(&p, &recs, true).unwrap();
+        nlsim::formats::uff_write::write(&p, &recs, true).unwrap();
         let good = std::fs::read(&p).unwrap();
         // The header lines `58b 1 2 11 COUNT ...` with COUNT replaced.
         let with_count = |count: &dyn Fn(usize, usize) -> String| -> Vec<u8> {
@@ -3683,7 +3683,7 @@ NONE
             .collect();
         let dir = scratch("uff-frf");
         let p = dir.join("ecl.uff");
-        uff::write(&p, &recs, true).unwrap();
+        nlsim::formats::uff_write::write(&p, &recs, true).unwrap();
         let data =
             uff::to_test_data(&uff::read(&p).unwrap(), "shaker", Noise::relative(0.01)).unwrap();
         let mut start = sys.clone();
@@ -5654,7 +5654,8 @@ mod hardening {
             values: vec![faer::c64::new(0.1, -0.2); 3],
         };
         let dup_uff = d("dup.uff");
-        nlsim::formats::uff::write(Path::new(&dup_uff), &[record(3), record(3)], false).unwrap();
+        nlsim::formats::uff_write::write(Path::new(&dup_uff), &[record(3), record(3)], false)
+            .unwrap();
         let cal = ["calibrate", "ecl_beam"];
         let k3 = [
             "--param",

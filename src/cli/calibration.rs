@@ -170,7 +170,8 @@ pub struct HarmonicsArgs {
     /// Model file (.toml) or built-in model: its sensors name the channels and give their
     /// quantities.
     model: String,
-    /// Time histories (CSV: `time_s,DRIVE,SENSOR,…`, evenly sampled).
+    /// Time histories: CSV (`time_s,DRIVE,SENSOR,…`, evenly sampled) or universal file
+    /// datasets 58 of function type 1 (.uff, .unv, .uf).
     records: std::path::PathBuf,
     /// Step table (CSV: `start_s,end_s[,frequency_hz][,sweep]`) [default: the steps found
     /// from the drive's frequency].

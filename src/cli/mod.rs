@@ -73,7 +73,8 @@ pub enum Command {
     /// log-amplitude and phase errors, points inside the band, chi2, peaks). See
     /// docs/calibration.md.
     Validate(ValidateArgs),
-    /// Harmonics from the time histories of a stepped-sine test: the dwells found from a
+    /// Harmonics from the time histories of a stepped-sine test (CSV or universal file
+    /// dataset 58 time records): the dwells found from a
     /// step table or from the drive's frequency, each dwell's transient left out, the drive
     /// and response harmonics fitted on whole periods at the refined frequency, their
     /// standard deviations from the period-to-period scatter; writes test data that `nlsim

@@ -156,7 +156,20 @@ fn check_clipping(name: &str, x: &[f64], rec: &TimeRecords, path: &std::path::Pa
 pub fn run(req: &HarmonicsRequest) -> Result<HarmonicsRun> {
     let loaded = crate::load_model(&req.model)?;
     let model = &loaded.model;
-    let rec = crate::formats::time_records::read_records(&req.records)?;
+    let uff = matches!(
+        req.records
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .as_deref(),
+        Some("uff" | "unv" | "uf")
+    );
+    let rec = if uff {
+        let sets = crate::formats::uff::read(&req.records)?;
+        crate::formats::time_records::from_uff(&sets, &req.records)?
+    } else {
+        crate::formats::time_records::read_records(&req.records)?
+    };
     let drive = match &req.drive {
         Some(d) => d.clone(),
         None => model
@@ -173,11 +186,14 @@ pub fn run(req: &HarmonicsRequest) -> Result<HarmonicsRun> {
     // Columns by name, or as `nlsim simulate` writes them (`NAME_QUANTITY_UNIT`,
     // `NAME_force_N`); element columns of a simulation are passed over.
     use crate::formats::history_file::{force_column, output_column};
-    let Some(d) = rec
-        .names
+    let drive_label = model
+        .excitation()
         .iter()
-        .position(|n| *n == drive || *n == force_column(&drive))
-    else {
+        .find(|e| e.name == drive)
+        .map(|e| format!("force@{}", e.at.label(model.dofs())));
+    let Some(d) = rec.names.iter().position(|n| {
+        *n == drive || *n == force_column(&drive) || drive_label.as_deref() == Some(n.as_str())
+    }) else {
         return Err(Error::Usage(format!(
             "{}: no column '{drive}' for the drive; the columns are {}",
             req.records.display(),
@@ -190,11 +206,11 @@ pub fn run(req: &HarmonicsRequest) -> Result<HarmonicsRun> {
         if j == d {
             continue;
         }
-        if let Some(s) = model
-            .sensors()
-            .iter()
-            .find(|s| s.name == *name || output_column(&s.name, s.quantity) == *name)
-        {
+        if let Some(s) = model.sensors().iter().find(|s| {
+            s.name == *name
+                || output_column(&s.name, s.quantity) == *name
+                || s.at.label(model.dofs()).to_string() == *name
+        }) {
             channels.push((s.name.clone(), s.quantity));
             columns.push(j);
             continue;

@@ -155,7 +155,7 @@ fn write_uff(
     y: &[Mat<c64>],
     info: &FrfInfo,
 ) -> Result<()> {
-    use crate::formats::uff::{Abscissa, UffFunction, node_direction, quantity_code};
+    use crate::formats::uff_write::{Abscissa, UffFunction, node_direction, quantity_code};
     let set = *sys.harmonics();
     let (Some(input), Some(&input_dof)) = (sys.inputs().first(), info.input_dofs.first()) else {
         return Err(Error::Usage(format!(
@@ -218,7 +218,7 @@ fn write_uff(
             });
         }
     }
-    crate::formats::uff::write_functions(path, &functions, false)
+    crate::formats::uff_write::write_functions(path, &functions, false)
 }
 
 fn write_csv(

@@ -57,7 +57,7 @@ pub const HINT: &str =
 /// 1, even abscissa from 0 s at the sample interval, real) per sensor output in its quantity
 /// and per input force (N), at its DOF.
 fn write_uff(path: &Path, model: &Model, h: &TimeHistory, info: &RunInfo) -> Result<()> {
-    use crate::formats::uff::{Abscissa, UffFunction, node_direction, quantity_code};
+    use crate::formats::uff_write::{Abscissa, UffFunction, node_direction, quantity_code};
     let labels = model.dofs();
     let real =
         |v: &[f64]| -> Vec<faer::c64> { v.iter().map(|&x| faer::c64::new(x, 0.0)).collect() };
@@ -114,7 +114,7 @@ fn write_uff(path: &Path, model: &Model, h: &TimeHistory, info: &RunInfo) -> Res
             path.display()
         )));
     }
-    crate::formats::uff::write_functions(path, &functions, false)
+    crate::formats::uff_write::write_functions(path, &functions, false)
 }
 
 /// The CSV column of sensor output `name` measuring `quantity`:

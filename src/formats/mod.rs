@@ -50,3 +50,4 @@ pub mod test_data;
 pub mod time_records;
 pub mod uff;
 pub mod uff55;
+pub mod uff_write;

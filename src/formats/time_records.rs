@@ -9,6 +9,13 @@
 //! `sweep`, in any order, then one row per dwell: its time window (s), its drive frequency
 //! if known (refined from the drive), the label of the sweep it belongs to (default `sweep1`).
 //!
+//! Time histories also come as universal file datasets 58 of function type 1 (time
+//! response; ASCII or binary, as test systems and pyuff write them): each dataset one
+//! signal, named by the first word of its ID line 1 (or `NODE:COMP` of its response DOF,
+//! `force@NODE:COMP` for a force, where that word is empty or `NONE`), all on the same even
+//! time abscissa
+//! ([`from_uff`]).
+//!
 //! Both are read line by line from text whose size was known before reading (the parsed
 //! numbers take no more memory than their text); errors name the file, line and column.
 
@@ -297,4 +304,114 @@ pub fn parse_step_table(text: &str, path: &Path) -> Result<Vec<StepRow>> {
         return Err(data_error(path, hline, "no step below the header".into()));
     }
     Ok(rows)
+}
+
+/// Time histories from universal file datasets 58 of function type 1 (time response), read
+/// by [`crate::formats::uff::read`]: one signal per dataset, named by the first word of its ID
+/// line 1, or by its response DOF (`21:uz`; `force@21:uz` for a force, ordinate type 13)
+/// where that is empty or `NONE`. Every dataset
+/// must be a real time response on the first one's even time abscissa; errors name the
+/// file and the dataset (1-based, in file order).
+pub fn from_uff(records: &[crate::formats::uff::Uff58], path: &Path) -> Result<TimeRecords> {
+    let bad = |i: usize, why: String| {
+        Error::Usage(format!(
+            "{}: dataset 58 number {} (in file order): {why}",
+            path.display(),
+            i + 1
+        ))
+    };
+    let Some(first) = records.first() else {
+        return Err(Error::Usage(format!(
+            "{}: no dataset 58 (function at nodal DOF) in the file",
+            path.display()
+        )));
+    };
+    let x = &first.frequencies_hz;
+    let n = x.len();
+    if n < 2 {
+        return Err(bad(
+            0,
+            format!("{n} value(s); a time history needs at least 2"),
+        ));
+    }
+    let dt = (x[n - 1] - x[0]) / (n - 1) as f64;
+    if dt.is_nan() || dt <= 0.0 {
+        return Err(bad(0, "the abscissa does not increase".into()));
+    }
+    if let Some(k) = (0..n).find(|&k| (x[k] - (x[0] + k as f64 * dt)).abs() > 0.01 * dt) {
+        return Err(bad(
+            0,
+            format!(
+                "abscissa value {} at {} is off the even sampling ({:.6} Hz); resample evenly",
+                k + 1,
+                x[k],
+                1.0 / dt
+            ),
+        ));
+    }
+    let mut names = Vec::with_capacity(records.len());
+    let mut columns = Vec::with_capacity(records.len());
+    for (i, r) in records.iter().enumerate() {
+        if r.function_type != 1 {
+            return Err(bad(
+                i,
+                format!(
+                    "function type {} is not a time response (1); `nlsim harmonics` reads time histories",
+                    r.function_type
+                ),
+            ));
+        }
+        if r.frequencies_hz.len() != n
+            || r.frequencies_hz
+                .iter()
+                .zip(x)
+                .any(|(a, b)| (a - b).abs() > 0.01 * dt)
+        {
+            return Err(bad(
+                i,
+                format!(
+                    "{} samples on another time abscissa than the first dataset's {n}",
+                    r.frequencies_hz.len()
+                ),
+            ));
+        }
+        if let Some(k) = r
+            .values
+            .iter()
+            .position(|v| !(v.re.is_finite() && v.im == 0.0))
+        {
+            return Err(bad(
+                i,
+                format!(
+                    "sample {} is {} — a time response holds finite real values",
+                    k + 1,
+                    r.values[k]
+                ),
+            ));
+        }
+        let word = r.id.split_whitespace().next().unwrap_or("");
+        let name = if word.is_empty() || word.eq_ignore_ascii_case("none") {
+            // A force (ordinate type 13) at a DOF is the drive there, not its response.
+            if r.ordinate_type == 13 {
+                format!("force@{}", r.response_label())
+            } else {
+                r.response_label()
+            }
+        } else {
+            word.to_string()
+        };
+        if names.contains(&name) {
+            return Err(bad(i, format!("a second signal named '{name}'")));
+        }
+        names.push(name);
+        columns.push(r.values.iter().map(|v| v.re).collect());
+    }
+    Ok(TimeRecords {
+        rate_hz: 1.0 / dt,
+        start_s: x[0],
+        names,
+        columns,
+        // Binary or fixed-column data have no line per sample: errors name the sample.
+        lines: (1..=n).collect(),
+    })
 }

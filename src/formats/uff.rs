@@ -25,7 +25,6 @@ use crate::error::{Error, Result};
 use faer::{Mat, c64};
 use nlsim_calib::{Channel, Noise, Step, Sweep, SweepDirection, TestData};
 use nlsim_kernel::Quantity;
-use std::fmt::Write as _;
 use std::path::Path;
 
 /// One dataset 58: a function of frequency at a response DOF per unit of a reference DOF.
@@ -270,10 +269,17 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Vec<Uff58>> {
         let abscissa_type = specific(7)?;
         let ordinate_type = specific(8)?;
         let denominator_type = specific(9)?;
-        if abscissa_type != 18 && abscissa_type != 0 {
+        // Frequency (18) for FRFs, time (17) for time responses; 0 (unknown) either way.
+        let wanted = if r6[0] == 1 { 17 } else { 18 };
+        if abscissa_type != wanted && abscissa_type != 0 {
             return Err(err(
                 rec[7].0,
-                format!("record 8: the abscissa is of type {abscissa_type}, not frequency (18)"),
+                format!(
+                    "record 8: the abscissa is of type {abscissa_type}, not {} ({wanted}) for \
+                     function type {}",
+                    if wanted == 17 { "time" } else { "frequency" },
+                    r6[0]
+                ),
             ));
         }
         let count = n * per_value;
@@ -466,232 +472,6 @@ fn fixed_fields(s: &str, widths: &[usize]) -> Vec<String> {
             f
         })
         .collect()
-}
-
-/// Writes `records` as datasets 58 (ASCII, double precision, uneven abscissa) or 58b
-/// (binary little-endian), atomically ([`write_functions`]).
-pub fn write(path: &Path, records: &[Uff58], binary: bool) -> Result<()> {
-    let functions: Vec<UffFunction> = records
-        .iter()
-        .map(|r| UffFunction {
-            id: r.id.clone(),
-            function_type: r.function_type,
-            response: (r.response_node, r.response_direction),
-            reference: (r.reference_node, r.reference_direction),
-            abscissa_type: 18,
-            ordinate_type: r.ordinate_type,
-            denominator_type: r.denominator_type,
-            abscissa: Abscissa::Uneven(r.frequencies_hz.clone()),
-            values: r.values.clone(),
-            complex: true,
-        })
-        .collect();
-    write_functions(path, &functions, binary)
-}
-
-/// The abscissa of a function written by [`write_functions`].
-#[derive(Debug, Clone, PartialEq)]
-pub enum Abscissa {
-    /// Evenly spaced: the first value and the increment (s or Hz).
-    Even {
-        /// First abscissa value.
-        start: f64,
-        /// Increment.
-        step: f64,
-    },
-    /// One abscissa value per ordinate value.
-    Uneven(Vec<f64>),
-}
-
-/// A function written as dataset 58 by [`write_functions`]: a time history (function type 1)
-/// or a frequency response (type 4), real or complex, at a response DOF per a reference DOF.
-#[derive(Debug, Clone, PartialEq)]
-pub struct UffFunction {
-    /// ID line 1: what the function is.
-    pub id: String,
-    /// Function type: 1 time response, 4 frequency response function.
-    pub function_type: i64,
-    /// Response node and direction (1..6 = +x … +rz; 0 a scalar coordinate).
-    pub response: (i64, i64),
-    /// Reference node and direction (0, 0 for a time response).
-    pub reference: (i64, i64),
-    /// Specific data type of the abscissa: 17 time (s), 18 frequency (Hz).
-    pub abscissa_type: i64,
-    /// Specific data type of the ordinate (numerator): 8 displacement, 11 velocity,
-    /// 12 acceleration, 13 excitation force.
-    pub ordinate_type: i64,
-    /// Specific data type of the denominator: 13 excitation force (an FRF), 0 none.
-    pub denominator_type: i64,
-    /// The abscissa.
-    pub abscissa: Abscissa,
-    /// The ordinate values (SI units of the ordinate over the denominator).
-    pub values: Vec<c64>,
-    /// Complex ordinate (ordinate data type 6), else real (4; the imaginary parts unused).
-    pub complex: bool,
-}
-
-/// The UFF node and direction of DOF `label`: its node number and 1..6 for ux … rz, 0 for a
-/// scalar coordinate.
-pub fn node_direction(label: nlsim_kernel::DofLabel) -> (i64, i64) {
-    use nlsim_kernel::Component as C;
-    let d = match label.component {
-        C::Ux => 1,
-        C::Uy => 2,
-        C::Uz => 3,
-        C::Rx => 4,
-        C::Ry => 5,
-        C::Rz => 6,
-        C::U => 0,
-    };
-    (i64::try_from(label.node).unwrap_or(i64::MAX), d)
-}
-
-/// The UFF specific data type of a response quantity (8, 11, 12).
-pub fn quantity_code(q: Quantity) -> i64 {
-    match q {
-        Quantity::Displacement => 8,
-        Quantity::Velocity => 11,
-        Quantity::Acceleration => 12,
-    }
-}
-
-fn axis_label(code: i64) -> (&'static str, &'static str) {
-    match code {
-        17 => ("Time", "s"),
-        18 => ("Frequency", "Hz"),
-        8 => ("Displacement", "m"),
-        11 => ("Velocity", "m/s"),
-        12 => ("Acceleration", "m/s^2"),
-        13 => ("Force", "N"),
-        _ => ("NONE", "NONE"),
-    }
-}
-
-/// Writes `functions` as datasets 58 (ASCII: records 1–11 in their fixed columns, double
-/// precision values `E20.11`, an uneven abscissa `E13.5` as the format gives it) or 58b
-/// (binary little-endian IEEE doubles, the header's byte count exact), atomically. ID lines
-/// 2–5 carry `nlsim` and the version; units are SI (the ordinate's over the denominator's).
-pub fn write_functions(path: &Path, functions: &[UffFunction], binary: bool) -> Result<()> {
-    let mut out: Vec<u8> = Vec::new();
-    for (i, f) in functions.iter().enumerate() {
-        let n = f.values.len();
-        if let Abscissa::Uneven(x) = &f.abscissa
-            && x.len() != n
-        {
-            return Err(Error::Usage(format!(
-                "{}: function {} ('{}'): {} abscissa values for {n} ordinate values",
-                path.display(),
-                i + 1,
-                f.id,
-                x.len()
-            )));
-        }
-        let mut data = Vec::with_capacity(3 * n);
-        for (k, v) in f.values.iter().enumerate() {
-            if let Abscissa::Uneven(x) = &f.abscissa {
-                data.push(x[k]);
-            }
-            data.push(v.re);
-            if f.complex {
-                data.push(v.im);
-            }
-        }
-        let mut s = String::new();
-        let _ = writeln!(s, "{:>6}", -1);
-        if binary {
-            let _ = writeln!(
-                s,
-                "{:>6}b{:>6}{:>6}{:>12}{:>12}{:>6}{:>6}{:>12}{:>12}",
-                58,
-                1,
-                2,
-                11,
-                data.len() * 8,
-                0,
-                0,
-                0,
-                0
-            );
-        } else {
-            let _ = writeln!(s, "{:>6}", 58);
-        }
-        let id: String = f.id.chars().take(80).collect();
-        let _ = writeln!(s, "{id:<80}");
-        let _ = writeln!(s, "{:<80}", format!("nlsim {}", env!("CARGO_PKG_VERSION")));
-        for _ in 0..3 {
-            let _ = writeln!(s, "{:<80}", "NONE");
-        }
-        let _ = writeln!(
-            s,
-            "{:>5}{:>10}{:>5}{:>10} {:<10}{:>10}{:>4} {:<10}{:>10}{:>4}",
-            f.function_type,
-            0,
-            0,
-            0,
-            "NONE",
-            f.response.0,
-            f.response.1,
-            "NONE",
-            f.reference.0,
-            f.reference.1
-        );
-        let (spacing, start, step) = match f.abscissa {
-            Abscissa::Even { start, step } => (1, start, step),
-            Abscissa::Uneven(_) => (0, 0.0, 0.0),
-        };
-        let _ = writeln!(
-            s,
-            "{:>10}{:>10}{:>10}{:>13.5e}{:>13.5e}{:>13.5e}",
-            if f.complex { 6 } else { 4 },
-            n,
-            spacing,
-            start,
-            step,
-            0.0
-        );
-        for t in [f.abscissa_type, f.ordinate_type, f.denominator_type, 0] {
-            let (label, units) = axis_label(t);
-            let _ = writeln!(s, "{t:>10}{:>5}{:>5}{:>5} {label:<20} {units:<20}", 0, 0, 0);
-        }
-        out.extend(s.as_bytes());
-        if binary {
-            for v in &data {
-                out.extend(v.to_le_bytes());
-            }
-            out.push(b'\n');
-        } else {
-            let mut body = String::new();
-            match (&f.abscissa, f.complex) {
-                (Abscissa::Uneven(_), true) => {
-                    for c in data.chunks(3) {
-                        let _ = writeln!(body, "{:>13.5e}{:>20.11e}{:>20.11e}", c[0], c[1], c[2]);
-                    }
-                }
-                (Abscissa::Uneven(_), false) => {
-                    for c in data.chunks(2) {
-                        let _ = writeln!(body, "{:>13.5e}{:>20.11e}", c[0], c[1]);
-                    }
-                }
-                (Abscissa::Even { .. }, _) => {
-                    for row in data.chunks(4) {
-                        for v in row {
-                            let _ = write!(body, "{v:>20.11e}");
-                        }
-                        body.push('\n');
-                    }
-                }
-            }
-            out.extend(body.as_bytes());
-        }
-        out.extend(format!("{:>6}\n", -1).as_bytes());
-    }
-    let tmp = crate::formats::files::temp_path(path);
-    std::fs::write(&tmp, out)
-        .and_then(|()| std::fs::rename(&tmp, path))
-        .map_err(|source| Error::Io {
-            path: path.to_path_buf(),
-            source,
-        })
 }
 
 /// Linear FRF test data from datasets 58 of one reference DOF on one frequency grid: the

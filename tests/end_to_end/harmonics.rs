@@ -291,3 +291,118 @@ fn bad_raw_records_are_refused_by_name() {
         &["--harmonics 0"],
     );
 }
+
+/// Time records as universal files (datasets 58 of function type 1) written by pyuff 2.5.8,
+/// the independent writer, ASCII and binary, with no names in their ID lines: signals found
+/// by DOF (the force at the drive's DOF, responses at the sensors'), and their harmonics
+/// those of the closed-form signals (an exact multi-sine: to 1e-9 of the fundamental, the
+/// written values' precision). The records `nlsim simulate --out F.uff` writes give the
+/// harmonics of its CSV.
+#[test]
+fn universal_file_time_records() {
+    let d = scratch("harmonics-uff");
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    let script = r#"
+import sys, numpy as np, pyuff
+d = sys.argv[1]
+rate, f = 2000.0, 10.0
+t = np.arange(8000) / rate
+w = 2 * np.pi * f * t
+signals = [(21, 13, 0.2 * np.sin(w)),
+           (21, 12, 3.0 * np.sin(w - 0.4) + 0.1 * np.cos(3 * w)),
+           (11, 12, 1.5 * np.sin(w - 0.5))]
+for name, binary in [("ascii", 0), ("binary", 1)]:
+    u = pyuff.UFF(d + "/" + name + ".uff")
+    for node, kind, x in signals:
+        ds = pyuff.prepare_58(binary=binary, func_type=1, rsp_node=node, rsp_dir=3,
+                              ref_node=0, ref_dir=0, data=x, x=t, id1="NONE",
+                              rsp_ent_name="ent", ref_ent_name="ent", abscissa_spacing=1,
+                              abscissa_spec_data_type=17, ordinate_spec_data_type=kind,
+                              orddenom_spec_data_type=0)
+        u.write_sets(ds, mode="add")
+print("ok")
+"#;
+    let out = Command::new(python_h5py())
+        .args(["-c", script, d.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // The drive's fundamental is turned real: 0.2 sin = 0.2 e^{-iπ/2} becomes 0.2, and
+    // harmonic k of every signal turns by e^{ikπ/2}.
+    let want = [
+        ("tip", 1, faer::c64::from_polar(3.0, -0.4)),
+        ("tip", 3, faer::c64::new(0.0, -0.1)),
+        ("mid", 1, faer::c64::from_polar(1.5, -0.5)),
+    ];
+    for name in ["ascii", "binary"] {
+        let data = p(&format!("{name}.csv"));
+        let (rc, o, e) = nlsim(&[
+            "harmonics",
+            "ecl_beam",
+            &p(&format!("{name}.uff")),
+            "--out",
+            &data,
+        ]);
+        assert_eq!(rc, 0, "{name}: {o}{e}");
+        let td = nlsim::formats::test_data::read_csv(Path::new(&data)).unwrap();
+        assert_eq!(td.input, "shaker");
+        let step = &td.sweeps[0].steps[0];
+        assert!(
+            (step.force[0] - faer::c64::new(0.2, 0.0)).norm() < 1e-9 * 0.2,
+            "{name}"
+        );
+        for (ch, k, z) in want {
+            let c = td.channels.iter().position(|c| c.name == ch).unwrap();
+            let got = step.response[(c, k - 1)];
+            assert!(
+                (got - z).norm() < 1e-9 * 3.0,
+                "{name}: {ch} harmonic {k}: {got} vs {z}"
+            );
+        }
+    }
+    // nlsim's own universal time records equal its CSV ones.
+    for (ext, out) in [("uff", "u.csv"), ("csv", "c.csv")] {
+        let raw = p(&format!("raw.{ext}"));
+        let (rc, o, e) = nlsim(&[
+            "simulate",
+            "ecl_beam",
+            "--excitation",
+            "stepped:f0=22,f1=24,steps=2,dwell=6",
+            "--rate",
+            "2000",
+            "--duration",
+            "12",
+            "--out",
+            &raw,
+        ]);
+        assert_eq!(rc, 0, "{o}{e}");
+        let (rc, o, e) = nlsim(&["harmonics", "ecl_beam", &raw, "--out", &p(out)]);
+        assert_eq!(rc, 0, "{ext}: {o}{e}");
+    }
+    let (u, c) = (
+        nlsim::formats::test_data::read_csv(Path::new(&p("u.csv"))).unwrap(),
+        nlsim::formats::test_data::read_csv(Path::new(&p("c.csv"))).unwrap(),
+    );
+    assert_eq!(u.sweeps[0].steps.len(), c.sweeps[0].steps.len());
+    for (a, b) in u.sweeps[0].steps.iter().zip(&c.sweeps[0].steps) {
+        let scale = b.response[(0, 0)].norm();
+        for (x, y) in a
+            .response
+            .col_iter()
+            .flat_map(|c| c.iter().copied().collect::<Vec<_>>())
+            .zip(
+                b.response
+                    .col_iter()
+                    .flat_map(|c| c.iter().copied().collect::<Vec<_>>()),
+            )
+        {
+            // The CSV holds 10 significant digits, the universal file 12.
+            assert!((x - y).norm() < 1e-8 * scale, "{x} vs {y}");
+        }
+    }
+}
