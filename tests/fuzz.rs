@@ -301,6 +301,27 @@ fn hostile_attr(loc: &hdf5_metno::Group, name: &str, rng: &mut Rng) -> hdf5_metn
     Ok(())
 }
 
+/// What `nlsim harmonics` does with time histories that read: the steps found from the
+/// drive and one dwell fitted over the whole record; `Some` with the error when refused.
+fn fit_records(r: nlsim::Result<nlsim::formats::time_records::TimeRecords>) -> Option<String> {
+    let r = match r {
+        Ok(r) => r,
+        Err(e) => return Some(e.to_string()),
+    };
+    let names: Vec<&str> = r.names.iter().map(String::as_str).collect();
+    let signals: Vec<&[f64]> = r.columns.iter().map(Vec::as_slice).collect();
+    let _ = nlsim::calib::detect_steps(signals[0], r.rate_hz, 5e-3);
+    nlsim::calib::extract_dwell(
+        &names,
+        &signals,
+        r.rate_hz,
+        None,
+        &nlsim::calib::DwellConfig::default(),
+    )
+    .err()
+    .map(|e| e.to_string())
+}
+
 /// The fuzzing itself; run by `readers_survive_mutated_inputs` in a memory-limited child.
 #[test]
 #[ignore = "run under a memory limit by readers_survive_mutated_inputs"]
@@ -560,23 +581,9 @@ fn fuzz_inner() {
     let rec_path = dir.join("records.csv");
     panics.extend(survive("time histories", 2000 * scale(), |_| {
         let text = mutate(rng.pick(&records).clone().as_str(), &mut rng);
-        match nlsim::formats::time_records::parse_records(&text, &rec_path) {
-            Ok(r) => {
-                let names: Vec<&str> = r.names.iter().map(String::as_str).collect();
-                let signals: Vec<&[f64]> = r.columns.iter().map(Vec::as_slice).collect();
-                let _ = nlsim::calib::detect_steps(signals[0], r.rate_hz, 5e-3);
-                nlsim::calib::extract_dwell(
-                    &names,
-                    &signals,
-                    r.rate_hz,
-                    None,
-                    &nlsim::calib::DwellConfig::default(),
-                )
-                .err()
-                .map(|e| e.to_string())
-            }
-            Err(e) => Some(e.to_string()),
-        }
+        fit_records(nlsim::formats::time_records::parse_records(
+            &text, &rec_path,
+        ))
     }));
     let tables =
         ["# steps\nstart_s,end_s,frequency_hz,sweep\n0,0.5,5.0,up\n0.5,1.1,5.5,up\n".to_string()];
@@ -700,24 +707,10 @@ fn fuzz_inner() {
     let times = [std::fs::read_to_string(&uff_time).unwrap()];
     panics.extend(survive("uff58 time records", 3000 * scale(), |_| {
         let text = mutate(rng.pick(&times).clone().as_str(), &mut rng);
-        let r = nlsim::formats::uff::parse(text.as_bytes(), &uff_time)
-            .and_then(|v| nlsim::formats::time_records::from_uff(&v, &uff_time));
-        match r {
-            Ok(r) => {
-                let names: Vec<&str> = r.names.iter().map(String::as_str).collect();
-                let signals: Vec<&[f64]> = r.columns.iter().map(Vec::as_slice).collect();
-                nlsim::calib::extract_dwell(
-                    &names,
-                    &signals,
-                    r.rate_hz,
-                    None,
-                    &nlsim::calib::DwellConfig::default(),
-                )
-                .err()
-                .map(|e| e.to_string())
-            }
-            Err(e) => Some(e.to_string()),
-        }
+        fit_records(
+            nlsim::formats::uff::parse(text.as_bytes(), &uff_time)
+                .and_then(|v| nlsim::formats::time_records::from_uff(&v, &uff_time)),
+        )
     }));
 
     // Calibration, plan and test files (parsed and checked; no model is loaded).

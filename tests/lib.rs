@@ -77,6 +77,36 @@ fn python_h5py() -> String {
     String::from_utf8_lossy(&out.stdout).trim().to_string()
 }
 
+/// Runs the Python `script` (with h5py, pyuff and numpy) on `dir` as its one argument and
+/// panics with its output unless it exits 0 having printed `ok`.
+fn python_checks(script: &str, dir: &Path) {
+    let out = Command::new(python_h5py())
+        .args(["-c", script, dir.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success() && text.contains("ok"),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// `(estimate, Cramér–Rao std)` per parameter of an estimates CSV (`calibrate --out`).
+fn estimates(path: &Path) -> std::collections::HashMap<String, (f64, f64)> {
+    let text = std::fs::read_to_string(path).unwrap();
+    text.lines()
+        .skip(1)
+        .map(|l| {
+            let c: Vec<&str> = l.split(',').collect();
+            (
+                c[0].to_string(),
+                (c[1].parse().unwrap(), c[2].parse().unwrap()),
+            )
+        })
+        .collect()
+}
+
 /// Runs `scripts/h5check.py report DIR` (h5py): panics with its report when a check fails;
 /// what it printed otherwise.
 fn h5check_report(dir: &Path) -> String {
@@ -3304,16 +3334,7 @@ for name, binary, even in [("a", 0, 1), ("b", 1, 1), ("c", 0, 0), ("e", 1, 0)]:
         u.write_sets(ds, mode="add")
 print("ok")
 "#;
-        let out = Command::new(python_h5py())
-            .args(["-c", script, d.to_str().unwrap()])
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success() && String::from_utf8_lossy(&out.stdout).contains("ok"),
-            "{}{}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        );
+        python_checks(script, &d);
         for name in ["a", "b", "c", "e"] {
             let f = p(&format!("py_{name}.uff"));
             let recs = uff::read(Path::new(&f)).unwrap_or_else(|e| panic!("{f}: {e}"));
@@ -3386,16 +3407,7 @@ for r, s in enumerate(sets):
                 assert s[c][k] == 0.0, (r, nodes[k], c)
 print("ok", checked)
 "#;
-        let out = Command::new(python_h5py())
-            .args(["-c", script, d.to_str().unwrap()])
-            .output()
-            .unwrap();
-        let text = String::from_utf8_lossy(&out.stdout);
-        assert!(
-            out.status.success() && text.contains("ok"),
-            "{text}{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        python_checks(script, &d);
         // A model of scalar coordinates: one value per node (characteristic 1).
         let (rc, o, e) = nlsim(&["modes", "duffing_fig3", "--out", &p("s.uff")]);
         assert_eq!(rc, 0, "{o}\n{e}");

@@ -187,24 +187,26 @@ fn fit(x: &[f64], theta: f64, h: usize, start: usize, len: usize, origin: f64, g
     }
 }
 
+/// The upward crossings of `x` through its mean, as fractional sample indices (linear
+/// interpolation between the samples around each).
+fn mean_crossings(x: &[f64]) -> Vec<f64> {
+    let mean = x.iter().sum::<f64>() / x.len() as f64;
+    let mut crossings = Vec::new();
+    for n in 1..x.len() {
+        let (a, b) = (x[n - 1] - mean, x[n] - mean);
+        if a < 0.0 && b >= 0.0 {
+            crossings.push((n - 1) as f64 + a / (a - b));
+        }
+    }
+    crossings
+}
+
 /// The drive frequency from its upward mean crossings (Hz), when none is given: good to
 /// about the period-to-period jitter, refined afterwards.
 fn crossing_frequency(drive: &[f64], rate_hz: f64) -> Option<f64> {
-    let mean = drive.iter().sum::<f64>() / drive.len() as f64;
-    let mut first = None;
-    let mut last = 0.0;
-    let mut count = 0usize;
-    for n in 1..drive.len() {
-        let (a, b) = (drive[n - 1] - mean, drive[n] - mean);
-        if a < 0.0 && b >= 0.0 {
-            let t = (n - 1) as f64 + a / (a - b);
-            first.get_or_insert(t);
-            last = t;
-            count += 1;
-        }
-    }
-    let first = first?;
-    (count >= 3 && last > first).then(|| (count - 1) as f64 / (last - first) * rate_hz)
+    let c = mean_crossings(drive);
+    let (&first, &last) = (c.first()?, c.last()?);
+    (c.len() >= 3 && last > first).then(|| (c.len() - 1) as f64 / (last - first) * rate_hz)
 }
 
 /// Per-period fits of every signal over `[start, end)`, origin at `origin`: `(block start,
@@ -523,14 +525,7 @@ pub fn detect_steps(drive: &[f64], rate_hz: f64, tolerance: f64) -> Vec<StepWind
     if drive.len() < 3 || rate_hz.is_nan() || rate_hz <= 0.0 {
         return Vec::new();
     }
-    let mean = drive.iter().sum::<f64>() / drive.len() as f64;
-    let mut crossings = Vec::new();
-    for n in 1..drive.len() {
-        let (a, b) = (drive[n - 1] - mean, drive[n] - mean);
-        if a < 0.0 && b >= 0.0 {
-            crossings.push((n - 1) as f64 + a / (a - b));
-        }
-    }
+    let crossings = mean_crossings(drive);
     if crossings.len() < 4 {
         return Vec::new();
     }

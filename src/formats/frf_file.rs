@@ -218,7 +218,12 @@ fn write_uff(
             });
         }
     }
-    crate::formats::uff_write::write_functions(path, &functions, false)
+    // `path` is already the temporary file of the atomic write.
+    let bytes = crate::formats::uff_write::encode_functions(path, &functions, false)?;
+    std::fs::write(path, bytes).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 fn write_csv(

@@ -114,7 +114,12 @@ fn write_uff(path: &Path, model: &Model, h: &TimeHistory, info: &RunInfo) -> Res
             path.display()
         )));
     }
-    crate::formats::uff_write::write_functions(path, &functions, false)
+    // `path` is already the temporary file of the atomic write.
+    let bytes = crate::formats::uff_write::encode_functions(path, &functions, false)?;
+    std::fs::write(path, bytes).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 /// The CSV column of sensor output `name` measuring `quantity`:

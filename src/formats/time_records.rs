@@ -20,6 +20,7 @@
 //! numbers take no more memory than their text); errors name the file, line and column.
 
 use crate::error::{Error, Result};
+use crate::formats::test_data::finite_cell;
 use std::path::Path;
 
 /// Time histories read from a CSV file.
@@ -60,17 +61,17 @@ fn data_error(path: &Path, line: usize, message: String) -> Error {
     }
 }
 
-fn number(cell: &str, column: usize, name: &str) -> std::result::Result<f64, String> {
-    cell.trim()
-        .parse::<f64>()
-        .ok()
-        .filter(|v| v.is_finite())
-        .ok_or_else(|| {
-            format!(
-                "column {column} ({name}): {} is not a finite number",
-                crate::formats::files::quoted(cell.trim())
-            )
-        })
+/// A data row's cells, trimmed; an error naming the line unless there is one per column.
+fn row<'a>(path: &Path, line: usize, text: &'a str, columns: usize) -> Result<Vec<&'a str>> {
+    let cells: Vec<&str> = text.split(',').map(str::trim).collect();
+    if cells.len() != columns {
+        return Err(data_error(
+            path,
+            line,
+            format!("{} cells; the header names {columns} columns", cells.len()),
+        ));
+    }
+    Ok(cells)
 }
 
 /// The lines that hold data: 1-based line number and text, comments and blank lines left
@@ -139,20 +140,9 @@ pub fn parse_records(text: &str, path: &Path) -> Result<TimeRecords> {
     let mut columns = vec![Vec::new(); names.len() - 1];
     let mut at = Vec::new();
     for (line, l) in lines {
-        let cells: Vec<&str> = l.split(',').collect();
-        if cells.len() != names.len() {
-            return Err(data_error(
-                path,
-                line,
-                format!(
-                    "{} cells; the header names {} columns",
-                    cells.len(),
-                    names.len()
-                ),
-            ));
-        }
-        for (j, c) in cells.iter().enumerate() {
-            let v = number(c, j + 1, &names[j]).map_err(|m| data_error(path, line, m))?;
+        let cells = row(path, line, l, names.len())?;
+        for j in 0..cells.len() {
+            let v = finite_cell(&cells, &names, j).map_err(|m| data_error(path, line, m))?;
             if j == 0 {
                 time.push(v);
             } else {
@@ -249,20 +239,8 @@ pub fn parse_step_table(text: &str, path: &Path) -> Result<Vec<StepRow>> {
     let (freq, sweep) = (col("frequency_hz"), col("sweep"));
     let mut rows = Vec::new();
     for (line, l) in lines {
-        let cells: Vec<&str> = l.split(',').map(str::trim).collect();
-        if cells.len() != names.len() {
-            return Err(data_error(
-                path,
-                line,
-                format!(
-                    "{} cells; the header names {} columns",
-                    cells.len(),
-                    names.len()
-                ),
-            ));
-        }
-        let num =
-            |j: usize| number(cells[j], j + 1, names[j]).map_err(|m| data_error(path, line, m));
+        let cells = row(path, line, l, names.len())?;
+        let num = |j: usize| finite_cell(&cells, &names, j).map_err(|m| data_error(path, line, m));
         let (s, e) = (num(start)?, num(end)?);
         if e <= s {
             return Err(data_error(

@@ -109,11 +109,17 @@ fn axis_label(code: i64) -> (&'static str, &'static str) {
     }
 }
 
-/// Writes `functions` as datasets 58 (ASCII: records 1–11 in their fixed columns, double
-/// precision values `E20.11`, an uneven abscissa `E13.5` as the format gives it) or 58b
-/// (binary little-endian IEEE doubles, the header's byte count exact), atomically. ID lines
-/// 2–5 carry `nlsim` and the version; units are SI (the ordinate's over the denominator's).
+/// Writes `functions` as datasets 58 to `path`, atomically ([`encode_functions`]).
 pub fn write_functions(path: &Path, functions: &[UffFunction], binary: bool) -> Result<()> {
+    crate::formats::files::write_bytes_atomically(path, &encode_functions(path, functions, binary)?)
+}
+
+/// The bytes of `functions` as datasets 58 (ASCII: records 1–11 in their fixed columns,
+/// double precision values `E20.11`, an uneven abscissa `E13.5` as the format gives it) or
+/// 58b (binary little-endian IEEE doubles, the header's byte count exact). ID lines 2–5
+/// carry `nlsim` and the version; units are SI (the ordinate's over the denominator's).
+/// `path` names the destination in errors.
+pub fn encode_functions(path: &Path, functions: &[UffFunction], binary: bool) -> Result<Vec<u8>> {
     let mut out: Vec<u8> = Vec::new();
     for (i, f) in functions.iter().enumerate() {
         let n = f.values.len();
@@ -227,11 +233,5 @@ pub fn write_functions(path: &Path, functions: &[UffFunction], binary: bool) -> 
         }
         out.extend(format!("{:>6}\n", -1).as_bytes());
     }
-    let tmp = crate::formats::files::temp_path(path);
-    std::fs::write(&tmp, out)
-        .and_then(|()| std::fs::rename(&tmp, path))
-        .map_err(|source| Error::Io {
-            path: path.to_path_buf(),
-            source,
-        })
+    Ok(out)
 }

@@ -45,6 +45,12 @@ impl std::str::FromStr for Magnitude {
     }
 }
 
+/// The magnitude axis of measured-against-model FRF plots: harmonic `k` of a `quantity`
+/// response over the fundamental force, `|acceleration h3| / |F1| (m/s^2/N)`.
+pub fn harmonic_over_force_axis(quantity: nlsim_kernel::Quantity, k: usize) -> String {
+    format!("|{} h{k}| / |F1| ({}/N)", quantity.as_str(), unit(quantity))
+}
+
 /// Plots the FRF of sensor `sensor` (responses `y` from `commands::frf::responses`) as SVG or PNG by the
 /// extension of `path`: one panel per harmonic carrying response, each on its own scale,
 /// magnitude read as `magnitude`, with a phase panel beside each when `phase`, a gap across

@@ -17,21 +17,6 @@ const CAL: &str = "model = \"ecl_beam\"\ndata = \"volt.csv\"\nharmonics = 3\nmod
     [[param]]\nname = \"mode2.zeta\"\nlower = 0.001\nupper = 0.1\n\n\
     [[param]]\nname = \"input_gain\"\nlower = 1.0\nupper = 50.0\n";
 
-/// `(estimate, Cramér–Rao std)` per parameter of an estimates CSV.
-fn estimates(path: &Path) -> std::collections::HashMap<String, (f64, f64)> {
-    let text = std::fs::read_to_string(path).unwrap();
-    text.lines()
-        .skip(1)
-        .map(|l| {
-            let c: Vec<&str> = l.split(',').collect();
-            (
-                c[0].to_string(),
-                (c[1].parse().unwrap(), c[2].parse().unwrap()),
-            )
-        })
-        .collect()
-}
-
 /// The open-loop test recorded as voltage (the coil voltage over the amplifier gain, the
 /// same for every step of a sweep): read back from CSV and HDF5 as a voltage drive; then the
 /// calibration through the same shaker gives the cubic stiffness, the damping and the

@@ -5,21 +5,6 @@
 
 use super::*;
 
-/// `(estimate, Cramér–Rao std)` per parameter of an estimates CSV.
-fn estimates(path: &Path) -> std::collections::HashMap<String, (f64, f64)> {
-    let text = std::fs::read_to_string(path).unwrap();
-    text.lines()
-        .skip(1)
-        .map(|l| {
-            let c: Vec<&str> = l.split(',').collect();
-            (
-                c[0].to_string(),
-                (c[1].parse().unwrap(), c[2].parse().unwrap()),
-            )
-        })
-        .collect()
-}
-
 /// The ECL beam (cubic tip spring 6e9 N/m³, Rayleigh damping) through five 5-s dwells of
 /// 0.2 N from 21.5 to 24.5 Hz, FOH at 4 kHz: the records with 1 % noise added to every
 /// channel (of its rms, seeded), their harmonics, and a calibration of the cubic stiffness
@@ -322,16 +307,7 @@ for name, binary in [("ascii", 0), ("binary", 1)]:
         u.write_sets(ds, mode="add")
 print("ok")
 "#;
-    let out = Command::new(python_h5py())
-        .args(["-c", script, d.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
+    python_checks(script, &d);
     // The drive's fundamental is turned real: 0.2 sin = 0.2 e^{-iπ/2} becomes 0.2, and
     // harmonic k of every signal turns by e^{ikπ/2}.
     let want = [

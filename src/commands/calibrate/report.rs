@@ -434,11 +434,7 @@ pub fn write_report(dir: &Path, run: &CalibrationRun) -> Result<Vec<PathBuf>> {
                     run.prepared.model_name, ch.name
                 ),
                 x_desc: "frequency (Hz)".into(),
-                y_desc: format!(
-                    "|{} h{k}| / |F1| ({}/N)",
-                    ch.quantity.as_str(),
-                    crate::formats::files::unit(ch.quantity)
-                ),
+                y_desc: crate::present::frf_plot::harmonic_over_force_axis(ch.quantity, k),
                 series,
             };
             let safe = crate::formats::files::file_name_part(&ch.name);

@@ -55,7 +55,7 @@ fn quantity(s: &str) -> Option<Quantity> {
 
 /// Cell `j` of a CSV row as a finite number; the message names the column (1-based), its
 /// name from `names` and the cell.
-fn finite_cell(
+pub(crate) fn finite_cell(
     cells: &[&str],
     names: &[impl AsRef<str>],
     j: usize,
