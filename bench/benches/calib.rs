@@ -20,6 +20,10 @@
 //!   samples in all), 3 harmonics, 41.37 samples per period, the frequency refined and the
 //!   transient found; throughput in samples (of every channel) per second (goal ≥ 10⁷ per
 //!   core).
+//! - `track/…`: harmonics tracked along a sine sweep ([`nlsim_calib::track_sweep`]): 4·10⁵
+//!   samples of a drive and three responses (1.6·10⁶ in all), 20 → 30 Hz, 3 harmonics,
+//!   windows of 10 periods, 100 points (every sample of the sweep's windows is fitted once);
+//!   throughput in samples of every channel per second.
 //!
 //! Run with `cargo bench -p nlsim-bench --bench calib -- --quick --noplot`.
 
@@ -138,5 +142,34 @@ fn dwell(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench, bracket_fe, dwell);
+fn track(c: &mut Criterion) {
+    use std::f64::consts::PI;
+    let (n, rate, f0, r) = (400_000, 2000.0, 20.0, 0.05);
+    let signal = |amp: f64, lag: f64| -> Vec<f64> {
+        (0..n)
+            .map(|i| {
+                let t = i as f64 / rate;
+                let w = 2.0 * PI * (f0 * t + 0.5 * r * t * t);
+                amp * (1.0 + 0.001 * t) * (w - lag).sin() + 0.05 * amp * (3.0 * w).cos()
+            })
+            .collect()
+    };
+    let signals = [
+        signal(0.2, 0.0),
+        signal(3.0, 0.4),
+        signal(1.0, 0.5),
+        signal(0.1, 2.0),
+    ];
+    let refs: Vec<&[f64]> = signals.iter().map(Vec::as_slice).collect();
+    let names = ["drive", "a", "b", "c"];
+    let cfg = nlsim_calib::TrackConfig::default();
+    let mut g = c.benchmark_group("track");
+    g.throughput(criterion::Throughput::Elements((4 * n) as u64));
+    g.bench_function("sweep_4x400k", |b| {
+        b.iter(|| black_box(nlsim_calib::track_sweep(&names, &refs, rate, &cfg).unwrap()))
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench, bracket_fe, dwell, track);
 criterion_main!(benches);

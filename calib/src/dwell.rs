@@ -276,7 +276,7 @@ fn refine(drive: &[f64], mut theta: f64, h: usize, start: usize, end: usize) -> 
 }
 
 /// Checks the signals: equal lengths, finite samples. `names[i]` names signal `i` in errors.
-fn check(names: &[&str], signals: &[&[f64]]) -> Result<usize> {
+pub(crate) fn check_signals(names: &[&str], signals: &[&[f64]]) -> Result<usize> {
     let Some(n) = signals.first().map(|s| s.len()) else {
         return Err(Error::invalid(
             "dwell",
@@ -330,7 +330,7 @@ pub fn extract_dwell(
             format!("{}; it must be positive", cfg.settle_tolerance),
         ));
     }
-    let n = check(names, signals)?;
+    let n = check_signals(names, signals)?;
     let h = cfg.harmonics;
     let f0 = match frequency_hz {
         Some(f) if f.is_finite() && f > 0.0 => f,

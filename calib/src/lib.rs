@@ -17,6 +17,8 @@
 //! - [`stats`]: Cramér–Rao bounds, identifiability, estimate statistics;
 //! - [`plan`]: pre-test planning by Fisher information (design ranking, sensor placement,
 //!   multi-sine side tones);
+//! - [`dwell`], [`track`]: harmonics from raw time histories of stepped-sine dwells and of
+//!   slow sweeps;
 //! - [`shaker`]: a virtual stepped-sine test through an electrodynamic shaker model, with and
 //!   without off-line force control.
 //!
@@ -38,6 +40,7 @@ pub mod shaker;
 pub mod stats;
 mod step;
 pub mod synthetic;
+pub mod track;
 
 pub use calibrate::{
     Calibration, CalibrationConfig, Candidate, FoldBy, FoldResult, KFold, MAX_FOLDS,
@@ -69,3 +72,4 @@ pub use shaker::{
 };
 pub use stats::{CHI2_WARN, CramerRao};
 pub use synthetic::{Gaussian, SweepPlan, synthesize};
+pub use track::{Track, TrackConfig, TrackPoint, sweep_bias, sweep_rate_parameter, track_sweep};

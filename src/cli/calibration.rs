@@ -201,6 +201,18 @@ pub struct HarmonicsArgs {
     /// drive.
     #[arg(long, default_value_t = 5e-3)]
     step_tol: f64,
+    /// The records hold slow sine sweeps, not dwells: track the harmonics along each (the
+    /// whole record, or each row of the step table, is one sweep whose frequency rises or
+    /// falls throughout).
+    #[arg(long)]
+    sweep: bool,
+    /// Periods of the drive in each tracking window (even, 4 to 10000) with --sweep.
+    #[arg(long, default_value_t = 10, requires = "sweep")]
+    window_periods: usize,
+    /// Points per sweep, evenly spaced in frequency, with --sweep (fewer when the sweep
+    /// holds fewer windows: the windows do not overlap).
+    #[arg(long, default_value_t = 100, requires = "sweep")]
+    points: usize,
     /// Test data written, .csv or .h5 [default: RECORDS with `-harmonics.csv`, beside it].
     #[arg(long)]
     out: Option<std::path::PathBuf>,
@@ -230,6 +242,29 @@ impl HarmonicsArgs {
                 "--min-periods 0: a dwell needs at least one settled period".into(),
             ));
         }
+        if self.sweep {
+            if self.window_periods < 4
+                || !self.window_periods.is_multiple_of(2)
+                || self.window_periods > 10_000
+            {
+                return Err(crate::Error::Usage(format!(
+                    "--window-periods {}: give an even number of periods, 4 to 10000",
+                    self.window_periods
+                )));
+            }
+            if self.points == 0 {
+                return Err(crate::Error::Usage(
+                    "--points 0: track at least one point per sweep".into(),
+                ));
+            }
+            if self.exact_frequency {
+                return Err(crate::Error::Usage(
+                    "--exact-frequency is for dwells: a sweep's frequency is tracked from its \
+                     drive"
+                        .into(),
+                ));
+            }
+        }
         if self.exact_frequency && self.steps.is_none() {
             return Err(crate::Error::Usage(
                 "--exact-frequency takes the step table's frequencies: give --steps TABLE".into(),
@@ -256,6 +291,11 @@ impl HarmonicsArgs {
                 estimate_frequency: !self.exact_frequency,
             },
             step_tolerance: self.step_tol,
+            sweep: self.sweep.then_some(nlsim_calib::TrackConfig {
+                harmonics: self.harmonics,
+                window_periods: self.window_periods,
+                points: self.points,
+            }),
             out,
         })
     }

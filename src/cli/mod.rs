@@ -73,12 +73,13 @@ pub enum Command {
     /// log-amplitude and phase errors, points inside the band, chi2, peaks). See
     /// docs/calibration.md.
     Validate(ValidateArgs),
-    /// Harmonics from the time histories of a stepped-sine test (CSV or universal file
-    /// dataset 58 time records): the dwells found from a
-    /// step table or from the drive's frequency, each dwell's transient left out, the drive
-    /// and response harmonics fitted on whole periods at the refined frequency, their
-    /// standard deviations from the period-to-period scatter; writes test data that `nlsim
-    /// calibrate` reads (docs/file-formats.md, "Time histories").
+    /// Harmonics from the time histories of a stepped-sine test or a slow sine sweep (CSV
+    /// or universal file dataset 58 time records): the dwells found from a step table or
+    /// from the drive's frequency, each dwell's transient left out, the drive and response
+    /// harmonics fitted on whole periods at the refined frequency, their standard
+    /// deviations from the period-to-period scatter; with --sweep, the harmonics tracked
+    /// along each sweep with a warning where it is too fast for the model's damping; writes
+    /// test data that `nlsim calibrate` reads (docs/file-formats.md, "Time histories").
     Harmonics(HarmonicsArgs),
     /// Pre-test planning: rank candidate tests (drive points, force levels, multi-sine
     /// signals, frequency bands, sensor sets, measured harmonics) by the Fisher information

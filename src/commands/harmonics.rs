@@ -3,14 +3,17 @@
 //! from the drive's frequency, each dwell's transient found and left out, the drive and
 //! response harmonics `1..=H` fitted by least squares on a whole number of periods at the
 //! refined frequency ([`nlsim_calib::extract_dwell`]), and each harmonic's standard
-//! deviation from the period-to-period scatter written as the step's noise.
+//! deviation from the period-to-period scatter written as the step's noise. With a sweep
+//! request the records hold slow sine sweeps instead, and the harmonics are tracked along
+//! each ([`nlsim_calib::track_sweep`]), with a warning where the sweep is too fast for the
+//! damping of a mode it passes.
 
 use crate::error::{Error, Result};
 use crate::formats::time_records::{StepRow, TimeRecords};
 use faer::{Mat, c64};
 use nlsim_calib::{
-    Channel, Drive, DwellConfig, Noise, Step, Sweep, SweepDirection, TestData, detect_steps,
-    extract_dwell,
+    Channel, Drive, DwellConfig, Noise, Step, Sweep, SweepDirection, TestData, TrackConfig,
+    detect_steps, extract_dwell, sweep_rate_parameter, track_sweep,
 };
 use std::path::PathBuf;
 
@@ -37,6 +40,9 @@ pub struct HarmonicsRequest {
     pub dwell: DwellConfig,
     /// Relative frequency change that starts a new step when steps are found from the drive.
     pub step_tolerance: f64,
+    /// `Some`: the records hold sine sweeps, tracked with these settings (the whole record,
+    /// or each row of the step table, one sweep); `None`: dwells.
+    pub sweep: Option<TrackConfig>,
     /// The test data written (.csv or .h5).
     pub out: PathBuf,
 }
@@ -60,13 +66,40 @@ pub struct DwellLine {
     pub kept: bool,
 }
 
+/// One tracked sweep's outcome, for the summary.
+#[derive(Debug, Clone)]
+pub struct TrackLine {
+    /// Sweep label.
+    pub sweep: String,
+    /// Where it came from: `line N` of the step table or `samples A–B`.
+    pub origin: String,
+    /// Points tracked.
+    pub points: usize,
+    /// Lowest and highest frequency tracked (Hz).
+    pub band_hz: (f64, f64),
+    /// Largest `|ṙ|` along it (Hz/s).
+    pub rate_hz_per_s: f64,
+    /// The mode the sweep passes fastest for its damping: `(mode number, f_r Hz, ζ_r, η)`
+    /// ([`nlsim_calib::sweep_rate_parameter`]); `None` when it passes no mode of the model.
+    pub worst_mode: Option<(usize, f64, f64, f64)>,
+}
+
+/// A sweep whose sweep-rate parameter `η` exceeds this at a mode it passes is too fast: its
+/// tracked response there is off by more than about 1 % ([`nlsim_calib::sweep_bias`]).
+pub const ETA_WARN: f64 = 1e-2;
+
+/// Modes looked at for the sweep-rate check (the lowest ones of the model).
+const CHECKED_MODES: usize = 30;
+
 /// The outcome of [`run`].
 #[derive(Debug, Clone)]
 pub struct HarmonicsRun {
     /// The test data.
     pub data: TestData,
-    /// Every dwell, kept or left out.
+    /// Every dwell, kept or left out (none for sweeps).
     pub dwells: Vec<DwellLine>,
+    /// Every tracked sweep (none for dwells).
+    pub tracks: Vec<TrackLine>,
     /// Sampling rate of the records (Hz).
     pub rate_hz: f64,
 }
@@ -249,6 +282,13 @@ pub fn run(req: &HarmonicsRequest) -> Result<HarmonicsRun> {
             let rows = crate::formats::time_records::read_step_table(table)?;
             windows_from_table(&rows, &rec, table)?
         }
+        None if req.sweep.is_some() => vec![Window {
+            start: 0,
+            end: rec.columns[d].len(),
+            frequency_hz: None,
+            sweep: "sweep1".into(),
+            origin: format!("samples 1–{}", rec.columns[d].len()),
+        }],
         None => {
             let found = detect_steps(&rec.columns[d], rec.rate_hz, req.step_tolerance);
             if found.is_empty() {
@@ -273,8 +313,38 @@ pub fn run(req: &HarmonicsRequest) -> Result<HarmonicsRun> {
     let names: Vec<&str> = columns.iter().map(|&j| rec.names[j].as_str()).collect();
     let h = req.dwell.harmonics;
     let mut dwells = Vec::new();
+    let mut tracks = Vec::new();
     let mut steps: Vec<(String, Step)> = Vec::new();
-    for w in &windows {
+    if let Some(cfg) = &req.sweep {
+        let modes = mode_table(model, &drive)?;
+        for w in &windows {
+            let signals: Vec<&[f64]> = columns
+                .iter()
+                .map(|&j| &rec.columns[j][w.start..w.end])
+                .collect();
+            let track = track_sweep(&names, &signals, rec.rate_hz, cfg).map_err(|e| {
+                Error::Usage(format!(
+                    "{}: sweep at {}: {e}",
+                    req.records.display(),
+                    w.origin
+                ))
+            })?;
+            tracks.push(track_line(w, &track, &modes));
+            let nc = channels.len();
+            for p in &track.points {
+                steps.push((
+                    w.sweep.clone(),
+                    Step {
+                        frequency_hz: p.frequency_hz,
+                        force: (0..cfg.harmonics).map(|k| p.harmonics[(0, k)]).collect(),
+                        response: Mat::from_fn(nc, cfg.harmonics, |c, k| p.harmonics[(c + 1, k)]),
+                        sigma: Mat::from_fn(nc, cfg.harmonics, |c, k| p.sigma[(c + 1, k)]),
+                    },
+                ));
+            }
+        }
+    }
+    for w in windows.iter().filter(|_| req.sweep.is_none()) {
         let signals: Vec<&[f64]> = columns
             .iter()
             .map(|&j| &rec.columns[j][w.start..w.end])
@@ -309,6 +379,12 @@ pub fn run(req: &HarmonicsRequest) -> Result<HarmonicsRun> {
                 sigma: Mat::from_fn(nc, h, |c, k| fit.sigma[(c + 1, k)]),
             },
         ));
+    }
+    if steps.is_empty() && req.sweep.is_some() {
+        return Err(Error::Failed(format!(
+            "{}: no point could be tracked; nothing to write",
+            req.records.display()
+        )));
     }
     if steps.is_empty() {
         return Err(Error::Failed(format!(
@@ -392,8 +468,84 @@ pub fn run(req: &HarmonicsRequest) -> Result<HarmonicsRun> {
     Ok(HarmonicsRun {
         data,
         dwells,
+        tracks,
         rate_hz: rec.rate_hz,
     })
+}
+
+/// The lowest modes of `model` (up to [`CHECKED_MODES`]) that the excitation `drive` drives
+/// (a resonant receptance at its point, `φ²/(2ζω²)`, above 1e-6 of the largest mode's, when
+/// it is one of the model's excitations; else every mode): mode number, natural frequency (Hz) and damping ratio, for the
+/// sweep-rate check.
+fn mode_table(model: &nlsim_kernel::Model, drive: &str) -> Result<Vec<(usize, f64, f64)>> {
+    let mut cfg = nlsim_reduction::ReductionConfig::lowest(CHECKED_MODES.min(model.n_dofs()));
+    cfg.eigen.par = faer::Par::Seq;
+    cfg.residual_flexibility = false;
+    let reduced = nlsim_reduction::reduce(model, &cfg)?;
+    let zeta = nlsim_reduction::damping_ratios(&reduced.modes, &reduced.damping);
+    let map = nlsim_reduction::model_port_map(model, &reduced.ports)?;
+    let driven: Vec<bool> = match map.inputs.iter().find(|(n, _)| n == drive) {
+        Some(&(_, port)) => {
+            // Each mode's resonant receptance at the drive, φ²/(2ζω²).
+            let omega = reduced.modes.omega();
+            let peak: Vec<f64> = (0..reduced.n_modes())
+                .map(|r| {
+                    let phi = reduced.participation[(port, r)];
+                    let v = phi * phi / (2.0 * zeta[r] * omega[r] * omega[r]);
+                    if v.is_finite() { v } else { 0.0 }
+                })
+                .collect();
+            let top = peak.iter().copied().fold(0.0, f64::max);
+            peak.iter().map(|&v| v > 1e-6 * top).collect()
+        }
+        None => vec![true; reduced.n_modes()],
+    };
+    Ok(reduced
+        .modes
+        .omega()
+        .iter()
+        .zip(zeta)
+        .enumerate()
+        .filter(|(r, _)| driven[*r])
+        .map(|(r, (w, z))| (r + 1, w / (2.0 * std::f64::consts::PI), z))
+        .collect())
+}
+
+/// The summary of a tracked sweep: its band, its fastest rate, and the mode within its band
+/// with the largest sweep-rate parameter at the rate the sweep passes it.
+fn track_line(w: &Window, track: &nlsim_calib::Track, modes: &[(usize, f64, f64)]) -> TrackLine {
+    let f: Vec<f64> = track.points.iter().map(|p| p.frequency_hz).collect();
+    let lo = f.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = f.iter().copied().fold(0.0, f64::max);
+    let mut worst: Option<(usize, f64, f64, f64)> = None;
+    for &(r, fr, z) in modes {
+        if !(fr >= lo && fr <= hi && z > 0.0) {
+            continue;
+        }
+        let Some(p) = track.points.iter().min_by(|a, b| {
+            (a.frequency_hz - fr)
+                .abs()
+                .total_cmp(&(b.frequency_hz - fr).abs())
+        }) else {
+            continue;
+        };
+        let eta = sweep_rate_parameter(p.rate_hz_per_s, fr, z);
+        if worst.is_none_or(|w| eta > w.3) {
+            worst = Some((r, fr, z, eta));
+        }
+    }
+    TrackLine {
+        sweep: w.sweep.clone(),
+        origin: w.origin.clone(),
+        points: track.points.len(),
+        band_hz: (lo, hi),
+        rate_hz_per_s: track
+            .points
+            .iter()
+            .map(|p| p.rate_hz_per_s.abs())
+            .fold(0.0, f64::max),
+        worst_mode: worst,
+    }
 }
 
 /// Found dwells grouped into sweeps: a new sweep wherever the frequency turns.
@@ -423,10 +575,81 @@ pub fn execute(req: &HarmonicsRequest, console: &crate::present::console::Consol
         &[Some(req.out.as_path())],
         &[],
     )?;
-    console.progress("fitting the harmonics of every dwell");
+    console.progress(if req.sweep.is_some() {
+        "tracking the harmonics along every sweep"
+    } else {
+        "fitting the harmonics of every dwell"
+    });
     let r = run(req);
     console.progress_end();
     let r = r?;
+    if req.sweep.is_some() {
+        say_tracks(&r, req, console);
+    } else {
+        say_dwells(&r, req, console);
+    }
+    match req.out.extension().and_then(|e| e.to_str()) {
+        Some("h5" | "hdf5") => crate::formats::test_data::write_h5(&req.out, &r.data)?,
+        _ => crate::formats::test_data::write_csv(&req.out, &r.data)?,
+    }
+    console.say(&format!("  written to {}", req.out.display()));
+    Ok(())
+}
+
+/// The summary of tracked sweeps, with the sweep-rate warning.
+fn say_tracks(
+    r: &HarmonicsRun,
+    req: &HarmonicsRequest,
+    console: &crate::present::console::Console,
+) {
+    console.say(&format!(
+        "harmonics 1..{} of {} channel(s) and the drive '{}' ({}) tracked along {} sweep(s) \
+         of {}, {} Hz sampling",
+        r.data.harmonics,
+        r.data.channels.len(),
+        r.data.input,
+        match r.data.drive {
+            Drive::Force => "force",
+            Drive::Voltage => "voltage",
+        },
+        r.tracks.len(),
+        req.records.display(),
+        r.rate_hz
+    ));
+    for t in &r.tracks {
+        let mode = match t.worst_mode {
+            Some((m, f, z, eta)) => format!(
+                "; passes mode {m} ({f:.4} Hz, zeta {z:.4}) at sweep-rate parameter eta = \
+                 {eta:.2e}"
+            ),
+            None => "; passes no mode of the model".into(),
+        };
+        console.say(&format!(
+            "  sweep '{}' ({}): {} points {:.4}–{:.4} Hz, up to {:.3e} Hz/s{mode}",
+            t.sweep, t.origin, t.points, t.band_hz.0, t.band_hz.1, t.rate_hz_per_s
+        ));
+        if let Some((m, f, z, eta)) = t.worst_mode
+            && eta > ETA_WARN
+        {
+            console.note(&format!(
+                "warning: sweep '{}' is too fast for mode {m} ({f:.4} Hz, zeta {z:.4}): eta = {eta:.2e} \
+                 > {ETA_WARN:e}, so the tracked response there is off by about {:.0} % (mostly \
+                 in phase: the response lags the sweep); sweep at most {:.3e} Hz/s there, or \
+                 record dwells (docs/file-formats.md, \"Sweeps\")",
+                t.sweep,
+                100.0 * eta,
+                ETA_WARN * 2.0 * std::f64::consts::PI * z * z * f * f
+            ));
+        }
+    }
+}
+
+/// The summary of fitted dwells.
+fn say_dwells(
+    r: &HarmonicsRun,
+    req: &HarmonicsRequest,
+    console: &crate::present::console::Console,
+) {
     let kept = r.dwells.iter().filter(|d| d.kept).count();
     console.say(&format!(
         "harmonics 1..{} of {} channel(s) and the drive '{}' ({}) from {}: {} of {} dwells \
@@ -483,10 +706,4 @@ pub fn execute(req: &HarmonicsRequest, console: &crate::present::console::Consol
             d.origin, d.frequency_hz
         ));
     }
-    match req.out.extension().and_then(|e| e.to_str()) {
-        Some("h5" | "hdf5") => crate::formats::test_data::write_h5(&req.out, &r.data)?,
-        _ => crate::formats::test_data::write_csv(&req.out, &r.data)?,
-    }
-    console.say(&format!("  written to {}", req.out.display()));
-    Ok(())
 }
