@@ -43,36 +43,7 @@ fn raw_records_calibrate_like_harmonic_data() {
         .parse()
         .unwrap();
     let truth = [("tip_spring.k3", 6e9), ("mode2.zeta", zeta)];
-    // 1 % noise, seeded, on each channel of the simulation (its rms), under plain names.
-    let text = std::fs::read_to_string(p("raw.csv")).unwrap();
-    let rows: Vec<Vec<f64>> = text
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.starts_with("time_s"))
-        .map(|l| l.split(',').map(|c| c.parse().unwrap()).collect())
-        .collect();
-    let header: Vec<&str> = text.lines().nth(1).unwrap().split(',').collect();
-    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
-    let cols = [
-        col("time_s"),
-        col("shaker_force_N"),
-        col("tip_acceleration_m_per_s2"),
-        col("mid_acceleration_m_per_s2"),
-    ];
-    let mut g = nlsim::calib::Gaussian::new(45);
-    let rms: Vec<f64> = cols
-        .iter()
-        .map(|&c| (rows.iter().map(|r| r[c] * r[c]).sum::<f64>() / rows.len() as f64).sqrt())
-        .collect();
-    let mut noisy =
-        String::from("# the ECL beam's stepped sine with 1 % noise\ntime_s,shaker,tip,mid\n");
-    for r in &rows {
-        noisy.push_str(&format!("{:e}", r[cols[0]]));
-        for j in 1..4 {
-            noisy.push_str(&format!(",{:e}", r[cols[j]] + 0.01 * rms[j] * g.sample()));
-        }
-        noisy.push('\n');
-    }
-    std::fs::write(p("noisy.csv"), noisy).unwrap();
+    noisy_copy(&p("raw.csv"), &p("noisy.csv"), 45);
     for (records, data) in [("noisy.csv", "noisy-h.csv"), ("raw.csv", "raw-h.csv")] {
         let (rc, out, err) = nlsim(&["harmonics", "ecl_beam", &p(records), "--out", &p(data)]);
         assert_eq!(rc, 0, "{records}: {out}{err}");
@@ -133,6 +104,112 @@ fn raw_records_calibrate_like_harmonic_data() {
         "{out}"
     );
     assert!(out.contains("not settled"), "{out}");
+}
+
+/// Writes the records of `nlsim simulate --out raw` (the drive `shaker`, sensors `tip` and
+/// `mid`) to `out` under plain names with 1 % noise (of each channel's rms) added to every
+/// channel, seeded with `seed`.
+fn noisy_copy(raw: &str, out: &str, seed: u64) {
+    let text = std::fs::read_to_string(raw).unwrap();
+    let rows: Vec<Vec<f64>> = text
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.starts_with("time_s"))
+        .map(|l| l.split(',').map(|c| c.parse().unwrap()).collect())
+        .collect();
+    let header: Vec<&str> = text
+        .lines()
+        .find(|l| l.starts_with("time_s"))
+        .unwrap()
+        .split(',')
+        .collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let cols = [
+        col("time_s"),
+        col("shaker_force_N"),
+        col("tip_acceleration_m_per_s2"),
+        col("mid_acceleration_m_per_s2"),
+    ];
+    let mut g = nlsim::calib::Gaussian::new(seed);
+    let rms: Vec<f64> = cols
+        .iter()
+        .map(|&c| (rows.iter().map(|r| r[c] * r[c]).sum::<f64>() / rows.len() as f64).sqrt())
+        .collect();
+    let mut noisy = format!("# {raw} with 1 % noise, seed {seed}\ntime_s,shaker,tip,mid\n");
+    for r in &rows {
+        noisy.push_str(&format!("{:e}", r[cols[0]]));
+        for j in 1..4 {
+            noisy.push_str(&format!(",{:e}", r[cols[j]] + 0.01 * rms[j] * g.sample()));
+        }
+        noisy.push('\n');
+    }
+    std::fs::write(out, noisy).unwrap();
+}
+
+/// The bump-stop cantilever (a one-sided clearance of 1 mm and 2e5 N/m at the tip, 0.5 N)
+/// through seven 8-s dwells from 21 to 27 Hz, FOH at 8 kHz, 1 % noise on every channel:
+/// `nlsim harmonics` (9 harmonics fitted, the unsettled dwell left out) and a calibration of
+/// the stop's stiffness and gap on the fundamentals with a 25-harmonic balance land within 3
+/// Cramér–Rao deviations of the model's values. The contact's kink needs that many: with 15
+/// harmonics the balance's truncation alone biases `k1` by 1.4 % (2.5–2.7 deviations, with or
+/// without the noise), with 25 by 0.02 % (noise-free records: 0.04 deviations).
+#[test]
+fn raw_records_of_a_bump_stop_calibrate_its_gap_and_stiffness() {
+    let d = scratch("harmonics-stop");
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    let (rc, out, err) = nlsim(&[
+        "simulate",
+        "bumpstop_cantilever",
+        "--excitation",
+        "stepped:f0=21,f1=27,steps=7,dwell=8",
+        "--rate",
+        "8000",
+        "--duration",
+        "56",
+        "--out",
+        &p("raw.csv"),
+    ]);
+    assert_eq!(rc, 0, "{out}{err}");
+    noisy_copy(&p("raw.csv"), &p("noisy.csv"), 46);
+    let (rc, out, err) = nlsim(&[
+        "harmonics",
+        "bumpstop_cantilever",
+        &p("noisy.csv"),
+        "--harmonics",
+        "9",
+        "--out",
+        &p("h.csv"),
+    ]);
+    assert_eq!(rc, 0, "{out}{err}");
+    eprintln!("{out}");
+    let (rc, out, err) = nlsim(&[
+        "calibrate",
+        "bumpstop_cantilever",
+        &p("h.csv"),
+        "--param",
+        "stop.k1=2e4:2e6",
+        "--param",
+        "stop.e1=5e-4:2e-3",
+        "--harmonics",
+        "25",
+        "--lhs",
+        "16",
+        "--starts",
+        "2",
+        "--folds",
+        "0",
+        "--out",
+        &p("est.csv"),
+    ]);
+    assert_eq!(rc, 0, "{out}{err}");
+    let est = estimates(Path::new(&p("est.csv")));
+    for (name, want) in [("stop.k1", 2e5), ("stop.e1", 1e-3)] {
+        let (v, sd) = est[name];
+        eprintln!(
+            "{name} {v:.6e} ± {sd:.2e} (truth {want:.6e}, {:.2} σ)",
+            (v - want) / sd
+        );
+        assert!((v - want).abs() <= 3.0 * sd, "{name} {v} ± {sd}, truth {want}");
+    }
 }
 
 /// Writes `text` to `name` in `dir` and runs `nlsim harmonics ecl_beam` on it (with `extra`
