@@ -828,6 +828,66 @@ fn fuzz_inner() {
         }
     }));
 
+    // Time records in HDF5 (`nlsim harmonics`): a good file of a time base and three
+    // signals in /inputs, /outputs and at the root, with datasets replaced by hostile ones
+    // (types, shapes, NaN, huge declared sizes) and lengths changed; what reads is fitted.
+    let rec_h5 = dir.join("records.h5");
+    let signals = [
+        "time",
+        "inputs/shaker",
+        "outputs/tip",
+        "mid",
+        "outputs",
+        "inputs",
+    ];
+    panics.extend(survive("time records hdf5", 3000 * scale(), |_| {
+        let _ = std::fs::remove_file(&rec_h5);
+        let write = |rng: &mut Rng| -> hdf5_metno::Result<()> {
+            let f = hdf5_metno::File::create(&rec_h5)?;
+            let n = *rng.pick(&[400usize, 399, 2, 1]);
+            let t: Vec<f64> = (0..n).map(|i| i as f64 / 1000.0).collect();
+            let sine = |a: f64, m: usize| -> Vec<f64> {
+                (0..m)
+                    .map(|i| a * (2.0 * std::f64::consts::PI * 25.0 * i as f64 / 1000.0).sin())
+                    .collect()
+            };
+            f.new_dataset_builder().with_data(&t).create("time")?;
+            f.create_group("inputs")?
+                .new_dataset_builder()
+                .with_data(&sine(0.2, n))
+                .create("shaker")?;
+            let m = if rng.below(4) == 0 {
+                n.saturating_sub(1)
+            } else {
+                n
+            };
+            f.create_group("outputs")?
+                .new_dataset_builder()
+                .with_data(&sine(3.0, m))
+                .create("tip")?;
+            f.new_dataset_builder()
+                .with_data(&sine(1.0, n))
+                .create("mid")?;
+            for _ in 0..rng.below(3) {
+                let name = *rng.pick(&signals);
+                let _ = f.unlink(name);
+                if rng.below(4) != 0 {
+                    let (group, leaf) = name.rsplit_once('/').unwrap_or(("/", name));
+                    let loc = match f.group(group) {
+                        Ok(g) => g,
+                        Err(_) => f.create_group(group)?,
+                    };
+                    hostile_dataset(&loc, leaf, rng)?;
+                }
+            }
+            Ok(())
+        };
+        if write(&mut rng).is_err() {
+            return Some("not written".into());
+        }
+        fit_records(nlsim::formats::time_records_h5::read_records_h5(&rec_h5))
+    }));
+
     // The candidates file of a merged calibrate-candidates batch: its attributes and two
     // tables with hostile types, shapes and values.
     let cands = dir.join("candidates.h5");

@@ -170,8 +170,9 @@ pub struct HarmonicsArgs {
     /// Model file (.toml) or built-in model: its sensors name the channels and give their
     /// quantities.
     model: String,
-    /// Time histories: CSV (`time_s,DRIVE,SENSOR,…`, evenly sampled) or universal file
-    /// datasets 58 of function type 1 (.uff, .unv, .uf).
+    /// Time histories: CSV (`time_s,DRIVE,SENSOR,…`, evenly sampled), HDF5 (.h5: `/time`
+    /// and the signals in `/inputs`, `/outputs` or at the root, as `nlsim simulate --out`
+    /// writes them) or universal file datasets 58 of function type 1 (.uff, .unv, .uf).
     records: std::path::PathBuf,
     /// Step table (CSV: `start_s,end_s[,frequency_hz][,sweep]`) [default: the steps found
     /// from the drive's frequency].

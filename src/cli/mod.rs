@@ -73,8 +73,8 @@ pub enum Command {
     /// log-amplitude and phase errors, points inside the band, chi2, peaks). See
     /// docs/calibration.md.
     Validate(ValidateArgs),
-    /// Harmonics from the time histories of a stepped-sine test or a slow sine sweep (CSV
-    /// or universal file dataset 58 time records): the dwells found from a step table or
+    /// Harmonics from the time histories of a stepped-sine test or a slow sine sweep (CSV,
+    /// HDF5 or universal file dataset 58 time records): the dwells found from a step table or
     /// from the drive's frequency, each dwell's transient left out, the drive and response
     /// harmonics fitted on whole periods at the refined frequency, their standard
     /// deviations from the period-to-period scatter; with --sweep, the harmonics tracked

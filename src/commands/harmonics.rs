@@ -185,6 +185,23 @@ fn check_clipping(name: &str, x: &[f64], rec: &TimeRecords, path: &std::path::Pa
     Ok(())
 }
 
+/// Time records from HDF5 ([`crate::formats::time_records_h5`]); refused in a build without
+/// HDF5.
+fn read_h5_records(path: &std::path::Path) -> Result<crate::formats::time_records::TimeRecords> {
+    #[cfg(feature = "hdf5")]
+    {
+        crate::formats::time_records_h5::read_records_h5(path)
+    }
+    #[cfg(not(feature = "hdf5"))]
+    {
+        Err(Error::Usage(format!(
+            "{}: this nlsim was built without HDF5; convert the records to CSV or rebuild \
+             with the hdf5 feature",
+            path.display()
+        )))
+    }
+}
+
 /// Reads the records, fits every dwell, and assembles the test data (nothing written).
 pub fn run(req: &HarmonicsRequest) -> Result<HarmonicsRun> {
     let loaded = crate::load_model(&req.model)?;
@@ -197,9 +214,19 @@ pub fn run(req: &HarmonicsRequest) -> Result<HarmonicsRun> {
             .as_deref(),
         Some("uff" | "unv" | "uf")
     );
+    let h5 = matches!(
+        req.records
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .as_deref(),
+        Some("h5" | "hdf5")
+    );
     let rec = if uff {
         let sets = crate::formats::uff::read(&req.records)?;
         crate::formats::time_records::from_uff(&sets, &req.records)?
+    } else if h5 {
+        read_h5_records(&req.records)?
     } else {
         crate::formats::time_records::read_records(&req.records)?
     };

@@ -48,6 +48,8 @@ pub mod op4_write;
 pub mod settings;
 pub mod test_data;
 pub mod time_records;
+#[cfg(feature = "hdf5")]
+pub mod time_records_h5;
 pub mod uff;
 pub mod uff55;
 pub mod uff_write;

@@ -208,7 +208,10 @@ fn raw_records_of_a_bump_stop_calibrate_its_gap_and_stiffness() {
             "{name} {v:.6e} ± {sd:.2e} (truth {want:.6e}, {:.2} σ)",
             (v - want) / sd
         );
-        assert!((v - want).abs() <= 3.0 * sd, "{name} {v} ± {sd}, truth {want}");
+        assert!(
+            (v - want).abs() <= 3.0 * sd,
+            "{name} {v} ± {sd}, truth {want}"
+        );
     }
 }
 
@@ -741,4 +744,121 @@ fn noise_free_dwells_equal_harmonic_balance() {
     }
     assert!(worst < 1e-6, "extrapolated records vs HB: {worst:e}");
     assert!(third < 1e-5, "third harmonic: {third:e}");
+}
+
+/// Time records in HDF5: what `nlsim simulate --out F.h5` writes gives the harmonics of its
+/// CSV (within 1e-6 of the fundamental: the CSV's nine written digits and the transient left
+/// at the settle tolerance), and a flat file written by h5py (the independent
+/// writer: `/time_s` and single-precision signals at the root) gives the harmonics of its
+/// closed-form signals; a signal of another length and a file without times are refused
+/// naming the dataset.
+#[test]
+fn hdf5_time_records() {
+    let d = scratch("harmonics-h5");
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    for out in ["raw.h5", "raw.csv"] {
+        let (rc, o, e) = nlsim(&[
+            "simulate",
+            "ecl_beam",
+            "--excitation",
+            "stepped:f0=22,f1=23,steps=2,dwell=16",
+            "--rate",
+            "2000",
+            "--duration",
+            "32",
+            "--out",
+            &p(out),
+        ]);
+        assert_eq!(rc, 0, "{o}{e}");
+    }
+    fresh_inode(Path::new(&p("raw.h5")));
+    let mut got = Vec::new();
+    for (raw, data) in [("raw.h5", "h5-h.csv"), ("raw.csv", "csv-h.csv")] {
+        let (rc, o, e) = nlsim(&[
+            "harmonics",
+            "ecl_beam",
+            &p(raw),
+            "--settle-tol",
+            "1e-7",
+            "--out",
+            &p(data),
+        ]);
+        assert_eq!(rc, 0, "{raw}: {o}{e}");
+        assert!(o.contains("2 of 2 dwells settled"), "{o}");
+        got.push(nlsim::formats::test_data::read_csv(Path::new(&p(data))).unwrap());
+    }
+    // The channels by name (the HDF5 file lists its outputs in name order).
+    let mut worst = 0.0f64;
+    for (a, b) in got[0].sweeps[0].steps.iter().zip(&got[1].sweeps[0].steps) {
+        assert!((a.frequency_hz - b.frequency_hz).abs() < 1e-8 * a.frequency_hz);
+        for (cb, ch) in got[1].channels.iter().enumerate() {
+            let ca = got[0]
+                .channels
+                .iter()
+                .position(|x| x.name == ch.name)
+                .unwrap();
+            let fund = (b.response[(cb, 0)] / b.force[0]).norm();
+            for k in 0..3 {
+                let (ya, yb) = (
+                    a.response[(ca, k)] / a.force[0],
+                    b.response[(cb, k)] / b.force[0],
+                );
+                worst = worst.max((ya - yb).norm() / fund);
+            }
+        }
+    }
+    eprintln!("HDF5 vs CSV records: harmonics within {worst:.2e} of the fundamental");
+    // The CSV's nine digits, and the transient left at the settle tolerance (1e-7), which
+    // each file's own rounding noise moves by a few periods.
+    assert!(worst < 1e-6, "{worst}");
+    let script = r#"
+import sys, h5py, numpy as np
+d = sys.argv[1]
+fs, f = 1000.0, 12.5
+t = np.arange(4000) / fs
+w = 2 * np.pi * f * t
+with h5py.File(d + "/flat.h5", "w") as h:
+    h["time_s"] = t
+    h["shaker"] = (0.2 * np.sin(w)).astype(np.float32)
+    h["tip"] = (3.0 * np.sin(w - 0.3) + 0.1 * np.cos(3 * w)).astype(np.float32)
+    h["mid"] = np.sin(w - 0.5)
+with h5py.File(d + "/short.h5", "w") as h:
+    h["time_s"] = t
+    h["shaker"] = 0.2 * np.sin(w)
+    h["tip"] = np.sin(w)[:3000]
+with h5py.File(d + "/notime.h5", "w") as h:
+    h["shaker"] = 0.2 * np.sin(w)
+print("ok")
+"#;
+    python_checks(script, &d);
+    let (rc, o, e) = nlsim(&[
+        "harmonics",
+        "ecl_beam",
+        &p("flat.h5"),
+        "--out",
+        &p("flat-h.csv"),
+    ]);
+    assert_eq!(rc, 0, "{o}{e}");
+    let flat = nlsim::formats::test_data::read_csv(Path::new(&p("flat-h.csv"))).unwrap();
+    let st = &flat.sweeps[0].steps[0];
+    assert!((st.frequency_hz - 12.5).abs() < 1e-6, "{}", st.frequency_hz);
+    // X = c − i s for c cos + s sin, turned so the drive's fundamental is real: the drive
+    // 0.2 sin w is 0.2 e^{−iπ/2}; the tip's fundamental 3 e^{−i(π/2 + 0.3)} turns to 3 e^{−0.3i},
+    // its third harmonic 0.1 e^{3iπ/2}; single precision holds ~1e-7.
+    let tip = flat.channels.iter().position(|c| c.name == "tip").unwrap();
+    let tip1 = st.response[(tip, 0)] / st.force[0] * 0.2;
+    let tip3 = st.response[(tip, 2)] / st.force[0] * 0.2;
+    let want1 = faer::c64::from_polar(3.0, -0.3);
+    let want3 = faer::c64::from_polar(0.1, 1.5 * std::f64::consts::PI);
+    assert!((tip1 - want1).norm() < 1e-6 * 3.0, "{tip1:?}");
+    assert!((tip3 - want3).norm() < 1e-6 * 3.0, "{tip3:?}");
+    for (file, says) in [
+        ("short.h5", "tip: 3000 samples; 'time_s' has 4000"),
+        ("notime.h5", "no '/time' dataset"),
+    ] {
+        let (rc, o, e) = nlsim(&["harmonics", "ecl_beam", &p(file), "--out", &p("x.csv")]);
+        assert!(rc == 1 || rc == 2, "{file}: {o}{e}");
+        assert!(e.contains(file) && e.contains(says), "{file}: {e}");
+        assert_eq!(e.trim().lines().count(), 1, "{e}");
+    }
 }
