@@ -635,10 +635,7 @@ fn say_tracks(
         r.data.harmonics,
         r.data.channels.len(),
         r.data.input,
-        match r.data.drive {
-            Drive::Force => "force",
-            Drive::Voltage => "voltage",
-        },
+        r.data.drive.as_str(),
         r.tracks.len(),
         req.records.display(),
         r.rate_hz
@@ -684,10 +681,7 @@ fn say_dwells(
         r.data.harmonics,
         r.data.channels.len(),
         r.data.input,
-        match r.data.drive {
-            Drive::Force => "force",
-            Drive::Voltage => "voltage",
-        },
+        r.data.drive.as_str(),
         req.records.display(),
         kept,
         r.dwells.len(),

@@ -506,6 +506,36 @@ print("ok")
     }
 }
 
+/// The stepped-sine harmonic balance of the ECL beam (its cubic tip spring at the model's
+/// 6e9 N/m³, 20 modes, with or without residual flexibility, `h` harmonics) at every step of
+/// `data`, with its measured frequencies and forces.
+fn ecl_beam_balance(
+    data: &nlsim::calib::TestData,
+    h: usize,
+    residual: bool,
+) -> nlsim::calib::SweepEvaluation {
+    use nlsim::calib::{FrfObjective, ObjectiveConfig, ParamSpec};
+    let model = nlsim::load_model("ecl_beam").unwrap().model;
+    let mut obj = FrfObjective::from_model(
+        &model,
+        &nlsim::reduction::ReductionConfig {
+            residual_flexibility: residual,
+            ..nlsim::reduction::ReductionConfig::lowest(20)
+        },
+        nlsim::hb::HarmonicSet::new(h, 1).unwrap(),
+        nlsim::hb::HbConfig::default(),
+        std::sync::Arc::new(data.clone()),
+        vec![ParamSpec::new(
+            nlsim::kernel::Param::element("tip_spring", "k3"),
+            1e9,
+            1e10,
+        )],
+        ObjectiveConfig::default(),
+    )
+    .unwrap();
+    obj.evaluate_values(&[6e9], None, false).unwrap()
+}
+
 /// A slow sine sweep of the ECL beam (5 mN, nearly linear, 21.5 → 25.5 Hz at 0.02 Hz/s
 /// through the driven mode 2 at 23.66 Hz, ζ = 0.01: η = 0.057), FOH at 2 kHz, tracked by
 /// `nlsim harmonics --sweep`: the summary names the mode and its η and warns (η > 1e-2);
@@ -518,9 +548,7 @@ print("ok")
 /// closer by more than half.
 #[test]
 fn a_tracked_sweep_agrees_with_harmonic_balance_within_the_sweep_bias() {
-    use nlsim::calib::{FrfObjective, ObjectiveConfig, ParamSpec, sweep_bias};
-    use nlsim::hb::{HarmonicSet, HbConfig};
-    use nlsim::kernel::Param;
+    use nlsim::calib::sweep_bias;
     let d = scratch("harmonics-sweep");
     let p = |n: &str| d.join(n).to_str().unwrap().to_string();
     let (rc, out, err) = nlsim(&[
@@ -560,22 +588,7 @@ fn a_tracked_sweep_agrees_with_harmonic_balance_within_the_sweep_bias() {
         "{err}"
     );
     let data = nlsim::formats::test_data::read_csv(Path::new(&p("tracked.csv"))).unwrap();
-    let model = nlsim::load_model("ecl_beam").unwrap().model;
-    let mut obj = FrfObjective::from_model(
-        &model,
-        &nlsim::reduction::ReductionConfig::lowest(20),
-        HarmonicSet::new(3, 1).unwrap(),
-        HbConfig::default(),
-        std::sync::Arc::new(data.clone()),
-        vec![ParamSpec::new(
-            Param::element("tip_spring", "k3"),
-            1e9,
-            1e10,
-        )],
-        ObjectiveConfig::default(),
-    )
-    .unwrap();
-    let ev = obj.evaluate_values(&[6e9], None, false).unwrap();
+    let ev = ecl_beam_balance(&data, 3, true);
     let (fr, zeta, rate) = (23.661478, 0.01, 0.02);
     let sweep = &data.sweeps[0];
     let peak = ev
@@ -621,9 +634,6 @@ fn a_tracked_sweep_agrees_with_harmonic_balance_within_the_sweep_bias() {
 /// move with the rate or the dwell's length); it is held below 1e-5 as a regression guard.
 #[test]
 fn noise_free_dwells_equal_harmonic_balance() {
-    use nlsim::calib::{FrfObjective, ObjectiveConfig, ParamSpec};
-    use nlsim::hb::{HarmonicSet, HbConfig};
-    use nlsim::kernel::Param;
     let d = scratch("harmonics-hb");
     let p = |n: &str| d.join(n).to_str().unwrap().to_string();
     let mut extracted = Vec::new();
@@ -658,26 +668,8 @@ fn noise_free_dwells_equal_harmonic_balance() {
         std::fs::remove_file(&raw).unwrap();
         extracted.push(nlsim::formats::test_data::read_csv(Path::new(&data)).unwrap());
     }
-    let model = nlsim::load_model("ecl_beam").unwrap().model;
     let fine = &extracted[2];
-    let mut obj = FrfObjective::from_model(
-        &model,
-        &nlsim::reduction::ReductionConfig {
-            residual_flexibility: false,
-            ..nlsim::reduction::ReductionConfig::lowest(20)
-        },
-        HarmonicSet::new(11, 1).unwrap(),
-        HbConfig::default(),
-        std::sync::Arc::new(fine.clone()),
-        vec![ParamSpec::new(
-            Param::element("tip_spring", "k3"),
-            1e9,
-            1e10,
-        )],
-        ObjectiveConfig::default(),
-    )
-    .unwrap();
-    let ev = obj.evaluate_values(&[6e9], None, false).unwrap();
+    let ev = ecl_beam_balance(fine, 11, false);
     eprintln!(
         "step  f (Hz)  channel  k   |X_k|/|X_1|   err 4 kHz   err 8 kHz  err 16 kHz  \
          Richardson 8/16  Richardson 4/8/16"
