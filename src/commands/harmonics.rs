@@ -206,29 +206,18 @@ fn read_h5_records(path: &std::path::Path) -> Result<crate::formats::time_record
 pub fn run(req: &HarmonicsRequest) -> Result<HarmonicsRun> {
     let loaded = crate::load_model(&req.model)?;
     let model = &loaded.model;
-    let uff = matches!(
-        req.records
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase)
-            .as_deref(),
-        Some("uff" | "unv" | "uf")
-    );
-    let h5 = matches!(
-        req.records
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase)
-            .as_deref(),
-        Some("h5" | "hdf5")
-    );
-    let rec = if uff {
-        let sets = crate::formats::uff::read(&req.records)?;
-        crate::formats::time_records::from_uff(&sets, &req.records)?
-    } else if h5 {
-        read_h5_records(&req.records)?
-    } else {
-        crate::formats::time_records::read_records(&req.records)?
+    let ext = req
+        .records
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    let rec = match ext.as_deref() {
+        Some("uff" | "unv" | "uf") => {
+            let sets = crate::formats::uff::read(&req.records)?;
+            crate::formats::time_records::from_uff(&sets, &req.records)?
+        }
+        Some("h5" | "hdf5") => read_h5_records(&req.records)?,
+        _ => crate::formats::time_records::read_records(&req.records)?,
     };
     let drive = match &req.drive {
         Some(d) => d.clone(),

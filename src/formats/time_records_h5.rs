@@ -73,14 +73,14 @@ pub fn read_records_h5(path: &Path) -> Result<TimeRecords> {
     }
     // The signals, named and checked before any is read.
     let mut found: Vec<(String, hdf5::Dataset)> = Vec::new();
-    for (group, prefix) in [("/inputs", "inputs/"), ("/outputs", "outputs/"), ("/", "")] {
-        if !group.is_empty() && group != "/" && !f.link_exists(group.trim_start_matches('/')) {
+    for (group, prefix) in [("inputs", "inputs/"), ("outputs", "outputs/"), ("/", "")] {
+        if group != "/" && !f.link_exists(group) {
             continue;
         }
         let g = f.group(group).map_err(|e| err(group, e.to_string()))?;
         let members = g.member_names().map_err(|e| err(group, e.to_string()))?;
         for m in members {
-            if group == "/" && (m == time_name) {
+            if group == "/" && m == time_name {
                 continue;
             }
             let Ok(d) = g.dataset(&m) else {
