@@ -3756,7 +3756,7 @@ mod test_data_hdf5 {
         assert_eq!(st.sigma[(0, 0)], c64::new(0.004, 0.0015));
         assert!(st.sigma[(0, 1)].re.is_nan());
         let h5 = d.join("t.h5");
-        nlsim::formats::test_data::write_h5(&h5, &data).unwrap();
+        write_test_h5(&h5, &data);
         let back = nlsim::formats::test_data::read_h5(&h5).unwrap();
         let csv2 = d.join("t2.csv");
         nlsim::formats::test_data::write_csv(&csv2, &back).unwrap();
@@ -3821,6 +3821,7 @@ mod test_data_hdf5 {
                 .write_raw(&v)
                 .unwrap();
         }
+        fresh_inode(&p);
         let e = nlsim::formats::test_data::read_h5(&p)
             .unwrap_err()
             .to_string();
@@ -3894,6 +3895,7 @@ mod test_data_hdf5 {
                 .write_raw(&vec![c64::new(0.0, 0.0); 44])
                 .unwrap();
         }
+        fresh_inode(&bad);
         let e = nlsim::formats::test_data::read_h5(&bad)
             .unwrap_err()
             .to_string();
@@ -3919,6 +3921,7 @@ mod test_data_hdf5 {
                 .unwrap();
         }
         assert!(std::fs::metadata(&huge).unwrap().len() < 1 << 20);
+        fresh_inode(&huge);
         let e = nlsim::formats::test_data::read_h5(&huge)
             .unwrap_err()
             .to_string();
@@ -3929,6 +3932,7 @@ mod test_data_hdf5 {
         // Not test data at all.
         let other = dir.join("other.h5");
         hdf5::File::create(&other).unwrap();
+        fresh_inode(&other);
         let e = nlsim::formats::test_data::read_h5(&other)
             .unwrap_err()
             .to_string();
@@ -5644,7 +5648,7 @@ mod hardening {
         // tool could) and in a universal file (two records of one response point).
         let measured = nlsim::formats::test_data::read_csv(&dir.join("vt.csv")).unwrap();
         let dup_h5 = d("dup.h5");
-        nlsim::formats::test_data::write_h5(Path::new(&dup_h5), &measured).unwrap();
+        write_test_h5(Path::new(&dup_h5), &measured);
         {
             let f = hdf5_metno::File::open_rw(&dup_h5).unwrap();
             let names = f.dataset("channels/name").unwrap();
@@ -5653,6 +5657,7 @@ mod hardening {
             v[1] = v[0].clone();
             names.write_raw(&v).unwrap();
         }
+        fresh_inode(Path::new(&dup_h5));
         let record = |dir: i64| nlsim::formats::uff::Uff58 {
             id: "tip".into(),
             function_type: 4,
