@@ -52,7 +52,7 @@
 pub mod batch;
 #[cfg(feature = "cli")]
 pub mod cli;
-#[cfg(feature = "io")]
+#[cfg(feature = "formats")]
 pub mod commands;
 pub mod error;
 #[cfg(feature = "formats")]

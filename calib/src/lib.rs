@@ -54,7 +54,8 @@ pub use lhs::{Spacing, latin_hypercube, maximin_latin_hypercube};
 pub use linalg::Svd;
 pub use lm::{Evaluation, LeastSquares, LmConfig, LmReport, StopReason, levenberg_marquardt};
 pub use modal::{
-    MeasuredMode, ModalCalibration, ModalData, ModalFit, ModalObjective, calibrate_modal, mac_of,
+    MeasuredMode, ModalCalibration, ModalData, ModalFit, ModalObjective, calibrate_modal,
+    calibrate_modal_with_progress, mac_of,
 };
 pub use nlsim_kernel::Status;
 pub use nlsim_reduction::{ParametricConfig, ParametricStats};

@@ -21,7 +21,8 @@
 
 use crate::CalibrationConfig;
 use crate::calibrate::{
-    Candidate, StartRun, best_candidates, evaluate_candidates, per_value, run_starts, start_points,
+    Candidate, Progress, StartRun, best_candidates, evaluate_candidates, per_value, run_starts,
+    start_points,
 };
 use crate::lm::{Evaluation, LeastSquares};
 use crate::objective::{ParamSpec, specs_to_internal, specs_to_values};
@@ -430,6 +431,16 @@ pub fn calibrate_modal(
     objective: &ModalObjective,
     config: &CalibrationConfig,
 ) -> Result<ModalCalibration> {
+    calibrate_modal_with_progress(objective, config, &|_| {})
+}
+
+/// [`calibrate_modal`] with `progress` called as candidates are evaluated and optimisations
+/// finish (from the worker threads; the numbers do not depend on it).
+pub fn calibrate_modal_with_progress(
+    objective: &ModalObjective,
+    config: &CalibrationConfig,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<ModalCalibration> {
     config.lm.validate()?;
     let specs = objective.specs.clone();
     let params: Vec<Param> = specs.iter().map(|s| s.param.clone()).collect();
@@ -446,7 +457,7 @@ pub fn calibrate_modal(
                 0.5 * f.residuals.iter().map(|r| r * r).sum::<f64>()
             }))
         },
-        &|_, _| {},
+        &|done, total| progress(Progress::Candidates { done, total }),
     )?;
     let order = best_candidates(&candidates, config.starts.max(1));
     if order.is_empty() {
@@ -461,7 +472,7 @@ pub fn calibrate_modal(
         &candidates,
         &order,
         &config.lm,
-        &|_, _| {},
+        &|done, total| progress(Progress::Start { done, total }),
     )?;
     let estimate = runs[0].values.clone();
     let mut obj = objective.clone();

@@ -16,8 +16,19 @@
 
 use crate::dense::{Lu, norm_inf};
 use crate::system::{HbSystem, expand};
+use crate::{HarmonicSet, HbConfig};
 use faer::{Mat, c64};
-use nlsim_kernel::{Error, Result, Status};
+use nlsim_kernel::{Error, Excitation, Model, Quantity, Result, Site, Status};
+use nlsim_reduction::ReducedModel;
+
+/// Most amplitudes of one nonlinear mode: a backbone needs tens to hundreds; 10⁴ is about a
+/// minute and a half on the ECL beam (7 ms a point), where 10⁵ would be a quarter of an hour.
+pub const MAX_NNM_POINTS: usize = 10_000;
+
+/// Most unknowns `modes · (2H + 1)` of the modal harmonic balance behind a nonlinear mode:
+/// its Newton matrix is dense, and a handful of them are alive at once (4 000 unknowns:
+/// 128 MB each, a 2·10¹⁰-flop factorisation per iteration).
+pub const MAX_NNM_UNKNOWNS: usize = 4_000;
 
 /// A point of a nonlinear mode.
 #[derive(Debug, Clone)]
@@ -232,5 +243,120 @@ pub fn nonlinear_mode(
         status: Status::Converged,
         points,
         detail: String::new(),
+    })
+}
+
+/// The model a nonlinear mode of `model` is computed on: `model` itself when it has an
+/// excitation point, otherwise with an unused input of zero amplitude at its first
+/// element's first DOF (the harmonic-balance system needs one; the free motion uses none of
+/// it). Refused when `model` has no nonlinear element.
+pub fn free_model(model: &Model) -> Result<Model> {
+    let Some(first) = model.elements().first() else {
+        return Err(Error::invalid(
+            format!("model '{}'", model.name()),
+            "has no nonlinear element: its modes are linear",
+        ));
+    };
+    let mut free = model.clone();
+    if free.excitation().is_empty() {
+        let dof = first.coupling().dofs()[0];
+        free.add_excitation(Excitation {
+            name: "unused".into(),
+            at: Site::Dof(dof),
+            amplitude: 0.0,
+            harmonics: Vec::new(),
+        })?;
+    }
+    Ok(free)
+}
+
+/// The harmonic-balance system of the free motions of `free` ([`free_model`]) on its
+/// reduction `reduced` (made without residual flexibility), `set` harmonics.
+///
+/// Within a cluster of equal frequencies (the two bending directions of a symmetric
+/// section) any basis is a basis of modes; the free motion needs the one where the
+/// cluster's members beyond the rank of its participation at the elements do not move
+/// them: those are then linear modes the EPMC leaves at rest instead of a singular
+/// direction of its Newton matrix. The clusters are rotated so before the system is built.
+pub fn free_motion_system(
+    free: &Model,
+    reduced: &ReducedModel,
+    set: HarmonicSet,
+) -> Result<HbSystem> {
+    let mut aligned = reduced.clone();
+    let element_ports: Vec<usize> = nlsim_reduction::model_port_map(free, &reduced.ports)?
+        .element_coordinates
+        .into_iter()
+        .flatten()
+        .collect();
+    align_clusters(&mut aligned, &element_ports);
+    HbSystem::from_model(free, &aligned, set, HbConfig::default())
+}
+
+/// Rotates each cluster of equal eigenvalues (to 1e-8) of `reduced` by the orthogonal `Q`
+/// of the QR factorisation of its participation at `element_ports` (transposed), so that the
+/// cluster's last columns do not move the elements; vectors and participation alike (the
+/// modal damping of a cluster is a multiple of the identity for Rayleigh and modal damping).
+fn align_clusters(reduced: &mut ReducedModel, element_ports: &[usize]) {
+    let lambda = reduced.modes.eigenvalues.clone();
+    let top = lambda
+        .iter()
+        .fold(0.0f64, |a, l| a.max(l.abs()))
+        .max(1e-300);
+    let m = lambda.len();
+    let mut i = 0;
+    while i < m {
+        let mut j = i + 1;
+        while j < m && (lambda[j] - lambda[i]).abs() <= 1e-8 * top {
+            j += 1;
+        }
+        let c = j - i;
+        if c >= 2 && !element_ports.is_empty() {
+            let pt = Mat::from_fn(c, element_ports.len(), |r, e| {
+                reduced.participation[(element_ports[e], i + r)]
+            });
+            let q = pt.qr().compute_Q();
+            let rotate = |a: &mut Mat<f64>| {
+                let block = Mat::from_fn(a.nrows(), c, |r, k| a[(r, i + k)]);
+                let rot = &block * &q;
+                for r in 0..a.nrows() {
+                    for k in 0..c {
+                        a[(r, i + k)] = rot[(r, k)];
+                    }
+                }
+            };
+            rotate(&mut reduced.participation);
+            rotate(&mut reduced.modes.vectors);
+        }
+        i = j;
+    }
+}
+
+/// Sensor harmonics of point `p` of a nonlinear mode of `sys` (sensors × `H + 1`, complex, in
+/// each sensor's quantity: m, m/s or m/s²): `Y_k = Φ_s (c_k − i s_k)` times `(ikω)^d` for
+/// velocity (`d = 1`) and acceleration (`d = 2`), in the cosine convention of eq. 13.
+pub fn sensor_harmonics(sys: &HbSystem, p: &NnmPoint) -> Mat<c64> {
+    let set = *sys.harmonics();
+    let nh = set.len();
+    let phi = sys.linear().participation();
+    let m = sys.linear().n_modes();
+    Mat::from_fn(sys.sensors().len(), set.h + 1, |s, k| {
+        let port = sys.sensors()[s].port;
+        let q: c64 = (0..m)
+            .map(|r| {
+                let z = if k == 0 {
+                    c64::new(p.eta[r * nh], 0.0)
+                } else {
+                    c64::new(p.eta[r * nh + 2 * k - 1], -p.eta[r * nh + 2 * k])
+                };
+                z * phi[(port, r)]
+            })
+            .sum();
+        let iw = c64::new(0.0, k as f64 * p.omega);
+        match sys.sensors()[s].quantity {
+            Quantity::Displacement => q,
+            Quantity::Velocity => iw * q,
+            Quantity::Acceleration => iw * iw * q,
+        }
     })
 }

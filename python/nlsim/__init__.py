@@ -9,8 +9,13 @@ scipy.sparse mass and stiffness matrices or load a model file, then compute
 - :func:`simulate` -- time histories by the exponential first-order hold;
 - :func:`frf` -- multi-harmonic frequency responses by harmonic balance, followed through
   folds, with Hill stability;
+- :func:`frf` with ``mode="step-up"`` -- stepped sines that jump at folds as a test does;
+- :func:`nnm` -- nonlinear modes (backbone frequency and damping against amplitude);
+- :class:`TestData` -- stepped-sine test data from numpy arrays or files;
 - :func:`calibrate` -- parameters fitted to a stepped-sine test, with Cramer-Rao bounds and
-  k-fold cross validation.
+  k-fold cross validation; :func:`calibrate_modal` -- FE-level parameters from measured modes;
+- :func:`virtual_test` and :func:`plan` -- the virtual test through a shaker model and the
+  ranking of candidate test designs by their Fisher information.
 
 Every function runs the same code as the ``nlsim`` command line with the same defaults, so the
 numbers equal the command's to the last bit. Results are numpy arrays, time or frequency
@@ -28,6 +33,8 @@ import numpy as np
 
 from . import _native
 from ._native import (
+    Balance,
+    BalancePoint,
     Calibration,
     ComputationError,
     Error,
@@ -35,13 +42,20 @@ from ._native import (
     Frf,
     History,
     InputError,
+    ModalCalibration,
     Model,
     Modes,
+    Nnm,
+    Plan,
     Reduced,
+    TestData,
+    VirtualTest,
     builtin_models,
     calibrate,
+    calibrate_modal,
     frf,
     modes,
+    nnm,
     reduce,
     simulate,
 )
@@ -49,6 +63,8 @@ from ._native import (
 __version__: str = _native.__version__
 
 __all__ = [
+    "Balance",
+    "BalancePoint",
     "Calibration",
     "ComputationError",
     "Error",
@@ -56,17 +72,26 @@ __all__ = [
     "Frf",
     "History",
     "InputError",
+    "ModalCalibration",
     "Model",
     "Modes",
+    "Nnm",
+    "Plan",
     "Reduced",
+    "TestData",
+    "VirtualTest",
     "builtin_models",
     "calibrate",
+    "calibrate_modal",
     "frf",
     "from_matrices",
     "load",
     "modes",
+    "nnm",
+    "plan",
     "reduce",
     "simulate",
+    "virtual_test",
 ]
 
 
@@ -132,6 +157,70 @@ def load(spec: str) -> Model:
     return Model.load(spec)
 
 
+def _toml_key(k: Any) -> str:
+    return _toml_value("key", str(k))
+
+
+def _toml_value(key: str, v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        return repr(float(v))
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, dict):
+        items = (f"{_toml_key(k)} = {_toml_value(f'{key}.{k}', x)}" for k, x in v.items())
+        return "{ " + ", ".join(items) + " }"
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return "[" + ", ".join(_toml_value(key, x) for x in v) + "]"
+    raise InputError(f"{key}: {type(v).__name__} is not a value a test or plan file holds")
+
+
+def _toml(arg: str, spec: Any) -> Any:
+    """A test or plan given as a dict, as the TOML text of the file it stands for: scalars,
+    lists and inline tables as keys; a list of dicts as an array of tables (``sweep=[{...}]``
+    is ``[[sweep]]``), a dict of scalars under a table name as that table (``shaker={...}``
+    is ``[shaker]``). Paths and TOML text pass unchanged."""
+    if not isinstance(spec, dict):
+        return spec
+    head, tables = [], []
+    for key, v in spec.items():
+        if not isinstance(key, str):
+            raise InputError(f"{arg}: keys are str, not {type(key).__name__}")
+        if isinstance(v, (list, tuple)) and v and all(isinstance(x, dict) for x in v):
+            for x in v:
+                tables.append(f"[[{key}]]")
+                tables.extend(
+                    f"{_toml_key(k)} = {_toml_value(f'{key}.{k}', y)}" for k, y in x.items()
+                )
+        elif isinstance(v, dict) and key in ("shaker", "control"):
+            tables.append(f"[{key}]")
+            tables.extend(f"{_toml_key(k)} = {_toml_value(f'{key}.{k}', y)}" for k, y in v.items())
+        else:
+            head.append(f"{_toml_key(key)} = {_toml_value(key, v)}")
+    return "\n".join(head + tables) + "\n"
+
+
+def virtual_test(model: Model, test: Any, threads: Optional[int] = None) -> VirtualTest:
+    """Runs a virtual stepped-sine test through the shaker model, as ``nlsim test MODEL
+    TEST``. ``test`` is a test file's path, its TOML text, or a dict of its keys
+    (``{"drive": "tip", "sweep": [{"from": 30.0, "to": 36.0, "steps": 21, "force": 0.2}]}``;
+    docs/planning.md lists them). Nothing is written: ``result.data`` is a :class:`TestData`
+    (``.save("test.csv")`` writes it, :func:`calibrate` takes it)."""
+    return _native.virtual_test(model, _toml("test", test), threads=threads)
+
+
+def plan(model: Model, plan: Any, threads: Optional[int] = None) -> Plan:
+    """Ranks candidate test designs by the Fisher information of ``plan["params"]``, as
+    ``nlsim plan MODEL PLAN``. ``plan`` is a plan file's path, its TOML text or a dict of its
+    keys (``{"params": ["tip.k3"], "levels": [0.1, 0.2], "band": [{"from": 30.0, "to":
+    36.0, "steps": 15}]}``; docs/planning.md lists them). Returns a :class:`Plan`, best
+    design first."""
+    return _native.plan(model, _toml("plan", plan), threads=threads)
+
+
 def _frame(columns: dict):
     try:
         import pandas as pd
@@ -195,6 +284,74 @@ def _calibration_frame(self: Calibration):
     return df
 
 
+def _nnm_frame(self: Nnm):
+    cols = {
+        "amplitude": self.amplitude,
+        "frequency_hz": self.frequency_hz,
+        "damping_ratio": self.damping_ratio,
+    }
+    y = self.response
+    for j, s in enumerate(self.sensors):
+        for k in range(1, y.shape[2]):
+            cols[f"{s}_h{k}"] = y[:, j, k]
+    return _frame(cols)
+
+
+def _test_data_frame(self: TestData):
+    rows: dict = {"sweep": [], "step": [], "frequency_hz": [], "force": []}
+    for c in self.channels:
+        rows[c] = []
+    for s in self.sweeps:
+        for i, f in enumerate(s["frequency_hz"]):
+            rows["sweep"].append(s["label"])
+            rows["step"].append(i + 1)
+            rows["frequency_hz"].append(f)
+            rows["force"].append(s["force"][i, 0])
+            for j, c in enumerate(self.channels):
+                rows[c].append(s["response"][i, j, 0])
+    return _frame(rows)
+
+
+def _modal_frame(self: ModalCalibration):
+    df = _frame(
+        {
+            "estimate": self.estimate,
+            "cramer_rao_std": self.cramer_rao_std,
+            "chi2_scaled_std": self.chi2_scaled_std,
+            "at_bound": self.at_bound,
+        }
+    )
+    df.index = self.params
+    df.index.name = "param"
+    return df
+
+
+def _plan_frame(self: Plan):
+    d = self.designs
+    cols = {
+        "drive": [x[0] for x in d],
+        "level_n": [float(x[1]) for x in d],
+        "signal": [x[2] for x in d],
+        "band": [x[3] for x in d],
+        "sensors": [x[4] for x in d],
+        "harmonics": [x[5] for x in d],
+        "log_det": self.log_det,
+        "max_variance": self.max_variance,
+        "collinearity": self.collinearity,
+    }
+    std = self.relative_std
+    for j, p in enumerate(self.params):
+        cols[f"std_{p}"] = std[:, j]
+    df = _frame(cols)
+    df.index = np.arange(1, len(df) + 1)
+    df.index.name = "rank"
+    return df
+
+
+Nnm.to_dataframe = _nnm_frame  # type: ignore[attr-defined]
+TestData.to_dataframe = _test_data_frame  # type: ignore[attr-defined]
+ModalCalibration.to_dataframe = _modal_frame  # type: ignore[attr-defined]
+Plan.to_dataframe = _plan_frame  # type: ignore[attr-defined]
 Calibration.to_dataframe = _calibration_frame  # type: ignore[attr-defined]
 Modes.to_dataframe = _modes_frame  # type: ignore[attr-defined]
 History.to_dataframe = _history_frame  # type: ignore[attr-defined]

@@ -216,7 +216,7 @@ class Calibration:
 
 def calibrate(
     model: Model,
-    data: Union[str, "os.PathLike[str]"],
+    data: Union[str, "os.PathLike[str]", TestData],
     params: Mapping[str, Tuple[float, float]],
     compare: Sequence[int] = ...,
     form: str = "complex",
@@ -251,6 +251,10 @@ def simulate(
     modes: int = 20,
     residual_flexibility: bool = True,
     locate_events: bool = True,
+    rtol: float = 1e-3,
+    atol: Optional[float] = None,
+    substeps: int = 1,
+    hht_alpha: float = -0.05,
     threads: Optional[int] = None,
 ) -> History: ...
 def frf(
@@ -263,6 +267,254 @@ def frf(
     modes: int = 20,
     residual_flexibility: bool = True,
     max_points: Optional[int] = None,
+    mode: str = "continuation",
+    points: Optional[int] = None,
     threads: Optional[int] = None,
 ) -> Frf: ...
 def builtin_models() -> List[Tuple[str, str]]: ...
+
+class Nnm:
+    """A nonlinear mode, amplitudes first, in increasing amplitude."""
+
+    @property
+    def amplitude(self) -> npt.NDArray[np.float64]:
+        """(point,) modal amplitude, m sqrt(kg)"""
+    @property
+    def frequency_hz(self) -> npt.NDArray[np.float64]:
+        """(point,)"""
+    @property
+    def damping_ratio(self) -> npt.NDArray[np.float64]:
+        """(point,)"""
+    @property
+    def xi(self) -> npt.NDArray[np.float64]:
+        """(point,) artificial damping, 1/s"""
+    @property
+    def response(self) -> npt.NDArray[np.complex128]:
+        """(point, sensor, harmonic 0..H), cosine convention"""
+    @property
+    def iterations(self) -> List[int]: ...
+    @property
+    def sensors(self) -> List[str]: ...
+    @property
+    def mode(self) -> int: ...
+    @property
+    def modes(self) -> int: ...
+    @property
+    def status(self) -> str: ...
+    @property
+    def detail(self) -> str: ...
+    def __len__(self) -> int: ...
+    def to_dataframe(self) -> Any: ...
+
+def nnm(
+    model: Model,
+    from_amplitude: float,
+    to_amplitude: float,
+    mode: int = 1,
+    points: int = 50,
+    harmonics: int = 7,
+    modes: int = 10,
+    threads: Optional[int] = None,
+) -> Nnm: ...
+
+class TestData:
+    """Stepped-sine test data: one drive point, response channels, sweeps of steps."""
+
+    def __init__(
+        self,
+        input: str,
+        channels: Mapping[str, str],
+        sweeps: Sequence[Mapping[str, Any]],
+        noise: Union[float, Sequence[float], None] = None,
+        noise_absolute: Union[float, Sequence[float], None] = None,
+        drive: str = "force",
+    ) -> None: ...
+    @staticmethod
+    def load(
+        path: Union[str, "os.PathLike[str]"],
+        model: Model,
+        noise: float = 0.01,
+        phase_offset_deg: float = 0.0,
+    ) -> TestData: ...
+    def save(self, path: Union[str, "os.PathLike[str]"]) -> None: ...
+    @property
+    def input(self) -> str: ...
+    @property
+    def drive(self) -> str: ...
+    @property
+    def channels(self) -> List[str]: ...
+    @property
+    def quantities(self) -> List[str]: ...
+    @property
+    def noise(self) -> List[Tuple[float, float]]:
+        """(absolute, relative) per channel"""
+    @property
+    def harmonics(self) -> int: ...
+    @property
+    def n_points(self) -> int: ...
+    @property
+    def sweeps(self) -> List[Dict[str, Any]]:
+        """each: label, direction, frequency_hz (step,), force (step, harmonic),
+        response (step, channel, harmonic), sigma (as response) or None"""
+    def __len__(self) -> int: ...
+    def to_dataframe(self) -> Any: ...
+
+class ModalCalibration:
+    """FE-level parameters fitted to measured modes."""
+
+    @property
+    def params(self) -> List[str]: ...
+    @property
+    def estimate(self) -> npt.NDArray[np.float64]:
+        """(param,)"""
+    @property
+    def status(self) -> str: ...
+    @property
+    def cost(self) -> float: ...
+    @property
+    def reduced_chi2(self) -> float: ...
+    @property
+    def cramer_rao_std(self) -> npt.NDArray[np.float64]:
+        """(param,)"""
+    @property
+    def chi2_scaled_std(self) -> npt.NDArray[np.float64]:
+        """(param,)"""
+    @property
+    def covariance(self) -> npt.NDArray[np.float64]:
+        """(param, param)"""
+    @property
+    def at_bound(self) -> List[bool]: ...
+    @property
+    def pairing(self) -> List[int]: ...
+    @property
+    def frequency_hz(self) -> npt.NDArray[np.float64]:
+        """(measured mode,) computed at the estimate"""
+    @property
+    def mac(self) -> npt.NDArray[np.float64]:
+        """(measured mode,)"""
+    @property
+    def candidates(self) -> npt.NDArray[np.float64]:
+        """(candidate, param)"""
+    @property
+    def candidate_cost(self) -> npt.NDArray[np.float64]:
+        """(candidate,)"""
+    def to_dataframe(self) -> Any: ...
+
+def calibrate_modal(
+    model: Model,
+    data: Union[str, "os.PathLike[str]", Mapping[str, Any]],
+    params: Mapping[str, Tuple[float, float]],
+    shape_noise: float = 0.02,
+    modes: int = 20,
+    lhs: int = 64,
+    seed: int = 1,
+    starts: int = 3,
+    threads: Optional[int] = None,
+) -> ModalCalibration: ...
+
+class VirtualTest:
+    """A virtual stepped-sine test through the shaker model."""
+
+    @property
+    def data(self) -> TestData: ...
+    @property
+    def open_loop(self) -> Optional[TestData]: ...
+    @property
+    def drive(self) -> str: ...
+    @property
+    def frequency_hz(self) -> npt.NDArray[np.float64]:
+        """(step,)"""
+    @property
+    def voltage(self) -> npt.NDArray[np.complex128]:
+        """(step, harmonic 0..H), V"""
+    @property
+    def force(self) -> npt.NDArray[np.complex128]:
+        """(step, harmonic 0..H), N"""
+    @property
+    def force_error(self) -> npt.NDArray[np.float64]:
+        """(step,)"""
+    @property
+    def noise_floors(self) -> List[Tuple[str, float]]: ...
+    @property
+    def warnings(self) -> List[str]: ...
+
+def virtual_test(
+    model: Model,
+    test: Union[str, "os.PathLike[str]"],
+    threads: Optional[int] = None,
+) -> VirtualTest: ...
+
+class Plan:
+    """Candidate test designs, best first."""
+
+    @property
+    def params(self) -> List[str]: ...
+    @property
+    def nominal(self) -> npt.NDArray[np.float64]:
+        """(param,)"""
+    @property
+    def criterion(self) -> str: ...
+    @property
+    def designs(self) -> List[Tuple[str, str, str, str, str, str]]:
+        """(drive, level N, signal, band, sensors, harmonics) per design"""
+    @property
+    def log_det(self) -> npt.NDArray[np.float64]:
+        """(design,)"""
+    @property
+    def max_variance(self) -> npt.NDArray[np.float64]:
+        """(design,)"""
+    @property
+    def relative_std(self) -> npt.NDArray[np.float64]:
+        """(design, param)"""
+    @property
+    def collinearity(self) -> npt.NDArray[np.float64]:
+        """(design,)"""
+    @property
+    def warnings(self) -> List[str]: ...
+    def __len__(self) -> int: ...
+    def to_dataframe(self) -> Any: ...
+
+def plan(
+    model: Model,
+    plan: Union[str, "os.PathLike[str]"],
+    threads: Optional[int] = None,
+) -> Plan: ...
+
+class BalancePoint:
+    """One solved harmonic-balance point."""
+
+    @property
+    def x(self) -> npt.NDArray[np.float64]:
+        """(unknown,): the start of the next solve"""
+    @property
+    def response(self) -> npt.NDArray[np.complex128]:
+        """(sensor, harmonic 0..H), cosine convention"""
+    @property
+    def status(self) -> str: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def residual(self) -> float: ...
+    @property
+    def seconds(self) -> float:
+        """wall time of the library's Newton solve alone"""
+
+class Balance:
+    """A harmonic-balance system built once, solved at any frequency and level."""
+
+    def __init__(
+        self,
+        model: Union[Model, Reduced],
+        harmonics: int = 7,
+        modes: int = 20,
+        residual_flexibility: bool = True,
+        threads: Optional[int] = None,
+    ) -> None: ...
+    @property
+    def n_unknowns(self) -> int: ...
+    def solve(
+        self,
+        freq_hz: float,
+        level: float = 1.0,
+        start: Optional[npt.NDArray[np.float64]] = None,
+    ) -> BalancePoint: ...

@@ -3,6 +3,7 @@
 //! Levenberg–Marquardt from the best starts, Cramér–Rao bounds at the optimum, k-fold cross
 //! validation — with the command's defaults, so the estimates are the command's to the bit.
 
+use crate::data::TestData;
 use crate::model::Model;
 use crate::runs::{Stop, run};
 use crate::{input, py_err};
@@ -148,34 +149,44 @@ impl Calibration {
     }
 }
 
-/// Calibrates parameters of `model` on the stepped-sine test in file `data` (CSV or
-/// universal file dataset 58; HDF5 through h5py is not read here). `params` maps each
-/// parameter's text form to its bounds `(lower, upper)`. The other arguments are `nlsim
-/// calibrate`'s options with its defaults: `compare` the harmonics compared (1 = the
-/// fundamental), `form` `"complex"` or `"log"` (log-magnitude and phase), `branch`
-/// `"nearest"` or `"continuation"`, `harmonics` the H of the harmonic balance, `modes`
-/// retained, `uff_noise` the relative noise of UFF FRFs, `lhs` candidates, `seed`, `starts`,
-/// `folds` (0: no cross validation).
-#[pyfunction]
-#[pyo3(signature = (model, data, params, compare=vec![1], form="complex", branch="nearest", harmonics=3, modes=20, uff_noise=0.01, lhs=64, seed=1, starts=3, folds=10, threads=None))]
-#[allow(clippy::too_many_arguments)]
-pub fn calibrate(
-    py: Python<'_>,
-    model: &Model,
-    data: PathBuf,
-    params: &Bound<'_, PyDict>,
-    compare: Vec<usize>,
-    form: &str,
-    branch: &str,
-    harmonics: usize,
-    modes: usize,
-    uff_noise: f64,
-    lhs: usize,
-    seed: u64,
-    starts: usize,
-    folds: usize,
-    threads: Option<usize>,
-) -> PyResult<Calibration> {
+/// The test data a calibration runs on: given as `TestData`, or a file read for the model.
+enum Source {
+    Given(Arc<nlsim::calib::TestData>),
+    File(PathBuf),
+}
+
+impl Source {
+    fn of(data: &Bound<'_, PyAny>) -> PyResult<Self> {
+        if let Ok(d) = data.cast::<TestData>() {
+            return Ok(Source::Given(d.get().data.clone()));
+        }
+        data.extract::<PathBuf>()
+            .map(Source::File)
+            .map_err(|_| input("data: expected an nlsim.TestData or the path of a test data file"))
+    }
+
+    fn read(
+        self,
+        m: &nlsim::kernel::Model,
+        uff_noise: f64,
+    ) -> nlsim::Result<Arc<nlsim::calib::TestData>> {
+        match self {
+            Source::Given(d) => Ok(d),
+            Source::File(path) => {
+                let options = nlsim::formats::test_data::DataOptions {
+                    noise: uff_noise,
+                    ..Default::default()
+                };
+                Ok(Arc::new(nlsim::formats::test_data::read(
+                    &path, m, &options,
+                )?))
+            }
+        }
+    }
+}
+
+/// The parameters `{name: (lower, upper)}` of `params`, each a parameter of `model`.
+pub(crate) fn param_specs(model: &Model, params: &Bound<'_, PyDict>) -> PyResult<Vec<ParamSpec>> {
     let mut specs = Vec::new();
     for (k, v) in params.iter() {
         let name: String = k
@@ -207,6 +218,40 @@ pub fn calibrate(
     if specs.is_empty() {
         return Err(input("params: name at least one parameter with its bounds"));
     }
+    Ok(specs)
+}
+
+/// Calibrates parameters of `model` on the stepped-sine test `data`: an `nlsim.TestData` (from
+/// arrays, e.g. read with h5py) or a file (nlsim's CSV, an amplitude-and-phase table or
+/// universal file datasets 58). `params` maps each
+/// parameter's text form to its bounds `(lower, upper)`. The other arguments are `nlsim
+/// calibrate`'s options with its defaults: `compare` the harmonics compared (1 = the
+/// fundamental), `form` `"complex"` or `"log"` (log-magnitude and phase), `branch`
+/// `"nearest"` or `"continuation"`, `harmonics` the H of the harmonic balance, `modes`
+/// retained, `uff_noise` the relative noise of UFF FRFs, `lhs` candidates, `seed`, `starts`,
+/// `folds` (0: no cross validation).
+#[pyfunction]
+#[pyo3(signature = (model, data, params, compare=vec![1], form="complex", branch="nearest", harmonics=3, modes=20, uff_noise=0.01, lhs=64, seed=1, starts=3, folds=10, threads=None))]
+#[allow(clippy::too_many_arguments)]
+pub fn calibrate(
+    py: Python<'_>,
+    model: &Model,
+    data: &Bound<'_, PyAny>,
+    params: &Bound<'_, PyDict>,
+    compare: Vec<usize>,
+    form: &str,
+    branch: &str,
+    harmonics: usize,
+    modes: usize,
+    uff_noise: f64,
+    lhs: usize,
+    seed: u64,
+    starts: usize,
+    folds: usize,
+    threads: Option<usize>,
+) -> PyResult<Calibration> {
+    let data = Source::of(data)?;
+    let specs = param_specs(model, params)?;
     let form = match form {
         "complex" => Form::Complex,
         "log" => Form::LogMagnitudePhase,
@@ -247,11 +292,7 @@ pub fn calibrate(
         .map_err(|e| input(e.to_string()))?;
     let m = model.inner.clone();
     let result = run(py, threads, move |stop: &Stop| -> nlsim::Result<_> {
-        let options = nlsim::formats::test_data::DataOptions {
-            noise: uff_noise,
-            ..Default::default()
-        };
-        let data = Arc::new(nlsim::formats::test_data::read(&data, &m, &options)?);
+        let data = data.read(&m, uff_noise)?;
         let reduction = nlsim::reduction::ReductionConfig::lowest(modes.min(m.n_dofs()));
         let objective = FrfObjective::from_model(
             &m,

@@ -12,9 +12,15 @@
 //! [`ComputationError`] for a numerical failure on valid input. A solver that stops short is
 //! not an error: its result carries `status` and `detail`, as in the Rust library.
 
+mod balance;
 mod calibration;
+mod data;
+mod history;
+mod modal;
 mod model;
+mod nnm;
 mod runs;
+mod testing;
 
 use pyo3::create_exception;
 use pyo3::exceptions::PyException;
@@ -87,14 +93,25 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<model::Model>()?;
     m.add_class::<runs::Modes>()?;
     m.add_class::<runs::Reduced>()?;
-    m.add_class::<runs::History>()?;
+    m.add_class::<history::History>()?;
     m.add_class::<runs::Frf>()?;
     m.add_function(wrap_pyfunction!(runs::modes, m)?)?;
     m.add_function(wrap_pyfunction!(runs::reduce, m)?)?;
-    m.add_function(wrap_pyfunction!(runs::simulate, m)?)?;
+    m.add_function(wrap_pyfunction!(history::simulate, m)?)?;
     m.add_function(wrap_pyfunction!(runs::frf, m)?)?;
     m.add_function(wrap_pyfunction!(runs::builtin_models, m)?)?;
     m.add_class::<calibration::Calibration>()?;
     m.add_function(wrap_pyfunction!(calibration::calibrate, m)?)?;
+    m.add_class::<data::TestData>()?;
+    m.add_class::<modal::ModalCalibration>()?;
+    m.add_function(wrap_pyfunction!(modal::calibrate_modal, m)?)?;
+    m.add_class::<nnm::Nnm>()?;
+    m.add_function(wrap_pyfunction!(nnm::nnm, m)?)?;
+    m.add_class::<balance::Balance>()?;
+    m.add_class::<balance::BalancePoint>()?;
+    m.add_class::<testing::VirtualTest>()?;
+    m.add_function(wrap_pyfunction!(testing::virtual_test, m)?)?;
+    m.add_class::<testing::Plan>()?;
+    m.add_function(wrap_pyfunction!(testing::plan, m)?)?;
     Ok(())
 }

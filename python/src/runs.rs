@@ -8,16 +8,44 @@ use crate::model::Model;
 use crate::{ComputationError, input, py_err};
 use faer::c64;
 use nlsim::hb::{ContinuationConfig, HarmonicSet, HbConfig, HbSystem, PointKind};
-use nlsim::reduction::{EigenConfig, ModalSystem, ModeSelection, ReducedModel, ReductionConfig};
-use nlsim::sim::{FohConfig, Hold, LoadCase, Plant, Signal, Simulator};
+use nlsim::reduction::{EigenConfig, ModeSelection, ReducedModel, ReductionConfig};
 use numpy::ndarray::{Array2, Array3};
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use std::f64::consts::PI;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering as AtomicOrdering};
 use std::sync::mpsc::RecvTimeoutError;
 use std::time::Duration;
+
+/// Frequencies of a stepped sine when `points` is not given (as `nlsim frf --mode step-up`).
+const DEFAULT_STEPS: usize = 400;
+
+/// Most frequencies of a stepped sine (as `nlsim frf --points`).
+const MAX_FRF_POINTS: usize = 1_000_000;
+
+/// How `frf` sweeps: `nlsim frf --mode`'s values.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum SweepMode {
+    /// Pseudo-arclength continuation through the folds.
+    Continuation,
+    /// Stepped sine upwards, each point from the last.
+    StepUp,
+    /// Stepped sine downwards.
+    StepDown,
+}
+
+impl SweepMode {
+    fn parse(s: &str) -> Option<Self> {
+        match s {
+            "continuation" => Some(Self::Continuation),
+            "step-up" => Some(Self::StepUp),
+            "step-down" => Some(Self::StepDown),
+            _ => None,
+        }
+    }
+}
 
 /// Most worker threads `threads=` accepts (as `nlsim --threads`).
 const MAX_THREADS: usize = 1024;
@@ -143,7 +171,7 @@ fn eigen_config(selection: ModeSelection, threads: Option<usize>) -> EigenConfig
     }
 }
 
-fn vec1<'py>(py: Python<'py>, v: Vec<f64>) -> Bound<'py, PyArray1<f64>> {
+pub(crate) fn vec1<'py>(py: Python<'py>, v: Vec<f64>) -> Bound<'py, PyArray1<f64>> {
     PyArray1::from_vec(py, v)
 }
 
@@ -324,7 +352,7 @@ impl Reduced {
 
 /// The reduction `simulate` and `frf` use (`nlsim simulate`/`frf`'s `--modes`, residual
 /// flexibility unless `--no-residual`).
-fn reduce_model(
+pub(crate) fn reduce_model(
     m: &nlsim::kernel::Model,
     modes: usize,
     residual: bool,
@@ -371,13 +399,13 @@ pub fn reduce(
 
 /// A model or a reduced model as given to `simulate` or `frf`: the reduction to use (made
 /// here, on the worker, when a model is given).
-enum Subject {
+pub(crate) enum Subject {
     Model(nlsim::kernel::Model),
     Reduced(Arc<ReducedModel>, nlsim::kernel::Model),
 }
 
 impl Subject {
-    fn of(obj: &Bound<'_, PyAny>) -> PyResult<Subject> {
+    pub(crate) fn of(obj: &Bound<'_, PyAny>) -> PyResult<Subject> {
         if let Ok(r) = obj.cast::<Reduced>() {
             let r = r.get();
             return Ok(Subject::Reduced(r.reduced.clone(), r.model.clone()));
@@ -393,13 +421,13 @@ impl Subject {
         )))
     }
 
-    fn model(&self) -> &nlsim::kernel::Model {
+    pub(crate) fn model(&self) -> &nlsim::kernel::Model {
         match self {
             Subject::Model(m) | Subject::Reduced(_, m) => m,
         }
     }
 
-    fn reduced(
+    pub(crate) fn reduced(
         self,
         modes: usize,
         residual: bool,
@@ -414,258 +442,6 @@ impl Subject {
             )),
         }
     }
-}
-
-// -----------------------------------------------------------------------------------------
-// Time simulation.
-
-/// A time history (`nlsim.simulate`), time first.
-#[pyclass(module = "nlsim._native", name = "History", frozen)]
-pub struct History {
-    h: nlsim::sim::TimeHistory,
-    excitation: Vec<String>,
-    modes: usize,
-}
-
-#[pymethods]
-impl History {
-    /// Sample times (s), shape `(n_samples,)`.
-    #[getter]
-    fn time<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        let n = self.h.outputs.first().map_or(0, |o| o.values.len());
-        vec1(py, (0..n).map(|k| k as f64 * self.h.dt).collect())
-    }
-
-    /// Sensor responses in their quantity (m, m/s or m/s²), shape `(n_samples, n_sensors)`.
-    #[getter]
-    fn outputs<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        let n = self.h.outputs.first().map_or(0, |o| o.values.len());
-        Array2::from_shape_fn((n, self.h.outputs.len()), |(k, s)| {
-            self.h.outputs[s].values[k]
-        })
-        .into_pyarray(py)
-    }
-
-    /// Sensor names, in the order of `outputs`' columns.
-    #[getter]
-    fn sensors(&self) -> Vec<String> {
-        self.h.outputs.iter().map(|o| o.name.clone()).collect()
-    }
-
-    /// Force of each excitation point (N), shape `(n_samples, n_inputs)`.
-    #[getter]
-    fn forces<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        let n = self.h.inputs.first().map_or(0, |i| i.1.len());
-        Array2::from_shape_fn((n, self.h.inputs.len()), |(k, i)| self.h.inputs[i].1[k])
-            .into_pyarray(py)
-    }
-
-    /// Element forces (N), shape `(n_samples, n_elements)`, columns in the order of
-    /// `elements`.
-    #[getter]
-    fn element_forces<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        let n = self.h.element_forces.first().map_or(0, Vec::len);
-        Array2::from_shape_fn((n, self.h.element_forces.len()), |(k, e)| {
-            self.h.element_forces[e][k]
-        })
-        .into_pyarray(py)
-    }
-
-    /// Element names.
-    #[getter]
-    fn elements(&self) -> Vec<String> {
-        self.h.element_names.clone()
-    }
-
-    /// The excitation spec each excitation point ran with.
-    #[getter]
-    fn excitation(&self) -> Vec<String> {
-        self.excitation.clone()
-    }
-
-    /// Retained modes.
-    #[getter]
-    fn modes(&self) -> usize {
-        self.modes
-    }
-
-    /// `"converged"` for a complete run; otherwise why it stopped (the samples computed are
-    /// kept).
-    #[getter]
-    fn status(&self) -> &'static str {
-        self.h.status.as_str()
-    }
-
-    /// What stopped the run, or `None`.
-    #[getter]
-    fn detail(&self) -> Option<String> {
-        self.h.stopped.as_ref().map(ToString::to_string)
-    }
-
-    /// Time step (s).
-    #[getter]
-    fn dt(&self) -> f64 {
-        self.h.dt
-    }
-
-    fn __repr__(&self) -> String {
-        format!(
-            "<nlsim.History: {} sample(s) of {} sensor(s), dt {} s, {}>",
-            self.h.outputs.first().map_or(0, |o| o.values.len()),
-            self.h.outputs.len(),
-            self.h.dt,
-            self.h.status.as_str()
-        )
-    }
-}
-
-/// One force per excitation point: a spec of `nlsim simulate --excitation` (`"sine:freq=20"`,
-/// `"sweep:f0=5,f1=50"`, …; amplitudes default to the point's nominal one) or samples (N) at
-/// `rate_hz`, held linearly between samples and zero after the last.
-fn drive(
-    point: &nlsim::kernel::Excitation,
-    value: &Bound<'_, PyAny>,
-    duration: f64,
-    rate_hz: f64,
-) -> PyResult<(Signal, String)> {
-    if let Ok(spec) = value.extract::<String>() {
-        let signal =
-            nlsim::formats::excitation::parse_excitation(&spec, point.amplitude, duration, rate_hz)
-                .map_err(|e| input(format!("excitation['{}']: {e}", point.name)))?;
-        nlsim::formats::excitation::nyquist_check(&spec, &signal, rate_hz)
-            .map_err(|e| input(format!("excitation['{}']: {e}", point.name)))?;
-        return Ok((signal, spec));
-    }
-    let samples = value
-        .extract::<PyReadonlyArray1<'_, f64>>()
-        .map_err(|_| {
-            input(format!(
-                "excitation['{}']: expected a spec string or a one-dimensional float64 array of forces (N)",
-                point.name
-            ))
-        })?;
-    let values = samples
-        .as_slice()
-        .map_err(|e| input(format!("excitation['{}']: {e}", point.name)))?;
-    if let Some(k) = values.iter().position(|v| !v.is_finite()) {
-        return Err(input(format!(
-            "excitation['{}']: sample {k} is {}, not a finite force",
-            point.name, values[k]
-        )));
-    }
-    Ok((
-        Signal::Sampled {
-            rate_hz,
-            values: values.to_vec(),
-        },
-        format!("{} samples at {rate_hz} Hz", values.len()),
-    ))
-}
-
-/// Simulates `model` (or a `Reduced`) for `duration` s at `rate_hz` samples per second with
-/// the exponential first-order hold (thesis eq. 18–22; `method="zoh"` or `"lsoh"` for the
-/// other holds), as `nlsim simulate` does. `excitation` maps excitation-point names to a spec
-/// string or an array of force samples (N) at `rate_hz`; points not named get a sine of
-/// their nominal amplitude at the first natural frequency, as on the command line.
-#[pyfunction]
-#[pyo3(signature = (model, duration, rate_hz, excitation=None, method="foh", modes=20, residual_flexibility=true, locate_events=true, threads=None))]
-#[allow(clippy::too_many_arguments)]
-pub fn simulate(
-    py: Python<'_>,
-    model: &Bound<'_, PyAny>,
-    duration: f64,
-    rate_hz: f64,
-    excitation: Option<&Bound<'_, PyDict>>,
-    method: &str,
-    modes: usize,
-    residual_flexibility: bool,
-    locate_events: bool,
-    threads: Option<usize>,
-) -> PyResult<History> {
-    let subject = Subject::of(model)?;
-    if !(duration > 0.0 && duration.is_finite()) {
-        return Err(input(format!(
-            "duration: {duration}; give a positive number of seconds"
-        )));
-    }
-    if !(rate_hz > 0.0 && rate_hz.is_finite()) {
-        return Err(input(format!("rate_hz: {rate_hz}; give a positive rate")));
-    }
-    let n_steps = (duration * rate_hz).round();
-    if !(1.0..=2e8).contains(&n_steps) {
-        return Err(input(format!(
-            "duration x rate_hz gives {n_steps} steps; it must be between 1 and 2e8"
-        )));
-    }
-    let n_steps = n_steps as usize;
-    let hold = match method {
-        "foh" => Hold::Foh,
-        "zoh" => Hold::Zoh,
-        "lsoh" => Hold::Lsoh,
-        other => {
-            return Err(input(format!(
-                "method: '{other}'; use 'foh', 'zoh' or 'lsoh'"
-            )));
-        }
-    };
-    if modes == 0 {
-        return Err(input("modes: 0; keep at least one mode"));
-    }
-    let points = subject.model().excitation().to_vec();
-    let mut given: Vec<Option<(Signal, String)>> = vec![None; points.len()];
-    if let Some(d) = excitation {
-        for (k, v) in d.iter() {
-            let name: String = k
-                .extract()
-                .map_err(|_| input("excitation: keys are excitation-point names (str)"))?;
-            let i = points.iter().position(|p| p.name == name).ok_or_else(|| {
-                input(format!(
-                    "excitation: no excitation point '{name}' (the model has {})",
-                    if points.is_empty() {
-                        "none".to_string()
-                    } else {
-                        points
-                            .iter()
-                            .map(|p| p.name.as_str())
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    }
-                ))
-            })?;
-            given[i] = Some(drive(&points[i], &v, duration, rate_hz)?);
-        }
-    }
-    let (hist, excitation, modes) = run(py, threads, move |stop| -> nlsim::Result<_> {
-        let (reduced, m) = subject.reduced(modes, residual_flexibility, threads, stop)?;
-        // The command line's default drive: a sine at the first natural frequency (to 1 µHz).
-        let f1: f64 = format!("{:.6}", reduced.modes.frequencies_hz()[0])
-            .parse()
-            .unwrap_or(0.0);
-        let (signals, labels): (Vec<Signal>, Vec<String>) = points
-            .iter()
-            .zip(given)
-            .map(|(p, g)| {
-                g.unwrap_or_else(|| (Signal::sine(p.amplitude, f1), format!("sine:freq={f1:.6}")))
-            })
-            .unzip();
-        let system = ModalSystem::new(&reduced)?;
-        let plant = Plant::from_model(&m, &system)?;
-        let mut cfg = FohConfig::new(1.0 / rate_hz);
-        cfg.hold = hold;
-        cfg.locate_events = locate_events;
-        let sim = Simulator::new(&plant, &cfg)?;
-        let h =
-            sim.run_with_progress(&LoadCase::new("simulate", signals), n_steps, &mut |_, _| {
-                stop.check()
-            })?;
-        Ok((h, labels, reduced.modes.len()))
-    })?
-    .map_err(py_err)?;
-    Ok(History {
-        h: hist,
-        excitation,
-        modes,
-    })
 }
 
 // -----------------------------------------------------------------------------------------
@@ -825,9 +601,11 @@ impl Frf {
 /// order) by harmonic balance with `harmonics` harmonics (thesis eq. 13–17) and
 /// pseudo-arclength continuation through folds (thesis §3.3), with Hill stability unless
 /// `stability` is false — `nlsim frf MODEL --from … --to …` with the same defaults. `level`
-/// scales the excitation's nominal amplitudes.
+/// scales the excitation's nominal amplitudes. `mode="step-up"` or `"step-down"` runs a
+/// stepped sine instead (`--mode`): `points` evenly spaced frequencies (default 400), each
+/// solved from the last, so the response jumps past a fold as a test's would.
 #[pyfunction]
-#[pyo3(signature = (model, from_hz, to_hz, harmonics=7, level=1.0, stability=true, modes=20, residual_flexibility=true, max_points=None, threads=None))]
+#[pyo3(signature = (model, from_hz, to_hz, harmonics=7, level=1.0, stability=true, modes=20, residual_flexibility=true, max_points=None, mode="continuation", points=None, threads=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn frf(
     py: Python<'_>,
@@ -840,8 +618,45 @@ pub fn frf(
     modes: usize,
     residual_flexibility: bool,
     max_points: Option<usize>,
+    mode: &str,
+    points: Option<usize>,
     threads: Option<usize>,
 ) -> PyResult<Frf> {
+    let sweep = SweepMode::parse(mode).ok_or_else(|| {
+        input(format!(
+            "mode: '{mode}'; use 'continuation', 'step-up' or 'step-down'"
+        ))
+    })?;
+    let steps = match (sweep, points) {
+        (SweepMode::Continuation, Some(_)) => {
+            return Err(input(
+                "points: a stepped sine's frequency count; a continuation takes max_points",
+            ));
+        }
+        (SweepMode::Continuation, None) => 0,
+        (_, p) => {
+            let upward = from_hz < to_hz;
+            if sweep == SweepMode::StepUp && !upward {
+                return Err(input(format!(
+                    "mode 'step-up' goes up, but from_hz {from_hz} is above to_hz {to_hz} (swap \
+                     them, or step down)"
+                )));
+            }
+            if sweep == SweepMode::StepDown && upward {
+                return Err(input(format!(
+                    "mode 'step-down' goes down, but from_hz {from_hz} is below to_hz {to_hz} \
+                     (swap them, or step up)"
+                )));
+            }
+            let n = p.unwrap_or(DEFAULT_STEPS);
+            if !(2..=MAX_FRF_POINTS).contains(&n) {
+                return Err(input(format!(
+                    "points: {n}; a stepped sine takes 2 to {MAX_FRF_POINTS} frequencies"
+                )));
+            }
+            n
+        }
+    };
     let subject = Subject::of(model)?;
     for (arg, v) in [("from_hz", from_hz), ("to_hz", to_hz)] {
         if !(v > 0.0 && v.is_finite()) {
@@ -876,14 +691,24 @@ pub fn frf(
     let (system, report, y) = run(py, threads, move |stop| -> nlsim::Result<_> {
         let (reduced, m) = subject.reduced(modes, residual_flexibility, threads, stop)?;
         let system = HbSystem::from_model(&m, &reduced, set, HbConfig::default())?;
-        let mut cfg = ContinuationConfig::frequency(from_hz, to_hz);
-        cfg.stability = stability;
-        cfg.fixed = level;
-        if let Some(n) = max_points {
-            cfg.max_points = n;
-        }
-        let report =
-            nlsim::hb::continuation_with_progress(&system, &cfg, None, &mut |_| stop.check())?;
+        let report = if sweep == SweepMode::Continuation {
+            let mut cfg = ContinuationConfig::frequency(from_hz, to_hz);
+            cfg.stability = stability;
+            cfg.fixed = level;
+            if let Some(n) = max_points {
+                cfg.max_points = n;
+            }
+            nlsim::hb::continuation_with_progress(&system, &cfg, None, &mut |_| stop.check())?
+        } else {
+            // The command line's stepped sine: evenly spaced from `from_hz` to `to_hz`.
+            let (a, b) = (from_hz, to_hz);
+            let omegas: Vec<f64> = (0..steps)
+                .map(|i| 2.0 * PI * (a + (b - a) * i as f64 / (steps - 1) as f64))
+                .collect();
+            nlsim::hb::stepped_sine_with_progress(&system, &omegas, level, stability, &mut |_| {
+                stop.check()
+            })?
+        };
         let y = report
             .branch
             .points

@@ -399,5 +399,12 @@ def test_the_worked_script_of_the_guide_runs_as_written(tmp_path: Path) -> None:
     assert "natural frequencies (Hz): [ 23.948 150.082 420.239 823.539]" in r.stdout
     assert "folds at [32.98 25.94] Hz" in r.stdout
     assert "2 fold(s), converged" in r.stdout
+    # The calibration finds the cubic stiffness and damping the beam was built with.
+    import re
+
+    est = re.search(r"tip_spring.k3 = (\S+) ± (\S+), mode1.zeta = (\S+) ± (\S+);", r.stdout)
+    assert est, r.stdout
+    k3, s_k3, zeta, s_zeta = (float(x) for x in est.groups())
+    assert abs(k3 - 6e9) < 3 * s_k3 and abs(zeta - 0.01) < 3 * s_zeta
     png = tmp_path / "cantilever.png"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -31,5 +31,5 @@ pub use history::{ContactEvent, InitialState, LoadCase, RunStats, Series, TimeHi
 pub use hold::{Hold, bias_error, reconstruction_gain, step_coefficients};
 pub use newmark::{Newmark, NewmarkConfig};
 pub use plant::{ElementPort, OutputSpec, Plant, PlantBuilder};
-pub use rk::{Rk4Config, Rk45Config, rk4, rk4_with_progress, rk45, rk45_with_progress};
+pub use rk::{Rk4Config, Rk45Config, auto_atol, rk4, rk4_with_progress, rk45, rk45_with_progress};
 pub use signal::{Harmonic, Signal};

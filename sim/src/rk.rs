@@ -640,3 +640,40 @@ pub fn rk4_with_progress(
     stats.seconds = start.elapsed().as_secs_f64();
     Ok(rec.finish(plant, "rk4", case, dt, z, stats, stop))
 }
+
+/// RK45's absolute tolerance scaled to the response (√kg m): `10⁻³ rtol z_ref`, with
+/// `z_ref = max_s Σ_i |b̃_{s,i}| F_i / |λ_s|` the largest static amplitude of a modal state
+/// under the peak excitation forces `F_i` (sampled over the run). ODE45's fixed default 1e-6
+/// is as large as the states of a typical structure (10⁻⁶–10⁻⁴ √kg m) and was measured 17 % and
+/// 89 % off on the clearance beams; relative to the response, `rtol` governs. Rigid-body states
+/// (`λ = 0`) are left out; with no force at all the floor is 1e-15.
+pub fn auto_atol(
+    plant: &Plant,
+    forces: &[crate::Signal],
+    dt: f64,
+    n_steps: usize,
+    rtol: f64,
+) -> f64 {
+    let peaks: Vec<f64> = forces
+        .iter()
+        .map(|f| {
+            (0..=n_steps)
+                .map(|k| f.eval(k as f64 * dt).abs())
+                .fold(0.0, f64::max)
+        })
+        .collect();
+    let sys = &plant.system;
+    let z_ref = (0..sys.n_states())
+        .filter(|&s| sys.poles[s].norm() > 0.0)
+        .map(|s| {
+            plant
+                .inputs
+                .iter()
+                .zip(&peaks)
+                .map(|((_, p), f)| sys.input[(s, *p)].norm() * f)
+                .sum::<f64>()
+                / sys.poles[s].norm()
+        })
+        .fold(0.0, f64::max);
+    (1e-3 * rtol * z_ref).max(1e-15)
+}

@@ -24,16 +24,26 @@
 //! HTML (`crate::present`), numerics (the numeric crates). Dependencies point down: commands
 //! use formats, present and the numeric crates, never the binary or `crate::batch`.
 
+#[cfg(feature = "io")]
 pub mod calibrate;
+#[cfg(feature = "io")]
 pub mod check;
+#[cfg(feature = "io")]
 pub mod demo;
+#[cfg(feature = "io")]
 pub mod frf;
+#[cfg(feature = "io")]
 pub mod harmonics;
+#[cfg(feature = "io")]
 pub mod modal_export;
+#[cfg(feature = "io")]
 pub mod modes;
+#[cfg(feature = "io")]
 pub mod nnm;
 pub mod plan;
 pub mod setup;
+#[cfg(feature = "io")]
 pub mod simulate;
 pub mod test;
+#[cfg(feature = "io")]
 pub mod validate;

@@ -9,8 +9,8 @@ use crate::formats::files::unit;
 use faer::c64;
 use hdf5_metno as hdf5;
 use nlsim_hb::nnm::{NnmPoint, NnmReport};
-use nlsim_hb::{HarmonicSet, HbConfig, HbSystem};
-use nlsim_kernel::{Excitation, Model, Quantity, Status};
+use nlsim_hb::{HarmonicSet, HbSystem};
+use nlsim_kernel::{Model, Status};
 use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
@@ -18,14 +18,7 @@ use std::time::Instant;
 /// Output formats of `nlsim nnm --out`.
 pub const HINT: &str = ".h5 (HDF5, complex harmonics) or .csv (one row per amplitude)";
 
-/// Most amplitudes of one nonlinear mode: a backbone needs tens to hundreds; 10⁴ is about a
-/// minute and a half on the ECL beam (7 ms a point), where 10⁵ would be a quarter of an hour.
-pub const MAX_NNM_POINTS: usize = 10_000;
-
-/// Most unknowns `modes · (2H + 1)` of the modal harmonic balance behind a nonlinear mode:
-/// its Newton matrix is dense, and a handful of them are alive at once (4 000 unknowns:
-/// 128 MB each, a 2·10¹⁰-flop factorisation per iteration).
-pub const MAX_NNM_UNKNOWNS: usize = 4_000;
+pub use nlsim_hb::nnm::{MAX_NNM_POINTS, MAX_NNM_UNKNOWNS};
 
 fn check_unknowns(modes: usize, harmonics: usize) -> Result<()> {
     let n = modes.saturating_mul(2 * harmonics + 1);
@@ -126,30 +119,7 @@ impl NnmRun {
     /// Sensor harmonics (sensors × H+1, complex, in each sensor's quantity) of point `p`:
     /// `Y_k = Φ_s (c_k − i s_k)` times `(ikω)^d` for velocity (`d = 1`) and acceleration.
     pub fn sensor_harmonics(&self, p: &NnmPoint) -> faer::Mat<c64> {
-        let sys = &self.system;
-        let set = *sys.harmonics();
-        let nh = set.len();
-        let phi = sys.linear().participation();
-        let m = sys.linear().n_modes();
-        faer::Mat::from_fn(sys.sensors().len(), set.h + 1, |s, k| {
-            let port = sys.sensors()[s].port;
-            let q: c64 = (0..m)
-                .map(|r| {
-                    let z = if k == 0 {
-                        c64::new(p.eta[r * nh], 0.0)
-                    } else {
-                        c64::new(p.eta[r * nh + 2 * k - 1], -p.eta[r * nh + 2 * k])
-                    };
-                    z * phi[(port, r)]
-                })
-                .sum();
-            let iw = c64::new(0.0, k as f64 * p.omega);
-            match sys.sensors()[s].quantity {
-                Quantity::Displacement => q,
-                Quantity::Velocity => iw * q,
-                Quantity::Acceleration => iw * iw * q,
-            }
-        })
+        nlsim_hb::nnm::sensor_harmonics(&self.system, p)
     }
 
     /// The lines `nlsim nnm` prints: the setup, a table of about ten points, how it ended.
@@ -213,17 +183,7 @@ pub fn run_nnm(
             model.n_dofs()
         )));
     }
-    // The harmonic-balance system needs an input; a free motion uses none of it.
-    let mut free = model.clone();
-    if free.excitation().is_empty() {
-        let dof = model.elements()[0].coupling().dofs()[0];
-        free.add_excitation(Excitation {
-            name: "unused".into(),
-            at: nlsim_kernel::Site::Dof(dof),
-            amplitude: 0.0,
-            harmonics: Vec::new(),
-        })?;
-    }
+    let free = nlsim_hb::nnm::free_model(model)?;
     let t0 = Instant::now();
     let reduced = crate::commands::setup::Reductions::default().get(
         &free,
@@ -232,21 +192,9 @@ pub fn run_nnm(
         req.par,
         req.lanczos,
     )?;
-    // Within a cluster of equal frequencies (the two bending directions of a symmetric
-    // section) any basis is a basis of modes; the free motion needs the one where the
-    // cluster's members beyond the rank of its participation at the elements do not move
-    // them: those are then linear modes the EPMC leaves at rest instead of a singular
-    // direction of its Newton matrix.
     // A cluster kept whole may add modes beyond the request.
     check_unknowns(reduced.n_modes(), req.harmonics)?;
-    let mut aligned = (*reduced).clone();
-    let element_ports: Vec<usize> = nlsim_reduction::model_port_map(&free, &reduced.ports)?
-        .element_coordinates
-        .into_iter()
-        .flatten()
-        .collect();
-    align_clusters(&mut aligned, &element_ports);
-    let system = HbSystem::from_model(&free, &aligned, set, HbConfig::default())?;
+    let system = nlsim_hb::nnm::free_motion_system(&free, &reduced, set)?;
     let report = nlsim_hb::nnm::nonlinear_mode(&system, req.mode - 1, &req.amplitudes(), progress)?;
     if report.points.is_empty() {
         return Err(Error::Failed(report.detail));
@@ -258,45 +206,6 @@ pub fn run_nnm(
         seconds: t0.elapsed().as_secs_f64(),
         model_name: model.name().to_string(),
     })
-}
-
-/// Rotates each cluster of equal eigenvalues (to 1e-8) of `reduced` by the orthogonal `Q`
-/// of the QR factorisation of its participation at `element_ports` (transposed), so that the
-/// cluster's last columns do not move the elements; vectors and participation alike (the
-/// modal damping of a cluster is a multiple of the identity for Rayleigh and modal damping).
-fn align_clusters(reduced: &mut nlsim_reduction::ReducedModel, element_ports: &[usize]) {
-    let lambda = reduced.modes.eigenvalues.clone();
-    let top = lambda
-        .iter()
-        .fold(0.0f64, |a, l| a.max(l.abs()))
-        .max(1e-300);
-    let m = lambda.len();
-    let mut i = 0;
-    while i < m {
-        let mut j = i + 1;
-        while j < m && (lambda[j] - lambda[i]).abs() <= 1e-8 * top {
-            j += 1;
-        }
-        let c = j - i;
-        if c >= 2 && !element_ports.is_empty() {
-            let pt = faer::Mat::from_fn(c, element_ports.len(), |r, e| {
-                reduced.participation[(element_ports[e], i + r)]
-            });
-            let q = pt.qr().compute_Q();
-            let rotate = |a: &mut faer::Mat<f64>| {
-                let block = faer::Mat::from_fn(a.nrows(), c, |r, k| a[(r, i + k)]);
-                let rot = &block * &q;
-                for r in 0..a.nrows() {
-                    for k in 0..c {
-                        a[(r, i + k)] = rot[(r, k)];
-                    }
-                }
-            };
-            rotate(&mut reduced.participation);
-            rotate(&mut reduced.modes.vectors);
-        }
-        i = j;
-    }
 }
 
 /// Writes a nonlinear mode: HDF5 for `.h5`/`.hdf5`, CSV for `.csv`, atomically.

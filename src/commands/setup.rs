@@ -249,6 +249,7 @@ fn reduction_key(model: &Model, modes: usize, residual: bool, lanczos: Lanczos) 
     Ok(h.finish())
 }
 
+#[cfg(feature = "io")]
 /// The retained mode count as a summary prints it: `20`, or `all 3` when the request asked
 /// for more modes than the model has.
 pub(crate) fn modes_text(kept: usize, asked: usize) -> String {
@@ -259,6 +260,7 @@ pub(crate) fn modes_text(kept: usize, asked: usize) -> String {
     }
 }
 
+#[cfg(feature = "io")]
 /// The note when more modes were kept than asked: the rest complete a degenerate cluster.
 pub(crate) fn cluster_note(kept: usize, asked: usize) -> Option<String> {
     (kept > asked && asked > 0).then(|| {

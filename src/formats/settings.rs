@@ -126,8 +126,7 @@ mod plain_type_tests {
 
 /// The `[shaker]` table of a test or calibration file: an electrodynamic shaker on a stinger
 /// ([`nlsim_calib::Shaker`]); absent keys take the default shaker's values. Read by the
-/// command layer (`io`) only.
-#[cfg(feature = "io")]
+/// command layer.
 #[derive(Debug, Clone, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct ShakerTable {
@@ -140,7 +139,6 @@ pub(crate) struct ShakerTable {
     stinger_stiffness: Option<f64>,
 }
 
-#[cfg(feature = "io")]
 impl ShakerTable {
     /// The shaker of `table`: the default one with the keys given replaced.
     pub(crate) fn shaker(table: Option<&ShakerTable>) -> nlsim_calib::Shaker {

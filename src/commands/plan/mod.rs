@@ -26,16 +26,19 @@
 //! steps = 15
 //! ```
 
+#[cfg(feature = "io")]
 pub mod report;
 pub mod request;
 pub mod run;
 
+#[cfg(feature = "io")]
 pub use report::*;
 pub use request::*;
 pub use run::*;
 
 /// `nlsim plan MODEL PLAN`: the request checked, every candidate evaluated with a progress
 /// line, the ranked summary printed and the report folder written.
+#[cfg(feature = "io")]
 pub fn execute(req: &PlanRequest, console: &crate::present::console::Console) -> crate::Result<()> {
     req.check()?;
     crate::formats::files::check_outputs(

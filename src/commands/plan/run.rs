@@ -83,8 +83,16 @@ pub(crate) fn binomial(n: usize, k: usize) -> Option<usize> {
 /// Loads the model of `req`, adds its candidate points, reduces it and builds the planner
 /// and the candidates.
 pub fn prepare_plan(req: &PlanRequest) -> Result<PlanSetup> {
+    req.check()?;
+    let model = crate::commands::setup::load_for_run(&req.model, &req.set)?;
+    prepare_plan_on(model, req)
+}
+
+/// [`prepare_plan`] on `model` as given (loaded, `req.set` not applied; `req.model` is not
+/// used).
+pub fn prepare_plan_on(model: Model, req: &PlanRequest) -> Result<PlanSetup> {
     let t = Instant::now();
-    let (model, candidates) = plan_candidates(req)?;
+    let (model, candidates) = plan_candidates_on(model, req)?;
     // Sequential reduction: the modes, and with them every number of the plan, are then
     // bit-identical whatever the thread count.
     let mut reduction = nlsim_reduction::ReductionConfig::lowest(req.modes.min(model.n_dofs()));
@@ -164,7 +172,13 @@ fn channel_noise(
 /// against the budgets before anything is allocated (no reduction).
 pub fn plan_candidates(req: &PlanRequest) -> Result<(Model, PlanCandidates)> {
     req.check()?;
-    let mut model = crate::commands::setup::load_for_run(&req.model, &req.set)?;
+    let model = crate::commands::setup::load_for_run(&req.model, &req.set)?;
+    plan_candidates_on(model, req)
+}
+
+/// [`plan_candidates`] on `model` as given.
+pub fn plan_candidates_on(mut model: Model, req: &PlanRequest) -> Result<(Model, PlanCandidates)> {
+    req.check()?;
     add_points(&mut model, req)?;
     if model.excitation().is_empty() {
         return Err(Error::Usage(format!(
@@ -407,6 +421,25 @@ pub struct PlanRun {
 /// thread count), then every design ranked. `progress(done, total)` after each sweep.
 pub fn run_plan(req: &PlanRequest, progress: &(dyn Fn(usize, usize) + Sync)) -> Result<PlanRun> {
     let setup = prepare_plan(req)?;
+    finish_plan(setup, req, progress)
+}
+
+/// [`run_plan`] on `model` as given (loaded, `req.set` not applied).
+pub fn run_plan_on(
+    model: Model,
+    req: &PlanRequest,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<PlanRun> {
+    let setup = prepare_plan_on(model, req)?;
+    finish_plan(setup, req, progress)
+}
+
+/// The candidate sweeps of `setup` and the ranking.
+fn finish_plan(
+    setup: PlanSetup,
+    req: &PlanRequest,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<PlanRun> {
     let t = Instant::now();
     let done = AtomicUsize::new(0);
     let total = setup.candidates.sweeps.len();

@@ -127,7 +127,7 @@ pub struct SimRequest {
     /// RK45 relative tolerance.
     pub rtol: f64,
     /// RK45 absolute tolerance on the modal states (√kg m); `None` scales it to the response
-    /// (see [`auto_atol`](super::auto_atol)).
+    /// (see [`nlsim_sim::auto_atol`]).
     pub atol: Option<f64>,
     /// Integration steps per sample (RK4, Newmark, HHT).
     pub substeps: usize,

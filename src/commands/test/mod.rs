@@ -35,16 +35,19 @@
 //! The request and its test file are in `request.rs`, the run in `run.rs`, the summary and the
 //! report folder in `report.rs`.
 
+#[cfg(feature = "io")]
 pub mod report;
 pub mod request;
 pub mod run;
 
+#[cfg(feature = "io")]
 pub use report::*;
 pub use request::*;
 pub use run::*;
 
 /// `nlsim test MODEL TEST`: the virtual test with a progress line per sweep, its summary,
 /// the test data (written by the run) and the report folder.
+#[cfg(feature = "io")]
 pub fn execute(req: &TestRequest, console: &crate::present::console::Console) -> crate::Result<()> {
     // The request's own errors first (run_test checks it again, as a library entry).
     req.check()?;

@@ -36,7 +36,38 @@ pub struct TestRun {
 pub fn run_test(req: &TestRequest, progress: &mut dyn FnMut(usize, usize)) -> Result<TestRun> {
     req.check()?;
     let t = Instant::now();
-    let mut model = crate::commands::setup::load_for_run(&req.model, &req.set)?;
+    let model = crate::commands::setup::load_for_run(&req.model, &req.set)?;
+    let load_seconds = t.elapsed().as_secs_f64();
+    let mut run = run_test_on(model, req, progress)?;
+    run.setup_seconds += load_seconds;
+    write_test_data(&req.out, &run.test.data)?;
+    Ok(run)
+}
+
+/// Writes virtual test data to `out`: HDF5 for `.h5`/`.hdf5` (with the `hdf5` feature), CSV
+/// otherwise.
+pub fn write_test_data(out: &std::path::Path, data: &nlsim_calib::TestData) -> Result<()> {
+    match out.extension().and_then(|e| e.to_str()) {
+        #[cfg(feature = "hdf5")]
+        Some("h5" | "hdf5") => crate::formats::test_data::write_h5(out, data),
+        #[cfg(not(feature = "hdf5"))]
+        Some("h5" | "hdf5") => Err(Error::Usage(format!(
+            "{}: HDF5 test data need nlsim's `hdf5` feature; name a .csv file",
+            out.display()
+        ))),
+        _ => crate::formats::test_data::write_csv(out, data),
+    }
+}
+
+/// [`run_test`] on `model` as given (loaded, `req.set` not applied): the test run, nothing
+/// written (`req.out` and `req.model` are not used).
+pub fn run_test_on(
+    mut model: nlsim_kernel::Model,
+    req: &TestRequest,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<TestRun> {
+    req.check()?;
+    let t = Instant::now();
     let drive = match (&req.drive, &req.drive_dof) {
         (_, Some(dof)) => {
             let at = model.site(dof).map_err(|e| {
@@ -173,10 +204,6 @@ pub fn run_test(req: &TestRequest, progress: &mut dyn FnMut(usize, usize)) -> Re
             "virtual test: the structure could not be solved at any step; nothing to write".into(),
         ));
     }
-    match req.out.extension().and_then(|e| e.to_str()) {
-        Some("h5" | "hdf5") => crate::formats::test_data::write_h5(&req.out, &test.data)?,
-        _ => crate::formats::test_data::write_csv(&req.out, &test.data)?,
-    }
     let recorded = |name: &String| req.channels.is_empty() || req.channels.contains(name);
     let floors = sys
         .sensors()
@@ -278,6 +305,7 @@ pub fn min_force_ratio(steps: &[nlsim_calib::StepControl], target: f64) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
+#[cfg(feature = "io")]
 /// `sqrt(Σ_{k≥2} |F_k|²) / |F_1|`: the harmonic distortion of a force record.
 pub(crate) fn distortion(force: &[faer::c64]) -> f64 {
     let hi: f64 = force.iter().skip(2).map(|f| f.norm_sqr()).sum();

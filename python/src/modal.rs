@@ -1,0 +1,291 @@
+//! `nlsim.calibrate_modal`: FE-level parameters (group stiffness and mass scales, boundary
+//! springs) from measured natural frequencies and mode shapes (the linear stage, thesis §4.5),
+//! as `nlsim calibrate MODEL MODES.csv` does it: maximin Latin-hypercube candidates, bounded
+//! Levenberg–Marquardt with analytic eigen-sensitivities, modes paired by MAC, the
+//! Cramér–Rao bound at the estimate.
+
+use crate::calibration::param_specs;
+use crate::model::Model;
+use crate::runs::{Stop, run, vec1};
+use crate::{input, py_err};
+use nlsim::calib::{CalibrationConfig, MeasuredMode, ModalData, ModalObjective};
+use numpy::ndarray::Array2;
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// A modal calibration's result (`nlsim.calibrate_modal`).
+#[pyclass(module = "nlsim._native", name = "ModalCalibration", frozen)]
+pub struct ModalCalibration {
+    c: nlsim::calib::ModalCalibration,
+}
+
+#[pymethods]
+impl ModalCalibration {
+    /// Parameter names, in the order of every array.
+    #[getter]
+    fn params(&self) -> Vec<String> {
+        self.c.params.iter().map(ToString::to_string).collect()
+    }
+
+    /// The estimate, shape `(n_params,)`.
+    #[getter]
+    fn estimate<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        vec1(py, self.c.estimate.clone())
+    }
+
+    /// How the best optimisation ended (`"converged"`, …).
+    #[getter]
+    fn status(&self) -> &'static str {
+        self.c.status.as_str()
+    }
+
+    /// Cost `½‖r‖²` at the estimate (residuals weighted by their standard deviations).
+    #[getter]
+    fn cost(&self) -> f64 {
+        self.c.cost
+    }
+
+    /// Reduced χ² of the weighted residuals at the estimate.
+    #[getter]
+    fn reduced_chi2(&self) -> f64 {
+        self.c.cramer_rao.reduced_chi2
+    }
+
+    /// Cramér–Rao standard deviations, shape `(n_params,)`.
+    #[getter]
+    fn cramer_rao_std<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        vec1(py, self.c.cramer_rao.std.clone())
+    }
+
+    /// Cramér–Rao standard deviations times `√χ²_red` (the bound when the stated noise is
+    /// wrong by that factor), shape `(n_params,)`.
+    #[getter]
+    fn chi2_scaled_std<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        vec1(py, self.c.cramer_rao.scaled_std.clone())
+    }
+
+    /// Cramér–Rao covariance, shape `(n_params, n_params)`.
+    #[getter]
+    fn covariance<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let m = &self.c.cramer_rao.covariance;
+        Array2::from_shape_fn((m.nrows(), m.ncols()), |(i, j)| m[(i, j)]).into_pyarray(py)
+    }
+
+    /// Whether each estimate sits on a bound.
+    #[getter]
+    fn at_bound(&self) -> Vec<bool> {
+        self.c.at_bound.clone()
+    }
+
+    /// The computed mode (0-based) paired with each measured mode.
+    #[getter]
+    fn pairing(&self) -> Vec<usize> {
+        self.c.fit.pairing.clone()
+    }
+
+    /// The paired computed natural frequencies at the estimate (Hz), one per measured mode.
+    #[getter]
+    fn frequency_hz<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        vec1(py, self.c.fit.frequencies_hz.clone())
+    }
+
+    /// MAC of each measured shape with its paired computed one (NaN where no shape was
+    /// measured).
+    #[getter]
+    fn mac<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        vec1(py, self.c.fit.mac.clone())
+    }
+
+    /// Every candidate (the model's values first, then the Latin hypercube), shape
+    /// `(n_candidates, n_params)`.
+    #[getter]
+    fn candidates<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let c = &self.c.candidates;
+        let p = self.c.params.len();
+        Array2::from_shape_fn((c.len(), p), |(i, j)| c[i].values[j]).into_pyarray(py)
+    }
+
+    /// Each candidate's cost (infinite where the eigen solve failed).
+    #[getter]
+    fn candidate_cost<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        vec1(py, self.c.candidates.iter().map(|c| c.cost).collect())
+    }
+
+    fn __repr__(&self) -> String {
+        let parts: Vec<String> = self
+            .c
+            .params
+            .iter()
+            .zip(&self.c.estimate)
+            .zip(&self.c.cramer_rao.std)
+            .map(|((p, e), s)| format!("{p} = {e:.6e} ± {s:.2e}"))
+            .collect();
+        format!(
+            "<nlsim.ModalCalibration: {}; reduced chi2 {:.3}, {}>",
+            parts.join(", "),
+            self.c.cramer_rao.reduced_chi2,
+            self.c.status.as_str()
+        )
+    }
+}
+
+/// Measured modes from a dict of arrays: `frequency_hz` (modes,), `frequency_std_hz`
+/// (modes,), optionally `dofs` (labels of the measured DOFs) with `shapes` (dofs, modes).
+fn modal_arrays(model: &Model, d: &Bound<'_, PyDict>, shape_noise: f64) -> PyResult<ModalData> {
+    for key in d.keys() {
+        let k: String = key.extract().map_err(|_| input("data: keys are str"))?;
+        if !["frequency_hz", "frequency_std_hz", "dofs", "shapes"].contains(&k.as_str()) {
+            return Err(input(format!(
+                "data: unknown key '{k}' (known: frequency_hz, frequency_std_hz, dofs, shapes)"
+            )));
+        }
+    }
+    let vector = |k: &str| -> PyResult<Vec<f64>> {
+        let v = d
+            .get_item(k)?
+            .ok_or_else(|| input(format!("data: no '{k}'")))?;
+        let a: PyReadonlyArray1<'_, f64> = v.extract().map_err(|_| {
+            input(format!(
+                "data['{k}']: expected a one-dimensional float64 array"
+            ))
+        })?;
+        Ok(a.as_array().to_vec())
+    };
+    let freq = vector("frequency_hz")?;
+    let std = vector("frequency_std_hz")?;
+    if std.len() != freq.len() {
+        return Err(input(format!(
+            "data['frequency_std_hz']: {} values for {} frequencies",
+            std.len(),
+            freq.len()
+        )));
+    }
+    let (dofs, shapes) = match (d.get_item("dofs")?, d.get_item("shapes")?) {
+        (None, None) => (Vec::new(), None),
+        (Some(labels), Some(shapes)) => {
+            let labels: Vec<String> = labels
+                .extract()
+                .map_err(|_| input("data['dofs']: expected a list of DOF labels (str)"))?;
+            let mut dofs = Vec::with_capacity(labels.len());
+            for (i, l) in labels.iter().enumerate() {
+                let k = model
+                    .inner
+                    .dofs()
+                    .find(l)
+                    .map_err(|e| input(format!("data['dofs'][{i}]: '{l}': {e}")))?;
+                if dofs.contains(&k) {
+                    return Err(input(format!("data['dofs'][{i}]: '{l}' is listed twice")));
+                }
+                dofs.push(k);
+            }
+            let a: PyReadonlyArray2<'_, f64> = shapes
+                .extract()
+                .map_err(|_| input("data['shapes']: expected a two-dimensional float64 array"))?;
+            let a = a.as_array();
+            if a.shape() != [dofs.len(), freq.len()] {
+                return Err(input(format!(
+                    "data['shapes']: shape ({}, {}); expected (dofs, modes) = ({}, {})",
+                    a.shape()[0],
+                    a.shape()[1],
+                    dofs.len(),
+                    freq.len()
+                )));
+            }
+            let cols = (0..freq.len())
+                .map(|m| (0..dofs.len()).map(|r| a[[r, m]]).collect())
+                .collect::<Vec<Vec<f64>>>();
+            (dofs, Some(cols))
+        }
+        _ => return Err(input("data: give 'dofs' and 'shapes' together, or neither")),
+    };
+    let mut modes = Vec::with_capacity(freq.len());
+    let mut shapes = shapes.map(Vec::into_iter);
+    for (i, (&f, &s)) in freq.iter().zip(&std).enumerate() {
+        let mode = MeasuredMode {
+            frequency_hz: f,
+            frequency_std_hz: s,
+            shape: shapes.as_mut().and_then(Iterator::next),
+        };
+        if let Some(why) = mode.fault() {
+            return Err(input(format!("data: mode {}: {why}", i + 1)));
+        }
+        modes.push(mode);
+    }
+    Ok(ModalData {
+        dofs,
+        shape_std: shape_noise,
+        modes,
+    })
+}
+
+/// Calibrates FE-level parameters of `model` on measured modes. `data`: a modal CSV (the
+/// file `nlsim calibrate` reads: `mode,frequency_hz,frequency_std_hz,DOF…`) or a dict of
+/// arrays `frequency_hz` (modes,), `frequency_std_hz` (modes,) and optionally `dofs` (labels)
+/// with `shapes` (dofs, modes; any scale and sign). `params` maps FE-level parameters
+/// (`group:NAME.k_scale`, `group:NAME.m_scale`, `spring:…`) to their bounds; `shape_noise`
+/// is the standard deviation of one component of a unit-normalised measured shape; `modes`
+/// the computed modes the MAC pairing chooses from (at least the measured ones). The other
+/// arguments are `nlsim calibrate`'s, with its defaults.
+#[pyfunction]
+#[pyo3(signature = (model, data, params, shape_noise=0.02, modes=20, lhs=64, seed=1, starts=3, threads=None))]
+#[allow(clippy::too_many_arguments)]
+pub fn calibrate_modal(
+    py: Python<'_>,
+    model: &Model,
+    data: &Bound<'_, PyAny>,
+    params: &Bound<'_, PyDict>,
+    shape_noise: f64,
+    modes: usize,
+    lhs: usize,
+    seed: u64,
+    starts: usize,
+    threads: Option<usize>,
+) -> PyResult<ModalCalibration> {
+    if !(shape_noise > 0.0 && shape_noise.is_finite()) {
+        return Err(input(format!(
+            "shape_noise: {shape_noise}; give a positive standard deviation"
+        )));
+    }
+    let specs = param_specs(model, params)?;
+    let measured = if let Ok(d) = data.cast::<PyDict>() {
+        modal_arrays(model, d, shape_noise)?
+    } else {
+        let path: PathBuf = data
+            .extract()
+            .map_err(|_| input("data: expected the path of a modal CSV or a dict of arrays"))?;
+        nlsim::formats::modal_data::read_modal_csv(&path, &model.inner, shape_noise)
+            .map_err(py_err)?
+            .data
+    };
+    let n = model.inner.n_dofs();
+    if measured.modes.len() > n {
+        return Err(input(format!(
+            "data: {} measured modes, but the model has {n} DOFs",
+            measured.modes.len()
+        )));
+    }
+    let modes = modes.clamp(measured.modes.len(), n);
+    let config = CalibrationConfig {
+        lhs_samples: lhs,
+        seed,
+        starts,
+        ..CalibrationConfig::default()
+    };
+    config
+        .validate_settings()
+        .map_err(|e| input(e.to_string()))?;
+    let m = model.inner.clone();
+    let result = run(py, threads, move |stop: &Stop| -> nlsim::Result<_> {
+        let objective = ModalObjective::new(m, Arc::new(measured), specs, modes, faer::Par::Seq)?;
+        Ok(nlsim::calib::calibrate_modal_with_progress(
+            &objective,
+            &config,
+            &|_| stop.check(),
+        )?)
+    })?
+    .map_err(py_err)?;
+    Ok(ModalCalibration { c: result })
+}
