@@ -30,6 +30,16 @@ pub const MAX_NNM_POINTS: usize = 10_000;
 /// 128 MB each, a 2·10¹⁰-flop factorisation per iteration).
 pub const MAX_NNM_UNKNOWNS: usize = 4_000;
 
+/// `points` modal amplitudes from `from` to `to` (m √kg), evenly spaced in their logarithm:
+/// the amplitudes a nonlinear mode is followed at (`points ≥ 2`).
+pub fn log_amplitudes(from: f64, to: f64, points: usize) -> Vec<f64> {
+    let (a, b) = (from.ln(), to.ln());
+    let last = points.saturating_sub(1).max(1) as f64;
+    (0..points)
+        .map(|i| (a + (b - a) * i as f64 / last).exp())
+        .collect()
+}
+
 /// A point of a nonlinear mode.
 #[derive(Debug, Clone)]
 pub struct NnmPoint {

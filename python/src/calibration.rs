@@ -79,8 +79,7 @@ impl Calibration {
     /// The Cramér–Rao covariance, shape `(param, param)`.
     #[getter]
     fn covariance<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        let m = &self.c.cramer_rao.covariance;
-        Array2::from_shape_fn((m.nrows(), m.ncols()), |(i, j)| m[(i, j)]).into_pyarray(py)
+        covariance_array(py, &self.c.cramer_rao)
     }
 
     /// Whether each estimate sits at a bound.
@@ -120,9 +119,7 @@ impl Calibration {
     /// and the model's own values.
     #[getter]
     fn candidates<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        let c = &self.c.candidates;
-        let p = self.c.params.len();
-        Array2::from_shape_fn((c.len(), p), |(i, j)| c[i].values[j]).into_pyarray(py)
+        candidates_array(py, &self.c.candidates, self.c.params.len())
     }
 
     /// The candidates' costs, shape `(candidate,)`.
@@ -132,21 +129,78 @@ impl Calibration {
     }
 
     fn __repr__(&self) -> String {
-        let parts: Vec<String> = self
-            .c
-            .params
-            .iter()
-            .zip(&self.c.estimate)
-            .zip(&self.c.cramer_rao.std)
-            .map(|((p, e), s)| format!("{p} = {e:.6e} ± {s:.2e}"))
-            .collect();
-        format!(
-            "<nlsim.Calibration: {}; reduced chi2 {:.3}, {}>",
-            parts.join(", "),
-            self.c.cramer_rao.reduced_chi2,
-            self.c.status.as_str()
+        estimates_repr(
+            "Calibration",
+            &self.c.params,
+            &self.c.estimate,
+            &self.c.cramer_rao,
+            self.c.status,
         )
     }
+}
+
+/// The Cramér–Rao covariance of `cr` as a `(param, param)` array.
+pub(crate) fn covariance_array<'py>(
+    py: Python<'py>,
+    cr: &nlsim::calib::CramerRao,
+) -> Bound<'py, PyArray2<f64>> {
+    let m = &cr.covariance;
+    Array2::from_shape_fn((m.nrows(), m.ncols()), |(i, j)| m[(i, j)]).into_pyarray(py)
+}
+
+/// The values of `candidates` (each of `n_params`) as a `(candidate, param)` array.
+pub(crate) fn candidates_array<'py>(
+    py: Python<'py>,
+    candidates: &[nlsim::calib::Candidate],
+    n_params: usize,
+) -> Bound<'py, PyArray2<f64>> {
+    Array2::from_shape_fn((candidates.len(), n_params), |(i, j)| {
+        candidates[i].values[j]
+    })
+    .into_pyarray(py)
+}
+
+/// `<nlsim.KIND: p = v ± s, …; reduced chi2 …, status>`.
+pub(crate) fn estimates_repr(
+    kind: &str,
+    params: &[Param],
+    estimate: &[f64],
+    cr: &nlsim::calib::CramerRao,
+    status: nlsim::calib::Status,
+) -> String {
+    let parts: Vec<String> = params
+        .iter()
+        .zip(estimate)
+        .zip(&cr.std)
+        .map(|((p, e), s)| format!("{p} = {e:.6e} ± {s:.2e}"))
+        .collect();
+    format!(
+        "<nlsim.{kind}: {}; reduced chi2 {:.3}, {}>",
+        parts.join(", "),
+        cr.reduced_chi2,
+        status.as_str()
+    )
+}
+
+/// The candidate search and optimisation settings of `nlsim calibrate` (`--lhs`, `--seed`,
+/// `--starts`, `--folds`), the rest at their defaults; refused as the command refuses them.
+pub(crate) fn search_config(
+    lhs: usize,
+    seed: u64,
+    starts: usize,
+    folds: usize,
+) -> PyResult<CalibrationConfig> {
+    let config = CalibrationConfig {
+        lhs_samples: lhs,
+        seed,
+        starts,
+        folds,
+        ..CalibrationConfig::default()
+    };
+    config
+        .validate_settings()
+        .map_err(|e| input(e.to_string()))?;
+    Ok(config)
 }
 
 /// The test data a calibration runs on: given as `TestData`, or a file read for the model.
@@ -280,16 +334,7 @@ pub fn calibrate(
         )));
     }
     let set = HarmonicSet::new(harmonics, 1).map_err(|e| input(format!("harmonics: {e}")))?;
-    let config = CalibrationConfig {
-        lhs_samples: lhs,
-        seed,
-        starts,
-        folds,
-        ..CalibrationConfig::default()
-    };
-    config
-        .validate_settings()
-        .map_err(|e| input(e.to_string()))?;
+    let config = search_config(lhs, seed, starts, folds)?;
     let m = model.inner.clone();
     let result = run(py, threads, move |stop: &Stop| -> nlsim::Result<_> {
         let data = data.read(&m, uff_noise)?;

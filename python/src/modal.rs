@@ -4,13 +4,14 @@
 //! Levenberg–Marquardt with analytic eigen-sensitivities, modes paired by MAC, the
 //! Cramér–Rao bound at the estimate.
 
-use crate::calibration::param_specs;
+use crate::calibration::{
+    candidates_array, covariance_array, estimates_repr, param_specs, search_config,
+};
 use crate::model::Model;
 use crate::runs::{Stop, run, vec1};
 use crate::{input, py_err};
 use nlsim::calib::{CalibrationConfig, MeasuredMode, ModalData, ModalObjective};
-use numpy::ndarray::Array2;
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
@@ -70,8 +71,7 @@ impl ModalCalibration {
     /// Cramér–Rao covariance, shape `(n_params, n_params)`.
     #[getter]
     fn covariance<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        let m = &self.c.cramer_rao.covariance;
-        Array2::from_shape_fn((m.nrows(), m.ncols()), |(i, j)| m[(i, j)]).into_pyarray(py)
+        covariance_array(py, &self.c.cramer_rao)
     }
 
     /// Whether each estimate sits on a bound.
@@ -103,9 +103,7 @@ impl ModalCalibration {
     /// `(n_candidates, n_params)`.
     #[getter]
     fn candidates<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        let c = &self.c.candidates;
-        let p = self.c.params.len();
-        Array2::from_shape_fn((c.len(), p), |(i, j)| c[i].values[j]).into_pyarray(py)
+        candidates_array(py, &self.c.candidates, self.c.params.len())
     }
 
     /// Each candidate's cost (infinite where the eigen solve failed).
@@ -115,19 +113,12 @@ impl ModalCalibration {
     }
 
     fn __repr__(&self) -> String {
-        let parts: Vec<String> = self
-            .c
-            .params
-            .iter()
-            .zip(&self.c.estimate)
-            .zip(&self.c.cramer_rao.std)
-            .map(|((p, e), s)| format!("{p} = {e:.6e} ± {s:.2e}"))
-            .collect();
-        format!(
-            "<nlsim.ModalCalibration: {}; reduced chi2 {:.3}, {}>",
-            parts.join(", "),
-            self.c.cramer_rao.reduced_chi2,
-            self.c.status.as_str()
+        estimates_repr(
+            "ModalCalibration",
+            &self.c.params,
+            &self.c.estimate,
+            &self.c.cramer_rao,
+            self.c.status,
         )
     }
 }
@@ -268,15 +259,8 @@ pub fn calibrate_modal(
         )));
     }
     let modes = modes.clamp(measured.modes.len(), n);
-    let config = CalibrationConfig {
-        lhs_samples: lhs,
-        seed,
-        starts,
-        ..CalibrationConfig::default()
-    };
-    config
-        .validate_settings()
-        .map_err(|e| input(e.to_string()))?;
+    // Folds do not apply to a handful of modes: the default's are not used.
+    let config = search_config(lhs, seed, starts, CalibrationConfig::default().folds)?;
     let m = model.inner.clone();
     let result = run(py, threads, move |stop: &Stop| -> nlsim::Result<_> {
         let objective = ModalObjective::new(m, Arc::new(measured), specs, modes, faer::Par::Seq)?;

@@ -192,10 +192,7 @@ pub fn nnm(
             m.n_dofs()
         )));
     }
-    let (a, b) = (from_amplitude.ln(), to_amplitude.ln());
-    let amplitudes: Vec<f64> = (0..points)
-        .map(|i| (a + (b - a) * i as f64 / (points - 1) as f64).exp())
-        .collect();
+    let amplitudes = nlsim::hb::nnm::log_amplitudes(from_amplitude, to_amplitude, points);
     let (report, y, sensors, kept) = run(py, threads, move |stop| -> nlsim::Result<_> {
         let free = nlsim::hb::nnm::free_model(&m)?;
         let reduced = crate::runs::reduce_model(&free, modes, false, threads, stop)?;

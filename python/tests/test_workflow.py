@@ -8,8 +8,6 @@ The command line is taken from $NLSIM_BIN (make test sets it to the debug build)
 from __future__ import annotations
 
 import math
-import os
-import subprocess
 from pathlib import Path
 
 import h5py
@@ -18,14 +16,9 @@ import pytest
 
 import nlsim
 
-NLSIM = os.environ.get("NLSIM_BIN", "nlsim")
+from test_nlsim import cli
+
 ROOT = Path(__file__).resolve().parents[2]
-
-
-def cli(*args: str, cwd: Path) -> None:
-    """Runs the command line, failing the test with its stderr."""
-    r = subprocess.run([NLSIM, "--quiet", *args], cwd=cwd, capture_output=True, text=True)
-    assert r.returncode == 0, f"nlsim {' '.join(args)}: {r.stderr}"
 
 
 # --- reference integrators, stepped sines, nonlinear modes ------------------------------

@@ -94,10 +94,7 @@ impl NnmRequest {
 
     /// The amplitudes, log-spaced from `from` to `to`.
     pub fn amplitudes(&self) -> Vec<f64> {
-        let (a, b) = (self.from.ln(), self.to.ln());
-        (0..self.points)
-            .map(|i| (a + (b - a) * i as f64 / (self.points - 1) as f64).exp())
-            .collect()
+        nlsim_hb::nnm::log_amplitudes(self.from, self.to, self.points)
     }
 }
 
