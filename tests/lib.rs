@@ -4598,6 +4598,28 @@ seed = 9
         ]);
         assert_eq!(rc, 0, "{out}{err}");
         assert!(out.contains("5 modes, 4 with shapes at 3 DOFs"), "{out}");
+        assert!(
+            out.contains("FE-level parameters: parametric reduced model of"),
+            "{out}"
+        );
+        // The progress lines (a log line per phase: stderr is not a terminal here).
+        assert!(err.contains("candidates 17/17 in"), "{err}");
+        // --dry-run estimates a modal calibration as it does a stepped-sine one.
+        let (rc, dry, err) = nlsim(&[
+            "calibrate",
+            model_file.to_str().unwrap(),
+            path.to_str().unwrap(),
+            "--param",
+            "group:root.k_scale=0.5:2",
+            "--dry-run",
+        ]);
+        assert_eq!(rc, 0, "{dry}{err}");
+        assert!(
+            dry.contains("candidates: 65 cost evaluations")
+                && dry.contains("optimisations: 3 starts and 0 folds")
+                && dry.contains("estimated wall time"),
+            "{dry}"
+        );
         let rows = csv_rows(&est);
         assert_eq!(rows.len(), 3);
         for ((row, name), t) in rows.iter().zip(names).zip(values) {

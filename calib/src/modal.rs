@@ -2,10 +2,14 @@
 //! scales of labelled element groups, boundary springs — from measured modal data (natural
 //! frequencies, and mode shapes at the sensors when measured).
 //!
-//! Each evaluation solves the eigenproblem once (the symbolic analysis is kept across
-//! evaluations) and takes the Jacobian from the analytic eigen-sensitivities on the same
-//! factor ([`nlsim_reduction::sensitivity`]), so a large model is factorised once per
-//! Levenberg–Marquardt trial, never once per parameter.
+//! Two ways to evaluate the model at parameter values ([`FeReduction`], as for stepped-sine
+//! data): by default the parametric reduced model ([`nlsim_reduction::ParametricReduction`],
+//! built once with the sensor DOFs as ports) solves a small dense eigenproblem per evaluation,
+//! certified against the full sparse matrices and refreshed by a full eigen solve where the
+//! certificate fails, with the Jacobian from the same projected matrices; with
+//! [`FeReduction::Full`] each evaluation solves the full eigenproblem (the symbolic analysis
+//! kept) and takes the Jacobian from the analytic eigen-sensitivities on the same factor
+//! ([`nlsim_reduction::sensitivity`]).
 //!
 //! Residuals, weighted by the noise model:
 //!
@@ -25,13 +29,18 @@ use crate::calibrate::{
     start_points,
 };
 use crate::lm::{Evaluation, LeastSquares};
-use crate::objective::{ParamSpec, specs_to_internal, specs_to_values};
+use crate::objective::{
+    FeCounters, FeReduction, FeReductionStats, ParamSpec, specs_to_internal, specs_to_values,
+    training_points,
+};
 use crate::stats::CramerRao;
 use faer::{Mat, Par};
 use nlsim_kernel::{Error, Model, Param, Parameterized, Result, Status};
 use nlsim_reduction::{
-    EigenConfig, EigenSolver, ModeSelection, SensitivityConfig, eigen_sensitivities,
+    EigenConfig, EigenSolver, ModeSelection, ParametricReduction, ReductionConfig,
+    SensitivityConfig, eigen_sensitivities,
 };
+use std::f64::consts::PI;
 use std::sync::Arc;
 
 /// One measured mode.
@@ -156,25 +165,66 @@ pub struct ModalFit {
     pub sensitivity_status: Status,
 }
 
+/// How a [`ModalObjective`] evaluates the model's modes.
+#[derive(Debug)]
+enum Engine {
+    /// The full eigenproblem at every evaluation.
+    Full {
+        eigen: EigenConfig,
+        solver: Box<EigenSolver>,
+    },
+    /// The parametric reduced model; the sensors are its last ports, from `offset`.
+    Parametric {
+        reduction: Box<ParametricReduction>,
+        offset: usize,
+    },
+}
+
+/// The modes of one evaluation at the sensors, with their derivatives when asked for.
+struct ModesAt {
+    /// Natural frequencies (Hz).
+    frequencies_hz: Vec<f64>,
+    /// Mass-normalised shapes at the sensor DOFs (sensors × modes).
+    shapes: Mat<f64>,
+    /// `∂f_r/∂p_j` (modes × parameters; Hz per unit of the parameter's value).
+    frequency_derivatives: Option<Mat<f64>>,
+    /// `∂φ/∂p_j` at the sensors (sensors × modes), one per parameter.
+    shape_derivatives: Vec<Mat<f64>>,
+    /// Status of the shape derivatives.
+    status: Status,
+}
+
 /// The modal least-squares problem over FE-level parameters.
 #[derive(Debug)]
 pub struct ModalObjective {
     model: Model,
     data: Arc<ModalData>,
     specs: Vec<ParamSpec>,
-    eigen: EigenConfig,
-    solver: EigenSolver,
+    engine: Engine,
+    counters: Arc<FeCounters>,
+    setup: FeReductionStats,
 }
 
 impl Clone for ModalObjective {
-    /// A copy with a fresh eigen solver (the symbolic analysis is redone once).
+    /// A copy with a fresh eigen solver (the symbolic analysis is redone on first need); the
+    /// parametric basis is shared until the copy enriches it. The counters are shared.
     fn clone(&self) -> Self {
         Self {
             model: self.model.clone(),
             data: self.data.clone(),
             specs: self.specs.clone(),
-            eigen: self.eigen.clone(),
-            solver: EigenSolver::new(),
+            engine: match &self.engine {
+                Engine::Full { eigen, .. } => Engine::Full {
+                    eigen: eigen.clone(),
+                    solver: Box::default(),
+                },
+                Engine::Parametric { reduction, offset } => Engine::Parametric {
+                    reduction: reduction.clone(),
+                    offset: *offset,
+                },
+            },
+            counters: Arc::clone(&self.counters),
+            setup: self.setup,
         }
     }
 }
@@ -182,13 +232,38 @@ impl Clone for ModalObjective {
 impl ModalObjective {
     /// The problem for `specs` (FE-level parameters of `model`) against `data`, retaining
     /// `modes` computed modes (at least as many as measured; a few more let the pairing
-    /// follow modes that change order). `par` is the parallelism of the eigen solves.
+    /// follow modes that change order). `par` is the parallelism of the eigen solves. The
+    /// modes come from the parametric reduced model ([`FeReduction::default`]); see
+    /// [`ModalObjective::with_reduction`].
     pub fn new(
         model: Model,
         data: Arc<ModalData>,
         specs: Vec<ParamSpec>,
         modes: usize,
         par: Par,
+    ) -> Result<Self> {
+        Self::with_reduction(model, data, specs, modes, par, &FeReduction::default())
+    }
+
+    /// [`ModalObjective::new`] with the evaluation of the modes chosen by `fe`. With
+    /// [`FeReduction::Parametric`] the parametric reduced model is built here, with the sensor
+    /// DOFs as ports and no residual flexibility: the nominal eigen solve (the model's current
+    /// values), its modes' and the sensors' static responses' derivative directions, then a
+    /// greedy training over the centre and the corners of the parameters' box (internal
+    /// coordinates; face centres beyond four parameters). An evaluation then solves a dense
+    /// eigenproblem of the basis's size, checks the lifted modes against the full matrices
+    /// and, where the certificate fails, solves the full eigenproblem there and enriches the
+    /// basis: kept by an evaluation with a Jacobian (an optimisation, sequential on its own
+    /// copy), not by a cost-only one (the candidates, in parallel), so results do not depend
+    /// on the thread count. With [`FeReduction::Full`] every evaluation solves the full
+    /// eigenproblem.
+    pub fn with_reduction(
+        model: Model,
+        data: Arc<ModalData>,
+        specs: Vec<ParamSpec>,
+        modes: usize,
+        par: Par,
+        fe: &FeReduction,
     ) -> Result<Self> {
         data.validate(model.n_dofs())?;
         if specs.is_empty() {
@@ -216,13 +291,61 @@ impl ModalObjective {
             par,
             ..EigenConfig::default()
         };
+        let (engine, setup) = match fe {
+            FeReduction::Full => (
+                Engine::Full {
+                    eigen,
+                    solver: Box::default(),
+                },
+                FeReductionStats::default(),
+            ),
+            FeReduction::Parametric(settings) => {
+                let config = ReductionConfig {
+                    eigen,
+                    residual_flexibility: false,
+                    extra_dofs: data.dofs.clone(),
+                };
+                let params: Vec<Param> = specs.iter().map(|s| s.param.clone()).collect();
+                let training = training_points(&specs.iter().collect::<Vec<_>>());
+                let reduction = ParametricReduction::new(
+                    &model,
+                    &config,
+                    &params,
+                    settings.clone(),
+                    &training,
+                    &mut |_| {},
+                )?;
+                let offset = nlsim_reduction::model_ports(&model, &[])?.len();
+                let st = reduction.stats();
+                let setup = FeReductionStats {
+                    parametric: true,
+                    basis_size: st.basis_size,
+                    setup_reductions: st.full_reductions,
+                    ..FeReductionStats::default()
+                };
+                (
+                    Engine::Parametric {
+                        reduction: Box::new(reduction),
+                        offset,
+                    },
+                    setup,
+                )
+            }
+        };
         Ok(Self {
             model,
             data,
             specs,
-            eigen,
-            solver: EigenSolver::new(),
+            engine,
+            counters: Arc::new(FeCounters::default()),
+            setup,
         })
+    }
+
+    /// What the evaluations of the modes did so far, over every copy of this objective
+    /// (the parametric model's basis, its training and refreshes, or the full eigen solves).
+    pub fn fe_stats(&self) -> FeReductionStats {
+        self.counters.stats(self.setup)
     }
 
     /// The parameters with their bounds.
@@ -230,7 +353,8 @@ impl ModalObjective {
         &self.specs
     }
 
-    /// The model at the values last evaluated.
+    /// The model: at the values last evaluated with [`FeReduction::Full`], at its nominal
+    /// values with the parametric model.
     pub fn model(&self) -> &Model {
         &self.model
     }
@@ -250,9 +374,131 @@ impl ModalObjective {
         self.specs.iter().map(ParamSpec::internal_bounds).unzip()
     }
 
-    /// The model against the data at parameter `values`. `Ok(None)` when the eigen solve
-    /// fails numerically there; `Err` for invalid values.
+    /// The model against the data at parameter `values`, with its Jacobian. `Ok(None)` when
+    /// the eigen solve fails numerically there; `Err` for invalid values. A refresh of the
+    /// parametric model serves this evaluation only.
     pub fn fit_values(&mut self, values: &[f64]) -> Result<Option<ModalFit>> {
+        self.fit(values, true, false)
+    }
+
+    /// The points [`calibrate_modal`] evaluates as candidates: the model's values (clamped to
+    /// the bounds), then the Latin hypercube of `config`.
+    pub fn candidate_points(&self, config: &CalibrationConfig) -> Result<Vec<Vec<f64>>> {
+        let current = self
+            .specs
+            .iter()
+            .map(|s| self.model.param(&s.param))
+            .collect::<Result<Vec<_>>>()?;
+        start_points(&self.specs, &current, config)
+    }
+
+    /// Cost `½‖r‖²` at `values` (no Jacobian; a refresh of the parametric model serves this
+    /// evaluation only); infinite where the eigen solve fails.
+    pub fn cost_values(&mut self, values: &[f64]) -> Result<f64> {
+        Ok(self.fit(values, false, false)?.map_or(f64::INFINITY, |f| {
+            0.5 * f.residuals.iter().map(|r| r * r).sum::<f64>()
+        }))
+    }
+
+    /// The modes at `values`, at the sensors, with derivatives when `derivatives`; `keep`
+    /// keeps a refresh of the parametric model's basis in this copy.
+    fn modes_at(
+        &mut self,
+        values: &[f64],
+        derivatives: bool,
+        keep: bool,
+    ) -> Result<Option<ModesAt>> {
+        let dofs = &self.data.dofs;
+        match &mut self.engine {
+            Engine::Full { eigen, solver } => {
+                for (s, &v) in self.specs.iter().zip(values) {
+                    self.model.set_param(&s.param, v)?;
+                }
+                let t = std::time::Instant::now();
+                let solved = solver.solve(self.model.stiffness(), self.model.mass(), eigen);
+                self.counters.count(true, 1, t.elapsed().as_secs_f64());
+                let modes = match solved {
+                    Ok(m) if m.is_converged() => m,
+                    Ok(_) | Err(Error::Numerical { .. }) => return Ok(None),
+                    Err(e) => return Err(e),
+                };
+                let shapes =
+                    Mat::from_fn(dofs.len(), modes.len(), |k, r| modes.vectors[(dofs[k], r)]);
+                let mut at = ModesAt {
+                    frequencies_hz: modes.frequencies_hz(),
+                    shapes,
+                    frequency_derivatives: None,
+                    shape_derivatives: Vec::new(),
+                    status: Status::Converged,
+                };
+                if derivatives {
+                    let params: Vec<Param> = self.specs.iter().map(|s| s.param.clone()).collect();
+                    let sens = eigen_sensitivities(
+                        &self.model,
+                        &modes,
+                        solver,
+                        &params,
+                        &SensitivityConfig {
+                            shape_dofs: dofs.clone(),
+                            par: eigen.par,
+                            ..SensitivityConfig::default()
+                        },
+                    )?;
+                    at.frequency_derivatives = Some(sens.frequency_hz);
+                    at.shape_derivatives = sens.shapes;
+                    at.status = sens.status;
+                }
+                Ok(Some(at))
+            }
+            Engine::Parametric { reduction, offset } => {
+                let before = reduction.stats();
+                let point = reduction.evaluate(values, derivatives, keep);
+                let after = reduction.stats();
+                self.counters.count(
+                    after.refreshes > before.refreshes,
+                    after.full_reductions - before.full_reductions,
+                    after.full_seconds - before.full_seconds,
+                );
+                let point = match point {
+                    Ok(p) => p,
+                    Err(Error::Numerical { .. }) => return Ok(None),
+                    Err(e) => return Err(e),
+                };
+                let red = &point.reduced;
+                let frequencies_hz = red.modes.frequencies_hz();
+                let rows =
+                    |p: &Mat<f64>| Mat::from_fn(dofs.len(), p.ncols(), |k, r| p[(*offset + k, r)]);
+                let mut at = ModesAt {
+                    shapes: rows(&red.participation),
+                    frequency_derivatives: None,
+                    shape_derivatives: Vec::new(),
+                    status: Status::Converged,
+                    frequencies_hz,
+                };
+                if let Some(d) = &point.derivatives {
+                    // f = √λ / 2π, so ∂f = ∂λ / (8π² f).
+                    let f = &at.frequencies_hz;
+                    at.frequency_derivatives = Some(Mat::from_fn(
+                        d.eigenvalues.nrows(),
+                        d.eigenvalues.ncols(),
+                        |r, j| {
+                            if f[r] > 0.0 {
+                                d.eigenvalues[(r, j)] / (8.0 * PI * PI * f[r])
+                            } else {
+                                0.0
+                            }
+                        },
+                    ));
+                    at.shape_derivatives = d.participation.iter().map(rows).collect();
+                }
+                Ok(Some(at))
+            }
+        }
+    }
+
+    /// The model against the data at `values`; the Jacobian when `derivatives` (else an
+    /// empty matrix); `keep` as in [`ModalObjective::modes_at`].
+    fn fit(&mut self, values: &[f64], derivatives: bool, keep: bool) -> Result<Option<ModalFit>> {
         if values.len() != self.specs.len() {
             return Err(Error::DimensionMismatch {
                 what: "modal calibration parameter values".into(),
@@ -261,41 +507,24 @@ impl ModalObjective {
             });
         }
         for (s, &v) in self.specs.iter().zip(values) {
-            self.model.set_param(&s.param, v)?;
+            nlsim_kernel::param::check_finite(&s.param, v)?;
         }
-        let modes = match self
-            .solver
-            .solve(self.model.stiffness(), self.model.mass(), &self.eigen)
-        {
-            Ok(m) if m.is_converged() => m,
-            Ok(_) | Err(Error::Numerical { .. }) => return Ok(None),
-            Err(e) => return Err(e),
+        let Some(modes) = self.modes_at(values, derivatives, keep)? else {
+            return Ok(None);
         };
         let data = self.data.clone();
-        let params: Vec<Param> = self.specs.iter().map(|s| s.param.clone()).collect();
-        let sens = eigen_sensitivities(
-            &self.model,
-            &modes,
-            &self.solver,
-            &params,
-            &SensitivityConfig {
-                shape_dofs: data.dofs.clone(),
-                par: self.eigen.par,
-                ..SensitivityConfig::default()
-            },
-        )?;
-        let freqs = modes.frequencies_hz();
-        let at =
-            |r: usize| -> Vec<f64> { data.dofs.iter().map(|&d| modes.vectors[(d, r)]).collect() };
+        let freqs = &modes.frequencies_hz;
+        let n_modes = freqs.len();
+        let at = |r: usize| -> Vec<f64> { modes.shapes.col(r).iter().copied().collect() };
         // Pairing.
-        let mut taken = vec![false; modes.len()];
+        let mut taken = vec![false; n_modes];
         let mut pairing = Vec::with_capacity(data.modes.len());
         let mut mac = Vec::with_capacity(data.modes.len());
         for m in &data.modes {
             let r = match &m.shape {
                 Some(psi) => {
                     let mut best = (usize::MAX, -1.0);
-                    for r in (0..modes.len()).filter(|&r| !taken[r]) {
+                    for r in (0..n_modes).filter(|&r| !taken[r]) {
                         let c = mac_of(&at(r), psi);
                         if c > best.1 {
                             best = (r, c);
@@ -310,7 +539,7 @@ impl ModalObjective {
                     // third when modes between were not measured.
                     mac.push(f64::NAN);
                     let gap = |r: usize| (freqs[r] / m.frequency_hz).ln().abs();
-                    (0..modes.len())
+                    (0..n_modes)
                         .filter(|&r| !taken[r])
                         .min_by(|&a, &b| gap(a).total_cmp(&gap(b)))
                         .unwrap_or(0)
@@ -328,13 +557,18 @@ impl ModalObjective {
             .map(|(s, &v)| s.dvalue(s.to_internal(v)))
             .collect();
         let mut residuals = Vec::with_capacity(data.n_residuals());
-        let mut jacobian = Mat::zeros(data.n_residuals(), n);
+        let mut jacobian = match modes.frequency_derivatives {
+            Some(_) => Mat::zeros(data.n_residuals(), n),
+            None => Mat::zeros(0, 0),
+        };
         let mut frequencies_hz = Vec::with_capacity(pairing.len());
         for (m, &r) in data.modes.iter().zip(&pairing) {
             let row = residuals.len();
             residuals.push((freqs[r] - m.frequency_hz) / m.frequency_std_hz);
-            for j in 0..n {
-                jacobian[(row, j)] = sens.frequency_hz[(r, j)] * du[j] / m.frequency_std_hz;
+            if let Some(df) = &modes.frequency_derivatives {
+                for j in 0..n {
+                    jacobian[(row, j)] = df[(r, j)] * du[j] / m.frequency_std_hz;
+                }
             }
             frequencies_hz.push(freqs[r]);
             if let Some(psi) = &m.shape {
@@ -343,17 +577,20 @@ impl ModalObjective {
                 let npsi = norm(psi);
                 let sign = if dot(&a, psi) < 0.0 { -1.0 } else { 1.0 };
                 let b: Vec<f64> = a.iter().map(|v| v / na).collect();
+                for (&bi, &pi) in b.iter().zip(psi) {
+                    residuals.push((sign * bi - pi / npsi) / data.shape_std);
+                }
+                if modes.frequency_derivatives.is_none() {
+                    continue;
+                }
                 // ∂b = (∂a − b (bᵀ∂a)) / ‖a‖, with ∂a the shape derivative at the sensors.
-                let da: Vec<Vec<f64>> = (0..n)
-                    .map(|j| {
-                        (0..data.dofs.len())
-                            .map(|k| sens.shapes[j][(k, r)])
-                            .collect()
-                    })
+                let da: Vec<Vec<f64>> = modes
+                    .shape_derivatives
+                    .iter()
+                    .map(|d| d.col(r).iter().copied().collect())
                     .collect();
                 let btda: Vec<f64> = da.iter().map(|d| dot(&b, d)).collect();
-                for (i, (&bi, &pi)) in b.iter().zip(psi).enumerate() {
-                    residuals.push((sign * bi - pi / npsi) / data.shape_std);
+                for (i, &bi) in b.iter().enumerate() {
                     for j in 0..n {
                         jacobian[(row + 1 + i, j)] =
                             sign * (da[j][i] - bi * btda[j]) / na * du[j] / data.shape_std;
@@ -367,7 +604,7 @@ impl ModalObjective {
             mac,
             residuals,
             jacobian,
-            sensitivity_status: sens.status,
+            sensitivity_status: modes.status,
         }))
     }
 }
@@ -393,7 +630,8 @@ impl LeastSquares for ModalObjective {
 
     fn evaluate(&mut self, u: &[f64]) -> Result<Option<Evaluation>> {
         let values = self.to_values(u);
-        Ok(self.fit_values(&values)?.map(|f| Evaluation {
+        // An optimisation step (sequential on its own copy) keeps a refresh of the basis.
+        Ok(self.fit(&values, true, true)?.map(|f| Evaluation {
             residuals: f.residuals,
             jacobian: f.jacobian,
         }))
@@ -444,19 +682,11 @@ pub fn calibrate_modal_with_progress(
     config.lm.validate()?;
     let specs = objective.specs.clone();
     let params: Vec<Param> = specs.iter().map(|s| s.param.clone()).collect();
-    let current = params
-        .iter()
-        .map(|p| objective.model.param(p))
-        .collect::<Result<Vec<_>>>()?;
-    let starts = start_points(&specs, &current, config)?;
+    let starts = objective.candidate_points(config)?;
     let candidates = evaluate_candidates(
         objective,
         starts,
-        |obj, v| {
-            Ok(obj.fit_values(v)?.map_or(f64::INFINITY, |f| {
-                0.5 * f.residuals.iter().map(|r| r * r).sum::<f64>()
-            }))
-        },
+        |obj, v| obj.cost_values(v),
         &|done, total| progress(Progress::Candidates { done, total }),
     )?;
     let order = best_candidates(&candidates, config.starts.max(1));

@@ -247,11 +247,38 @@ impl Default for FeReduction {
 /// Counters of the FE-level reductions, shared by every copy of an objective (the copies
 /// the calibration runs in parallel included).
 #[derive(Debug, Default)]
-struct FeCounters {
+pub(crate) struct FeCounters {
     evaluations: AtomicUsize,
     refreshes: AtomicUsize,
     full_reductions: AtomicUsize,
     full_micros: AtomicU64,
+}
+
+impl FeCounters {
+    /// Counts one evaluation of the linear part; `refreshed` when the parametric model's
+    /// certificate failed, with the full reductions made (and their seconds) from the
+    /// reduction's counters `before` and `after` the evaluation.
+    pub(crate) fn count(&self, refreshed: bool, full_reductions: usize, full_seconds: f64) {
+        self.evaluations.fetch_add(1, Ordering::Relaxed);
+        if refreshed {
+            self.refreshes.fetch_add(1, Ordering::Relaxed);
+        }
+        self.full_reductions
+            .fetch_add(full_reductions, Ordering::Relaxed);
+        self.full_micros
+            .fetch_add((full_seconds * 1e6) as u64, Ordering::Relaxed);
+    }
+
+    /// The counters over `setup` (what building the objective did).
+    pub(crate) fn stats(&self, setup: FeReductionStats) -> FeReductionStats {
+        FeReductionStats {
+            evaluations: self.evaluations.load(Ordering::Relaxed),
+            refreshes: self.refreshes.load(Ordering::Relaxed),
+            full_reductions: self.full_reductions.load(Ordering::Relaxed),
+            full_seconds: self.full_micros.load(Ordering::Relaxed) as f64 * 1e-6,
+            ..setup
+        }
+    }
 }
 
 /// What the FE-level reductions of an objective (and of all its copies) did so far.
@@ -545,13 +572,7 @@ impl FrfObjective {
     /// What the FE-level reductions did so far, over every copy of this objective; `None`
     /// without FE-level parameters.
     pub fn fe_stats(&self) -> Option<FeReductionStats> {
-        self.fe.as_ref().map(|l| FeReductionStats {
-            evaluations: l.counters.evaluations.load(Ordering::Relaxed),
-            refreshes: l.counters.refreshes.load(Ordering::Relaxed),
-            full_reductions: l.counters.full_reductions.load(Ordering::Relaxed),
-            full_seconds: l.counters.full_micros.load(Ordering::Relaxed) as f64 * 1e-6,
-            ..l.setup
-        })
+        self.fe.as_ref().map(|l| l.counters.stats(l.setup))
     }
 
     fn build(
@@ -1062,7 +1083,6 @@ impl FrfObjective {
             .map(|&i| self.specs[i].param.clone())
             .collect();
         let fe_values: Vec<f64> = link.fe.iter().map(|&i| values[i]).collect();
-        link.counters.evaluations.fetch_add(1, Ordering::Relaxed);
         match &mut link.model {
             FeModel::Parametric(prom) => {
                 let before = prom.stats();
@@ -1071,16 +1091,10 @@ impl FrfObjective {
                 // on shared copies) does not, so that no result depends on the scheduling.
                 let point = prom.evaluate(&fe_values, jacobian, jacobian);
                 let after = prom.stats();
-                if after.refreshes > before.refreshes {
-                    link.counters.refreshes.fetch_add(1, Ordering::Relaxed);
-                }
-                let full = after.full_reductions - before.full_reductions;
-                link.counters
-                    .full_reductions
-                    .fetch_add(full, Ordering::Relaxed);
-                link.counters.full_micros.fetch_add(
-                    ((after.full_seconds - before.full_seconds) * 1e6) as u64,
-                    Ordering::Relaxed,
+                link.counters.count(
+                    after.refreshes > before.refreshes,
+                    after.full_reductions - before.full_reductions,
+                    after.full_seconds - before.full_seconds,
                 );
                 let point = match point {
                     Ok(p) => p,
@@ -1108,15 +1122,9 @@ impl FrfObjective {
                 for (p, &v) in params.iter().zip(&fe_values) {
                     model.set_param(p, v)?;
                 }
-                link.counters.refreshes.fetch_add(1, Ordering::Relaxed);
-                link.counters
-                    .full_reductions
-                    .fetch_add(1, Ordering::Relaxed);
                 let t = std::time::Instant::now();
                 let reduced = reduce_with(model, reduction, solver, &mut |_| {});
-                link.counters
-                    .full_micros
-                    .fetch_add((t.elapsed().as_secs_f64() * 1e6) as u64, Ordering::Relaxed);
+                link.counters.count(true, 1, t.elapsed().as_secs_f64());
                 let reduced = match reduced {
                     Ok(r) => r,
                     Err(Error::Numerical { .. }) => return Ok(None),
@@ -1218,7 +1226,7 @@ fn variations(
 /// The parametric model's training points over the box of `specs` (values, in their
 /// order): the centre and the corners of the box in the internal coordinates (the centre and
 /// the face centres beyond four parameters).
-fn training_points(specs: &[&ParamSpec]) -> Vec<Vec<f64>> {
+pub(crate) fn training_points(specs: &[&ParamSpec]) -> Vec<Vec<f64>> {
     let n = specs.len();
     let (lo, hi): (Vec<f64>, Vec<f64>) = specs.iter().map(|s| s.internal_bounds()).unzip();
     let centre: Vec<f64> = (0..n).map(|j| 0.5 * (lo[j] + hi[j])).collect();

@@ -4,7 +4,7 @@
 
 use nlsim_calib::{
     CalibrationConfig, FeReduction, Form, FrfObjective, LeastSquares, Noise, ObjectiveConfig,
-    ParamSpec, Status, SweepPlan, TestData, calibrate, synthesize,
+    ParamSpec, ParametricConfig, Status, SweepPlan, TestData, calibrate, synthesize,
 };
 use nlsim_hb::{HarmonicSet, HbConfig, HbSystem};
 use nlsim_kernel::{
@@ -320,5 +320,106 @@ fn parametric_jacobian_matches_central_differences_of_full_re_reduction() {
             full.fe_stats().unwrap().refreshes,
             full.fe_stats().unwrap().evaluations
         );
+    }
+}
+
+/// The certificate fires on the bracket (the hexahedral solid of the FE benchmarks, refinement
+/// 2, consistent mass) with a grounded spring at the upright's tip whose range, 1e3 to 1e9 N/m,
+/// moves the first mode out of the band the sweeps cover (±8 % about it): on the nominal
+/// basis alone (no training) an evaluation at 1e8 N/m fails the certificate, is refreshed by a
+/// full reduction, and its residuals equal those of a full re-reduction there; the default
+/// training enriches the basis at the box's corners while the objective is built, and then
+/// matches too.
+#[test]
+fn the_certificate_fires_on_the_bracket_when_the_tip_spring_moves_a_mode_out_of_the_band() {
+    use nlsim_fixtures::bracket::BracketConfig;
+    let cfg = BracketConfig {
+        refinement: 2,
+        lumped_mass: false,
+        ..BracketConfig::default()
+    };
+    let mut model = nlsim_fixtures::bracket_fixture(&cfg, "cubic")
+        .unwrap()
+        .model;
+    let tip = model.excitation()[0].at.clone();
+    let dof = tip.dof().unwrap();
+    model
+        .add_sensor(Sensor {
+            name: "tip_d".into(),
+            at: tip,
+            quantity: Quantity::Displacement,
+        })
+        .unwrap();
+    model.add_boundary_spring(dof, 1e4).unwrap();
+    model.set_param(&Param::element("tip", "k3"), 1e12).unwrap();
+    let spring: Param = format!("spring:{}.k", model.dofs().labels()[dof])
+        .parse()
+        .unwrap();
+    let specs = vec![
+        ParamSpec::new(spring.clone(), 1e3, 1e9),
+        ParamSpec::new(Param::element("tip", "k3"), 1e11, 1e13),
+    ];
+    let red = ReductionConfig::lowest(10);
+    let nominal = reduce(&model, &red).unwrap();
+    let f1 = nominal.modes.frequencies_hz()[0];
+    let set = HarmonicSet::new(3, 1).unwrap();
+    let sys = HbSystem::from_model(&model, &nominal, set, HbConfig::default()).unwrap();
+    let plans = [
+        SweepPlan::linear("0.5 N up", 0.92 * f1, 1.08 * f1, 8, 0.5),
+        SweepPlan::linear("4 N down", 1.08 * f1, 0.92 * f1, 8, 4.0),
+    ];
+    let data = Arc::new(synthesize(&sys, "shaker", &plans, 3, Noise::relative(0.01), 7).unwrap());
+    let make = |fe: FeReduction| {
+        FrfObjective::from_model_with(
+            &model,
+            &red,
+            &fe,
+            set,
+            HbConfig::default(),
+            Arc::clone(&data),
+            specs.clone(),
+            ObjectiveConfig::default(),
+        )
+        .unwrap()
+    };
+    let far = [1e8, 1e12];
+    // The mode did leave the band.
+    let mut stiff = model.clone();
+    stiff.set_param(&spring, far[0]).unwrap();
+    let f1_far = reduce(&stiff, &red).unwrap().modes.frequencies_hz()[0];
+    eprintln!(
+        "{} DOFs: f1 {f1:.2} Hz at 1e4 N/m, {f1_far:.2} Hz at 1e8 N/m",
+        model.n_dofs()
+    );
+    assert!(f1_far > 1.08 * f1, "{f1_far} vs {f1}");
+    let mut full = make(FeReduction::Full);
+    let base = full.evaluate_values(&far, None, false).unwrap().residuals;
+    let rmax = base.iter().fold(0.0f64, |a, r| a.max(r.abs()));
+    let untrained = FeReduction::Parametric(ParametricConfig {
+        max_training: 0,
+        ..ParametricConfig::default()
+    });
+    for (what, fe) in [
+        ("untrained", untrained),
+        ("trained", FeReduction::default()),
+    ] {
+        let mut prom = make(fe);
+        let setup = prom.fe_stats().unwrap();
+        let got = prom.evaluate_values(&far, None, false).unwrap().residuals;
+        let st = prom.fe_stats().unwrap();
+        let d = got
+            .iter()
+            .zip(&base)
+            .fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
+        eprintln!(
+            "{what}: {setup:?}; after: {st:?}; residuals differ by {:.1e}",
+            d / rmax
+        );
+        if what == "untrained" {
+            assert_eq!((setup.setup_reductions, st.refreshes), (1, 1), "{st:?}");
+        } else {
+            assert!(setup.setup_reductions > 1, "{setup:?}");
+        }
+        assert!(d <= 1e-6 * rmax, "{what}: {d:e} vs {rmax:e}");
     }
 }

@@ -3,8 +3,8 @@
 
 use faer::Par;
 use nlsim_calib::{
-    CalibrationConfig, Gaussian, LeastSquares, MeasuredMode, ModalData, ModalObjective, ParamSpec,
-    Spacing, calibrate_modal,
+    CalibrationConfig, FeReduction, Gaussian, LeastSquares, MeasuredMode, ModalData,
+    ModalObjective, ParamSpec, ParametricConfig, Spacing, calibrate_modal,
 };
 use nlsim_kernel::{Error, Param, Parameterized, Status};
 use nlsim_reduction::{EigenConfig, EigenSolver, ModeSelection};
@@ -78,6 +78,225 @@ fn objective(data: ModalData) -> ModalObjective {
         Par::Seq,
     )
     .unwrap()
+}
+
+/// The objective with the modes from `fe`.
+fn objective_with(data: ModalData, specs: Vec<ParamSpec>, fe: &FeReduction) -> ModalObjective {
+    ModalObjective::with_reduction(
+        nlsim_fixtures::grouped_chain(60).unwrap(),
+        Arc::new(data),
+        specs,
+        MEASURED + 3,
+        Par::Seq,
+        fe,
+    )
+    .unwrap()
+}
+
+/// Interior points of the box of [`specs`] (values).
+const INTERIOR: [[f64; 4]; 4] = [
+    [1.1, 0.95, 1.2, 1500.0],
+    [0.6, 1.4, 0.55, 250.0],
+    [1.9, 0.55, 1.8, 1.8e4],
+    [1.3, 0.85, 0.9, 3500.0],
+];
+
+/// The parametric model's residuals against a full eigen solve at every point (the
+/// oracle): the certificate (1e-6) bounds the error of a shape component, relative, to first
+/// order, and a frequency's to second order; measured ≤ 1e-9 of the largest residual.
+#[test]
+fn parametric_residuals_and_jacobian_match_full_eigen_solves() {
+    let data = measured(2e-3, 1e-2, 5);
+    let mut prom = objective_with(data.clone(), specs(), &FeReduction::default());
+    let mut full = objective_with(data, specs(), &FeReduction::Full);
+    let setup = prom.fe_stats();
+    assert!(
+        setup.parametric && setup.basis_size > MEASURED + 3,
+        "{setup:?}"
+    );
+    for p in INTERIOR {
+        let a = prom.fit_values(&p).unwrap().unwrap();
+        let b = full.fit_values(&p).unwrap().unwrap();
+        assert_eq!(a.pairing, b.pairing, "at {p:?}");
+        let scale = b.residuals.iter().fold(1.0f64, |m, r| m.max(r.abs()));
+        let worst = a
+            .residuals
+            .iter()
+            .zip(&b.residuals)
+            .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+        eprintln!(
+            "at {p:?}: residuals differ by {:.1e} of the largest",
+            worst / scale
+        );
+        for (i, (x, y)) in a.residuals.iter().zip(&b.residuals).enumerate() {
+            assert!(
+                (x - y).abs() <= 1e-6 * scale,
+                "at {p:?}: residual {i}: {x} vs {y}"
+            );
+        }
+        // The parametric Jacobian (exact for the Ritz model) against the full model's
+        // analytic eigen-sensitivities.
+        for j in 0..p.len() {
+            let norm = (0..b.residuals.len())
+                .map(|i| b.jacobian[(i, j)].powi(2))
+                .sum::<f64>()
+                .sqrt();
+            for i in 0..b.residuals.len() {
+                assert!(
+                    (a.jacobian[(i, j)] - b.jacobian[(i, j)]).abs() <= 1e-5 * norm,
+                    "at {p:?}: d r{i} / d {}: {} vs {}",
+                    specs()[j].param,
+                    a.jacobian[(i, j)],
+                    b.jacobian[(i, j)]
+                );
+            }
+        }
+    }
+    let st = full.fe_stats();
+    assert!(
+        !st.parametric && st.full_reductions == INTERIOR.len(),
+        "{st:?}"
+    );
+}
+
+/// The parametric Jacobian against central differences of the full re-solve's residuals
+/// (step 1e-5 on internal variables of order 1: truncation ≈ 1e-10, round-off ≈ 1e-11 of
+/// the residuals; the basis's missing derivative directions are first order in its own
+/// error, ≤ 1e-5 of a column).
+#[test]
+fn parametric_jacobian_matches_central_differences_of_full_eigen_solves() {
+    let data = measured(0.0, 0.0, 1);
+    let mut prom = objective_with(data.clone(), specs(), &FeReduction::default());
+    let mut full = objective_with(data, specs(), &FeReduction::Full);
+    let u = prom.to_internal(&INTERIOR[1]);
+    let ev = prom.evaluate(&u).unwrap().unwrap();
+    for j in 0..u.len() {
+        let h = 1e-5;
+        let mut up = u.clone();
+        up[j] += h;
+        let mut um = u.clone();
+        um[j] -= h;
+        let rp = full.evaluate(&up).unwrap().unwrap().residuals;
+        let rm = full.evaluate(&um).unwrap().unwrap().residuals;
+        let col_norm = (0..rp.len())
+            .map(|i| ev.jacobian[(i, j)].powi(2))
+            .sum::<f64>()
+            .sqrt();
+        for i in 0..rp.len() {
+            let fd = (rp[i] - rm[i]) / (2.0 * h);
+            assert!(
+                (ev.jacobian[(i, j)] - fd).abs() <= 1e-5 * col_norm,
+                "{}: residual {i}: {} vs FD {fd}",
+                specs()[j].param,
+                ev.jacobian[(i, j)]
+            );
+        }
+    }
+}
+
+/// Calibrations on noisy data with the parametric model and with full eigen solves agree
+/// within 1e-3 of their Cramér–Rao bounds (the criterion), for any thread count.
+#[test]
+fn parametric_and_full_calibrations_agree_within_a_thousandth_of_the_bound() {
+    let data = measured(2e-3, 1e-2, 11);
+    let cfg = CalibrationConfig {
+        lhs_samples: 8,
+        starts: 2,
+        ..CalibrationConfig::default()
+    };
+    let prom = objective_with(data.clone(), specs(), &FeReduction::default());
+    let full = objective_with(data, specs(), &FeReduction::Full);
+    let a = calibrate_modal(&prom, &cfg).unwrap();
+    let b = calibrate_modal(&full, &cfg).unwrap();
+    for j in 0..TRUTH.len() {
+        let d = (a.estimate[j] - b.estimate[j]).abs() / b.cramer_rao.std[j];
+        eprintln!("{}: {:e} of the bound", specs()[j].param, d);
+        assert!(
+            d <= 1e-3,
+            "{}: {} vs {}",
+            specs()[j].param,
+            a.estimate[j],
+            b.estimate[j]
+        );
+        let s = (a.cramer_rao.std[j] / b.cramer_rao.std[j] - 1.0).abs();
+        assert!(
+            s <= 1e-4,
+            "{}: bound {} vs {}",
+            specs()[j].param,
+            a.cramer_rao.std[j],
+            b.cramer_rao.std[j]
+        );
+    }
+    assert_eq!(a.fit.pairing, b.fit.pairing);
+}
+
+/// The certificate fires: the mid group's stiffness scale over 0.05..40 moves the second to
+/// fourth modes across the measured band (1.3 → 0.05 or 40 × the nominal stiffness of a third
+/// of the chain). On the nominal basis alone (no training) an evaluation there fails the
+/// certificate and is refreshed by a full eigen solve, and its residuals equal the full
+/// solve's; with the default training the box's corners enrich the basis while it is built.
+#[test]
+fn the_certificate_refreshes_where_a_mode_moves_across_the_band() {
+    let p = |s: &str| s.parse::<Param>().unwrap();
+    let wide = vec![
+        ParamSpec::new(p("group:mid.k_scale"), 0.05, 40.0),
+        ParamSpec::new(p("spring:60:u.k"), 200.0, 2e4),
+    ];
+    let data = measured(0.0, 0.0, 1);
+    let untrained = FeReduction::Parametric(ParametricConfig {
+        max_training: 0,
+        ..ParametricConfig::default()
+    });
+    let mut prom = objective_with(data.clone(), wide.clone(), &untrained);
+    let mut full = objective_with(data.clone(), wide.clone(), &FeReduction::Full);
+    let far = [30.0, 2000.0];
+    let a = prom.fit_values(&far).unwrap().unwrap();
+    let b = full.fit_values(&far).unwrap().unwrap();
+    let st = prom.fe_stats();
+    assert_eq!(
+        (st.setup_reductions, st.refreshes, st.full_reductions),
+        (1, 1, 1),
+        "{st:?}"
+    );
+    // The modes did move: the nominal frequencies against those at the far point.
+    let nominal = objective_with(data.clone(), wide.clone(), &FeReduction::Full)
+        .fit_values(&[1.0, 2000.0])
+        .unwrap()
+        .unwrap();
+    eprintln!(
+        "nominal {:?}\nfar     {:?}",
+        nominal.frequencies_hz, b.frequencies_hz
+    );
+    assert!(b.frequencies_hz[1] > 1.2 * nominal.frequencies_hz[1]);
+    assert_eq!(a.pairing, b.pairing);
+    let scale = b.residuals.iter().fold(1.0f64, |m, r| m.max(r.abs()));
+    let worst = a
+        .residuals
+        .iter()
+        .zip(&b.residuals)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+    eprintln!(
+        "refreshed: residuals differ by {:.1e} of the largest",
+        worst / scale
+    );
+    for (x, y) in a.residuals.iter().zip(&b.residuals) {
+        assert!((x - y).abs() <= 1e-6 * scale, "{x} vs {y}");
+    }
+    // Not kept by a cost-only evaluation: the next one there refreshes again.
+    prom.fit_values(&far).unwrap().unwrap();
+    assert_eq!(prom.fe_stats().refreshes, 2);
+    // Kept by an optimisation step: the second one there does not.
+    let u = prom.to_internal(&far);
+    prom.evaluate(&u).unwrap().unwrap();
+    prom.evaluate(&u).unwrap().unwrap();
+    assert_eq!(prom.fe_stats().refreshes, 3);
+    // The default training enriches at the box's corners while the objective is built.
+    let trained = objective_with(data, wide, &FeReduction::default());
+    assert!(
+        trained.fe_stats().setup_reductions > 1,
+        "{:?}",
+        trained.fe_stats()
+    );
 }
 
 #[test]

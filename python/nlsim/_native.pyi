@@ -179,6 +179,10 @@ class Calibration:
     @property
     def params(self) -> List[str]: ...
     @property
+    def fe_stats(self) -> Optional[Dict[str, Any]]:
+        """fe_reduction, basis_size, setup_reductions, evaluations, refreshes, full_reductions,
+        full_seconds; None without FE-level parameters"""
+    @property
     def estimate(self) -> npt.NDArray[np.float64]:
         """(param,)"""
     @property
@@ -228,6 +232,8 @@ def calibrate(
     seed: int = 1,
     starts: int = 3,
     folds: int = 10,
+    fe_reduction: str = "parametric",
+    fe_tolerance: Optional[float] = None,
     threads: Optional[int] = None,
 ) -> Calibration: ...
 def modes(
@@ -365,6 +371,10 @@ class ModalCalibration:
     @property
     def params(self) -> List[str]: ...
     @property
+    def fe_stats(self) -> Dict[str, Any]:
+        """fe_reduction, basis_size, setup_reductions, evaluations, refreshes, full_reductions
+        (full eigen solves), full_seconds"""
+    @property
     def estimate(self) -> npt.NDArray[np.float64]:
         """(param,)"""
     @property
@@ -409,6 +419,8 @@ def calibrate_modal(
     lhs: int = 64,
     seed: int = 1,
     starts: int = 3,
+    fe_reduction: str = "parametric",
+    fe_tolerance: Optional[float] = None,
     threads: Optional[int] = None,
 ) -> ModalCalibration: ...
 

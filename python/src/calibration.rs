@@ -8,7 +8,8 @@ use crate::model::Model;
 use crate::runs::{Stop, run};
 use crate::{input, py_err};
 use nlsim::calib::{
-    BranchChoice, CalibrationConfig, Form, FrfObjective, ObjectiveConfig, ParamSpec,
+    BranchChoice, CalibrationConfig, FeReduction, FeReductionStats, Form, FrfObjective,
+    ObjectiveConfig, ParamSpec, ParametricConfig,
 };
 use nlsim::hb::{HarmonicSet, HbConfig};
 use nlsim::kernel::{Param, Parameterized};
@@ -24,6 +25,7 @@ use std::sync::Arc;
 #[pyclass(module = "nlsim._native", name = "Calibration", frozen)]
 pub struct Calibration {
     c: nlsim::calib::Calibration,
+    fe: Option<FeReductionStats>,
 }
 
 fn vec1<'py>(py: Python<'py>, v: Vec<f64>) -> Bound<'py, PyArray1<f64>> {
@@ -36,6 +38,14 @@ impl Calibration {
     #[getter]
     fn params(&self) -> Vec<String> {
         self.c.params.iter().map(ToString::to_string).collect()
+    }
+
+    /// What the evaluations of FE-level parameters did (`None` without them): a dict of
+    /// `fe_reduction` (`"parametric"` or `"full"`), `basis_size`, `setup_reductions`,
+    /// `evaluations`, `refreshes`, `full_reductions` and `full_seconds`.
+    #[getter]
+    fn fe_stats<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        fe_stats_dict(py, self.fe.as_ref())
     }
 
     /// The estimate, shape `(param,)`, in each parameter's unit.
@@ -203,6 +213,51 @@ pub(crate) fn search_config(
     Ok(config)
 }
 
+/// The evaluation of FE-level parameters named by `fe_reduction` (`"parametric"`, the
+/// default, or `"full"`) with the parametric model's certificate `fe_tolerance` (default
+/// 1e-6; refused with `"full"`).
+pub(crate) fn fe_reduction(kind: &str, tolerance: Option<f64>) -> PyResult<FeReduction> {
+    match (kind, tolerance) {
+        ("parametric", tol) => {
+            let settings = ParametricConfig {
+                tolerance: tol.unwrap_or(ParametricConfig::default().tolerance),
+                ..ParametricConfig::default()
+            };
+            settings
+                .check()
+                .map_err(|e| input(format!("fe_tolerance: {e}")))?;
+            Ok(FeReduction::Parametric(settings))
+        }
+        ("full", None) => Ok(FeReduction::Full),
+        ("full", Some(_)) => Err(input(
+            "fe_tolerance: a tolerance belongs to fe_reduction='parametric', not 'full'",
+        )),
+        (other, _) => Err(input(format!(
+            "fe_reduction: '{other}'; use 'parametric' or 'full'"
+        ))),
+    }
+}
+
+/// What the FE-level evaluations did, as a dict (`None` without FE-level parameters).
+pub(crate) fn fe_stats_dict<'py>(
+    py: Python<'py>,
+    fe: Option<&FeReductionStats>,
+) -> PyResult<Option<Bound<'py, PyDict>>> {
+    let Some(fe) = fe else { return Ok(None) };
+    let d = PyDict::new(py);
+    d.set_item(
+        "fe_reduction",
+        if fe.parametric { "parametric" } else { "full" },
+    )?;
+    d.set_item("basis_size", fe.basis_size)?;
+    d.set_item("setup_reductions", fe.setup_reductions)?;
+    d.set_item("evaluations", fe.evaluations)?;
+    d.set_item("refreshes", fe.refreshes)?;
+    d.set_item("full_reductions", fe.full_reductions)?;
+    d.set_item("full_seconds", fe.full_seconds)?;
+    Ok(Some(d))
+}
+
 /// The test data a calibration runs on: given as `TestData`, or a file read for the model.
 enum Source {
     Given(Arc<nlsim::calib::TestData>),
@@ -285,7 +340,7 @@ pub(crate) fn param_specs(model: &Model, params: &Bound<'_, PyDict>) -> PyResult
 /// retained, `uff_noise` the relative noise of UFF FRFs, `lhs` candidates, `seed`, `starts`,
 /// `folds` (0: no cross validation).
 #[pyfunction]
-#[pyo3(signature = (model, data, params, compare=vec![1], form="complex", branch="nearest", harmonics=3, modes=20, uff_noise=0.01, lhs=64, seed=1, starts=3, folds=10, threads=None))]
+#[pyo3(signature = (model, data, params, compare=vec![1], form="complex", branch="nearest", harmonics=3, modes=20, uff_noise=0.01, lhs=64, seed=1, starts=3, folds=10, fe_reduction="parametric", fe_tolerance=None, threads=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn calibrate(
     py: Python<'_>,
@@ -302,8 +357,11 @@ pub fn calibrate(
     seed: u64,
     starts: usize,
     folds: usize,
+    fe_reduction: &str,
+    fe_tolerance: Option<f64>,
     threads: Option<usize>,
 ) -> PyResult<Calibration> {
+    let fe = self::fe_reduction(fe_reduction, fe_tolerance)?;
     let data = Source::of(data)?;
     let specs = param_specs(model, params)?;
     let form = match form {
@@ -339,9 +397,10 @@ pub fn calibrate(
     let result = run(py, threads, move |stop: &Stop| -> nlsim::Result<_> {
         let data = data.read(&m, uff_noise)?;
         let reduction = nlsim::reduction::ReductionConfig::lowest(modes.min(m.n_dofs()));
-        let objective = FrfObjective::from_model(
+        let objective = FrfObjective::from_model_with(
             &m,
             &reduction,
+            &fe,
             set,
             HbConfig::default(),
             data,
@@ -352,12 +411,12 @@ pub fn calibrate(
                 branch,
             },
         )?;
-        Ok(nlsim::calib::calibrate_with_progress(
-            &objective,
-            &config,
-            &|_| stop.check(),
-        )?)
+        let c = nlsim::calib::calibrate_with_progress(&objective, &config, &|_| stop.check())?;
+        Ok((c, objective.fe_stats()))
     })?
     .map_err(py_err)?;
-    Ok(Calibration { c: result })
+    Ok(Calibration {
+        c: result.0,
+        fe: result.1,
+    })
 }

@@ -1,11 +1,12 @@
 //! `nlsim.calibrate_modal`: FE-level parameters (group stiffness and mass scales, boundary
 //! springs) from measured natural frequencies and mode shapes (the linear stage, thesis §4.5),
 //! as `nlsim calibrate MODEL MODES.csv` does it: maximin Latin-hypercube candidates, bounded
-//! Levenberg–Marquardt with analytic eigen-sensitivities, modes paired by MAC, the
-//! Cramér–Rao bound at the estimate.
+//! Levenberg–Marquardt with the modes and their sensitivities from the parametric reduced
+//! model (or full eigen solves), modes paired by MAC, the Cramér–Rao bound at the estimate.
 
 use crate::calibration::{
-    candidates_array, covariance_array, estimates_repr, param_specs, search_config,
+    candidates_array, covariance_array, estimates_repr, fe_reduction, fe_stats_dict, param_specs,
+    search_config,
 };
 use crate::model::Model;
 use crate::runs::{Stop, run, vec1};
@@ -21,6 +22,7 @@ use std::sync::Arc;
 #[pyclass(module = "nlsim._native", name = "ModalCalibration", frozen)]
 pub struct ModalCalibration {
     c: nlsim::calib::ModalCalibration,
+    fe: nlsim::calib::FeReductionStats,
 }
 
 #[pymethods]
@@ -29,6 +31,14 @@ impl ModalCalibration {
     #[getter]
     fn params(&self) -> Vec<String> {
         self.c.params.iter().map(ToString::to_string).collect()
+    }
+
+    /// What the evaluations of the modes did: a dict of `fe_reduction` (`"parametric"` or
+    /// `"full"`), `basis_size`, `setup_reductions`, `evaluations`, `refreshes`,
+    /// `full_reductions` (full eigen solves) and `full_seconds`.
+    #[getter]
+    fn fe_stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        Ok(fe_stats_dict(py, Some(&self.fe))?.expect("given"))
     }
 
     /// The estimate, shape `(n_params,)`.
@@ -218,10 +228,12 @@ fn modal_arrays(model: &Model, d: &Bound<'_, PyDict>, shape_noise: f64) -> PyRes
 /// with `shapes` (dofs, modes; any scale and sign). `params` maps FE-level parameters
 /// (`group:NAME.k_scale`, `group:NAME.m_scale`, `spring:…`) to their bounds; `shape_noise`
 /// is the standard deviation of one component of a unit-normalised measured shape; `modes`
-/// the computed modes the MAC pairing chooses from (at least the measured ones). The other
-/// arguments are `nlsim calibrate`'s, with its defaults.
+/// the computed modes the MAC pairing chooses from (at least the measured ones);
+/// `fe_reduction` `"parametric"` (the parametric reduced model, certified to `fe_tolerance`,
+/// default 1e-6) or `"full"` (a full eigen solve per evaluation). The other arguments are
+/// `nlsim calibrate`'s, with its defaults.
 #[pyfunction]
-#[pyo3(signature = (model, data, params, shape_noise=0.02, modes=20, lhs=64, seed=1, starts=3, threads=None))]
+#[pyo3(signature = (model, data, params, shape_noise=0.02, modes=20, lhs=64, seed=1, starts=3, fe_reduction="parametric", fe_tolerance=None, threads=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn calibrate_modal(
     py: Python<'_>,
@@ -233,8 +245,11 @@ pub fn calibrate_modal(
     lhs: usize,
     seed: u64,
     starts: usize,
+    fe_reduction: &str,
+    fe_tolerance: Option<f64>,
     threads: Option<usize>,
 ) -> PyResult<ModalCalibration> {
+    let fe = self::fe_reduction(fe_reduction, fe_tolerance)?;
     if !(shape_noise > 0.0 && shape_noise.is_finite()) {
         return Err(input(format!(
             "shape_noise: {shape_noise}; give a positive standard deviation"
@@ -263,13 +278,21 @@ pub fn calibrate_modal(
     let config = search_config(lhs, seed, starts, CalibrationConfig::default().folds)?;
     let m = model.inner.clone();
     let result = run(py, threads, move |stop: &Stop| -> nlsim::Result<_> {
-        let objective = ModalObjective::new(m, Arc::new(measured), specs, modes, faer::Par::Seq)?;
-        Ok(nlsim::calib::calibrate_modal_with_progress(
-            &objective,
-            &config,
-            &|_| stop.check(),
-        )?)
+        let objective = ModalObjective::with_reduction(
+            m,
+            Arc::new(measured),
+            specs,
+            modes,
+            faer::Par::Seq,
+            &fe,
+        )?;
+        let c =
+            nlsim::calib::calibrate_modal_with_progress(&objective, &config, &|_| stop.check())?;
+        Ok((c, objective.fe_stats()))
     })?
     .map_err(py_err)?;
-    Ok(ModalCalibration { c: result })
+    Ok(ModalCalibration {
+        c: result.0,
+        fe: result.1,
+    })
 }

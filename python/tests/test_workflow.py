@@ -298,6 +298,23 @@ def test_modal_calibration_equals_the_command_line(tmp_path: Path) -> None:
     np.testing.assert_array_equal(got.frequency_hz, [float(r[3]) for r in fit])
     np.testing.assert_array_equal(got.mac[:2], [float(r[5]) for r in fit[:2]])
     assert math.isnan(got.mac[2])  # the fifth mode's shape was not measured
+    assert got.fe_stats["fe_reduction"] == "parametric" and got.fe_stats["basis_size"] > 0
+    # A full eigen solve per evaluation: the command line's --fe-reduction full to the bit,
+    # and the parametric estimates within 1e-3 of the Cramér–Rao bound of it.
+    cli("calibrate", model_file, "modes.csv", "--param", "group:root.k_scale=0.5:2",
+        "--param", "group:tip.m_scale=0.5:1.5", "--param", "spring:6:ux.k=100:5000",
+        "--fe-reduction", "full", "--out", "full.csv", cwd=tmp_path)
+    full = nlsim.calibrate_modal(model, tmp_path / "modes.csv", params, fe_reduction="full")
+    rows = [l.split(",") for l in (tmp_path / "full.csv").read_text().splitlines()[1:]]
+    np.testing.assert_array_equal(full.estimate, [float(r[1]) for r in rows])
+    assert full.fe_stats["fe_reduction"] == "full"
+    assert full.fe_stats["full_reductions"] == full.fe_stats["evaluations"] > 0
+    assert np.all(np.abs(got.estimate - full.estimate) <= 1e-3 * full.cramer_rao_std)
+    with pytest.raises(nlsim.InputError, match="fe_reduction: 'exact'"):
+        nlsim.calibrate_modal(model, tmp_path / "modes.csv", params, fe_reduction="exact")
+    with pytest.raises(nlsim.InputError, match="fe_tolerance: a tolerance belongs"):
+        nlsim.calibrate_modal(model, tmp_path / "modes.csv", params, fe_reduction="full",
+                              fe_tolerance=1e-8)
     arrays = {
         "frequency_hz": np.array([5.706751, 14.000702]),
         "frequency_std_hz": np.array([0.0057, 0.014]),

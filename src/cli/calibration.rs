@@ -140,6 +140,10 @@ pub struct ValidateArgs {
     /// (measured, predicted, band) and report.h5.
     #[arg(long)]
     report: Option<std::path::PathBuf>,
+    /// The prediction as a file: .csv (every predicted value) or .uff/.unv (universal file
+    /// datasets 58: predicted and measured Y_k/F1 per sweep, channel and harmonic).
+    #[arg(long)]
+    out: Option<std::path::PathBuf>,
 }
 
 impl ValidateArgs {
@@ -155,6 +159,7 @@ impl ValidateArgs {
             r.scale = commands::validate::BandScale::None;
         }
         r.report = self.report.clone();
+        r.out = self.out.clone();
         r
     }
 
@@ -451,19 +456,17 @@ impl CalibrateArgs {
         if self.dry_run {
             let req = self.request()?;
             req.check()?;
-            if req
+            let estimate = if req
                 .data
                 .extension()
                 .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
                 && crate::formats::modal_data::is_modal_csv(&req.data)?
             {
-                return Err(crate::Error::Usage(
-                    "--dry-run: estimates a calibration on stepped-sine data; a modal-data \
-                     calibration is one eigen solve per evaluation and needs no estimate"
-                        .into(),
-                ));
-            }
-            for line in commands::calibrate::estimate_calibration(&req)?.lines() {
+                commands::calibrate::estimate_modal_calibration(&req)?
+            } else {
+                commands::calibrate::estimate_calibration(&req)?
+            };
+            for line in estimate.lines() {
                 console.say(&line);
             }
             return Ok(());

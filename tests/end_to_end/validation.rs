@@ -217,11 +217,14 @@ fn brake_reuss_beam_from_the_command_line() {
             "{text}"
         );
         let val = dir.join(format!("val-{m}"));
+        let uff = dir.join(format!("pred-{m}.uff"));
         let (rc, out, err) = nlsim(&[
             "validate",
             result.to_str().unwrap(),
             "--report",
             val.to_str().unwrap(),
+            "--out",
+            uff.to_str().unwrap(),
         ]);
         assert_eq!(rc, 0, "{m}: {out}{err}");
         assert!(
@@ -246,6 +249,35 @@ fn brake_reuss_beam_from_the_command_line() {
         eprintln!("{m}: held-out mean rms ln|A| {mean:.4}");
         means.push(mean);
         assert_eq!(csv_rows(&val.join("prediction.csv")).len(), 8 * 41);
+        if m == "linear" {
+            // pyuff, the independent reader, finds per held-out sweep the predicted and the
+            // measured Y1/F1 (16 datasets 58 of 41 points) whose magnitudes times |F1| are
+            // prediction.csv's to the written precision (E20.11: 1e-10), frequencies to E13.5.
+            let script = r#"
+import sys, csv, numpy as np, pyuff
+d = sys.argv[1]
+sets = pyuff.UFF(d + "/pred-linear.uff").read_sets()
+sets = sets if isinstance(sets, list) else [sets]
+assert len(sets) == 16, len(sets)
+rows = list(csv.DictReader(open(d + "/val-linear/prediction.csv")))
+for i in range(8):
+    label = "response-%d" % (i + 1)
+    mine = [r for r in rows if r["sweep"] == label]
+    f1 = np.array([float(r["force1_amplitude"]) for r in mine])
+    hz = np.array([float(r["frequency_hz"]) for r in mine])
+    for what in ("predicted", "measured"):
+        s = [s for s in sets if s["id1"].startswith("%s %s:" % (what, label))]
+        assert len(s) == 1, (what, label, [x["id1"] for x in sets])
+        s = s[0]
+        assert s["func_type"] == 4, s["func_type"]
+        y = np.array([complex(float(r[what + "_re"]), float(r[what + "_im"])) for r in mine])
+        got = np.abs(np.asarray(s["data"])) * f1
+        assert np.allclose(got, np.abs(y), rtol=1e-10, atol=0), (what, label, got, np.abs(y))
+        assert np.allclose(np.asarray(s["x"]), hz, rtol=5e-6), (label, s["x"], hz)
+print("ok")
+"#;
+            python_checks(script, &dir);
+        }
         for f in ["index.html", "report.h5", "frf_response-1_accel_h1.svg"] {
             assert!(val.join(f).is_file(), "{m}: {f} missing");
         }
@@ -309,6 +341,15 @@ fn validate_refuses_bad_input() {
     let res = rep.join("calibration.toml");
     let r = res.to_str().unwrap();
     refused(&["validate", r, "--level", "1.5"], "band level");
+    // An output format validate does not write is refused before anything is predicted.
+    refused(
+        &["validate", r, "--out", dir.join("p.h5").to_str().unwrap()],
+        "validate writes its prediction as .csv",
+    );
+    refused(
+        &["validate", r, "--out", dir.join("p.txt").to_str().unwrap()],
+        "unknown output format",
+    );
     refused(
         &["validate", r, "--sweeps", "nope-*"],
         "--sweeps: 'nope-*' matches no sweep",

@@ -100,7 +100,7 @@ pub fn execute(
                     .into(),
             ));
         }
-        let run = run_modal_calibration(req)?;
+        let run = run_modal_calibration(req, &progress)?;
         return write_modal_outputs(req, &run, console);
     }
     let run = run_calibration(req, candidates, &progress)?;

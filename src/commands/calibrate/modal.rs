@@ -36,15 +36,25 @@ pub struct ModalRun {
     pub modes: usize,
     /// The result.
     pub calibration: ModalCalibration,
+    /// What the evaluations of the modes did (parametric model or full eigen solves).
+    pub fe: nlsim_calib::FeReductionStats,
     /// Wall time of loading the model and the data (s).
     pub setup_seconds: f64,
     /// Wall time of the candidates and the optimisations (s).
     pub seconds: f64,
 }
 
-/// Runs `req` on modal data: Latin-hypercube candidates, Levenberg–Marquardt from the best,
-/// the Cramér–Rao bound at the estimate. Every parameter must be FE-level.
-pub fn run_modal_calibration(req: &CalibrationRequest) -> Result<ModalRun> {
+/// The modal calibration of a request, built: the model loaded, the data read, the objective
+/// (with the parametric reduced model unless `fe_reduction = "full"`).
+struct PreparedModal {
+    model_name: String,
+    file: ModalFile,
+    modes: usize,
+    objective: ModalObjective,
+    seconds: f64,
+}
+
+fn prepare_modal(req: &CalibrationRequest) -> Result<PreparedModal> {
     req.check()?;
     let t = Instant::now();
     let model = crate::commands::setup::load_for_run(&req.model, &req.model_sets())?;
@@ -59,24 +69,67 @@ pub fn run_modal_calibration(req: &CalibrationRequest) -> Result<ModalRun> {
     }
     let modes = req.modes.clamp(measured, model.n_dofs());
     let model_name = model.name().to_string();
-    let objective = ModalObjective::new(
+    let objective = ModalObjective::with_reduction(
         model,
         Arc::new(file.data.clone()),
         req.params.clone(),
         modes,
         faer::Par::Seq,
+        &req.fe,
     )?;
-    let setup_seconds = t.elapsed().as_secs_f64();
-    let t = Instant::now();
-    let calibration = nlsim_calib::calibrate_modal(&objective, &req.config)?;
-    Ok(ModalRun {
-        request: req.clone(),
+    Ok(PreparedModal {
         model_name,
         file,
         modes,
-        calibration,
-        setup_seconds,
+        objective,
         seconds: t.elapsed().as_secs_f64(),
+    })
+}
+
+/// Runs `req` on modal data: Latin-hypercube candidates, Levenberg–Marquardt from the best,
+/// the Cramér–Rao bound at the estimate. Every parameter must be FE-level. `progress` is
+/// told of the candidates and optimisations done (from the worker threads).
+pub fn run_modal_calibration(
+    req: &CalibrationRequest,
+    progress: &(dyn Fn(nlsim_calib::Progress) + Sync),
+) -> Result<ModalRun> {
+    let prepared = prepare_modal(req)?;
+    let t = Instant::now();
+    let calibration =
+        nlsim_calib::calibrate_modal_with_progress(&prepared.objective, &req.config, progress)?;
+    Ok(ModalRun {
+        request: req.clone(),
+        model_name: prepared.model_name,
+        file: prepared.file,
+        modes: prepared.modes,
+        fe: prepared.objective.fe_stats(),
+        calibration,
+        setup_seconds: prepared.seconds,
+        seconds: t.elapsed().as_secs_f64(),
+    })
+}
+
+/// Builds the objective of a modal-data `req` and times one evaluation of each kind at the
+/// first candidate (see [`super::CalibrationEstimate`]; no folds).
+pub fn estimate_modal_calibration(req: &CalibrationRequest) -> Result<super::CalibrationEstimate> {
+    let prepared = prepare_modal(req)?;
+    let mut obj = prepared.objective.clone();
+    let points = obj.candidate_points(&req.config)?;
+    let t = Instant::now();
+    obj.cost_values(&points[0])?;
+    let cost_seconds = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    obj.fit_values(&points[0])?;
+    let jacobian_seconds = t.elapsed().as_secs_f64();
+    Ok(super::CalibrationEstimate {
+        setup_seconds: prepared.seconds,
+        candidates: points.len(),
+        cost_seconds,
+        jacobian_seconds,
+        starts: req.config.starts.min(points.len()),
+        folds: 0,
+        max_iterations: req.config.lm.max_iterations,
+        threads: rayon::current_num_threads(),
     })
 }
 
@@ -121,6 +174,7 @@ impl ModalRun {
         if let Some(w) = c.cramer_rao.misfit_warning() {
             v.push(format!("warning: {w}"));
         }
+        v.push(super::report::fe_reduction_line(&self.fe, "eigen solve"));
         v.push(format!(
             "{:<22} {:>14} {:>14} {:>14}  flags",
             "parameter", "estimate", "Cramér–Rao", "chi2-scaled"

@@ -58,23 +58,7 @@ impl CalibrationRun {
             v.push(format!("warning: {w}"));
         }
         if let Some(fe) = self.prepared.objective.fe_stats() {
-            v.push(if fe.parametric {
-                format!(
-                    "FE-level parameters: parametric reduced model of {} basis vectors ({} \
-                     full reductions to build it); {} evaluations, {} refreshed by a full \
-                     reduction ({:.2} s)",
-                    fe.basis_size,
-                    fe.setup_reductions,
-                    fe.evaluations,
-                    fe.refreshes,
-                    fe.full_seconds
-                )
-            } else {
-                format!(
-                    "FE-level parameters: a full reduction at each of {} evaluations ({:.2} s)",
-                    fe.evaluations, fe.full_seconds
-                )
-            });
+            v.push(fe_reduction_line(&fe, "reduction"));
         }
         if !c.fit.failed.is_empty() {
             let at: Vec<String> = c
@@ -528,4 +512,25 @@ pub(crate) fn write_calibration_outputs(
         ));
     }
     Ok(())
+}
+
+/// The summary line of the FE-level evaluations: the parametric model's basis, its set-up
+/// and refreshes, or the full `what` (a reduction, an eigen solve) at every evaluation.
+pub fn fe_reduction_line(fe: &nlsim_calib::FeReductionStats, what: &str) -> String {
+    if fe.parametric {
+        format!(
+            "FE-level parameters: parametric reduced model of {} basis vectors ({} to build \
+             it); {} evaluations, {} refreshed by a full {what} ({:.2} s)",
+            fe.basis_size,
+            crate::present::summary::counted(fe.setup_reductions, &format!("full {what}")),
+            fe.evaluations,
+            fe.refreshes,
+            fe.full_seconds
+        )
+    } else {
+        format!(
+            "FE-level parameters: a full {what} at each of {} evaluations ({:.2} s)",
+            fe.evaluations, fe.full_seconds
+        )
+    }
 }

@@ -21,15 +21,22 @@ pub fn execute(
 ) -> crate::Result<()> {
     crate::formats::files::check_outputs(
         &[Some(req.calibration.as_path()), req.data.as_deref()],
-        &[],
+        &[req.out.as_deref()],
         &[req.report.as_deref()],
     )?;
+    if let Some(out) = &req.out {
+        out_format(out)?;
+    }
     console.progress("predicting (harmonic balance with sensitivities at every step)");
     let run = run_validation(req);
     console.progress_end();
     let run = run?;
     for line in run.summary() {
         console.say(&line);
+    }
+    if let Some(out) = &req.out {
+        write_prediction(out, &run)?;
+        console.say(&format!("prediction written to {}", out.display()));
     }
     if let Some(dir) = &req.report {
         let files = write_report(dir, &run)?;

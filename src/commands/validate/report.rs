@@ -2,8 +2,9 @@
 //! value with its band as CSV, and a report folder with a plot per sweep and compared
 //! harmonic (measured, predicted, band; the numbers in `report.h5`).
 use crate::commands::validate::run::{BandScale, ValidationRun};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::present::plot::Lines;
+use faer::c64;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -181,6 +182,97 @@ impl ValidationRun {
             );
         }
         s
+    }
+}
+
+impl ValidationRun {
+    /// The prediction as universal file functions (dataset 58, function type 4): per sweep,
+    /// channel and compared harmonic `k`, the predicted `Y_k/F₁` and the measured one (`F₁` the
+    /// step's measured complex drive fundamental; per volt for voltage-driven data) over the
+    /// sweep's step frequencies, at the channel's sensor DOF per the drive's DOF (node 0 where
+    /// the model has none). ID line 1 names sweep, channel, harmonic and which of the two.
+    pub fn prediction_uff(&self) -> Vec<crate::formats::uff_write::UffFunction> {
+        use crate::formats::uff_write::{Abscissa, UffFunction, node_direction, quantity_code};
+        use std::collections::BTreeMap;
+        let d = &self.data;
+        // (sweep, channel, harmonic) → the sweep's values in step order.
+        let mut groups: BTreeMap<(usize, usize, usize), Vec<&nlsim_calib::PredictedValue>> =
+            BTreeMap::new();
+        for v in &self.prediction.values {
+            groups
+                .entry((v.id.sweep, v.channel, v.harmonic))
+                .or_default()
+                .push(v);
+        }
+        let reference = self.input_dof.map_or((0, 0), node_direction);
+        let per = match d.drive {
+            nlsim_calib::Drive::Force => (13, "F1"),
+            nlsim_calib::Drive::Voltage => (0, "V1"),
+        };
+        let mut out = Vec::new();
+        for ((sweep, c, k), mut values) in groups {
+            values.sort_by_key(|v| v.id.step);
+            let hz: Vec<f64> = values.iter().map(|v| v.frequency_hz).collect();
+            let f1: Vec<c64> = values.iter().map(|v| d.step(v.id).force[0]).collect();
+            let channel = &d.channels[c];
+            let which = if k == 1 {
+                "fundamental".to_string()
+            } else {
+                format!("harmonic {k}")
+            };
+            for (what, pick) in [
+                (
+                    "predicted",
+                    (|v: &nlsim_calib::PredictedValue| v.predicted) as fn(&_) -> c64,
+                ),
+                ("measured", |v: &nlsim_calib::PredictedValue| v.measured),
+            ] {
+                out.push(UffFunction {
+                    id: format!(
+                        "{what} {}: {} {which} / {} {}",
+                        d.sweeps[sweep].label, channel.name, d.input, per.1
+                    ),
+                    function_type: 4,
+                    response: self.channel_dofs[c].map_or((0, 0), node_direction),
+                    reference,
+                    abscissa_type: 18,
+                    ordinate_type: quantity_code(channel.quantity),
+                    denominator_type: per.0,
+                    abscissa: Abscissa::Uneven(hz.clone()),
+                    values: values.iter().zip(&f1).map(|(v, f)| pick(v) / f).collect(),
+                    complex: true,
+                });
+            }
+        }
+        out
+    }
+}
+
+/// What `nlsim validate --out` writes, for the usage error.
+pub const OUT_HINT: &str = ".csv (every predicted value, as prediction.csv of the report) or \
+                            .uff/.unv (universal file: dataset 58 per sweep, channel and \
+                            harmonic, predicted and measured)";
+
+/// The format of `--out PATH` (CSV or universal file), or the usage error naming it.
+pub fn out_format(path: &Path) -> Result<crate::formats::files::Format> {
+    use crate::formats::files::Format;
+    match Format::of_any(path, OUT_HINT, true)? {
+        Format::Hdf5 => Err(Error::Usage(format!(
+            "--out {}: validate writes its prediction as {OUT_HINT}; the HDF5 numbers are in \
+             report.h5 of --report",
+            path.display()
+        ))),
+        f => Ok(f),
+    }
+}
+
+/// Writes the prediction of `run` to `path`: CSV or universal file by extension
+/// ([`OUT_HINT`], [`out_format`]), atomically.
+pub fn write_prediction(path: &Path, run: &ValidationRun) -> Result<()> {
+    if out_format(path)? == crate::formats::files::Format::Csv {
+        crate::formats::files::write_text_atomically(path, &run.prediction_csv())
+    } else {
+        crate::formats::uff_write::write_functions(path, &run.prediction_uff(), false)
     }
 }
 

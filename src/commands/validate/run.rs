@@ -36,6 +36,10 @@ pub struct ValidateRequest {
     pub scale: BandScale,
     /// Report folder.
     pub report: Option<PathBuf>,
+    /// The prediction as a file: `.csv` (every predicted value, as `prediction.csv` of the
+    /// report) or `.uff`/`.unv` (universal file datasets 58: per sweep, channel and compared
+    /// harmonic the predicted and the measured `Y_k/F₁`, for test software to overlay).
+    pub out: Option<PathBuf>,
 }
 
 impl ValidateRequest {
@@ -48,6 +52,7 @@ impl ValidateRequest {
             level: 0.95,
             scale: BandScale::Chi2,
             report: None,
+            out: None,
         }
     }
 }
@@ -70,6 +75,10 @@ pub struct ValidationRun {
     pub prediction: Prediction,
     /// The predicted test data.
     pub data: Arc<TestData>,
+    /// The DOF of the data's drive in the model (None when the model has no such excitation).
+    pub input_dof: Option<nlsim_kernel::DofLabel>,
+    /// The DOF of each channel's sensor in the model.
+    pub channel_dofs: Vec<Option<nlsim_kernel::DofLabel>>,
     /// Wall time (s).
     pub seconds: f64,
 }
@@ -127,6 +136,22 @@ pub fn run_validation(req: &ValidateRequest) -> Result<ValidationRun> {
         BandScale::Chi2 => result.reduced_chi2.max(1.0),
         BandScale::None => 1.0,
     };
+    let input_dof = model
+        .excitation()
+        .iter()
+        .find(|x| x.name == data.input)
+        .map(|x| x.at.label(model.dofs()));
+    let channel_dofs = data
+        .channels
+        .iter()
+        .map(|c| {
+            model
+                .sensors()
+                .iter()
+                .find(|s| s.name == c.name)
+                .map(|s| s.at.label(model.dofs()))
+        })
+        .collect();
     let data = Arc::new(data);
     let prepared = prepare_on(&cal, &model, Arc::clone(&data), t)?;
     let mut obj = prepared.objective;
@@ -149,6 +174,8 @@ pub fn run_validation(req: &ValidateRequest) -> Result<ValidationRun> {
         selection,
         prediction,
         data,
+        input_dof,
+        channel_dofs,
         seconds: t.elapsed().as_secs_f64(),
     })
 }
