@@ -7996,3 +7996,6 @@ mod gains;
 
 #[path = "end_to_end/harmonics.rs"]
 mod harmonics;
+
+#[path = "end_to_end/time_domain.rs"]
+mod time_domain;

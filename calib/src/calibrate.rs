@@ -344,16 +344,7 @@ pub fn calibrate_from_candidates(
         _ => CramerRao::new(&Mat::zeros(0, n), &[], &estimate),
     };
     let at_bound: Vec<bool> = best.report.active_bounds.clone();
-    let poorly_identified = (0..n)
-        .map(|j| {
-            cramer_rao.relative_std[j].is_nan()
-                || cramer_rao.relative_std[j] > 0.5
-                || (cramer_rao.collinearity > 15.0
-                    && cramer_rao
-                        .most_correlated
-                        .is_some_and(|(a, b, _)| a == j || b == j))
-        })
-        .collect();
+    let poorly_identified = cramer_rao.poorly_identified();
     let status = best.report.status;
     let kfold = if config.folds > 0 {
         Some(kfold(objective, &estimate, config, progress)?)

@@ -40,6 +40,7 @@ pub mod shaker;
 pub mod stats;
 mod step;
 pub mod synthetic;
+pub mod time_domain;
 pub mod track;
 
 pub use calibrate::{
@@ -73,4 +74,8 @@ pub use shaker::{
 };
 pub use stats::{CHI2_WARN, CramerRao};
 pub use synthetic::{Gaussian, SweepPlan, synthesize};
+pub use time_domain::{
+    MAX_TIME_SAMPLES, TimeCalibration, TimeChannel, TimeFit, TimeObjective, TimeRecords,
+    calibrate_time, synthesize_time, time_blocks,
+};
 pub use track::{Track, TrackConfig, TrackPoint, sweep_bias, sweep_rate_parameter, track_sweep};

@@ -98,6 +98,22 @@ impl CramerRao {
         }
     }
 
+    /// Whether each parameter is poorly identifiable: its relative standard deviation above
+    /// 0.5 (or undefined), or it belongs to the most correlated pair while the collinearity
+    /// index exceeds 15.
+    pub fn poorly_identified(&self) -> Vec<bool> {
+        (0..self.std.len())
+            .map(|j| {
+                self.relative_std[j].is_nan()
+                    || self.relative_std[j] > 0.5
+                    || (self.collinearity > 15.0
+                        && self
+                            .most_correlated
+                            .is_some_and(|(a, b, _)| a == j || b == j))
+            })
+            .collect()
+    }
+
     /// A one-line warning when the reduced χ² exceeds [`CHI2_WARN`]: the Cramér–Rao std
     /// assumes the noise model and is `√χ²_red` times smaller than the spread the misfit
     /// implies.

@@ -31,6 +31,9 @@ use faer::c64;
 use nlsim_kernel::{Error, Law, Result, Status};
 use pulp::{Arch, Simd, WithSimd};
 
+mod sensitivity;
+pub use sensitivity::OutputSensitivities;
+
 /// Settings of the hold integrator.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FohConfig {

@@ -26,7 +26,7 @@ pub mod signal;
 
 pub use batch::run_batch;
 pub use feedback::NewtonConfig;
-pub use foh::{FohConfig, Simulator};
+pub use foh::{FohConfig, OutputSensitivities, Simulator};
 pub use history::{ContactEvent, InitialState, LoadCase, RunStats, Series, TimeHistory};
 pub use hold::{Hold, bias_error, reconstruction_gain, step_coefficients};
 pub use newmark::{Newmark, NewmarkConfig};

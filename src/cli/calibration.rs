@@ -68,6 +68,12 @@ pub struct CalibrateArgs {
     /// shape [default: 0.02].
     #[arg(long)]
     shape_noise: Option<f64>,
+    /// The data are raw time records (CSV `time_s,DRIVE,SENSOR…`, HDF5 or UFF 58 time
+    /// responses, from rest): element law parameters fitted to the sampled responses by
+    /// first-order-hold simulations driven by the recorded force; each channel's noise is
+    /// --data-noise times its rms.
+    #[arg(long)]
+    time_domain: bool,
     /// How FE-level parameters (`group:NAME.k_scale`, `group:NAME.m_scale`,
     /// `spring:NODE:COMP.k`) reduce the model at each evaluation: `parametric` (one basis,
     /// a small eigen solve per evaluation, certified against the full matrices and
@@ -415,6 +421,9 @@ impl CalibrateArgs {
             c.fold_by = crate::commands::calibrate::request::parse_fold_by(f)
                 .map_err(|m| crate::Error::Usage(format!("--fold-by {m}")))?;
         }
+        if self.time_domain {
+            req.time_domain = true;
+        }
         if let Some(s) = self.shape_noise {
             req.shape_noise = s;
         }
@@ -456,7 +465,9 @@ impl CalibrateArgs {
         if self.dry_run {
             let req = self.request()?;
             req.check()?;
-            let estimate = if req
+            let estimate = if req.time_domain {
+                commands::calibrate::estimate_time_calibration(&req)?
+            } else if req
                 .data
                 .extension()
                 .is_some_and(|e| e.eq_ignore_ascii_case("csv"))

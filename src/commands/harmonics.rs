@@ -145,154 +145,22 @@ fn windows_from_table(
         .collect()
 }
 
-/// Refuses a signal clipped by its recorder: its largest or smallest value held for 4 or
-/// more samples in a row, at least twice (every period of a clipped sine).
-fn check_clipping(name: &str, x: &[f64], rec: &TimeRecords, path: &std::path::Path) -> Result<()> {
-    let (lo, hi) = x
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        });
-    if hi <= lo {
-        return Ok(());
-    }
-    for bound in [hi, lo] {
-        let mut runs = Vec::new();
-        let mut run = 0usize;
-        for (i, &v) in x.iter().enumerate() {
-            if v == bound {
-                run += 1;
-                if run == 4 {
-                    runs.push(i + 1 - 4);
-                }
-            } else {
-                run = 0;
-            }
-        }
-        if runs.len() >= 2 {
-            return Err(Error::DataFile {
-                file: path.to_path_buf(),
-                line: rec.lines[runs[0]],
-                message: format!(
-                    "channel '{name}' is clipped: it holds {bound} for 4 or more samples in a \
-                     row {} times, first at sample {}; record it with a larger range",
-                    runs.len(),
-                    runs[0] + 1
-                ),
-            });
-        }
-    }
-    Ok(())
-}
-
-/// Time records from HDF5 ([`crate::formats::time_records_h5`]); refused in a build without
-/// HDF5.
-fn read_h5_records(path: &std::path::Path) -> Result<crate::formats::time_records::TimeRecords> {
-    #[cfg(feature = "hdf5")]
-    {
-        crate::formats::time_records_h5::read_records_h5(path)
-    }
-    #[cfg(not(feature = "hdf5"))]
-    {
-        Err(Error::Usage(format!(
-            "{}: this nlsim was built without HDF5; convert the records to CSV or rebuild \
-             with the hdf5 feature",
-            path.display()
-        )))
-    }
-}
-
 /// Reads the records, fits every dwell, and assembles the test data (nothing written).
 pub fn run(req: &HarmonicsRequest) -> Result<HarmonicsRun> {
     let loaded = crate::load_model(&req.model)?;
     let model = &loaded.model;
-    let ext = req
-        .records
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    let rec = match ext.as_deref() {
-        Some("uff" | "unv" | "uf") => {
-            let sets = crate::formats::uff::read(&req.records)?;
-            crate::formats::time_records::from_uff(&sets, &req.records)?
-        }
-        Some("h5" | "hdf5") => read_h5_records(&req.records)?,
-        _ => crate::formats::time_records::read_records(&req.records)?,
-    };
-    let drive = match &req.drive {
-        Some(d) => d.clone(),
-        None => model
-            .excitation()
-            .first()
-            .map(|e| e.name.clone())
-            .ok_or_else(|| {
-                Error::Usage(format!(
-                    "model '{}' has no excitation to name the drive; give --drive COLUMN",
-                    req.model
-                ))
-            })?,
-    };
-    // Columns by name, or as `nlsim simulate` writes them (`NAME_QUANTITY_UNIT`,
-    // `NAME_force_N`); element columns of a simulation are passed over.
-    use crate::formats::history_file::{force_column, output_column};
-    let drive_label = model
-        .excitation()
-        .iter()
-        .find(|e| e.name == drive)
-        .map(|e| format!("force@{}", e.at.label(model.dofs())));
-    let Some(d) = rec.names.iter().position(|n| {
-        *n == drive || *n == force_column(&drive) || drive_label.as_deref() == Some(n.as_str())
-    }) else {
-        return Err(Error::Usage(format!(
-            "{}: no column '{drive}' for the drive; the columns are {}",
-            req.records.display(),
-            rec.names.join(", ")
-        )));
-    };
-    let mut channels = Vec::new();
-    let mut columns = vec![d];
-    for (j, name) in rec.names.iter().enumerate() {
-        if j == d {
-            continue;
-        }
-        if let Some(s) = model.sensors().iter().find(|s| {
-            s.name == *name
-                || output_column(&s.name, s.quantity) == *name
-                || s.at.label(model.dofs()).to_string() == *name
-        }) {
-            channels.push((s.name.clone(), s.quantity));
-            columns.push(j);
-            continue;
-        }
-        let passed_over = model
-            .elements()
-            .iter()
-            .any(|e| *name == format!("{}_u_m", e.name()) || *name == force_column(e.name()))
-            || model
-                .excitation()
-                .iter()
-                .any(|e| *name == force_column(&e.name));
-        if passed_over {
-            continue;
-        }
-        let known: Vec<&str> = model.sensors().iter().map(|s| s.name.as_str()).collect();
-        return Err(Error::Usage(format!(
-            "{}: column '{name}' is no sensor of model '{}' (its sensors: {}) nor the drive \
-             '{drive}'",
-            req.records.display(),
-            req.model,
-            known.join(", ")
-        )));
-    }
-    if channels.is_empty() {
-        return Err(Error::Usage(format!(
-            "{}: only the drive '{drive}' is recorded; add a sensor's column",
-            req.records.display()
-        )));
-    }
-    for &j in &columns {
-        check_clipping(&rec.names[j], &rec.columns[j], &rec, &req.records)?;
-    }
+    let crate::commands::records::MappedRecords {
+        records: rec,
+        drive,
+        drive_column: d,
+        channels,
+        columns,
+    } = crate::commands::records::map_records(
+        model,
+        &req.model,
+        &req.records,
+        req.drive.as_deref(),
+    )?;
     let windows = match &req.steps {
         Some(table) => {
             let rows = crate::formats::time_records::read_step_table(table)?;

@@ -41,6 +41,8 @@ pub mod modes;
 #[cfg(feature = "io")]
 pub mod nnm;
 pub mod plan;
+#[cfg(feature = "io")]
+pub mod records;
 pub mod setup;
 #[cfg(feature = "io")]
 pub mod simulate;

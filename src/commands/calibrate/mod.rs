@@ -35,12 +35,14 @@ pub mod report;
 pub mod request;
 pub mod result;
 pub mod run;
+pub mod time;
 
 pub use modal::*;
 pub use report::*;
 pub use request::*;
 pub use result::*;
 pub use run::*;
+pub use time::*;
 
 /// `nlsim calibrate`: the request checked; measured modes (a modal CSV) go to
 /// [`run_modal_calibration`], stepped-sine data (CSV, HDF5, UFF 58) to [`run_calibration`]
@@ -87,6 +89,17 @@ pub fn execute(
         }
         console.phase(what, d, n, ph.1, ph.2);
     };
+    if req.time_domain {
+        if candidates.is_some() {
+            return Err(crate::Error::Usage(
+                "--candidates: a time-domain calibration evaluates its candidates itself (it \
+                 has no batch kinds)"
+                    .into(),
+            ));
+        }
+        let run = run_time_calibration(req, &progress)?;
+        return write_time_outputs(req, &run, console);
+    }
     let modal = req
         .data
         .extension()

@@ -82,21 +82,14 @@ impl CalibrationRun {
                 if c.fit.failed.len() > 5 { ", …" } else { "" }
             ));
         }
-        v.push(format!(
-            "{:<22} {:>14} {:>14} {:>14} {:>14}  flags",
-            "parameter", "estimate", "Cramér–Rao", "chi2-scaled", "k-fold (jk)"
+        v.extend(parameter_lines(
+            &c.params,
+            &c.estimate,
+            &c.cramer_rao,
+            c.kfold.as_ref(),
+            &c.at_bound,
+            &c.poorly_identified,
         ));
-        for (j, p) in c.params.iter().enumerate() {
-            v.push(format!(
-                "{:<22} {:>14.6e} {:>14.3e} {:>14.3e} {:>14.3e}  {}",
-                p.to_string(),
-                c.estimate[j],
-                c.cramer_rao.std[j],
-                c.cramer_rao.scaled_std[j],
-                c.kfold.as_ref().map_or(f64::NAN, |k| k.jackknife_std[j]),
-                self.flags(j)
-            ));
-        }
         if let (Some(k), nlsim_calib::FoldBy::Sweeps) =
             (c.kfold.as_ref(), self.request.config.fold_by)
         {
@@ -115,42 +108,17 @@ impl CalibrationRun {
         v
     }
 
-    /// `at bound`, `poorly identified`, both or nothing for parameter `j`.
-    fn flags(&self, j: usize) -> String {
-        let c = &self.calibration;
-        [
-            (c.at_bound[j], "at bound"),
-            (c.poorly_identified[j], "poorly identified"),
-        ]
-        .iter()
-        .filter(|f| f.0)
-        .map(|f| f.1)
-        .collect::<Vec<_>>()
-        .join(", ")
-    }
-
     /// Estimates and statistics, one row per parameter.
     pub fn estimates_csv(&self) -> String {
         let c = &self.calibration;
-        let mut csv = String::from(
-            "param,estimate,cramer_rao_std,kfold_mean,kfold_std,jackknife_std,at_bound,poorly_identified,chi2_scaled_std\n",
-        );
-        for (j, p) in c.params.iter().enumerate() {
-            let kf = c.kfold.as_ref();
-            let _ = writeln!(
-                csv,
-                "{p},{:?},{:?},{:?},{:?},{:?},{},{},{:?}",
-                c.estimate[j],
-                c.cramer_rao.std[j],
-                kf.map_or(f64::NAN, |k| k.mean[j]),
-                kf.map_or(f64::NAN, |k| k.std[j]),
-                kf.map_or(f64::NAN, |k| k.jackknife_std[j]),
-                c.at_bound[j],
-                c.poorly_identified[j],
-                c.cramer_rao.scaled_std[j]
-            );
-        }
-        csv
+        estimates_table(
+            &c.params,
+            &c.estimate,
+            &c.cramer_rao,
+            c.kfold.as_ref(),
+            &c.at_bound,
+            &c.poorly_identified,
+        )
     }
 
     fn param_header(&self) -> String {
@@ -533,4 +501,72 @@ pub fn fe_reduction_line(fe: &nlsim_calib::FeReductionStats, what: &str) -> Stri
             fe.evaluations, fe.full_seconds
         )
     }
+}
+
+/// The estimates CSV of a calibration: per parameter the estimate, its Cramér–Rao standard
+/// deviation, the k-fold mean, standard deviation and jackknife spread (NaN without folds),
+/// the flags and the χ²-scaled standard deviation.
+pub fn estimates_table(
+    params: &[nlsim_kernel::Param],
+    estimate: &[f64],
+    cramer_rao: &nlsim_calib::CramerRao,
+    kfold: Option<&nlsim_calib::KFold>,
+    at_bound: &[bool],
+    poorly_identified: &[bool],
+) -> String {
+    let mut csv = String::from(
+        "param,estimate,cramer_rao_std,kfold_mean,kfold_std,jackknife_std,at_bound,poorly_identified,chi2_scaled_std\n",
+    );
+    for (j, p) in params.iter().enumerate() {
+        let _ = writeln!(
+            csv,
+            "{p},{:?},{:?},{:?},{:?},{:?},{},{},{:?}",
+            estimate[j],
+            cramer_rao.std[j],
+            kfold.map_or(f64::NAN, |k| k.mean[j]),
+            kfold.map_or(f64::NAN, |k| k.std[j]),
+            kfold.map_or(f64::NAN, |k| k.jackknife_std[j]),
+            at_bound[j],
+            poorly_identified[j],
+            cramer_rao.scaled_std[j]
+        );
+    }
+    csv
+}
+
+/// The summary's parameter table: a header, then per parameter the estimate, its
+/// Cramér–Rao and χ²-scaled standard deviations, the k-fold jackknife spread and the flags
+/// (`at bound`, `poorly identified`).
+pub fn parameter_lines(
+    params: &[nlsim_kernel::Param],
+    estimate: &[f64],
+    cramer_rao: &nlsim_calib::CramerRao,
+    kfold: Option<&nlsim_calib::KFold>,
+    at_bound: &[bool],
+    poorly_identified: &[bool],
+) -> Vec<String> {
+    let mut v = vec![format!(
+        "{:<22} {:>14} {:>14} {:>14} {:>14}  flags",
+        "parameter", "estimate", "Cramér–Rao", "chi2-scaled", "k-fold (jk)"
+    )];
+    for (j, p) in params.iter().enumerate() {
+        let flags: Vec<&str> = [
+            (at_bound[j], "at bound"),
+            (poorly_identified[j], "poorly identified"),
+        ]
+        .iter()
+        .filter(|f| f.0)
+        .map(|f| f.1)
+        .collect();
+        v.push(format!(
+            "{:<22} {:>14.6e} {:>14.3e} {:>14.3e} {:>14.3e}  {}",
+            p.to_string(),
+            estimate[j],
+            cramer_rao.std[j],
+            cramer_rao.scaled_std[j],
+            kfold.map_or(f64::NAN, |k| k.jackknife_std[j]),
+            flags.join(", ")
+        ));
+    }
+    v
 }

@@ -62,6 +62,10 @@ pub struct CalibrationRequest {
     /// The shaker a voltage-driven test's record drives the model through (`[shaker]`);
     /// `None`: the recorded drive times the input gain is the force.
     pub shaker: Option<nlsim_calib::Shaker>,
+    /// `data` holds raw time records (a force and the sensors' responses from rest),
+    /// calibrated in the time domain ([`crate::commands::calibrate::time`]); the noise of each
+    /// channel is `data_options.noise` times its rms.
+    pub time_domain: bool,
 }
 
 /// Whether a `NAME=VALUE` override names a gain of the test data (`input_gain`,
@@ -121,6 +125,7 @@ impl CalibrationRequest {
             source: None,
             result: None,
             shaker: None,
+            time_domain: false,
         }
     }
 
@@ -276,6 +281,7 @@ pub(crate) struct CalibrationTable {
     phase_offset_deg: Option<f64>,
     train: Option<Vec<String>>,
     shape_noise: Option<f64>,
+    time_domain: Option<bool>,
     fe_reduction: Option<String>,
     fe_tolerance: Option<f64>,
     lhs: Option<usize>,
@@ -367,6 +373,7 @@ impl CalibrationTable {
             },
             train: self.train.unwrap_or_default(),
             shape_noise: self.shape_noise.unwrap_or(d.shape_noise),
+            time_domain: self.time_domain.unwrap_or(false),
             config: CalibrationConfig {
                 lhs_samples: self.lhs.unwrap_or(dc.lhs_samples),
                 seed: self.seed.unwrap_or(dc.seed),

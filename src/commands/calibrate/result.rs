@@ -100,6 +100,9 @@ pub fn result_toml(run: &CalibrationRun) -> String {
     };
     let _ = writeln!(s, "branch = \"{branch}\"");
     let _ = writeln!(s, "modes = {}", req.modes);
+    if req.time_domain {
+        s.push_str("time_domain = true\n");
+    }
     match &req.fe {
         FeReduction::Full => s.push_str("fe_reduction = \"full\"\n"),
         FeReduction::Parametric(p) => {
