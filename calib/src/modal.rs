@@ -451,14 +451,7 @@ impl ModalObjective {
                 Ok(Some(at))
             }
             Engine::Parametric { reduction, offset } => {
-                let before = reduction.stats();
-                let point = reduction.evaluate(values, derivatives, keep);
-                let after = reduction.stats();
-                self.counters.count(
-                    after.refreshes > before.refreshes,
-                    after.full_reductions - before.full_reductions,
-                    after.full_seconds - before.full_seconds,
-                );
+                let point = self.counters.evaluate(reduction, values, derivatives, keep);
                 let point = match point {
                     Ok(p) => p,
                     Err(Error::Numerical { .. }) => return Ok(None),

@@ -269,6 +269,25 @@ impl FeCounters {
             .fetch_add((full_seconds * 1e6) as u64, Ordering::Relaxed);
     }
 
+    /// `prom.evaluate(values, derivatives, keep)`, counted.
+    pub(crate) fn evaluate(
+        &self,
+        prom: &mut ParametricReduction,
+        values: &[f64],
+        derivatives: bool,
+        keep: bool,
+    ) -> Result<nlsim_reduction::ParametricPoint> {
+        let before = prom.stats();
+        let point = prom.evaluate(values, derivatives, keep);
+        let after = prom.stats();
+        self.count(
+            after.refreshes > before.refreshes,
+            after.full_reductions - before.full_reductions,
+            after.full_seconds - before.full_seconds,
+        );
+        point
+    }
+
     /// The counters over `setup` (what building the objective did).
     pub(crate) fn stats(&self, setup: FeReductionStats) -> FeReductionStats {
         FeReductionStats {
@@ -1085,17 +1104,10 @@ impl FrfObjective {
         let fe_values: Vec<f64> = link.fe.iter().map(|&i| values[i]).collect();
         match &mut link.model {
             FeModel::Parametric(prom) => {
-                let before = prom.stats();
                 // An evaluation with a Jacobian (an optimisation step, sequential on its own
                 // copy) keeps an enrichment; a cost-only one (the candidates, run in parallel
                 // on shared copies) does not, so that no result depends on the scheduling.
-                let point = prom.evaluate(&fe_values, jacobian, jacobian);
-                let after = prom.stats();
-                link.counters.count(
-                    after.refreshes > before.refreshes,
-                    after.full_reductions - before.full_reductions,
-                    after.full_seconds - before.full_seconds,
-                );
+                let point = link.counters.evaluate(prom, &fe_values, jacobian, jacobian);
                 let point = match point {
                     Ok(p) => p,
                     Err(Error::Numerical { .. }) => return Ok(None),

@@ -255,7 +255,7 @@ impl Feedback {
 
 /// Gaussian elimination with partial pivoting on a row-major `n × n` matrix; `false` when
 /// singular.
-fn dense_solve(a: &mut [f64], b: &mut [f64], n: usize) -> bool {
+pub(crate) fn dense_solve(a: &mut [f64], b: &mut [f64], n: usize) -> bool {
     if n == 1 {
         if a[0] == 0.0 || !a[0].is_finite() {
             return false;

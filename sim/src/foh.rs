@@ -229,6 +229,38 @@ impl Simulator {
         6 + 4 * self.cols.len() + 4 * self.n_kernel_rows
     }
 
+    /// One state update `ẑ_out = φ ẑ_in + Σ_c Γ_c vals_c` over every block (SIMD), with the
+    /// port responses of the updated states accumulated into `rp` (one per response row).
+    #[allow(clippy::too_many_arguments)]
+    fn state_pass(
+        &self,
+        zr_in: &[Block],
+        zi_in: &[Block],
+        zr_out: &mut [Block],
+        zi_out: &mut [Block],
+        vals: &[f64],
+        acc: &mut [Block],
+        rp: &mut [f64],
+    ) {
+        for a in acc.iter_mut() {
+            *a = [0.0; LANES];
+        }
+        self.arch.dispatch(StepKernel {
+            coeffs: &self.coeffs,
+            stride: self.stride,
+            ncols: self.cols.len(),
+            zr_in,
+            zi_in,
+            zr_out,
+            zi_out,
+            vals,
+            acc,
+        });
+        for (r, v) in rp.iter_mut().enumerate() {
+            *v = acc[self.row_slot[r]].iter().sum();
+        }
+    }
+
     /// Runs `case` for `n_steps` steps (`n_steps + 1` samples).
     pub fn run(&self, case: &LoadCase, n_steps: usize) -> Result<TimeHistory> {
         self.run_with_progress(case, n_steps, &mut |_, _| {})
@@ -246,7 +278,7 @@ impl Simulator {
         let elements = &elements[..];
         let plant = &self.plant;
         let dt = self.cfg.dt;
-        let (ns, nb, stride) = (self.ns, self.nblocks, self.stride);
+        let (ns, nb) = (self.ns, self.nblocks);
         let ne = plant.inputs.len();
         let nn = elements.len();
         let nq = ne + nn;
@@ -369,23 +401,7 @@ impl Simulator {
                     }
                 };
             }
-            for a in acc.iter_mut() {
-                *a = [0.0; LANES];
-            }
-            self.arch.dispatch(StepKernel {
-                coeffs: &self.coeffs,
-                stride,
-                ncols: self.cols.len(),
-                zr_in: &zr,
-                zi_in: &zi,
-                zr_out: &mut zr2,
-                zi_out: &mut zi2,
-                vals: &vals,
-                acc: &mut acc,
-            });
-            for r in 0..nr {
-                rp[r] = acc[self.row_slot[r]].iter().sum();
-            }
+            self.state_pass(&zr, &zi, &mut zr2, &mut zi2, &vals, &mut acc, &mut rp);
             for q in 0..ne {
                 u_next[q] = e[q][k + 1];
             }

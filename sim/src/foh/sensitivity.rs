@@ -19,7 +19,7 @@
 //! with the parameters; build the simulator with [`super::FohConfig::locate_events`] off),
 //! laws with internal state (hysteresis) and laws on several coordinates.
 
-use super::{Block, Column, LANES, Simulator, StepKernel};
+use super::{Block, Column, LANES, Simulator};
 use crate::history::{LoadCase, TimeHistory};
 use crate::hold::Hold;
 use faer::c64;
@@ -33,40 +33,6 @@ pub struct OutputSensitivities {
     /// `outputs[j][o][k] = ∂y_o(t_k)/∂p_j` (the output's unit per unit of the parameter), for
     /// every sample of the run (fewer than asked for when the run stopped short).
     pub outputs: Vec<Vec<Vec<f64>>>,
-}
-
-/// Solves the small dense system `a x = b` (row-major `n × n`) in place by Gaussian
-/// elimination with partial pivoting; `false` when `a` is singular.
-fn solve_small(a: &mut [f64], b: &mut [f64], n: usize) -> bool {
-    for c in 0..n {
-        let p = (c..n)
-            .max_by(|&x, &y| a[x * n + c].abs().total_cmp(&a[y * n + c].abs()))
-            .unwrap_or(c);
-        if a[p * n + c] == 0.0 || !a[p * n + c].is_finite() {
-            return false;
-        }
-        if p != c {
-            for j in 0..n {
-                a.swap(p * n + j, c * n + j);
-            }
-            b.swap(p, c);
-        }
-        for r in c + 1..n {
-            let m = a[r * n + c] / a[c * n + c];
-            for j in c..n {
-                a[r * n + j] -= m * a[c * n + j];
-            }
-            b[r] -= m * b[c];
-        }
-    }
-    for c in (0..n).rev() {
-        let mut s = b[c];
-        for j in c + 1..n {
-            s -= a[c * n + j] * b[j];
-        }
-        b[c] = s / a[c * n + c];
-    }
-    true
 }
 
 impl Simulator {
@@ -137,7 +103,7 @@ impl Simulator {
         let ne = self.plant.inputs.len();
         let no = self.plant.outputs.len();
         let nr = self.resp.rows.len();
-        let (ns, nb, stride) = (self.ns, self.nblocks, self.stride);
+        let (ns, nb) = (self.ns, self.nblocks);
         // The loop's linearisation at every sample: G_u, G_v and ∂g/∂p per element.
         let nparam: Vec<usize> = elements
             .iter()
@@ -193,7 +159,7 @@ impl Simulator {
                     }
                     rhs[i] = gu[i][k] * pd[i] + gv[i][k] * pv[i] + dgp(i, k);
                 }
-                if !solve_small(&mut a, &mut rhs, nn) {
+                if !crate::feedback::dense_solve(&mut a, &mut rhs, nn) {
                     return Err(Error::Numerical {
                         what: format!("output sensitivities at step {k}"),
                         detail: "the linearised element loop is singular".into(),
@@ -235,23 +201,7 @@ impl Simulator {
                         Column::Element(i, j) => -df[i][(k as i64 + j as i64).max(0) as usize],
                     };
                 }
-                for x in acc.iter_mut() {
-                    *x = [0.0; LANES];
-                }
-                self.arch.dispatch(StepKernel {
-                    coeffs: &self.coeffs,
-                    stride,
-                    ncols: self.cols.len(),
-                    zr_in: &zr,
-                    zi_in: &zi,
-                    zr_out: &mut zr2,
-                    zi_out: &mut zi2,
-                    vals: &vals,
-                    acc: &mut acc,
-                });
-                for r in 0..nr {
-                    rp[r] = acc[self.row_slot[r]].iter().sum();
-                }
+                self.state_pass(&zr, &zi, &mut zr2, &mut zi2, &vals, &mut acc, &mut rp);
                 pd.copy_from_slice(&rp[..nn]);
                 pv.copy_from_slice(&rp[nn..2 * nn]);
                 solve_loop(k + 1, &self.sd, &self.sv, &pd, &pv, &mut df)?;

@@ -10,11 +10,6 @@
 
 use crate::commands::calibrate::request::CalibrationRequest;
 
-use crate::commands::calibrate::report::candidates_table;
-
-use crate::commands::calibrate::report::convergence_plot;
-
-use crate::commands::calibrate::report::convergence_table;
 use crate::error::{Error, Result};
 use crate::formats::modal_data::ModalFile;
 use crate::formats::modal_data::read_modal_csv;
@@ -273,53 +268,27 @@ impl ModalRun {
 /// `modes.csv`, `candidates.csv`, `convergence.csv` and the convergence plot (SVG and PNG).
 /// Returns the files written.
 pub fn write_modal_report(dir: &Path, run: &ModalRun) -> Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(dir).map_err(|source| Error::Io {
-        path: dir.to_path_buf(),
-        source,
-    })?;
     let c = &run.calibration;
-    let mut written = Vec::new();
-    let mut summary = run.summary().join("\n");
-    summary.push('\n');
-    for (name, text) in [
-        ("summary.txt", summary),
-        ("estimates.csv", run.estimates_csv()),
-        ("modes.csv", run.modes_csv()),
-        ("candidates.csv", candidates_table(&c.params, &c.candidates)),
-        (
-            "convergence.csv",
-            convergence_table(&run.request.params, &c.runs),
-        ),
-    ] {
-        let p = dir.join(name);
-        crate::formats::files::write_text_atomically(&p, &text)?;
-        written.push(p);
-    }
-    let report = crate::present::report::Report::create(
+    let (report, written) = crate::commands::calibrate::report::search_report(
         dir,
         &format!("nlsim calibrate (modal): {}", run.model_name),
-        &crate::present::report::command_line(),
-        &run.request.model,
-    )?;
-    report.model_name(&run.model_name);
-    report.seed("Latin hypercube", run.request.config.seed)?;
-    report.section_with("Summary", &run.summary());
-    report.table(
-        "estimates",
-        crate::present::report::Table::from_csv(
-            "Estimates and uncertainties",
-            &run.estimates_csv(),
-        ),
+        &run.request,
+        &run.model_name,
+        &run.summary(),
+        &run.estimates_csv(),
+        (&c.params, &c.candidates, &c.runs),
+        vec![("modes.csv", run.modes_csv())],
     )?;
     report.table(
         "modes",
         crate::present::report::Table::from_csv("Measured and computed modes", &run.modes_csv()),
     )?;
-    report.section("Optimisation");
-    written.extend(convergence_plot(&report, &run.model_name, &c.runs)?);
-    written.push(report.finish()?);
-    written.push(dir.join(crate::present::report::DATA));
-    Ok(written)
+    crate::commands::calibrate::report::finish_search_report(
+        report,
+        &run.model_name,
+        &c.runs,
+        written,
+    )
 }
 
 /// Prints the summary of a modal calibration and writes the estimates CSV and the report

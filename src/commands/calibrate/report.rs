@@ -570,3 +570,69 @@ pub fn parameter_lines(
     }
     v
 }
+
+/// The start of a search's report folder (modal and time-domain calibrations): `dir`
+/// created, `summary.txt`, `estimates.csv`, `candidates.csv`, `convergence.csv` and the
+/// `extra` text files written, and the page opened with the model, the Latin-hypercube seed,
+/// the summary and the estimates table. Returns the page and the files written.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn search_report(
+    dir: &Path,
+    title: &str,
+    req: &CalibrationRequest,
+    model_name: &str,
+    summary: &[String],
+    estimates_csv: &str,
+    (params, candidates, runs): (&[Param], &[Candidate], &[StartRun]),
+    extra: Vec<(&str, String)>,
+) -> Result<(crate::present::report::Report, Vec<PathBuf>)> {
+    std::fs::create_dir_all(dir).map_err(|source| Error::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let mut text = summary.join("\n");
+    text.push('\n');
+    let mut files = vec![
+        ("summary.txt", text),
+        ("estimates.csv", estimates_csv.to_string()),
+        ("candidates.csv", candidates_table(params, candidates)),
+        ("convergence.csv", convergence_table(&req.params, runs)),
+    ];
+    files.extend(extra);
+    let mut written = Vec::new();
+    for (name, text) in files {
+        let p = dir.join(name);
+        crate::formats::files::write_text_atomically(&p, &text)?;
+        written.push(p);
+    }
+    let report = crate::present::report::Report::create(
+        dir,
+        title,
+        &crate::present::report::command_line(),
+        &req.model,
+    )?;
+    report.model_name(model_name);
+    report.seed("Latin hypercube", req.config.seed)?;
+    report.section_with("Summary", summary);
+    report.table(
+        "estimates",
+        crate::present::report::Table::from_csv("Estimates and uncertainties", estimates_csv),
+    )?;
+    Ok((report, written))
+}
+
+/// The end of a search's report ([`search_report`]): the convergence plot under
+/// "Optimisation", the page finished; `written` gains the plot, the page and `report.h5`.
+pub(crate) fn finish_search_report(
+    report: crate::present::report::Report,
+    model_name: &str,
+    runs: &[StartRun],
+    mut written: Vec<PathBuf>,
+) -> Result<Vec<PathBuf>> {
+    report.section("Optimisation");
+    written.extend(convergence_plot(&report, model_name, runs)?);
+    let data = report.dir().join(crate::present::report::DATA);
+    written.push(report.finish()?);
+    written.push(data);
+    Ok(written)
+}

@@ -10,9 +10,7 @@
 //! from the best, the Cramér–Rao bound, and k-fold cross validation over contiguous blocks of
 //! samples.
 
-use crate::commands::calibrate::report::{
-    candidates_table, convergence_plot, convergence_table, estimates_table, parameter_lines,
-};
+use crate::commands::calibrate::report::{estimates_table, parameter_lines};
 use crate::commands::calibrate::request::CalibrationRequest;
 use crate::error::{Error, Result};
 use crate::present::summary::counted;
@@ -283,43 +281,16 @@ impl TimeRun {
 /// calibrated), per channel a plot of both over time (at most 4000 points drawn), the
 /// convergence plot, and the page. Returns the files written.
 pub fn write_time_report(dir: &Path, run: &TimeRun) -> Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(dir).map_err(|source| Error::Io {
-        path: dir.to_path_buf(),
-        source,
-    })?;
     let c = &run.calibration;
-    let mut written = Vec::new();
-    let mut summary = run.summary().join("\n");
-    summary.push('\n');
-    for (name, text) in [
-        ("summary.txt", summary),
-        ("estimates.csv", run.estimates_csv()),
-        ("candidates.csv", candidates_table(&c.params, &c.candidates)),
-        (
-            "convergence.csv",
-            convergence_table(&run.request.params, &c.runs),
-        ),
-        ("fit.csv", run.fit_csv()),
-    ] {
-        let p = dir.join(name);
-        crate::formats::files::write_text_atomically(&p, &text)?;
-        written.push(p);
-    }
-    let report = crate::present::report::Report::create(
+    let (report, mut written) = crate::commands::calibrate::report::search_report(
         dir,
         &format!("nlsim calibrate (time domain): {}", run.model_name),
-        &crate::present::report::command_line(),
-        &run.request.model,
-    )?;
-    report.model_name(&run.model_name);
-    report.seed("Latin hypercube", run.request.config.seed)?;
-    report.section_with("Summary", &run.summary());
-    report.table(
-        "estimates",
-        crate::present::report::Table::from_csv(
-            "Estimates and uncertainties",
-            &run.estimates_csv(),
-        ),
+        &run.request,
+        &run.model_name,
+        &run.summary(),
+        &run.estimates_csv(),
+        (&c.params, &c.candidates, &c.runs),
+        vec![("fit.csv", run.fit_csv())],
     )?;
     report.section("Measured and calibrated responses");
     let r = &run.records;
@@ -350,11 +321,12 @@ pub fn write_time_report(dir: &Path, run: &TimeRun) -> Result<Vec<PathBuf>> {
             },
         )?);
     }
-    report.section("Optimisation");
-    written.extend(convergence_plot(&report, &run.model_name, &c.runs)?);
-    written.push(report.finish()?);
-    written.push(dir.join(crate::present::report::DATA));
-    Ok(written)
+    crate::commands::calibrate::report::finish_search_report(
+        report,
+        &run.model_name,
+        &c.runs,
+        written,
+    )
 }
 
 /// Prints the summary of a time-domain calibration and writes the estimates CSV and the
