@@ -14,6 +14,7 @@ scipy.sparse mass and stiffness matrices or load a model file, then compute
 - :class:`TestData` -- stepped-sine test data from numpy arrays or files;
 - :func:`calibrate` -- parameters fitted to a stepped-sine test, with Cramer-Rao bounds and
   k-fold cross validation; :func:`calibrate_modal` -- FE-level parameters from measured modes;
+  :func:`calibrate_time` -- element laws fitted to raw time records (sweeps, chirps, decays);
 - :func:`virtual_test` and :func:`plan` -- the virtual test through a shaker model and the
   ranking of candidate test designs by their Fisher information.
 
@@ -49,6 +50,7 @@ from ._native import (
     Plan,
     Reduced,
     TestData,
+    TimeCalibration,
     VirtualTest,
     builtin_models,
     calibrate,
@@ -79,10 +81,12 @@ __all__ = [
     "Plan",
     "Reduced",
     "TestData",
+    "TimeCalibration",
     "VirtualTest",
     "builtin_models",
     "calibrate",
     "calibrate_modal",
+    "calibrate_time",
     "frf",
     "from_matrices",
     "load",
@@ -357,3 +361,28 @@ Modes.to_dataframe = _modes_frame  # type: ignore[attr-defined]
 History.to_dataframe = _history_frame  # type: ignore[attr-defined]
 Frf.to_dataframe = _frf_frame  # type: ignore[attr-defined]
 Model.from_matrices = staticmethod(from_matrices)  # type: ignore[attr-defined]
+
+
+def calibrate_time(
+    model: Model,
+    force: Any,
+    responses: Any,
+    rate_hz: float,
+    params: Any,
+    **options: Any,
+) -> TimeCalibration:
+    """Element law parameters fitted to a raw time record, as ``nlsim calibrate MODEL RECORDS
+    --time-domain`` does it: ``force`` (N) at the excitation ``drive`` (default: the model's
+    first) and ``responses`` ``{sensor: samples}``, sampled at ``rate_hz`` from rest; each
+    channel's noise is ``data_noise`` (default 0.01) times its rms. Other options: ``modes``
+    (20), ``lhs`` (64), ``seed`` (1), ``starts`` (3), ``folds`` (10, contiguous blocks of
+    samples), ``threads``. Any array-like is taken (copied to contiguous float64 only where
+    it is not already)."""
+    return _native.calibrate_time(
+        model,
+        np.ascontiguousarray(force, dtype=np.float64),
+        {k: np.ascontiguousarray(v, dtype=np.float64) for k, v in dict(responses).items()},
+        rate_hz,
+        params,
+        **options,
+    )

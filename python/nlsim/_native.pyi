@@ -424,6 +424,63 @@ def calibrate_modal(
     threads: Optional[int] = None,
 ) -> ModalCalibration: ...
 
+class TimeCalibration:
+    """Element law parameters fitted to a raw time record."""
+
+    @property
+    def params(self) -> List[str]: ...
+    @property
+    def estimate(self) -> npt.NDArray[np.float64]:
+        """(param,)"""
+    @property
+    def status(self) -> str: ...
+    @property
+    def cost(self) -> float: ...
+    @property
+    def reduced_chi2(self) -> float: ...
+    @property
+    def cramer_rao_std(self) -> npt.NDArray[np.float64]:
+        """(param,)"""
+    @property
+    def chi2_scaled_std(self) -> npt.NDArray[np.float64]:
+        """(param,)"""
+    @property
+    def covariance(self) -> npt.NDArray[np.float64]:
+        """(param, param)"""
+    @property
+    def at_bound(self) -> List[bool]: ...
+    @property
+    def poorly_identified(self) -> List[bool]: ...
+    @property
+    def kfold(
+        self,
+    ) -> Optional[
+        Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]
+    ]:
+        """(mean, std, jackknife_std) of the fold estimates, each (param,)"""
+    @property
+    def simulated(self) -> Dict[str, npt.NDArray[np.float64]]:
+        """{channel: (sample,)} the calibrated model's response"""
+    @property
+    def candidates(self) -> npt.NDArray[np.float64]:
+        """(candidate, param)"""
+
+def calibrate_time(
+    model: Model,
+    force: npt.NDArray[np.float64],
+    responses: Mapping[str, npt.NDArray[np.float64]],
+    rate_hz: float,
+    params: Mapping[str, Tuple[float, float]],
+    drive: Optional[str] = None,
+    data_noise: float = 0.01,
+    modes: int = 20,
+    lhs: int = 64,
+    seed: int = 1,
+    starts: int = 3,
+    folds: int = 10,
+    threads: Optional[int] = None,
+) -> TimeCalibration: ...
+
 class VirtualTest:
     """A virtual stepped-sine test through the shaker model."""
 

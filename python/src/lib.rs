@@ -21,6 +21,7 @@ mod model;
 mod nnm;
 mod runs;
 mod testing;
+mod time_domain;
 
 use pyo3::create_exception;
 use pyo3::exceptions::PyException;
@@ -113,5 +114,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(testing::virtual_test, m)?)?;
     m.add_class::<testing::Plan>()?;
     m.add_function(wrap_pyfunction!(testing::plan, m)?)?;
+    m.add_class::<time_domain::TimeCalibration>()?;
+    m.add_function(wrap_pyfunction!(time_domain::calibrate_time, m)?)?;
     Ok(())
 }
