@@ -32,14 +32,121 @@ fn vec1<'py>(py: Python<'py>, v: Vec<f64>) -> Bound<'py, PyArray1<f64>> {
     PyArray1::from_vec(py, v)
 }
 
-#[pymethods]
-impl Calibration {
-    /// The calibrated parameters' names.
-    #[getter]
-    fn params(&self) -> Vec<String> {
-        self.c.params.iter().map(ToString::to_string).collect()
-    }
+/// The `#[pymethods]` of a calibration result class `$ty` (whose result is `self.c`, with
+/// `params`, `estimate`, `status`, `cost`, `cramer_rao`, `at_bound` and `candidates`): the
+/// getters every calibration shares — `params`, `estimate`, `status`, `cost`,
+/// `reduced_chi2`, `cramer_rao_std`, `chi2_scaled_std`, `covariance`, `at_bound`,
+/// `candidates`, `candidate_cost` — and `__repr__` naming `$name`, then the class's own
+/// methods `$extra`.
+macro_rules! calibration_result {
+    ($ty:ident, $name:literal, { $($extra:tt)* }) => {
+        #[pyo3::pymethods]
+        impl $ty {
+            /// The calibrated parameters' names, in the order of every array.
+            #[getter]
+            fn params(&self) -> Vec<String> {
+                self.c.params.iter().map(ToString::to_string).collect()
+            }
 
+            /// The estimate, shape `(param,)`, in each parameter's unit.
+            #[getter]
+            fn estimate<'py>(
+                &self,
+                py: pyo3::Python<'py>,
+            ) -> pyo3::Bound<'py, numpy::PyArray1<f64>> {
+                $crate::runs::vec1(py, self.c.estimate.clone())
+            }
+
+            /// `"converged"`, or why the best Levenberg–Marquardt run stopped.
+            #[getter]
+            fn status(&self) -> &'static str {
+                self.c.status.as_str()
+            }
+
+            /// The cost `½ Σ r²` of the residuals (each over its standard deviation) at the
+            /// estimate.
+            #[getter]
+            fn cost(&self) -> f64 {
+                self.c.cost
+            }
+
+            /// Reduced χ² at the estimate (1 when the noise model fits the misfit).
+            #[getter]
+            fn reduced_chi2(&self) -> f64 {
+                self.c.cramer_rao.reduced_chi2
+            }
+
+            /// Cramér–Rao standard deviations (the Fisher information's inverse; thesis
+            /// eq. 36), shape `(param,)`.
+            #[getter]
+            fn cramer_rao_std<'py>(
+                &self,
+                py: pyo3::Python<'py>,
+            ) -> pyo3::Bound<'py, numpy::PyArray1<f64>> {
+                $crate::runs::vec1(py, self.c.cramer_rao.std.clone())
+            }
+
+            /// Cramér–Rao standard deviations scaled by √(reduced χ²): the spread when the
+            /// residuals exceed the noise model, shape `(param,)` (docs/calibration.md).
+            #[getter]
+            fn chi2_scaled_std<'py>(
+                &self,
+                py: pyo3::Python<'py>,
+            ) -> pyo3::Bound<'py, numpy::PyArray1<f64>> {
+                $crate::runs::vec1(py, self.c.cramer_rao.scaled_std.clone())
+            }
+
+            /// The Cramér–Rao covariance, shape `(param, param)`.
+            #[getter]
+            fn covariance<'py>(
+                &self,
+                py: pyo3::Python<'py>,
+            ) -> pyo3::Bound<'py, numpy::PyArray2<f64>> {
+                $crate::calibration::covariance_array(py, &self.c.cramer_rao)
+            }
+
+            /// Whether each estimate sits at a bound.
+            #[getter]
+            fn at_bound(&self) -> Vec<bool> {
+                self.c.at_bound.clone()
+            }
+
+            /// The candidates' values, shape `(candidate, param)`: the model's own values
+            /// first, then the Latin hypercube.
+            #[getter]
+            fn candidates<'py>(
+                &self,
+                py: pyo3::Python<'py>,
+            ) -> pyo3::Bound<'py, numpy::PyArray2<f64>> {
+                $crate::calibration::candidates_array(py, &self.c.candidates, self.c.params.len())
+            }
+
+            /// The candidates' costs, shape `(candidate,)` (infinite where a model run failed).
+            #[getter]
+            fn candidate_cost<'py>(
+                &self,
+                py: pyo3::Python<'py>,
+            ) -> pyo3::Bound<'py, numpy::PyArray1<f64>> {
+                $crate::runs::vec1(py, self.c.candidates.iter().map(|c| c.cost).collect())
+            }
+
+            fn __repr__(&self) -> String {
+                $crate::calibration::estimates_repr(
+                    $name,
+                    &self.c.params,
+                    &self.c.estimate,
+                    &self.c.cramer_rao,
+                    self.c.status,
+                )
+            }
+
+            $($extra)*
+        }
+    };
+}
+pub(crate) use calibration_result;
+
+calibration_result!(Calibration, "Calibration", {
     /// What the evaluations of FE-level parameters did (`None` without them): a dict of
     /// `fe_reduction` (`"parametric"` or `"full"`), `basis_size`, `setup_reductions`,
     /// `evaluations`, `refreshes`, `full_reductions` and `full_seconds`.
@@ -48,57 +155,8 @@ impl Calibration {
         fe_stats_dict(py, self.fe.as_ref())
     }
 
-    /// The estimate, shape `(param,)`, in each parameter's unit.
-    #[getter]
-    fn estimate<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        vec1(py, self.c.estimate.clone())
-    }
-
-    /// `"converged"`, or why the best Levenberg–Marquardt run stopped.
-    #[getter]
-    fn status(&self) -> &'static str {
-        self.c.status.as_str()
-    }
-
-    /// The cost `½ Σ r²` of the normalised residuals at the estimate.
-    #[getter]
-    fn cost(&self) -> f64 {
-        self.c.cost
-    }
-
-    /// Reduced χ² at the estimate (1 when the noise model fits the misfit).
-    #[getter]
-    fn reduced_chi2(&self) -> f64 {
-        self.c.cramer_rao.reduced_chi2
-    }
-
-    /// Cramér–Rao standard deviations (the Fisher information's inverse; thesis eq. 36),
-    /// shape `(param,)`.
-    #[getter]
-    fn cramer_rao_std<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        vec1(py, self.c.cramer_rao.std.clone())
-    }
-
-    /// Cramér–Rao standard deviations scaled by √(reduced χ²): the spread when the residuals
-    /// exceed the noise model, shape `(param,)` (docs/calibration.md).
-    #[getter]
-    fn chi2_scaled_std<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        vec1(py, self.c.cramer_rao.scaled_std.clone())
-    }
-
-    /// The Cramér–Rao covariance, shape `(param, param)`.
-    #[getter]
-    fn covariance<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        covariance_array(py, &self.c.cramer_rao)
-    }
-
-    /// Whether each estimate sits at a bound.
-    #[getter]
-    fn at_bound(&self) -> Vec<bool> {
-        self.c.at_bound.clone()
-    }
-
-    /// Whether each parameter is poorly identified (relative Cramér–Rao std above 1).
+    /// Whether each parameter is poorly identified (relative Cramér–Rao std above 0.5 or
+    /// part of a collinear pair).
     #[getter]
     fn poorly_identified(&self) -> Vec<bool> {
         self.c.poorly_identified.clone()
@@ -124,30 +182,7 @@ impl Calibration {
             .as_ref()
             .map(|k| vec1(py, k.jackknife_std.clone()))
     }
-
-    /// The candidates' values, shape `(candidate, param)`: the `lhs` Latin-hypercube points
-    /// and the model's own values.
-    #[getter]
-    fn candidates<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        candidates_array(py, &self.c.candidates, self.c.params.len())
-    }
-
-    /// The candidates' costs, shape `(candidate,)`.
-    #[getter]
-    fn candidate_cost<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        vec1(py, self.c.candidates.iter().map(|c| c.cost).collect())
-    }
-
-    fn __repr__(&self) -> String {
-        estimates_repr(
-            "Calibration",
-            &self.c.params,
-            &self.c.estimate,
-            &self.c.cramer_rao,
-            self.c.status,
-        )
-    }
-}
+});
 
 /// The Cramér–Rao covariance of `cr` as a `(param, param)` array.
 pub(crate) fn covariance_array<'py>(

@@ -4,15 +4,12 @@
 //! Levenberg–Marquardt with the modes and their sensitivities from the parametric reduced
 //! model (or full eigen solves), modes paired by MAC, the Cramér–Rao bound at the estimate.
 
-use crate::calibration::{
-    candidates_array, covariance_array, estimates_repr, fe_reduction, fe_stats_dict, param_specs,
-    search_config,
-};
+use crate::calibration::{fe_reduction, fe_stats_dict, param_specs, search_config};
 use crate::model::Model;
 use crate::runs::{Stop, run, vec1};
 use crate::{input, py_err};
 use nlsim::calib::{CalibrationConfig, MeasuredMode, ModalData, ModalObjective};
-use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
@@ -25,69 +22,13 @@ pub struct ModalCalibration {
     fe: nlsim::calib::FeReductionStats,
 }
 
-#[pymethods]
-impl ModalCalibration {
-    /// Parameter names, in the order of every array.
-    #[getter]
-    fn params(&self) -> Vec<String> {
-        self.c.params.iter().map(ToString::to_string).collect()
-    }
-
+crate::calibration::calibration_result!(ModalCalibration, "ModalCalibration", {
     /// What the evaluations of the modes did: a dict of `fe_reduction` (`"parametric"` or
     /// `"full"`), `basis_size`, `setup_reductions`, `evaluations`, `refreshes`,
     /// `full_reductions` (full eigen solves) and `full_seconds`.
     #[getter]
     fn fe_stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         Ok(fe_stats_dict(py, Some(&self.fe))?.expect("given"))
-    }
-
-    /// The estimate, shape `(n_params,)`.
-    #[getter]
-    fn estimate<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        vec1(py, self.c.estimate.clone())
-    }
-
-    /// How the best optimisation ended (`"converged"`, …).
-    #[getter]
-    fn status(&self) -> &'static str {
-        self.c.status.as_str()
-    }
-
-    /// Cost `½‖r‖²` at the estimate (residuals weighted by their standard deviations).
-    #[getter]
-    fn cost(&self) -> f64 {
-        self.c.cost
-    }
-
-    /// Reduced χ² of the weighted residuals at the estimate.
-    #[getter]
-    fn reduced_chi2(&self) -> f64 {
-        self.c.cramer_rao.reduced_chi2
-    }
-
-    /// Cramér–Rao standard deviations, shape `(n_params,)`.
-    #[getter]
-    fn cramer_rao_std<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        vec1(py, self.c.cramer_rao.std.clone())
-    }
-
-    /// Cramér–Rao standard deviations times `√χ²_red` (the bound when the stated noise is
-    /// wrong by that factor), shape `(n_params,)`.
-    #[getter]
-    fn chi2_scaled_std<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        vec1(py, self.c.cramer_rao.scaled_std.clone())
-    }
-
-    /// Cramér–Rao covariance, shape `(n_params, n_params)`.
-    #[getter]
-    fn covariance<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        covariance_array(py, &self.c.cramer_rao)
-    }
-
-    /// Whether each estimate sits on a bound.
-    #[getter]
-    fn at_bound(&self) -> Vec<bool> {
-        self.c.at_bound.clone()
     }
 
     /// The computed mode (0-based) paired with each measured mode.
@@ -108,30 +49,7 @@ impl ModalCalibration {
     fn mac<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
         vec1(py, self.c.fit.mac.clone())
     }
-
-    /// Every candidate (the model's values first, then the Latin hypercube), shape
-    /// `(n_candidates, n_params)`.
-    #[getter]
-    fn candidates<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        candidates_array(py, &self.c.candidates, self.c.params.len())
-    }
-
-    /// Each candidate's cost (infinite where the eigen solve failed).
-    #[getter]
-    fn candidate_cost<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        vec1(py, self.c.candidates.iter().map(|c| c.cost).collect())
-    }
-
-    fn __repr__(&self) -> String {
-        estimates_repr(
-            "ModalCalibration",
-            &self.c.params,
-            &self.c.estimate,
-            &self.c.cramer_rao,
-            self.c.status,
-        )
-    }
-}
+});
 
 /// Measured modes from a dict of arrays: `frequency_hz` (modes,), `frequency_std_hz`
 /// (modes,), optionally `dofs` (labels of the measured DOFs) with `shapes` (dofs, modes).

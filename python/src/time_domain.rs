@@ -4,14 +4,12 @@
 //! sensitivities of the hold, Latin-hypercube candidates, Levenberg–Marquardt over growing
 //! horizons, the Cramér–Rao bound and k-fold cross validation over contiguous blocks.
 
-use crate::calibration::{
-    candidates_array, covariance_array, estimates_repr, param_specs, search_config,
-};
+use crate::calibration::{param_specs, search_config};
 use crate::model::Model;
 use crate::runs::{Stop, run, vec1};
 use crate::{input, py_err};
 use nlsim::calib::{TimeChannel, TimeObjective, TimeRecords};
-use numpy::{PyArray1, PyArray2, PyReadonlyArray1};
+use numpy::{PyArray1, PyReadonlyArray1};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::Arc;
@@ -23,62 +21,7 @@ pub struct TimeCalibration {
     channels: Vec<String>,
 }
 
-#[pymethods]
-impl TimeCalibration {
-    /// Parameter names, in the order of every array.
-    #[getter]
-    fn params(&self) -> Vec<String> {
-        self.c.params.iter().map(ToString::to_string).collect()
-    }
-
-    /// The estimate, shape `(param,)`, in each parameter's unit.
-    #[getter]
-    fn estimate<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        vec1(py, self.c.estimate.clone())
-    }
-
-    /// `"converged"`, or why the best Levenberg–Marquardt run stopped.
-    #[getter]
-    fn status(&self) -> &'static str {
-        self.c.status.as_str()
-    }
-
-    /// Cost `½ Σ r²` of the residuals (each sample over its channel's noise) at the estimate.
-    #[getter]
-    fn cost(&self) -> f64 {
-        self.c.cost
-    }
-
-    /// Reduced χ² at the estimate (1 when the noise model fits the misfit).
-    #[getter]
-    fn reduced_chi2(&self) -> f64 {
-        self.c.cramer_rao.reduced_chi2
-    }
-
-    /// Cramér–Rao standard deviations, shape `(param,)`.
-    #[getter]
-    fn cramer_rao_std<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        vec1(py, self.c.cramer_rao.std.clone())
-    }
-
-    /// Cramér–Rao standard deviations times √(reduced χ²), shape `(param,)`.
-    #[getter]
-    fn chi2_scaled_std<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        vec1(py, self.c.cramer_rao.scaled_std.clone())
-    }
-
-    /// The Cramér–Rao covariance, shape `(param, param)`.
-    #[getter]
-    fn covariance<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        covariance_array(py, &self.c.cramer_rao)
-    }
-
-    /// Whether each estimate sits at a bound.
-    #[getter]
-    fn at_bound(&self) -> Vec<bool> {
-        self.c.at_bound.clone()
-    }
-
+crate::calibration::calibration_result!(TimeCalibration, "TimeCalibration", {
     /// Whether each parameter is poorly identified.
     #[getter]
     fn poorly_identified(&self) -> Vec<bool> {
@@ -115,23 +58,7 @@ impl TimeCalibration {
         }
         Ok(d)
     }
-
-    /// The candidates' values, shape `(candidate, param)`: the model's own values first.
-    #[getter]
-    fn candidates<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        candidates_array(py, &self.c.candidates, self.c.params.len())
-    }
-
-    fn __repr__(&self) -> String {
-        estimates_repr(
-            "TimeCalibration",
-            &self.c.params,
-            &self.c.estimate,
-            &self.c.cramer_rao,
-            self.c.status,
-        )
-    }
-}
+});
 
 /// Calibrates element law parameters of `model` on a raw time record: `force` (N, shape
 /// `(sample,)`) at the excitation `drive` (default: the model's first), `responses` a dict
