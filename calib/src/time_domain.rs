@@ -349,10 +349,12 @@ impl TimeObjective {
             .zip(values)
             .map(|(s, &v)| s.dvalue(s.to_internal(v)))
             .collect();
+        let mut outputs = h.outputs;
         let mut simulated = Vec::with_capacity(self.outputs.len());
         for (c, &o) in self.outputs.iter().enumerate() {
             let ch = &self.data.channels[c];
-            let y = &h.outputs[o].values;
+            // Each channel has its own output (names are distinct): moved, not copied.
+            let y = std::mem::take(&mut outputs[o].values);
             for k in (0..n).filter(|&k| mask[k]) {
                 if let (Some(j), Some(s)) = (jac.as_mut(), sens.as_ref()) {
                     let row = residuals.len();
@@ -362,7 +364,7 @@ impl TimeObjective {
                 }
                 residuals.push((y[k] - ch.values[k]) / ch.sigma);
             }
-            simulated.push(y.clone());
+            simulated.push(y);
         }
         Ok(Some(TimeFit {
             simulated,

@@ -149,16 +149,11 @@ impl ModalRun {
                 self.modes,
                 self.setup_seconds
             ),
-            format!(
-                "{} in {} LM iterations ({} evaluations, {} rejected, {} failed) from the best \
-                 of {} candidates; {:.2} s",
-                c.status,
-                best.iterations,
-                best.evaluations,
-                best.rejected,
-                best.failed_evaluations,
+            crate::commands::calibrate::report::optimisation_line(
+                best,
                 c.candidates.len(),
-                self.seconds
+                "",
+                self.seconds,
             ),
             format!(
                 "cost {:.6e}, reduced chi2 {:.3} (1 when the noise model fits), collinearity \

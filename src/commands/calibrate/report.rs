@@ -31,22 +31,13 @@ impl CalibrationRun {
                 counted(d.channels.len(), "channel"),
                 self.prepared.seconds
             ),
-            format!(
-                "{} in {} LM iterations ({} evaluations, {} rejected, {} failed) from the best \
-                 of {} candidates{}; {:.2} s",
-                c.status,
-                best.iterations,
-                best.evaluations,
-                best.rejected,
-                best.failed_evaluations,
+            optimisation_line(
+                best,
                 c.candidates.len(),
-                self.candidates_from
-                    .as_ref()
-                    .map_or(String::new(), |p| format!(
-                        " (evaluated in {})",
-                        p.display()
-                    )),
-                self.seconds
+                &self.candidates_from.as_ref().map_or(String::new(), |p| {
+                    format!(" (evaluated in {})", p.display())
+                }),
+                self.seconds,
             ),
             format!(
                 "cost {:.6e}, reduced chi2 {:.3} (1 when the noise model fits), collinearity \
@@ -82,14 +73,7 @@ impl CalibrationRun {
                 if c.fit.failed.len() > 5 { ", …" } else { "" }
             ));
         }
-        v.extend(parameter_lines(
-            &c.params,
-            &c.estimate,
-            &c.cramer_rao,
-            c.kfold.as_ref(),
-            &c.at_bound,
-            &c.poorly_identified,
-        ));
+        v.extend(self.estimates().lines());
         if let (Some(k), nlsim_calib::FoldBy::Sweeps) =
             (c.kfold.as_ref(), self.request.config.fold_by)
         {
@@ -110,15 +94,20 @@ impl CalibrationRun {
 
     /// Estimates and statistics, one row per parameter.
     pub fn estimates_csv(&self) -> String {
+        self.estimates().csv()
+    }
+
+    /// The estimate with its statistics.
+    pub fn estimates(&self) -> EstimateView<'_> {
         let c = &self.calibration;
-        estimates_table(
-            &c.params,
-            &c.estimate,
-            &c.cramer_rao,
-            c.kfold.as_ref(),
-            &c.at_bound,
-            &c.poorly_identified,
-        )
+        EstimateView {
+            params: &c.params,
+            estimate: &c.estimate,
+            cramer_rao: &c.cramer_rao,
+            kfold: c.kfold.as_ref(),
+            at_bound: &c.at_bound,
+            poorly_identified: &c.poorly_identified,
+        }
     }
 
     fn param_header(&self) -> String {
@@ -503,72 +492,94 @@ pub fn fe_reduction_line(fe: &nlsim_calib::FeReductionStats, what: &str) -> Stri
     }
 }
 
-/// The estimates CSV of a calibration: per parameter the estimate, its Cramér–Rao standard
-/// deviation, the k-fold mean, standard deviation and jackknife spread (NaN without folds),
-/// the flags and the χ²-scaled standard deviation.
-pub fn estimates_table(
-    params: &[nlsim_kernel::Param],
-    estimate: &[f64],
-    cramer_rao: &nlsim_calib::CramerRao,
-    kfold: Option<&nlsim_calib::KFold>,
-    at_bound: &[bool],
-    poorly_identified: &[bool],
-) -> String {
-    let mut csv = String::from(
-        "param,estimate,cramer_rao_std,kfold_mean,kfold_std,jackknife_std,at_bound,poorly_identified,chi2_scaled_std\n",
-    );
-    for (j, p) in params.iter().enumerate() {
-        let _ = writeln!(
-            csv,
-            "{p},{:?},{:?},{:?},{:?},{:?},{},{},{:?}",
-            estimate[j],
-            cramer_rao.std[j],
-            kfold.map_or(f64::NAN, |k| k.mean[j]),
-            kfold.map_or(f64::NAN, |k| k.std[j]),
-            kfold.map_or(f64::NAN, |k| k.jackknife_std[j]),
-            at_bound[j],
-            poorly_identified[j],
-            cramer_rao.scaled_std[j]
-        );
-    }
-    csv
+/// What a calibration estimated, for its estimates CSV and its summary's parameter table
+/// (stepped-sine and time-domain calibrations share both).
+pub struct EstimateView<'a> {
+    /// The parameters.
+    pub params: &'a [Param],
+    /// The estimate.
+    pub estimate: &'a [f64],
+    /// The Cramér–Rao bound at it.
+    pub cramer_rao: &'a nlsim_calib::CramerRao,
+    /// The cross validation, if any.
+    pub kfold: Option<&'a nlsim_calib::KFold>,
+    /// Parameters on a bound.
+    pub at_bound: &'a [bool],
+    /// Poorly identified parameters.
+    pub poorly_identified: &'a [bool],
 }
 
-/// The summary's parameter table: a header, then per parameter the estimate, its
-/// Cramér–Rao and χ²-scaled standard deviations, the k-fold jackknife spread and the flags
-/// (`at bound`, `poorly identified`).
-pub fn parameter_lines(
-    params: &[nlsim_kernel::Param],
-    estimate: &[f64],
-    cramer_rao: &nlsim_calib::CramerRao,
-    kfold: Option<&nlsim_calib::KFold>,
-    at_bound: &[bool],
-    poorly_identified: &[bool],
-) -> Vec<String> {
-    let mut v = vec![format!(
-        "{:<22} {:>14} {:>14} {:>14} {:>14}  flags",
-        "parameter", "estimate", "Cramér–Rao", "chi2-scaled", "k-fold (jk)"
-    )];
-    for (j, p) in params.iter().enumerate() {
-        let flags: Vec<&str> = [
-            (at_bound[j], "at bound"),
-            (poorly_identified[j], "poorly identified"),
-        ]
-        .iter()
-        .filter(|f| f.0)
-        .map(|f| f.1)
-        .collect();
-        v.push(format!(
-            "{:<22} {:>14.6e} {:>14.3e} {:>14.3e} {:>14.3e}  {}",
-            p.to_string(),
-            estimate[j],
-            cramer_rao.std[j],
-            cramer_rao.scaled_std[j],
-            kfold.map_or(f64::NAN, |k| k.jackknife_std[j]),
-            flags.join(", ")
-        ));
+impl EstimateView<'_> {
+    /// The estimates CSV: per parameter the estimate, its Cramér–Rao standard deviation, the
+    /// k-fold mean, standard deviation and jackknife spread (NaN without folds), the flags and
+    /// the χ²-scaled standard deviation.
+    pub fn csv(&self) -> String {
+        let mut csv = String::from(
+            "param,estimate,cramer_rao_std,kfold_mean,kfold_std,jackknife_std,at_bound,poorly_identified,chi2_scaled_std\n",
+        );
+        let kf = self.kfold;
+        for (j, p) in self.params.iter().enumerate() {
+            let _ = writeln!(
+                csv,
+                "{p},{:?},{:?},{:?},{:?},{:?},{},{},{:?}",
+                self.estimate[j],
+                self.cramer_rao.std[j],
+                kf.map_or(f64::NAN, |k| k.mean[j]),
+                kf.map_or(f64::NAN, |k| k.std[j]),
+                kf.map_or(f64::NAN, |k| k.jackknife_std[j]),
+                self.at_bound[j],
+                self.poorly_identified[j],
+                self.cramer_rao.scaled_std[j]
+            );
+        }
+        csv
     }
-    v
+
+    /// The summary's parameter table: a header, then per parameter the estimate, its
+    /// Cramér–Rao and χ²-scaled standard deviations, the k-fold jackknife spread and the flags
+    /// (`at bound`, `poorly identified`).
+    pub fn lines(&self) -> Vec<String> {
+        let mut v = vec![format!(
+            "{:<22} {:>14} {:>14} {:>14} {:>14}  flags",
+            "parameter", "estimate", "Cramér–Rao", "chi2-scaled", "k-fold (jk)"
+        )];
+        for (j, p) in self.params.iter().enumerate() {
+            let flags: Vec<&str> = [
+                (self.at_bound[j], "at bound"),
+                (self.poorly_identified[j], "poorly identified"),
+            ]
+            .iter()
+            .filter(|f| f.0)
+            .map(|f| f.1)
+            .collect();
+            v.push(format!(
+                "{:<22} {:>14.6e} {:>14.3e} {:>14.3e} {:>14.3e}  {}",
+                p.to_string(),
+                self.estimate[j],
+                self.cramer_rao.std[j],
+                self.cramer_rao.scaled_std[j],
+                self.kfold.map_or(f64::NAN, |k| k.jackknife_std[j]),
+                flags.join(", ")
+            ));
+        }
+        v
+    }
+}
+
+/// The summary line of a search's best optimisation: its status, iterations, evaluations
+/// (rejected, failed), the candidates it started from (`from`: where they were evaluated,
+/// or empty) and the wall time.
+pub fn optimisation_line(
+    best: &nlsim_calib::LmReport,
+    candidates: usize,
+    from: &str,
+    seconds: f64,
+) -> String {
+    format!(
+        "{} in {} LM iterations ({} evaluations, {} rejected, {} failed) from the best of \
+         {candidates} candidates{from}; {seconds:.2} s",
+        best.status, best.iterations, best.evaluations, best.rejected, best.failed_evaluations,
+    )
 }
 
 /// The start of a search's report folder (modal and time-domain calibrations): `dir`

@@ -10,7 +10,7 @@
 //! from the best, the Cramér–Rao bound, and k-fold cross validation over contiguous blocks of
 //! samples.
 
-use crate::commands::calibrate::report::{estimates_table, parameter_lines};
+use crate::commands::calibrate::report::{EstimateView, optimisation_line};
 use crate::commands::calibrate::request::CalibrationRequest;
 use crate::error::{Error, Result};
 use crate::present::summary::counted;
@@ -57,14 +57,15 @@ fn prepare_time(req: &CalibrationRequest) -> Result<PreparedTime> {
     req.check()?;
     let t = Instant::now();
     let model = crate::commands::setup::load_for_run(&req.model, &req.model_sets())?;
-    let mapped = crate::commands::records::map_records(&model, &req.model, &req.data, None)?;
-    let rec = &mapped.records;
+    let mut mapped = crate::commands::records::map_records(&model, &req.model, &req.data, None)?;
+    // The columns move into the calibration's record (each is used once).
+    let mut columns = std::mem::take(&mut mapped.records.columns);
     let channels = mapped
         .channels
         .iter()
         .zip(&mapped.columns[1..])
         .map(|((name, _), &j)| {
-            let values = rec.columns[j].clone();
+            let values = std::mem::take(&mut columns[j]);
             let rms = (values.iter().map(|v| v * v).sum::<f64>() / values.len() as f64).sqrt();
             if !(rms > 0.0 && rms.is_finite()) {
                 return Err(Error::Usage(format!(
@@ -81,9 +82,9 @@ fn prepare_time(req: &CalibrationRequest) -> Result<PreparedTime> {
         })
         .collect::<Result<Vec<_>>>()?;
     let records = Arc::new(TimeRecords {
-        rate_hz: rec.rate_hz,
+        rate_hz: mapped.records.rate_hz,
         input: mapped.drive.clone(),
-        force: rec.columns[mapped.drive_column].clone(),
+        force: std::mem::take(&mut columns[mapped.drive_column]),
         channels,
     });
     let modes = req.modes.min(model.n_dofs());
@@ -94,7 +95,7 @@ fn prepare_time(req: &CalibrationRequest) -> Result<PreparedTime> {
     Ok(PreparedTime {
         model_name: model.name().to_string(),
         records,
-        start_s: rec.start_s,
+        start_s: mapped.records.start_s,
         modes,
         objective,
         seconds: t.elapsed().as_secs_f64(),
@@ -175,17 +176,7 @@ impl TimeRun {
                 self.modes,
                 self.setup_seconds
             ),
-            format!(
-                "{} in {} LM iterations ({} evaluations, {} rejected, {} failed) from the best \
-                 of {} candidates; {:.2} s",
-                c.status,
-                best.iterations,
-                best.evaluations,
-                best.rejected,
-                best.failed_evaluations,
-                c.candidates.len(),
-                self.seconds
-            ),
+            optimisation_line(best, c.candidates.len(), "", self.seconds),
             format!(
                 "cost {:.6e}, reduced chi2 {:.3} (1 when the noise model fits: each channel's \
                  noise is {} of its rms), collinearity index {:.2}",
@@ -198,14 +189,7 @@ impl TimeRun {
         if let Some(w) = c.cramer_rao.misfit_warning() {
             v.push(format!("warning: {w}"));
         }
-        v.extend(parameter_lines(
-            &c.params,
-            &c.estimate,
-            &c.cramer_rao,
-            c.kfold.as_ref(),
-            &c.at_bound,
-            &c.poorly_identified,
-        ));
+        v.extend(self.estimates().lines());
         let per: Vec<String> = r
             .channels
             .iter()
@@ -241,15 +225,20 @@ impl TimeRun {
     /// Estimates and statistics, one row per parameter (the stepped-sine calibration's
     /// columns).
     pub fn estimates_csv(&self) -> String {
+        self.estimates().csv()
+    }
+
+    /// The estimate with its statistics.
+    pub fn estimates(&self) -> EstimateView<'_> {
         let c = &self.calibration;
-        estimates_table(
-            &c.params,
-            &c.estimate,
-            &c.cramer_rao,
-            c.kfold.as_ref(),
-            &c.at_bound,
-            &c.poorly_identified,
-        )
+        EstimateView {
+            params: &c.params,
+            estimate: &c.estimate,
+            cramer_rao: &c.cramer_rao,
+            kfold: c.kfold.as_ref(),
+            at_bound: &c.at_bound,
+            poorly_identified: &c.poorly_identified,
+        }
     }
 
     /// Every sample: its time, and per channel the measured and the calibrated response.
