@@ -755,6 +755,10 @@ fn fuzz_inner() {
          enabled = true\ntolerance = 0.01\nmax_iterations = 20\n\n[[sweep]]\n\
          label = \"0.2 N up\"\nfrom = 21.0\nto = 30.0\nsteps = 19\nforce = 0.2\n"
             .to_string(),
+        "harmonics = 3\nrecord = \"voltage\"\namplifier_gain = 2.0\n\n[raw]\nout = \"raw.h5\"\n\
+         rate = 9500\ndwell = 8.1\noversample = 4\n\n[[sweep]]\nfrom = 22.0\nto = 24.0\n\
+         steps = 3\nforce = 0.1\n"
+            .to_string(),
     ];
     let test_path = dir.join("test.toml");
     panics.extend(survive("test file", 10000 * scale(), |_| {

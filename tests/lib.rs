@@ -7999,3 +7999,6 @@ mod harmonics;
 
 #[path = "end_to_end/time_domain.rs"]
 mod time_domain;
+
+#[path = "end_to_end/raw_test.rs"]
+mod raw_test;

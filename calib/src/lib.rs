@@ -20,7 +20,10 @@
 //! - [`dwell`], [`track`]: harmonics from raw time histories of stepped-sine dwells and of
 //!   slow sweeps;
 //! - [`shaker`]: a virtual stepped-sine test through an electrodynamic shaker model, with and
-//!   without off-line force control.
+//!   without off-line force control; [`raw_test`]: the time histories that test records,
+//!   the shaker coupled in the time domain;
+//! - [`time_domain`]: calibration on measured time histories, Jacobian by forward
+//!   sensitivities of the hold recursion.
 //!
 //! Solvers that stop short return what they computed with a [`Status`];
 //! `Err` means invalid input. Nothing here prints, reads files or exits.
@@ -36,6 +39,7 @@ pub mod modal;
 pub mod objective;
 pub mod plan;
 pub mod predict;
+pub mod raw_test;
 pub mod shaker;
 pub mod stats;
 mod step;
@@ -69,6 +73,10 @@ pub use plan::{
     SweepInformation, dof_information, greedy_placement, rank_designs, scaled_noise, subsets,
 };
 pub use predict::{BandConfig, PredictedValue, Prediction, SweepScore, normal_quantile, predict};
+pub use raw_test::{
+    MAX_RAW_VALUES, RawConfig, RawRecord, RawStep, add_raw_noise, raw_records, settle_time,
+    shaker_plant,
+};
 pub use shaker::{
     ControlConfig, Shaker, StepControl, VirtualTest, virtual_test, virtual_test_with,
 };

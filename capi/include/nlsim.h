@@ -340,6 +340,41 @@ typedef struct NlsimFrfInfo {
 } NlsimFrfInfo;
 
 /**
+ * An electrodynamic shaker on a stinger (SI units), as the virtual test couples it
+ * (`nlsim_calib::Shaker`); [`nlsim_calibration_settings_default`] holds nlsim's default.
+ */
+typedef struct NlsimShaker {
+  /**
+   * Armature mass (kg).
+   */
+  double armature_mass;
+  /**
+   * Suspension stiffness (N/m).
+   */
+  double suspension_stiffness;
+  /**
+   * Suspension damping (N s/m).
+   */
+  double suspension_damping;
+  /**
+   * Coil resistance (Ω), amplifier output included.
+   */
+  double resistance;
+  /**
+   * Coil inductance (H).
+   */
+  double inductance;
+  /**
+   * Force constant `Bl` (N/A).
+   */
+  double force_constant;
+  /**
+   * Axial stiffness of the stinger (N/m).
+   */
+  double stinger_stiffness;
+} NlsimShaker;
+
+/**
  * Settings of [`nlsim_calibrate`]; [`nlsim_calibration_settings_default`] gives the
  * defaults of the `nlsim calibrate` command.
  */
@@ -365,6 +400,16 @@ typedef struct NlsimCalibrationSettings {
    * Levenberg–Marquardt iterations per run.
    */
   size_t max_iterations;
+  /**
+   * 1: the test data's voltage record ([`nlsim_testdata_set_record`]) drives the model
+   * through `shaker` (the coupling of the virtual test); 0: the recorded drive is taken as
+   * the force (times the input gain).
+   */
+  int32_t model_shaker;
+  /**
+   * The shaker, when `model_shaker` is 1.
+   */
+  struct NlsimShaker shaker;
 } NlsimCalibrationSettings;
 
 /**
@@ -405,6 +450,16 @@ typedef struct NlsimCalibrationInfo {
    * Parameters poorly identified (relative standard deviation above 0.5, or collinear).
    */
   size_t n_poorly_identified;
+  /**
+   * `√reduced_chi2`: the Cramér–Rao `std` times this is the standard deviation with the
+   * noise scaled to the misfit (the command line's `chi2-scaled` column).
+   */
+  double chi2_scale;
+  /**
+   * 1 when the reduced χ² exceeds 2: the residuals exceed the noise model, the Cramér–Rao
+   * `std` is too small by `chi2_scale` (the command line prints a warning).
+   */
+  int32_t misfit_warning;
 } NlsimCalibrationInfo;
 
 #ifdef __cplusplus
@@ -770,9 +825,17 @@ NlsimCode nlsim_frf_sensitivities(NlsimFrf frf,
 
 /**
  * The defaults of the command line's `nlsim calibrate`: seed 1, 64 candidates, 3 starts,
- * 10 folds, 100 iterations.
+ * 10 folds, 100 iterations, no shaker modelled (nlsim's default shaker filled in).
  */
 struct NlsimCalibrationSettings nlsim_calibration_settings_default(void);
+
+/**
+ * What the test data recorded at the drive: `record` 0 the force (N, the default), 1 the
+ * voltage into the amplifier (V) — calibrated with the input gain `input_gain` (N per V
+ * with the shaker taken as a force source, or V at the coil per V with the shaker modelled,
+ * [`NlsimCalibrationSettings::model_shaker`]).
+ */
+NlsimCode nlsim_testdata_set_record(NlsimTestData data, int32_t record);
 
 /**
  * Starts stepped-sine test data: the force is measured at the model input named `input`,
@@ -803,7 +866,7 @@ NlsimCode nlsim_testdata_add_channel(NlsimTestData data,
  * Adds a sweep of `n_steps` steps measured in the given order (`direction` 0 up, 1 down):
  * `freq_hz[n_steps]` (Hz), the measured force harmonics `force[n_steps][H][2]` (N, complex,
  * harmonics `1..=H`) and responses `response[n_steps][n_channels][H][2]` (each channel's
- * unit; NaN where a harmonic was not measured).
+ * unit; NaN where a harmonic was not measured). The channels' noise models weigh them.
  *
  * # Safety
  * `label` is a string; the arrays hold the sizes above.
@@ -817,6 +880,27 @@ NlsimCode nlsim_testdata_add_sweep(NlsimTestData data,
                                    size_t force_len,
                                    const double *response,
                                    size_t response_len);
+
+/**
+ * [`nlsim_testdata_add_sweep`] with each step's measured standard deviations
+ * `sigma[n_steps][n_channels][H][2]` (of the real and of the imaginary part, each channel's
+ * unit; positive, or NaN where the harmonic was not measured) in place of the channels'
+ * noise models; `sigma` null with `sigma_len` 0 uses the noise models.
+ *
+ * # Safety
+ * `label` is a string; the arrays hold the sizes above (`sigma` may be null with length 0).
+ */
+NlsimCode nlsim_testdata_add_sweep_sigma(NlsimTestData data,
+                                         const char *label,
+                                         int32_t direction,
+                                         size_t n_steps,
+                                         const double *freq_hz,
+                                         const double *force,
+                                         size_t force_len,
+                                         const double *response,
+                                         size_t response_len,
+                                         const double *sigma,
+                                         size_t sigma_len);
 
 /**
  * Calibrates the parameters `names[0..n_params]` of the harmonic-balance system `hb`

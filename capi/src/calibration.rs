@@ -3,13 +3,14 @@
 
 use crate::{
     Done, Failure, NlsimCode, NlsimHb, NlsimStatus, NlsimTestData, Object, get_hb, get_testdata,
-    guard, insert, out, out_opt, params_of, read, slice, slice_mut, text, texts, write,
+    guard, insert, out, out_opt, read, slice, slice_mut, text, texts, write,
 };
 use faer::c64;
 use nlsim::calib::{
-    CalibrationConfig, Channel, FrfObjective, Noise, ObjectiveConfig, ParamSpec, Step, Sweep,
-    SweepDirection, TestData, calibrate,
+    CalibrationConfig, Channel, Drive, FrfObjective, Noise, ObjectiveConfig, ParamSpec, Shaker,
+    Step, Sweep, SweepDirection, TestData, calibrate,
 };
+use nlsim::kernel::{Param, Parameterized, param::parse_known};
 use std::ffi::c_char;
 use std::sync::{Arc, RwLock};
 
@@ -34,6 +35,47 @@ pub struct NlsimCalibrationSettings {
     pub folds: usize,
     /// Levenberg–Marquardt iterations per run.
     pub max_iterations: usize,
+    /// 1: the test data's voltage record ([`nlsim_testdata_set_record`]) drives the model
+    /// through `shaker` (the coupling of the virtual test); 0: the recorded drive is taken as
+    /// the force (times the input gain).
+    pub model_shaker: i32,
+    /// The shaker, when `model_shaker` is 1.
+    pub shaker: NlsimShaker,
+}
+
+/// An electrodynamic shaker on a stinger (SI units), as the virtual test couples it
+/// (`nlsim_calib::Shaker`); [`nlsim_calibration_settings_default`] holds nlsim's default.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct NlsimShaker {
+    /// Armature mass (kg).
+    pub armature_mass: f64,
+    /// Suspension stiffness (N/m).
+    pub suspension_stiffness: f64,
+    /// Suspension damping (N s/m).
+    pub suspension_damping: f64,
+    /// Coil resistance (Ω), amplifier output included.
+    pub resistance: f64,
+    /// Coil inductance (H).
+    pub inductance: f64,
+    /// Force constant `Bl` (N/A).
+    pub force_constant: f64,
+    /// Axial stiffness of the stinger (N/m).
+    pub stinger_stiffness: f64,
+}
+
+impl From<NlsimShaker> for Shaker {
+    fn from(s: NlsimShaker) -> Self {
+        Shaker {
+            armature_mass: s.armature_mass,
+            suspension_stiffness: s.suspension_stiffness,
+            suspension_damping: s.suspension_damping,
+            resistance: s.resistance,
+            inductance: s.inductance,
+            force_constant: s.force_constant,
+            stinger_stiffness: s.stinger_stiffness,
+        }
+    }
 }
 
 /// The outcome of [`nlsim_calibrate`].
@@ -55,20 +97,59 @@ pub struct NlsimCalibrationInfo {
     pub n_at_bound: usize,
     /// Parameters poorly identified (relative standard deviation above 0.5, or collinear).
     pub n_poorly_identified: usize,
+    /// `√reduced_chi2`: the Cramér–Rao `std` times this is the standard deviation with the
+    /// noise scaled to the misfit (the command line's `chi2-scaled` column).
+    pub chi2_scale: f64,
+    /// 1 when the reduced χ² exceeds 2: the residuals exceed the noise model, the Cramér–Rao
+    /// `std` is too small by `chi2_scale` (the command line prints a warning).
+    pub misfit_warning: i32,
 }
 
 /// The defaults of the command line's `nlsim calibrate`: seed 1, 64 candidates, 3 starts,
-/// 10 folds, 100 iterations.
+/// 10 folds, 100 iterations, no shaker modelled (nlsim's default shaker filled in).
 #[unsafe(no_mangle)]
 pub extern "C" fn nlsim_calibration_settings_default() -> NlsimCalibrationSettings {
     let d = CalibrationConfig::default();
+    let sh = Shaker::default();
     NlsimCalibrationSettings {
         seed: d.seed,
         lhs_samples: d.lhs_samples,
         starts: d.starts,
         folds: d.folds,
         max_iterations: d.lm.max_iterations,
+        model_shaker: 0,
+        shaker: NlsimShaker {
+            armature_mass: sh.armature_mass,
+            suspension_stiffness: sh.suspension_stiffness,
+            suspension_damping: sh.suspension_damping,
+            resistance: sh.resistance,
+            inductance: sh.inductance,
+            force_constant: sh.force_constant,
+            stinger_stiffness: sh.stinger_stiffness,
+        },
     }
+}
+
+/// What the test data recorded at the drive: `record` 0 the force (N, the default), 1 the
+/// voltage into the amplifier (V) — calibrated with the input gain `input_gain` (N per V
+/// with the shaker taken as a force source, or V at the coil per V with the shaker modelled,
+/// [`NlsimCalibrationSettings::model_shaker`]).
+#[unsafe(no_mangle)]
+pub extern "C" fn nlsim_testdata_set_record(data: NlsimTestData, record: i32) -> NlsimCode {
+    guard(|| {
+        let drive = match record {
+            0 => Drive::Force,
+            1 => Drive::Voltage,
+            r => {
+                return Err(Failure::input(format!(
+                    "record {r} is neither force (0) nor voltage (1)"
+                )));
+            }
+        };
+        let d = get_testdata(data)?;
+        write(&d).data.drive = drive;
+        Ok(Done::Complete)
+    })
 }
 
 /// Starts stepped-sine test data: the force is measured at the model input named `input`,
@@ -147,7 +228,7 @@ pub unsafe extern "C" fn nlsim_testdata_add_channel(
 /// Adds a sweep of `n_steps` steps measured in the given order (`direction` 0 up, 1 down):
 /// `freq_hz[n_steps]` (Hz), the measured force harmonics `force[n_steps][H][2]` (N, complex,
 /// harmonics `1..=H`) and responses `response[n_steps][n_channels][H][2]` (each channel's
-/// unit; NaN where a harmonic was not measured).
+/// unit; NaN where a harmonic was not measured). The channels' noise models weigh them.
 ///
 /// # Safety
 /// `label` is a string; the arrays hold the sizes above.
@@ -163,12 +244,56 @@ pub unsafe extern "C" fn nlsim_testdata_add_sweep(
     response: *const f64,
     response_len: usize,
 ) -> NlsimCode {
+    // SAFETY: the function's contract, with no standard deviations.
+    unsafe {
+        nlsim_testdata_add_sweep_sigma(
+            data,
+            label,
+            direction,
+            n_steps,
+            freq_hz,
+            force,
+            force_len,
+            response,
+            response_len,
+            std::ptr::null(),
+            0,
+        )
+    }
+}
+
+/// [`nlsim_testdata_add_sweep`] with each step's measured standard deviations
+/// `sigma[n_steps][n_channels][H][2]` (of the real and of the imaginary part, each channel's
+/// unit; positive, or NaN where the harmonic was not measured) in place of the channels'
+/// noise models; `sigma` null with `sigma_len` 0 uses the noise models.
+///
+/// # Safety
+/// `label` is a string; the arrays hold the sizes above (`sigma` may be null with length 0).
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn nlsim_testdata_add_sweep_sigma(
+    data: NlsimTestData,
+    label: *const c_char,
+    direction: i32,
+    n_steps: usize,
+    freq_hz: *const f64,
+    force: *const f64,
+    force_len: usize,
+    response: *const f64,
+    response_len: usize,
+    sigma: *const f64,
+    sigma_len: usize,
+) -> NlsimCode {
     guard(|| {
         // SAFETY (every block below): the function's contract.
         let label = unsafe { text(label, "label")? };
         let freq = unsafe { slice(freq_hz, n_steps, "freq_hz")? };
         let force = unsafe { slice(force, force_len, "force")? };
         let response = unsafe { slice(response, response_len, "response")? };
+        let sigma = if sigma.is_null() && sigma_len == 0 {
+            None
+        } else {
+            Some(unsafe { slice(sigma, sigma_len, "sigma")? })
+        };
         let direction = match direction {
             0 => SweepDirection::Up,
             1 => SweepDirection::Down,
@@ -197,13 +322,21 @@ pub unsafe extern "C" fn nlsim_testdata_add_sweep(
                 response.len(),
             ));
         }
+        if let Some(sg) = sigma
+            && sg.len() != n_steps * nc * h * 2
+        {
+            return Err(Failure::size("sigma", n_steps * nc * h * 2, sg.len()));
+        }
         let z = |v: &[f64], i: usize| c64::new(v[2 * i], v[2 * i + 1]);
         let steps = (0..n_steps)
             .map(|s| Step {
                 frequency_hz: freq[s],
                 force: (0..h).map(|k| z(force, s * h + k)).collect(),
                 response: faer::Mat::from_fn(nc, h, |c, k| z(response, (s * nc + c) * h + k)),
-                sigma: faer::Mat::new(),
+                sigma: match sigma {
+                    Some(sg) => faer::Mat::from_fn(nc, h, |c, k| z(sg, (s * nc + c) * h + k)),
+                    None => faer::Mat::new(),
+                },
             })
             .collect();
         d.data.sweeps.push(Sweep {
@@ -260,15 +393,26 @@ pub unsafe extern "C" fn nlsim_calibrate(
         }
         let h = get_hb(hb)?;
         let sys = read(&h).clone();
-        let params = params_of(&sys, &names)?;
+        let td = read(&*get_testdata(data)?).data.clone();
+        td.validate()?;
+        // The system's parameters and the test data's gains.
+        let mut known = sys.parameters();
+        known.push(Param::InputGain);
+        known.extend(
+            td.channels
+                .iter()
+                .map(|c| Param::SensorGain(c.name.clone())),
+        );
+        let params = names
+            .iter()
+            .map(|n| parse_known(n, &known).map_err(Failure::from))
+            .collect::<Result<Vec<_>, Failure>>()?;
         let specs: Vec<ParamSpec> = params
             .into_iter()
             .zip(lower.iter().zip(upper))
             .map(|(p, (&lo, &hi))| ParamSpec::new(p, lo, hi))
             .collect();
-        let td = read(&*get_testdata(data)?).data.clone();
-        td.validate()?;
-        let objective = FrfObjective::new(
+        let mut objective = FrfObjective::new(
             &sys,
             Arc::new(td),
             specs,
@@ -277,6 +421,15 @@ pub unsafe extern "C" fn nlsim_calibrate(
                 ..ObjectiveConfig::default()
             },
         )?;
+        match settings.model_shaker {
+            0 => {}
+            1 => objective.set_shaker(Some(settings.shaker.into()))?,
+            m => {
+                return Err(Failure::input(format!(
+                    "settings.model_shaker {m} is neither 0 nor 1"
+                )));
+            }
+        }
         let mut cfg = CalibrationConfig {
             seed: settings.seed,
             lhs_samples: settings.lhs_samples,
@@ -297,6 +450,8 @@ pub unsafe extern "C" fn nlsim_calibrate(
                 iterations: cal.runs.first().map_or(0, |r| r.report.iterations),
                 n_at_bound: cal.at_bound.iter().filter(|&&b| b).count(),
                 n_poorly_identified: cal.poorly_identified.iter().filter(|&&b| b).count(),
+                chi2_scale: cal.cramer_rao.reduced_chi2.sqrt(),
+                misfit_warning: i32::from(cal.cramer_rao.misfit_warning().is_some()),
             };
         }
         Ok(if cal.status.is_converged() {

@@ -283,6 +283,7 @@ fn reference() -> BTreeMap<&'static str, Vec<f64>> {
         }],
     };
     sys.set_param(&params[0], 3e9).unwrap();
+    let data_force = data.clone();
     let objective = FrfObjective::new(
         &sys,
         Arc::new(data),
@@ -290,16 +291,13 @@ fn reference() -> BTreeMap<&'static str, Vec<f64>> {
         ObjectiveConfig::default(),
     )
     .unwrap();
-    let cal = calibrate(
-        &objective,
-        &CalibrationConfig {
-            lhs_samples: 8,
-            starts: 1,
-            folds: 0,
-            ..CalibrationConfig::default()
-        },
-    )
-    .unwrap();
+    let config = CalibrationConfig {
+        lhs_samples: 8,
+        starts: 1,
+        folds: 0,
+        ..CalibrationConfig::default()
+    };
+    let cal = calibrate(&objective, &config).unwrap();
     assert!(
         (cal.estimate[0] / 1e9 - 1.0).abs() < 1e-6,
         "noise-free data give k3 back: {}",
@@ -308,6 +306,44 @@ fn reference() -> BTreeMap<&'static str, Vec<f64>> {
     r.insert(
         "calibration",
         vec![cal.estimate[0], cal.cramer_rao.std[0], 0.0],
+    );
+
+    // The same recorded as a voltage (0.4 V for 1 N), the input gain calibrated beside k3,
+    // each step weighed by its own standard deviations (1 % of the response per part).
+    let mut volt = data_force.clone();
+    volt.drive = nlsim::calib::Drive::Voltage;
+    for st in &mut volt.sweeps[0].steps {
+        st.force = vec![faer::c64::new(0.4, 0.0)];
+        let s = 0.01 * st.response[(0, 0)].norm();
+        st.sigma = faer::Mat::from_fn(1, 1, |_, _| faer::c64::new(s, s));
+    }
+    let objective = FrfObjective::new(
+        &sys,
+        Arc::new(volt),
+        vec![
+            ParamSpec::new(params[0].clone(), 1e8, 1e10),
+            ParamSpec::new(nlsim::kernel::Param::InputGain, 0.5, 10.0),
+        ],
+        ObjectiveConfig::default(),
+    )
+    .unwrap();
+    let gains = calibrate(&objective, &config).unwrap();
+    assert!(
+        (gains.estimate[0] / 1e9 - 1.0).abs() < 1e-6
+            && (gains.estimate[1] / 2.5 - 1.0).abs() < 1e-6,
+        "noise-free data give k3 and the input gain back: {:?}",
+        gains.estimate
+    );
+    r.insert(
+        "gain_calibration",
+        vec![
+            gains.estimate[0],
+            gains.estimate[1],
+            gains.cramer_rao.std[0],
+            gains.cramer_rao.std[1],
+            gains.cramer_rao.reduced_chi2.sqrt(),
+            f64::from(u8::from(gains.cramer_rao.misfit_warning().is_some())),
+        ],
     );
 
     let file = nlsim::load_model(examples().join("models/two_dof.toml").to_str().unwrap())
@@ -397,6 +433,7 @@ fn a_c_program_linked_shared_and_static_agrees_with_the_rust_api() {
         "frf_sens_last",
         "point_12hz_k3x2",
         "calibration",
+        "gain_calibration",
         "file_model",
         "live_handles",
         "failures",
@@ -410,6 +447,8 @@ fn a_c_program_linked_shared_and_static_agrees_with_the_rust_api() {
         compare(&lines, &reference, &required, who);
         check_bad_calls(&lines, who);
         for extra in [
+            "sigma_size",
+            "bad_record",
             "asymmetric",
             "index_outside",
             "handle_zero",

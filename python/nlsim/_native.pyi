@@ -234,6 +234,8 @@ def calibrate(
     folds: int = 10,
     fe_reduction: str = "parametric",
     fe_tolerance: Optional[float] = None,
+    gains: Optional[Mapping[str, float]] = None,
+    shaker: Union[None, bool, Mapping[str, float]] = None,
     threads: Optional[int] = None,
 ) -> Calibration: ...
 def modes(
@@ -506,6 +508,11 @@ class VirtualTest:
     def noise_floors(self) -> List[Tuple[str, float]]: ...
     @property
     def warnings(self) -> List[str]: ...
+    @property
+    def raw(self) -> Optional[Dict[str, Any]]:
+        """The raw time histories (`[raw]` in the test file): rate_hz, time_s, voltage,
+        force, responses, noise_std, steps, dwell_s, settle_s, oversample, status."""
+        ...
 
 def virtual_test(
     model: Model,

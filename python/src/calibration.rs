@@ -329,6 +329,67 @@ impl Source {
     }
 }
 
+/// Fixed gains `{name: value}` of `gains` (gain parameters only, checked by the objective).
+fn fixed_gains(gains: Option<&Bound<'_, PyDict>>) -> PyResult<Vec<(Param, f64)>> {
+    let mut out = Vec::new();
+    for (k, v) in gains.into_iter().flat_map(|g| g.iter()) {
+        let name: String = k
+            .extract()
+            .map_err(|_| input("gains: keys are gain names, e.g. 'input_gain'"))?;
+        let p: Param = name.parse().ok().filter(Param::is_gain).ok_or_else(|| {
+            input(format!(
+                "gains: '{name}' is no gain; use 'input_gain' or 'sensor_gain:CHANNEL'"
+            ))
+        })?;
+        let value: f64 = v
+            .extract()
+            .map_err(|_| input(format!("gains['{name}']: expected a number")))?;
+        out.push((p, value));
+    }
+    Ok(out)
+}
+
+/// The shaker of `shaker`: `None`/`False` none, `True` nlsim's default, or a dict of fields.
+pub(crate) fn shaker_of(
+    shaker: Option<&Bound<'_, PyAny>>,
+) -> PyResult<Option<nlsim::calib::Shaker>> {
+    let Some(s) = shaker else { return Ok(None) };
+    if let Ok(on) = s.extract::<bool>() {
+        return Ok(on.then(nlsim::calib::Shaker::default));
+    }
+    let d = s
+        .cast::<PyDict>()
+        .map_err(|_| input("shaker: True, or a dict of the shaker's fields"))?;
+    let mut sh = nlsim::calib::Shaker::default();
+    for (k, v) in d.iter() {
+        let name: String = k
+            .extract()
+            .map_err(|_| input("shaker: keys are field names, e.g. 'resistance'"))?;
+        let value: f64 = v
+            .extract()
+            .map_err(|_| input(format!("shaker['{name}']: expected a number")))?;
+        let field = match name.as_str() {
+            "armature_mass" => &mut sh.armature_mass,
+            "suspension_stiffness" => &mut sh.suspension_stiffness,
+            "suspension_damping" => &mut sh.suspension_damping,
+            "resistance" => &mut sh.resistance,
+            "inductance" => &mut sh.inductance,
+            "force_constant" => &mut sh.force_constant,
+            "stinger_stiffness" => &mut sh.stinger_stiffness,
+            other => {
+                return Err(input(format!(
+                    "shaker: '{other}' is no field; use armature_mass, suspension_stiffness, \
+                     suspension_damping, resistance, inductance, force_constant or \
+                     stinger_stiffness"
+                )));
+            }
+        };
+        *field = value;
+    }
+    sh.check().map_err(|e| input(format!("shaker: {e}")))?;
+    Ok(Some(sh))
+}
+
 /// The parameters `{name: (lower, upper)}` of `params`, each a parameter of `model`.
 pub(crate) fn param_specs(model: &Model, params: &Bound<'_, PyDict>) -> PyResult<Vec<ParamSpec>> {
     let mut specs = Vec::new();
@@ -373,9 +434,14 @@ pub(crate) fn param_specs(model: &Model, params: &Bound<'_, PyDict>) -> PyResult
 /// fundamental), `form` `"complex"` or `"log"` (log-magnitude and phase), `branch`
 /// `"nearest"` or `"continuation"`, `harmonics` the H of the harmonic balance, `modes`
 /// retained, `uff_noise` the relative noise of UFF FRFs, `lhs` candidates, `seed`, `starts`,
-/// `folds` (0: no cross validation).
+/// `folds` (0: no cross validation). `gains` fixes gains of the data
+/// (`{"input_gain": 2.5, "sensor_gain:tip": 1.02}`; a calibrated gain starts there);
+/// `shaker` drives a voltage record through a modelled shaker: `True` for nlsim's default
+/// shaker, or a dict of its fields (`armature_mass`, `suspension_stiffness`,
+/// `suspension_damping`, `resistance`, `inductance`, `force_constant`, `stinger_stiffness`;
+/// the others default), as a calibration file's `[shaker]`.
 #[pyfunction]
-#[pyo3(signature = (model, data, params, compare=vec![1], form="complex", branch="nearest", harmonics=3, modes=20, uff_noise=0.01, lhs=64, seed=1, starts=3, folds=10, fe_reduction="parametric", fe_tolerance=None, threads=None))]
+#[pyo3(signature = (model, data, params, compare=vec![1], form="complex", branch="nearest", harmonics=3, modes=20, uff_noise=0.01, lhs=64, seed=1, starts=3, folds=10, fe_reduction="parametric", fe_tolerance=None, gains=None, shaker=None, threads=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn calibrate(
     py: Python<'_>,
@@ -394,9 +460,13 @@ pub fn calibrate(
     folds: usize,
     fe_reduction: &str,
     fe_tolerance: Option<f64>,
+    gains: Option<&Bound<'_, PyDict>>,
+    shaker: Option<&Bound<'_, PyAny>>,
     threads: Option<usize>,
 ) -> PyResult<Calibration> {
     let fe = self::fe_reduction(fe_reduction, fe_tolerance)?;
+    let fixed = fixed_gains(gains)?;
+    let shaker = shaker_of(shaker)?;
     let data = Source::of(data)?;
     let specs = param_specs(model, params)?;
     let form = match form {
@@ -446,6 +516,11 @@ pub fn calibrate(
                 branch,
             },
         )?;
+        let mut objective = objective;
+        for (p, v) in &fixed {
+            objective.set_gain(p, *v)?;
+        }
+        objective.set_shaker(shaker)?;
         let c = nlsim::calib::calibrate_with_progress(&objective, &config, &|_| stop.check())?;
         Ok((c, objective.fe_stats()))
     })?

@@ -14,6 +14,7 @@ use nlsim::commands::test::{TestRequest, TestRun, run_test_on};
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -103,6 +104,55 @@ impl VirtualTest {
     #[getter]
     fn warnings(&self) -> Vec<String> {
         self.run.warnings.clone()
+    }
+
+    /// The time histories the test would have recorded, when the test file has a `[raw]`
+    /// table (as `nlsim test --raw` writes them; else `None`): a dict with `rate_hz`,
+    /// `time_s`, `voltage` (the coil voltage, V), `force` (the stinger force with the gauge's
+    /// noise, N), `responses` (`{sensor: samples}` with noise, every sensor), `noise_std`
+    /// (`{sensor or "force": standard deviation}`), `steps` (one dict per step: `sweep`,
+    /// `frequency_hz`, `start`, `measured`, `end` sample indices, the measured window from
+    /// `measured` to `end`), `dwell_s`, `settle_s`, `oversample` and `status`.
+    #[getter]
+    fn raw<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(raw) = &self.run.raw else {
+            return Ok(None);
+        };
+        let rec = &raw.record;
+        let d = PyDict::new(py);
+        d.set_item("rate_hz", rec.rate_hz)?;
+        let n = rec.voltage.len();
+        d.set_item(
+            "time_s",
+            vec1(py, (0..n).map(|k| k as f64 / rec.rate_hz).collect()),
+        )?;
+        d.set_item("voltage", vec1(py, rec.voltage.clone()))?;
+        d.set_item("force", vec1(py, rec.force.clone()))?;
+        let responses = PyDict::new(py);
+        let noise = PyDict::new(py);
+        for ((name, _, x), s) in rec.responses.iter().zip(&raw.sigmas) {
+            responses.set_item(name, vec1(py, x.clone()))?;
+            noise.set_item(name, *s)?;
+        }
+        noise.set_item("force", raw.sigmas.last().copied().unwrap_or(0.0))?;
+        d.set_item("responses", responses)?;
+        d.set_item("noise_std", noise)?;
+        let steps = pyo3::types::PyList::empty(py);
+        for st in &rec.steps {
+            let s = PyDict::new(py);
+            s.set_item("sweep", &st.sweep)?;
+            s.set_item("frequency_hz", st.frequency_hz)?;
+            s.set_item("start", st.start)?;
+            s.set_item("measured", st.measured)?;
+            s.set_item("end", st.end)?;
+            steps.append(s)?;
+        }
+        d.set_item("steps", steps)?;
+        d.set_item("dwell_s", raw.dwell_s)?;
+        d.set_item("settle_s", raw.settle_s)?;
+        d.set_item("oversample", raw.oversample)?;
+        d.set_item("status", rec.status.as_str())?;
+        Ok(Some(d))
     }
 
     fn __repr__(&self) -> String {

@@ -194,6 +194,92 @@ def test_virtual_test_equals_the_command_line_and_calibrates_from_arrays(tmp_pat
     assert len(df) == 22 and list(df.columns[:4]) == ["sweep", "step", "frequency_hz", "force"]
 
 
+def test_raw_records_equal_the_command_line(tmp_path: Path) -> None:
+    """A test file with `[raw]`: `VirtualTest.raw` holds the samples `nlsim test` writes to
+    its raw CSV (to the file's nine digits), the step table's windows, and the noise each
+    channel got; without `[raw]` it is None."""
+    test = dict(TEST_FILE, noise={"relative": 0.01}, force_noise={"relative": 0.01},
+                raw={"out": "raw.csv", "rate": 2000.0, "dwell": 3.0})
+    test["sweep"] = [{"label": "up", "from": 22.0, "to": 24.0, "steps": 3, "force": 0.1}]
+    toml = tmp_path / "t.toml"
+    vt = nlsim.virtual_test(nlsim.load("ecl_beam"), test)
+    raw = vt.raw
+    assert raw is not None and raw["rate_hz"] == 2000.0 and raw["status"] == "converged"
+    assert raw["dwell_s"] == 3.0 and raw["oversample"] >= 1
+    lines = [
+        "harmonics = 3", "seed = 11", "noise = { relative = 0.01 }",
+        "force_noise = { relative = 0.01 }", "[shaker]", "armature_mass = 0.05",
+        "[raw]", 'out = "raw.csv"', "rate = 2000.0", "dwell = 3.0", "[[sweep]]",
+        'label = "up"', "from = 22.0", "to = 24.0", "steps = 3", "force = 0.1",
+    ]
+    toml.write_text("\n".join(lines) + "\n")
+    cli("test", "ecl_beam", "t.toml", "--out", "d.csv", cwd=tmp_path)
+    rows = [l for l in (tmp_path / "raw.csv").read_text().splitlines() if not l.startswith("#")]
+    head = rows[0].split(",")
+    vals = np.array([[float(x) for x in r.split(",")] for r in rows[1:]])
+    assert len(vals) == len(raw["time_s"]) == 3 * 6000
+    np.testing.assert_allclose(vals[:, 0], raw["time_s"], rtol=0, atol=1e-12)
+    cols = {
+        "tip_acceleration_m_per_s2": raw["responses"]["tip"],
+        "mid_acceleration_m_per_s2": raw["responses"]["mid"],
+        "shaker_force_N": raw["force"],
+        "shaker_voltage_V": raw["voltage"],
+    }
+    assert head[1:] == list(cols)
+    for j, name in enumerate(head[1:], start=1):
+        x = cols[name]
+        np.testing.assert_allclose(vals[:, j], x, rtol=1e-8, atol=1e-9 * np.abs(x).max())
+    table = [l.split(",") for l in (tmp_path / "raw_steps.csv").read_text().splitlines()[1:]]
+    assert len(table) == len(raw["steps"]) == 3
+    for row, step in zip(table, raw["steps"]):
+        assert abs(float(row[0]) * 2000.0 - step["measured"]) < 1e-6
+        assert abs(float(row[1]) * 2000.0 - (step["end"] - 1)) < 1e-6
+        assert row[3] == step["sweep"] == "up"
+    # 1 % of each channel's rms: the noise the samples carry.
+    tip = raw["responses"]["tip"]
+    assert abs(raw["noise_std"]["tip"] - 0.01 * np.sqrt(np.mean(tip**2))) < 1e-4 * raw["noise_std"]["tip"]
+    assert nlsim.virtual_test(nlsim.load("ecl_beam"), TEST_FILE).raw is None
+
+
+def test_voltage_records_calibrate_through_a_shaker_as_the_command_line(tmp_path: Path) -> None:
+    """An open-loop test recorded as voltage over an amplifier gain of 8: `calibrate` with
+    `shaker` and the input gain among the parameters gives the calibration file's estimates
+    (`[shaker]`) to the bit, and a fixed gain (`gains`) starts a calibrated one there; bad
+    gains and shakers are refused by name."""
+    test = {
+        "harmonics": 3, "modes": 4, "seed": 2, "record": "voltage", "amplifier_gain": 8.0,
+        "control": {"enabled": False},
+        "sweep": [{"label": "high", "from": 21.5, "to": 26.5, "steps": 21, "force": 0.2}],
+    }
+    model = nlsim.load("ecl_beam")
+    data = nlsim.virtual_test(model, test).data
+    data.save(tmp_path / "volt.csv")
+    (tmp_path / "cal.toml").write_text(
+        'model = "ecl_beam"\ndata = "volt.csv"\nharmonics = 3\nmodes = 4\nlhs = 12\n'
+        'starts = 2\nfolds = 0\nout = "est.csv"\n\n[shaker]\nresistance = 1.5\n\n'
+        '[[param]]\nname = "tip_spring.k3"\nlower = 6e8\nupper = 6e10\n\n'
+        '[[param]]\nname = "input_gain"\nlower = 1.0\nupper = 50.0\n'
+    )
+    cli("calibrate", "--config", "cal.toml", cwd=tmp_path)
+    rows = [l.split(",") for l in (tmp_path / "est.csv").read_text().splitlines()[1:]]
+    params = {"tip_spring.k3": (6e8, 6e10), "input_gain": (1.0, 50.0)}
+    c = nlsim.calibrate(model, data, params, modes=4, lhs=12, starts=2, folds=0,
+                        shaker={"resistance": 1.5})
+    assert [float(r[1]) for r in rows] == list(c.estimate)
+    assert abs(c.estimate[1] - 8.0) < 3 * c.cramer_rao_std[1]
+    # nlsim's default shaker has resistance 1.5 too: the same bits.
+    d = nlsim.calibrate(model, data, params, modes=4, lhs=12, starts=2, folds=0, shaker=True)
+    np.testing.assert_array_equal(c.estimate, d.estimate)
+    # Without the shaker the voltage is taken as the force: far off.
+    far = nlsim.calibrate(model, data, {"tip_spring.k3": (6e8, 6e10)}, modes=4, lhs=12,
+                          starts=2, folds=0, gains={"input_gain": 8.0})
+    assert far.reduced_chi2 > 10 * c.reduced_chi2
+    with pytest.raises(nlsim.InputError, match="'speed' is no field"):
+        nlsim.calibrate(model, data, params, shaker={"speed": 1.0})
+    with pytest.raises(nlsim.InputError, match="'tip_spring.k3' is no gain"):
+        nlsim.calibrate(model, data, params, gains={"tip_spring.k3": 1.0})
+
+
 def test_test_data_from_arrays_is_checked_by_name() -> None:
     """Closed form: a linear one-channel sweep whose per-step standard deviations are given
     calibrates against that noise; and every malformed array is refused naming it."""

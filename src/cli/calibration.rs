@@ -74,6 +74,12 @@ pub struct CalibrateArgs {
     /// --data-noise times its rms.
     #[arg(long)]
     time_domain: bool,
+    /// The data's voltage record drives the model through a modelled shaker: nlsim's default
+    /// shaker without a value (or `default`), or the `[shaker]` table of a test or
+    /// calibration FILE (the default shaker where it has none) [default: the calibration
+    /// file's `[shaker]`, else the voltage taken as the force times the input gain].
+    #[arg(long, num_args = 0..=1, default_missing_value = "default", value_name = "FILE")]
+    shaker: Option<std::path::PathBuf>,
     /// How FE-level parameters (`group:NAME.k_scale`, `group:NAME.m_scale`,
     /// `spring:NODE:COMP.k`) reduce the model at each evaluation: `parametric` (one basis,
     /// a small eigen solve per evaluation, certified against the full matrices and
@@ -361,6 +367,11 @@ pub struct TestArgs {
     /// file's, else TEST's name with `-report`, beside it].
     #[arg(long)]
     report: Option<std::path::PathBuf>,
+    /// Also write the time histories the test would have recorded (.csv, .h5, .uff) and
+    /// their step table beside them, the shaker coupled in the time domain [default: the
+    /// file's `[raw]`, else none].
+    #[arg(long)]
+    raw: Option<std::path::PathBuf>,
 }
 
 impl CalibrateArgs {
@@ -423,6 +434,13 @@ impl CalibrateArgs {
         }
         if self.time_domain {
             req.time_domain = true;
+        }
+        if let Some(f) = &self.shaker {
+            req.shaker = Some(if f.as_os_str() == "default" {
+                crate::calib::Shaker::default()
+            } else {
+                crate::formats::settings::shaker_of_file(f)?
+            });
         }
         if let Some(s) = self.shape_noise {
             req.shape_noise = s;
@@ -509,8 +527,8 @@ impl PlanArgs {
 }
 
 impl TestArgs {
-    /// The request of `nlsim test`: the test file's, with `--out`, `--seed`, `--open-loop`
-    /// and `--report` overriding it.
+    /// The request of `nlsim test`: the test file's, with `--out`, `--seed`, `--open-loop`,
+    /// `--raw` and `--report` overriding it.
     pub fn request(&self) -> crate::Result<commands::test::TestRequest> {
         let mut req = commands::test::TestRequest::load(&self.test, &self.model)?;
         if let Some(o) = &self.out {
@@ -528,6 +546,19 @@ impl TestArgs {
         }
         if let Some(g) = self.amplifier_gain {
             req.amplifier_gain = g;
+        }
+        if let Some(out) = &self.raw {
+            match &mut req.raw {
+                Some(r) => r.out = out.clone(),
+                None => {
+                    req.raw = Some(commands::test::RawRequest {
+                        out: out.clone(),
+                        rate_hz: None,
+                        dwell_s: None,
+                        oversample: None,
+                    })
+                }
+            }
         }
         req.check()?;
         req.report = Some(

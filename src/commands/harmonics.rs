@@ -160,6 +160,7 @@ pub fn run(req: &HarmonicsRequest) -> Result<HarmonicsRun> {
         &req.model,
         &req.records,
         req.drive.as_deref(),
+        req.record == Drive::Voltage,
     )?;
     let windows = match &req.steps {
         Some(table) => {
@@ -222,7 +223,7 @@ pub fn run(req: &HarmonicsRequest) -> Result<HarmonicsRun> {
                         frequency_hz: p.frequency_hz,
                         force: (0..cfg.harmonics).map(|k| p.harmonics[(0, k)]).collect(),
                         response: Mat::from_fn(nc, cfg.harmonics, |c, k| p.harmonics[(c + 1, k)]),
-                        sigma: Mat::from_fn(nc, cfg.harmonics, |c, k| p.sigma[(c + 1, k)]),
+                        sigma: with_drive_noise(&p.harmonics, &p.sigma, nc, cfg.harmonics),
                     },
                 ));
             }
@@ -260,7 +261,7 @@ pub fn run(req: &HarmonicsRequest) -> Result<HarmonicsRun> {
                 frequency_hz: fit.frequency_hz,
                 force: (0..h).map(|k| fit.harmonics[(0, k)]).collect(),
                 response: Mat::from_fn(nc, h, |c, k| fit.harmonics[(c + 1, k)]),
-                sigma: Mat::from_fn(nc, h, |c, k| fit.sigma[(c + 1, k)]),
+                sigma: with_drive_noise(&fit.harmonics, &fit.sigma, nc, h),
             },
         ));
     }
@@ -354,6 +355,28 @@ pub fn run(req: &HarmonicsRequest) -> Result<HarmonicsRun> {
         dwells,
         tracks,
         rate_hz: rec.rate_hz,
+    })
+}
+
+/// The responses' standard deviations (`nc` channels × `h` harmonics, rows `1..` of `sigma`)
+/// with the drive's own noise folded in (the effective variance of errors in the input): the
+/// calibration takes the measured drive harmonics as exact, so a response predicted from a
+/// drive fundamental off by `δF₁` is off by about `Y_k δF₁/F₁`; with `r² = var(F₁)/|F₁|²`
+/// from the drive's scatter, each of the real and imaginary parts gains the variance
+/// `|Y_k|² r²/2`. Nothing changes for an exact drive (a generator's voltage). The noise of
+/// the drive's higher harmonics is not folded in.
+fn with_drive_noise(harmonics: &Mat<c64>, sigma: &Mat<c64>, nc: usize, h: usize) -> Mat<c64> {
+    let f1 = harmonics[(0, 0)].norm();
+    let sf = sigma[(0, 0)];
+    let r2 = if f1 > 0.0 && sf.re.is_finite() && sf.im.is_finite() {
+        (sf.re * sf.re + sf.im * sf.im) / (f1 * f1)
+    } else {
+        0.0
+    };
+    Mat::from_fn(nc, h, |c, k| {
+        let s = sigma[(c + 1, k)];
+        let add = harmonics[(c + 1, k)].norm_sqr() * r2 / 2.0;
+        c64::new((s.re * s.re + add).sqrt(), (s.im * s.im + add).sqrt())
     })
 }
 

@@ -85,11 +85,15 @@ fn check_clipping(name: &str, x: &[f64], rec: &TimeRecords, path: &Path) -> Resu
 /// else CSV) and maps them onto `model` (`model_spec` names it in errors): the drive column
 /// `drive` (default: the model's first excitation), every sensor's column; columns of element
 /// displacements and forces a simulation wrote are passed over, any other is refused by name.
+/// With `voltage` the drive is the amplifier's voltage: the column `DRIVE_voltage_V` (as
+/// `nlsim test --raw` writes it) where there is one, else the drive's own; without, such a
+/// voltage column is passed over.
 pub fn map_records(
     model: &Model,
     model_spec: &str,
     path: &Path,
     drive: Option<&str>,
+    voltage: bool,
 ) -> Result<MappedRecords> {
     let ext = path
         .extension()
@@ -124,8 +128,14 @@ pub fn map_records(
         .iter()
         .find(|e| e.name == drive)
         .map(|e| format!("force@{}", e.at.label(model.dofs())));
-    let Some(d) = rec.names.iter().position(|n| {
-        *n == drive || *n == force_column(&drive) || drive_label.as_deref() == Some(n.as_str())
+    use crate::formats::raw_records::voltage_column;
+    let voltage_col = voltage
+        .then(|| rec.names.iter().position(|n| *n == voltage_column(&drive)))
+        .flatten();
+    let Some(d) = voltage_col.or_else(|| {
+        rec.names.iter().position(|n| {
+            *n == drive || *n == force_column(&drive) || drive_label.as_deref() == Some(n.as_str())
+        })
     }) else {
         return Err(Error::Usage(format!(
             "{}: no column '{drive}' for the drive; the columns are {}",
@@ -155,7 +165,8 @@ pub fn map_records(
             || model
                 .excitation()
                 .iter()
-                .any(|e| *name == force_column(&e.name));
+                .any(|e| *name == force_column(&e.name) || *name == voltage_column(&e.name))
+            || (voltage && (*name == drive || *name == force_column(&drive)));
         if passed_over {
             continue;
         }

@@ -24,6 +24,7 @@
 //! | [`uff`] | universal file dataset 58 (FRFs) |
 //! | [`settings`] | what the calibration, plan and test files (TOML) share |
 //! | [`modes_file`], [`history_file`], [`frf_file`] | result files of `modes`, `simulate`, `frf` |
+//! | [`raw_records`] | the raw time records of a virtual test (`nlsim test --raw`) and their step table |
 //! | [`candidates`] | the candidates file of a merged calibration batch |
 //! | [`files`] | atomic writes, bounded reads, provenance attributes, one-line messages |
 
@@ -45,6 +46,7 @@ pub mod model_file;
 pub mod modes_file;
 pub mod op4;
 pub mod op4_write;
+pub mod raw_records;
 pub mod settings;
 pub mod test_data;
 pub mod time_records;

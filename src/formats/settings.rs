@@ -139,6 +139,29 @@ pub(crate) struct ShakerTable {
     stinger_stiffness: Option<f64>,
 }
 
+/// The shaker of a test or calibration file at `path` (`nlsim calibrate --shaker FILE`): its
+/// `[shaker]` table, the default shaker's values for the keys it leaves out, and the default
+/// shaker when it has none (as `nlsim test` runs it). The other keys of the file are not read.
+pub fn shaker_of_file(path: &Path) -> Result<nlsim_calib::Shaker> {
+    #[derive(serde::Deserialize)]
+    struct Only {
+        shaker: Option<ShakerTable>,
+    }
+    let text = crate::formats::files::read_text_bounded(path, MAX_SHAKER_FILE_BYTES)?;
+    let only: Only = SettingsFile::parse(&text, path)?;
+    let shaker = ShakerTable::shaker(only.shaker.as_ref());
+    shaker.check().map_err(|e| Error::Spec {
+        file: path.to_path_buf(),
+        line: line_of_key(&text, "shaker"),
+        key: "shaker".into(),
+        message: e.to_string(),
+    })?;
+    Ok(shaker)
+}
+
+/// Largest test or calibration file read for its `[shaker]` table (bytes).
+pub const MAX_SHAKER_FILE_BYTES: u64 = 1 << 20;
+
 impl ShakerTable {
     /// The shaker of `table`: the default one with the keys given replaced.
     pub(crate) fn shaker(table: Option<&ShakerTable>) -> nlsim_calib::Shaker {

@@ -94,6 +94,60 @@ fn voltage_record_calibrates_structure_and_amplifier_gain() {
     assert_eq!(rc, 0, "{e}\n{o}");
     let (k3, sd) = estimates(&dir.join("e2.csv"))["tip_spring.k3"];
     assert!((k3 - 6e9).abs() > 10.0 * sd, "{k3} ± {sd}");
+    // From the command line alone: `--shaker` (nlsim's default shaker, whose resistance is
+    // the calibration file's 1.5 ohm) and `--shaker TEST` (the test file's, which has no
+    // `[shaker]`: the default it ran with) give the calibration file's estimates to the bit;
+    // a test file whose shaker is invalid is refused naming it.
+    let config = std::fs::read_to_string(dir.join("estimates.csv")).unwrap();
+    for shaker in [None, Some(test.to_str().unwrap())] {
+        let out = dir.join("e3.csv");
+        let mut args = vec![
+            "calibrate",
+            "ecl_beam",
+            "volt.csv",
+            "--param",
+            "tip_spring.k3=6e7:6e11",
+            "--param",
+            "mode2.zeta=0.001:0.1",
+            "--param",
+            "input_gain=1:50",
+            "--compare",
+            "1,3",
+            "--modes",
+            "4",
+            "--lhs",
+            "16",
+            "--starts",
+            "2",
+            "--folds",
+            "0",
+            "--shaker",
+        ];
+        args.extend(shaker);
+        args.extend(["--out", out.to_str().unwrap()]);
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_nlsim"))
+            .args(&args)
+            .current_dir(&*dir)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert_eq!(std::fs::read_to_string(&out).unwrap(), config, "{shaker:?}");
+    }
+    std::fs::write(dir.join("bad.toml"), "[shaker]\nresistance = -1.0\n").unwrap();
+    let (rc, _, e) = nlsim(&[
+        "calibrate",
+        "ecl_beam",
+        dir.join("volt.csv").to_str().unwrap(),
+        "--param",
+        "input_gain=1:50",
+        "--shaker",
+        dir.join("bad.toml").to_str().unwrap(),
+    ]);
+    assert_ne!(rc, 0);
+    assert!(
+        e.contains("bad.toml") && e.contains("shaker.resistance"),
+        "{e}"
+    );
 }
 
 /// Voltage data and gains refuse what they cannot use, in one line naming the place.

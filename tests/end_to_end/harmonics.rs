@@ -507,21 +507,14 @@ print("ok")
 }
 
 /// The stepped-sine harmonic balance of the ECL beam (its cubic tip spring at the model's
-/// 6e9 N/m³, 20 modes, with or without residual flexibility, `h` harmonics) at every step of
-/// `data`, with its measured frequencies and forces.
-fn ecl_beam_balance(
-    data: &nlsim::calib::TestData,
-    h: usize,
-    residual: bool,
-) -> nlsim::calib::SweepEvaluation {
+/// 6e9 N/m³, 20 modes with residual flexibility, `h` harmonics) at every step of `data`, with
+/// its measured frequencies and forces.
+fn ecl_beam_balance(data: &nlsim::calib::TestData, h: usize) -> nlsim::calib::SweepEvaluation {
     use nlsim::calib::{FrfObjective, ObjectiveConfig, ParamSpec};
     let model = nlsim::load_model("ecl_beam").unwrap().model;
     let mut obj = FrfObjective::from_model(
         &model,
-        &nlsim::reduction::ReductionConfig {
-            residual_flexibility: residual,
-            ..nlsim::reduction::ReductionConfig::lowest(20)
-        },
+        &nlsim::reduction::ReductionConfig::lowest(20),
         nlsim::hb::HarmonicSet::new(h, 1).unwrap(),
         nlsim::hb::HbConfig::default(),
         std::sync::Arc::new(data.clone()),
@@ -588,7 +581,7 @@ fn a_tracked_sweep_agrees_with_harmonic_balance_within_the_sweep_bias() {
         "{err}"
     );
     let data = nlsim::formats::test_data::read_csv(Path::new(&p("tracked.csv"))).unwrap();
-    let ev = ecl_beam_balance(&data, 3, true);
+    let ev = ecl_beam_balance(&data, 3);
     let (fr, zeta, rate) = (23.661478, 0.01, 0.02);
     let sweep = &data.sweeps[0];
     let peak = ev
@@ -621,10 +614,11 @@ fn a_tracked_sweep_agrees_with_harmonic_balance_within_the_sweep_bias() {
 /// Noise-free records against the harmonic balance: the ECL beam (0.2 N, cubic tip spring)
 /// through two 40-s dwells at 22.5 and 24 Hz, FOH at 4, 8 and 16 kHz, the steady state held
 /// to 1e-8 (`--settle-tol`), against the stepped-sine harmonic balance with 11 harmonics at
-/// the extracted frequencies and forces, on the same 20 modes without residual flexibility
-/// (with it, the FOH's accelerations leave out the element forces' residual term `D g̈` by
-/// design — `add_residual_rates` in sim/src/history.rs — which the harmonic balance keeps:
-/// 2e-5 of the fundamental in the tip's third harmonic here). The FOH holds the sampled force
+/// the extracted frequencies and forces, on the same 20 modes with residual flexibility (the
+/// FOH's accelerations keep the cubic spring's residual term `D g̈` — `add_residual_rates`
+/// in sim/src/history.rs — as the harmonic balance does; leaving it out cost 2e-5 of the
+/// fundamental in the tip's third harmonic here, so this test once ran without residual
+/// flexibility; 21 harmonics change nothing below). The FOH holds the sampled force
 /// linearly between samples (an error second order in the step): the fundamentals' error
 /// falls by 4 per halving from 8 to 16 kHz, and the Richardson extrapolation of those two,
 /// `(4 X₁₆ − X₈)/3`, equals the harmonic balance within 1e-6 of the fundamental for the
@@ -649,7 +643,6 @@ fn noise_free_dwells_equal_harmonic_balance() {
             rate,
             "--duration",
             "80",
-            "--no-residual",
             "--out",
             &raw,
         ]);
@@ -669,7 +662,7 @@ fn noise_free_dwells_equal_harmonic_balance() {
         extracted.push(nlsim::formats::test_data::read_csv(Path::new(&data)).unwrap());
     }
     let fine = &extracted[2];
-    let ev = ecl_beam_balance(fine, 11, false);
+    let ev = ecl_beam_balance(fine, 11);
     eprintln!(
         "step  f (Hz)  channel  k   |X_k|/|X_1|   err 4 kHz   err 8 kHz  err 16 kHz  \
          Richardson 8/16  Richardson 4/8/16"

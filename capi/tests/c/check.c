@@ -181,6 +181,32 @@ int main(void) {
   OK(nlsim_calibrate(hb, data, cal_names, 1, lo, hi_, &cs, est, sd, &ci));
   printf("calibration %.17g %.17g %d\n", est[0], sd[0], ci.status);
 
+  /* The same data recorded as the amplifier's voltage (0.4 V for 1 N: an input gain of
+   * 2.5 N/V, calibrated beside k3), each step weighed by its own standard deviations (1 % of
+   * the response per part). */
+  double vforce[NS * 2], vsig[NS * 2];
+  for (int s = 0; s < NS; s++) {
+    vforce[2 * s] = 0.4;
+    vforce[2 * s + 1] = 0.0;
+    vsig[2 * s] = vsig[2 * s + 1] = 0.01 * hypot(cresp[2 * s], cresp[2 * s + 1]);
+  }
+  NlsimTestData vdata = 0;
+  OK(nlsim_testdata_new("shaker", 1, &vdata));
+  OK(nlsim_testdata_set_record(vdata, 1));
+  OK(nlsim_testdata_add_channel(vdata, "tip_d", NLSIM_QUANTITY_DISPLACEMENT, 0.0, 0.01));
+  bad("sigma_size", nlsim_testdata_add_sweep_sigma(vdata, "up", 0, NS, cf, vforce, NS * 2, cresp,
+                                                   NS * 2, vsig, NS), NLSIM_CODE_ERR_SIZE);
+  OK(nlsim_testdata_add_sweep_sigma(vdata, "up", 0, NS, cf, vforce, NS * 2, cresp, NS * 2, vsig,
+                                    NS * 2));
+  bad("bad_record", nlsim_testdata_set_record(vdata, 7), NLSIM_CODE_ERR_INPUT);
+  const char *gain_names[] = {"tip.k3", "input_gain"};
+  const double glo[] = {1e8, 0.5}, ghi[] = {1e10, 10.0};
+  double gest[2], gsd[2];
+  OK(nlsim_calibrate(hb, vdata, gain_names, 2, glo, ghi, &cs, gest, gsd, &ci));
+  printf("gain_calibration %.17g %.17g %.17g %.17g %.17g %d\n", gest[0], gest[1], gsd[0], gsd[1],
+         ci.chi2_scale, ci.misfit_warning);
+  OK(nlsim_free(vdata));
+
   /* A model file. */
   NlsimModel file_model = 0;
   OK(nlsim_model_load(NLSIM_EXAMPLES "/models/two_dof.toml", &file_model));

@@ -219,6 +219,14 @@ impl Simulator {
                 std::mem::swap(&mut zr, &mut zr2);
                 std::mem::swap(&mut zi, &mut zi2);
             }
+            // The residual flexibility's rate terms of the element forces' sensitivities, as
+            // the run adds those of the forces.
+            let forces: Vec<Vec<f64>> = (0..ne)
+                .map(|_| Vec::new())
+                .chain(df.iter().map(|g| g.iter().map(|x| -x).collect()))
+                .collect();
+            let mut outs: Vec<&mut [f64]> = out.iter_mut().map(|v| v.as_mut_slice()).collect();
+            crate::history::residual_rates(&self.plant, &forces, self.cfg.dt, &mut outs);
             sens.push(out);
         }
         Ok((

@@ -57,7 +57,8 @@ fn prepare_time(req: &CalibrationRequest) -> Result<PreparedTime> {
     req.check()?;
     let t = Instant::now();
     let model = crate::commands::setup::load_for_run(&req.model, &req.model_sets())?;
-    let mut mapped = crate::commands::records::map_records(&model, &req.model, &req.data, None)?;
+    let mut mapped =
+        crate::commands::records::map_records(&model, &req.model, &req.data, None, false)?;
     // The columns move into the calibration's record (each is used once).
     let mut columns = std::mem::take(&mut mapped.records.columns);
     let channels = mapped

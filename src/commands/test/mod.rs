@@ -56,10 +56,17 @@ pub fn execute(req: &TestRequest, console: &crate::present::console::Console) ->
             Some(std::path::Path::new(&req.model)),
             req.source.as_deref(),
         ],
-        &[Some(req.out.as_path())],
+        &[
+            Some(req.out.as_path()),
+            req.raw.as_ref().map(|r| r.out.as_path()),
+            req.raw
+                .as_ref()
+                .map(|r| request::raw_steps_path(&r.out))
+                .as_deref(),
+        ],
         &[req.report.as_deref()],
     )?;
-    let mut progress = console.eta("sweeps");
+    let mut progress = console.eta("test");
     let run = run_test(req, &mut progress)?;
     progress(req.sweeps.len(), req.sweeps.len());
     for line in run.summary() {

@@ -121,9 +121,72 @@ impl TestRun {
             self.test.data.channels.len(),
             r.out.display()
         ));
+        if let (Some(raw), Some(rr)) = (&self.raw, &r.raw) {
+            v.extend(self.raw_lines(raw, rr));
+        }
         for w in &self.warnings {
             v.push(format!("warning: {w}"));
         }
+        v
+    }
+
+    /// The summary's lines on the raw records.
+    fn raw_lines(
+        &self,
+        raw: &crate::commands::test::run::RawRun,
+        rr: &crate::commands::test::request::RawRequest,
+    ) -> Vec<String> {
+        let rec = &raw.record;
+        let r = &self.request;
+        let steps = crate::commands::test::request::raw_steps_path(&rr.out);
+        let dwell = format!(
+            "{} s per step, measured after {:.1} s of settling (the slowest mode near the band \
+             to {:e})",
+            raw.dwell_s,
+            raw.settle_s.min(raw.dwell_s),
+            crate::commands::test::request::DEFAULT_SETTLE,
+        );
+        let sig = |name: &str, s: f64| format!("{name} {s:.2e}");
+        let mut noise: Vec<String> = rec
+            .responses
+            .iter()
+            .zip(&raw.sigmas)
+            .filter(|((n, _, _), _)| r.channels.is_empty() || r.channels.contains(n))
+            .map(|((n, _, _), &s)| sig(n, s))
+            .collect();
+        if r.record == nlsim_calib::Drive::Force {
+            noise.push(sig("force", raw.sigmas.last().copied().unwrap_or(0.0)));
+        }
+        let mut v = vec![format!(
+            "raw records: {} ({} samples at {} Hz, {} steps, {dwell}; hold integration \
+             through the shaker at {} steps per sample {:.2} s; noise std {}); step table {}",
+            rr.out.display(),
+            rec.voltage.len(),
+            rec.rate_hz,
+            rec.steps.len(),
+            raw.oversample,
+            raw.seconds,
+            noise.join(", "),
+            steps.display()
+        )];
+        if let Some(why) = &rec.stopped {
+            v.push(format!(
+                "warning: the raw records stop short at {:.3} s ({}): {why}",
+                rec.voltage.len() as f64 / rec.rate_hz,
+                rec.status
+            ));
+        }
+        v.push(format!(
+            "  harmonics from them: `nlsim harmonics {} {} --steps {}{}`",
+            r.model,
+            rr.out.display(),
+            steps.display(),
+            if r.record == nlsim_calib::Drive::Voltage {
+                " --record voltage"
+            } else {
+                ""
+            }
+        ));
         v
     }
 

@@ -67,6 +67,54 @@ pub struct TestRequest {
     pub record: nlsim_calib::Drive,
     /// The amplifier's gain (V at the coil per V in) a voltage record is divided by.
     pub amplifier_gain: f64,
+    /// Also write the time histories the test would have recorded.
+    pub raw: Option<RawRequest>,
+}
+
+/// The raw records of a virtual test (`[raw]` in the test file, `--raw FILE`): the time
+/// histories its recorder would hold, the shaker coupled in the time domain
+/// ([`nlsim_calib::raw_records`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RawRequest {
+    /// Where they go: `.csv`, `.h5` or `.uff`/`.unv`; the step table beside it
+    /// ([`raw_steps_path`]).
+    pub out: PathBuf,
+    /// Sampling rate (Hz) [default: [`DEFAULT_SAMPLES_PER_PERIOD`] samples per period of the
+    /// highest harmonic at the highest step frequency, rounded up to 100 Hz].
+    pub rate_hz: Option<f64>,
+    /// Length of every step (s) [default: the settling time of the slowest mode around the
+    /// swept band to [`DEFAULT_SETTLE`] of its amplitude, then [`DEFAULT_MEASURED_PERIODS`]
+    /// periods of the lowest step frequency, rounded up to 0.1 s].
+    pub dwell_s: Option<f64>,
+    /// Hold steps per recorded sample [default: enough for [`DEFAULT_HOLD_SAMPLES_PER_PERIOD`]
+    /// hold steps per period of the highest harmonic at the highest step frequency].
+    pub oversample: Option<usize>,
+}
+
+/// Default hold steps per period of the highest harmonic at the highest step frequency (the
+/// integration's rate, [`RawRequest::oversample`] times the recording's): the hold carries an
+/// element force's harmonic `k` with the gain `sinc²(kωh/2)`, 1.3e-5 short at the highest
+/// harmonic and 1.4e-6 at the fundamental of a 3-harmonic test.
+pub const DEFAULT_HOLD_SAMPLES_PER_PERIOD: f64 = 512.0;
+
+/// Default recorded samples per period of the highest harmonic at the highest step
+/// frequency (the hold integrates more finely: [`DEFAULT_HOLD_SAMPLES_PER_PERIOD`]).
+pub const DEFAULT_SAMPLES_PER_PERIOD: f64 = 128.0;
+
+/// Default settling of a step before its measured periods: the slowest mode's transient
+/// decays to this fraction of its start.
+pub const DEFAULT_SETTLE: f64 = 1e-4;
+
+/// Default periods measured after the settling, at the lowest step frequency.
+pub const DEFAULT_MEASURED_PERIODS: f64 = 40.0;
+
+/// The step table beside raw records `out`: `STEM_steps.csv` in its folder.
+pub fn raw_steps_path(out: &Path) -> PathBuf {
+    let stem = out
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "raw".into());
+    out.with_file_name(format!("{stem}_steps.csv"))
 }
 
 impl TestRequest {
@@ -97,6 +145,7 @@ impl TestRequest {
             source: None,
             record: nlsim_calib::Drive::Force,
             amplifier_gain: 1.0,
+            raw: None,
         }
     }
 
@@ -238,6 +287,49 @@ impl TestRequest {
                 format!("{}: name a .csv or .h5 file", self.out.display()),
             );
         }
+        if let Some(raw) = &self.raw {
+            let ext = raw
+                .out
+                .extension()
+                .and_then(|e| e.to_str())
+                .map(str::to_ascii_lowercase);
+            if !matches!(ext.as_deref(), Some("csv" | "h5" | "hdf5" | "uff" | "unv")) {
+                return bad(
+                    "raw",
+                    format!(
+                        "out {}: name a {}",
+                        raw.out.display(),
+                        crate::formats::raw_records::HINT
+                    ),
+                );
+            }
+            if let Some(m) = raw.oversample
+                && !(1..=1024).contains(&m)
+            {
+                return bad(
+                    "raw",
+                    format!("oversample {m}: give 1 to 1024 hold steps per sample"),
+                );
+            }
+            for (what, v) in [("rate", raw.rate_hz), ("dwell", raw.dwell_s)] {
+                if let Some(v) = v
+                    && !(v.is_finite() && v > 0.0)
+                {
+                    return bad("raw", format!("{what} {v} must be positive and finite"));
+                }
+            }
+            if raw.out == self.out || raw_steps_path(&raw.out) == self.out {
+                return bad(
+                    "raw",
+                    format!(
+                        "out {}: the raw records and their step table need names of their own \
+                         (the test data go to {})",
+                        raw.out.display(),
+                        self.out.display()
+                    ),
+                );
+            }
+        }
         Ok(())
     }
 
@@ -296,6 +388,15 @@ struct SweepTable {
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+struct RawTable {
+    out: Option<String>,
+    rate: Option<f64>,
+    dwell: Option<f64>,
+    oversample: Option<usize>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
 struct ControlTable {
     enabled: Option<bool>,
     tolerance: Option<f64>,
@@ -329,6 +430,7 @@ struct TestTable {
     channels: Vec<String>,
     record: Option<String>,
     amplifier_gain: Option<f64>,
+    raw: Option<RawTable>,
 }
 
 impl TestTable {
@@ -402,6 +504,12 @@ impl TestTable {
             source: Some(path.to_path_buf()),
             record,
             amplifier_gain: self.amplifier_gain.unwrap_or(d.amplifier_gain),
+            raw: self.raw.as_ref().map(|r| RawRequest {
+                out: rel(r.out.as_deref().unwrap_or("raw.csv")),
+                rate_hz: r.rate,
+                dwell_s: r.dwell,
+                oversample: r.oversample,
+            }),
         };
         req.check().map_err(|e| file.located("test", e))?;
         Ok(req)

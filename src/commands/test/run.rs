@@ -28,6 +28,28 @@ pub struct TestRun {
     pub setup_seconds: f64,
     /// Wall time of the tests (s).
     pub seconds: f64,
+    /// The raw records, when asked for.
+    pub raw: Option<RawRun>,
+}
+
+/// The raw records of a virtual test and how they were made.
+#[derive(Debug, Clone)]
+pub struct RawRun {
+    /// The records (noise added).
+    pub record: nlsim_calib::RawRecord,
+    /// Hold steps per recorded sample.
+    pub oversample: usize,
+    /// Length of every step (s).
+    pub dwell_s: f64,
+    /// The settling time (s) at the start of every step, left out of its measured window in
+    /// the step table (at most the dwell less 4 periods).
+    pub settle_s: f64,
+    /// Standard deviation of each sensor's noise (its unit), the force's last (N).
+    pub sigmas: Vec<f64>,
+    /// Wall time of the time integration (s).
+    pub seconds: f64,
+    /// Universal-file node and direction of each sensor and of the drive, by name.
+    pub sites: Vec<(String, (i64, i64))>,
 }
 
 /// Runs `req`: the model loaded and reduced, the stepped sines through the shaker (and
@@ -41,6 +63,23 @@ pub fn run_test(req: &TestRequest, progress: &mut dyn FnMut(usize, usize)) -> Re
     let mut run = run_test_on(model, req, progress)?;
     run.setup_seconds += load_seconds;
     write_test_data(&req.out, &run.test.data)?;
+    if let (Some(raw), Some(r)) = (&run.raw, &req.raw) {
+        let info = crate::formats::raw_records::RawInfo {
+            model_name: &run.model_name,
+            sites: &raw.sites,
+            model_spec: &req.model,
+            drive: &run.drive,
+            record: req.record,
+            amplifier_gain: req.amplifier_gain,
+            channels: &req.channels,
+            noise: raw_noise_line(req),
+        };
+        crate::formats::raw_records::write_raw(&r.out, &raw.record, &info)?;
+        crate::formats::raw_records::write_step_table(
+            &crate::commands::test::request::raw_steps_path(&r.out),
+            &raw.record,
+        )?;
+    }
     Ok(run)
 }
 
@@ -59,8 +98,23 @@ pub fn write_test_data(out: &std::path::Path, data: &nlsim_calib::TestData) -> R
     }
 }
 
+/// What the raw records' noise is, for their header.
+fn raw_noise_line(req: &TestRequest) -> String {
+    format!(
+        "noise per sample: sensors {} of their rms (at least {:e}), force {} of its rms (at \
+         least {:e}), voltage exact; seed {}",
+        req.noise.relative,
+        req.noise.absolute,
+        req.force_noise.relative,
+        req.force_noise.absolute,
+        req.seed
+    )
+}
+
 /// [`run_test`] on `model` as given (loaded, `req.set` not applied): the test run, nothing
-/// written (`req.out` and `req.model` are not used).
+/// written (`req.out` and `req.model` are not used). With `req.raw` the run holds the raw
+/// records too; `progress(done, total)` then counts the time integration as much as the
+/// sweeps.
 pub fn run_test_on(
     mut model: nlsim_kernel::Model,
     req: &TestRequest,
@@ -126,6 +180,10 @@ pub fn run_test_on(
     )?;
     let setup_seconds = t.elapsed().as_secs_f64();
     let t = Instant::now();
+    // Progress in hundredths of a sweep; the raw records count as much as the sweeps.
+    let n_sweeps = req.sweeps.len();
+    let total = 100 * n_sweeps * if req.raw.is_some() { 2 } else { 1 };
+    let mut sweep_progress = |s: usize, _: usize| progress(100 * s, total);
     // One sweep at a time (for progress); the noise seed of sweep `s` is `seed + s`, so a
     // test of several sweeps is the same whichever are run.
     let run = |control: &ControlConfig,
@@ -185,7 +243,12 @@ pub fn run_test_on(
     } else {
         (vec![req.noise; n_sensors], vec![f64::NAN; n_sensors])
     };
-    let mut test = keep(run(&req.control, &noise, req.force_noise, progress)?)?;
+    let mut test = keep(run(
+        &req.control,
+        &noise,
+        req.force_noise,
+        &mut sweep_progress,
+    )?)?;
     if req.record == nlsim_calib::Drive::Voltage {
         test.data = test.voltage_data(req.amplifier_gain)?;
     }
@@ -204,6 +267,21 @@ pub fn run_test_on(
             "virtual test: the structure could not be solved at any step; nothing to write".into(),
         ));
     }
+    let raw = match &req.raw {
+        None => None,
+        Some(r) => {
+            let done = 100 * n_sweeps;
+            Some(raw_run(
+                &model,
+                &reduced,
+                &drive,
+                req,
+                r,
+                &test,
+                &mut |k, n| progress(done + done * k / n.max(1), total),
+            )?)
+        }
+    };
     let recorded = |name: &String| req.channels.is_empty() || req.channels.contains(name);
     let floors = sys
         .sensors()
@@ -238,8 +316,90 @@ pub fn run_test_on(
         open_loop,
         setup_seconds,
         seconds,
+        raw,
     })
 }
+
+/// The raw records of `test` (run on `model` reduced to `reduced`, the shaker at `drive`):
+/// the coupled plant, the default rate and dwell where `r` gives none, one hold run, the
+/// noise of `req`.
+fn raw_run(
+    model: &nlsim_kernel::Model,
+    reduced: &nlsim_reduction::ReducedModel,
+    drive: &str,
+    req: &TestRequest,
+    r: &crate::commands::test::request::RawRequest,
+    test: &VirtualTest,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<RawRun> {
+    use crate::commands::test::request::{
+        DEFAULT_HOLD_SAMPLES_PER_PERIOD, DEFAULT_MEASURED_PERIODS, DEFAULT_SAMPLES_PER_PERIOD,
+        DEFAULT_SETTLE,
+    };
+    let t = Instant::now();
+    let system = nlsim_reduction::ModalSystem::new(reduced)?;
+    let plant = nlsim_sim::Plant::from_model(model, &system)?;
+    let coupled = nlsim_calib::shaker_plant(&plant, drive, &req.shaker)?;
+    let input = coupled.input_index(drive)?;
+    let freqs = req
+        .sweeps
+        .iter()
+        .flat_map(|s| s.frequencies_hz.iter().copied());
+    let (lo, hi) = freqs.fold((f64::INFINITY, 0.0f64), |(a, b), f| (a.min(f), b.max(f)));
+    let rate_hz = r.rate_hz.unwrap_or_else(|| {
+        (DEFAULT_SAMPLES_PER_PERIOD * req.harmonics as f64 * hi / 100.0).ceil() * 100.0
+    });
+    let settle_s = nlsim_calib::settle_time(&coupled, (lo, hi), DEFAULT_SETTLE);
+    let dwell_s = r.dwell_s.unwrap_or_else(|| {
+        let d = settle_s + DEFAULT_MEASURED_PERIODS / lo;
+        (d * 10.0).ceil() / 10.0
+    });
+    let oversample = r.oversample.unwrap_or_else(|| {
+        let want = DEFAULT_HOLD_SAMPLES_PER_PERIOD * req.harmonics as f64 * hi;
+        ((want / rate_hz).ceil() as usize).clamp(1, 1024)
+    });
+    let cfg = nlsim_calib::RawConfig {
+        rate_hz,
+        dwell_s,
+        settle_s,
+        oversample,
+    };
+    let mut record = nlsim_calib::raw_records(&coupled, input, test, &cfg, progress)
+        .map_err(|e| Error::Usage(format!("test raw: {e}")))?;
+    // The noise stream of its own beside the harmonics' (sweep s uses seed + s there).
+    let sigmas = nlsim_calib::add_raw_noise(
+        &mut record,
+        req.noise,
+        req.force_noise,
+        req.seed ^ RAW_SEED_STREAM,
+    );
+    let labels = model.dofs();
+    let at = |l| crate::formats::uff_write::node_direction(l);
+    let mut sites: Vec<(String, (i64, i64))> = model
+        .sensors()
+        .iter()
+        .map(|s| (s.name.clone(), at(s.at.label(labels))))
+        .collect();
+    sites.extend(
+        model
+            .excitation()
+            .iter()
+            .map(|x| (x.name.clone(), at(x.at.label(labels)))),
+    );
+    Ok(RawRun {
+        record,
+        oversample,
+        dwell_s,
+        settle_s,
+        sigmas,
+        sites,
+        seconds: t.elapsed().as_secs_f64(),
+    })
+}
+
+/// Mixed into the test's seed for the raw records' noise, so that it is not the stream of any
+/// sweep's harmonics.
+pub const RAW_SEED_STREAM: u64 = 0x7261_775f_7265_6373;
 
 /// What the force controller did along one sweep.
 #[derive(Debug, Clone, Copy, PartialEq)]
