@@ -28,21 +28,7 @@ fn raw_records_calibrate_like_harmonic_data() {
         &p("raw.csv"),
     ]);
     assert_eq!(rc, 0, "{out}{err}");
-    // The truth: k3 of the model, ζ of mode 2 (the z-bending mode the shaker drives) from
-    // the modes of the same model.
-    let (rc, out, err) = nlsim(&["modes", "ecl_beam", "--count", "2", "--out", &p("m.csv")]);
-    assert_eq!(rc, 0, "{out}{err}");
-    let modes = std::fs::read_to_string(p("m.csv")).unwrap();
-    let zeta: f64 = modes
-        .lines()
-        .nth(2)
-        .unwrap()
-        .split(',')
-        .nth(3)
-        .unwrap()
-        .parse()
-        .unwrap();
-    let truth = [("tip_spring.k3", 6e9), ("mode2.zeta", zeta)];
+    let truth = [("tip_spring.k3", 6e9), ("mode2.zeta", ecl_driven_zeta(&d))];
     noisy_copy(&p("raw.csv"), &p("noisy.csv"), 45);
     for (records, data) in [("noisy.csv", "noisy-h.csv"), ("raw.csv", "raw-h.csv")] {
         let (rc, out, err) = nlsim(&["harmonics", "ecl_beam", &p(records), "--out", &p(data)]);
@@ -104,6 +90,31 @@ fn raw_records_calibrate_like_harmonic_data() {
         "{out}"
     );
     assert!(out.contains("not settled"), "{out}");
+}
+
+/// The truth of the ECL beam's calibrations: `ζ` of mode 2 (the z-bending mode the shaker
+/// drives), from `nlsim modes` of the same model (written into `dir`).
+pub(super) fn ecl_driven_zeta(dir: &Path) -> f64 {
+    let m = dir.join("m.csv");
+    let (rc, out, err) = nlsim(&[
+        "modes",
+        "ecl_beam",
+        "--count",
+        "2",
+        "--out",
+        m.to_str().unwrap(),
+    ]);
+    assert_eq!(rc, 0, "{out}{err}");
+    let modes = std::fs::read_to_string(m).unwrap();
+    modes
+        .lines()
+        .nth(2)
+        .unwrap()
+        .split(',')
+        .nth(3)
+        .unwrap()
+        .parse()
+        .unwrap()
 }
 
 /// Writes the records of `nlsim simulate --out raw` (the drive `shaker`, sensors `tip` and

@@ -44,18 +44,7 @@ fn virtual_raw_records_calibrate_within_their_bounds() {
     assert_eq!(rc, 0, "{out}{err}");
     assert!(out.contains("7 of 7 dwells settled"), "{out}");
     assert!(out.contains("sweep 'up' (up): 7 steps"), "{out}");
-    let (rc, out, err) = nlsim(&["modes", "ecl_beam", "--count", "2", "--out", &p("m.csv")]);
-    assert_eq!(rc, 0, "{out}{err}");
-    let modes = std::fs::read_to_string(p("m.csv")).unwrap();
-    let zeta: f64 = modes
-        .lines()
-        .nth(2)
-        .unwrap()
-        .split(',')
-        .nth(3)
-        .unwrap()
-        .parse()
-        .unwrap();
+    let zeta = super::harmonics::ecl_driven_zeta(&d);
     let (rc, out, err) = nlsim(&[
         "calibrate",
         "ecl_beam",
