@@ -75,7 +75,8 @@ fn virtual_raw_records_calibrate_within_their_bounds() {
 }
 
 /// The same noise-free raw records as CSV, HDF5 and universal file (`--raw` overriding the
-/// file's `[raw] out`) give the same harmonics (to the CSV's nine digits), the voltage-only
+/// file's `[raw] out`; steps too short to settle, which the summary warns of) give the same
+/// harmonics (to the CSV's nine digits), the voltage-only
 /// record (`record = "voltage"`) gives the test data's voltage harmonics exactly (the
 /// generator's own signal) with `nlsim harmonics --record voltage`, and pyuff reads the
 /// universal file: a dataset per signal, its values the CSV's to the written precision.
@@ -92,6 +93,12 @@ fn raw_records_read_alike_in_every_format() {
         let (rc, out, err) = nlsim(&["test", "ecl_beam", &p("test.toml"), "--raw", &p(raw)]);
         assert_eq!(rc, 0, "{raw}: {out}{err}");
         assert!(!d.join("ignored.csv").exists());
+        // 4-s steps: shorter than the 6.2 s the driven mode needs to settle to 1e-4.
+        assert!(
+            out.contains("warning: the raw records' steps are measured 3.8 s after their start")
+                && out.contains("lengthen the dwell to 8."),
+            "{out}"
+        );
         // The step table beside each: r_steps.csv.
         let steps = "r_steps.csv";
         let h = format!("h-{raw}.csv");

@@ -139,12 +139,20 @@ impl TestRun {
         let rec = &raw.record;
         let r = &self.request;
         let steps = crate::commands::test::request::raw_steps_path(&rr.out);
+        // The settling each step's measured window leaves out (at most the dwell less 4
+        // periods).
+        let waited = rec
+            .steps
+            .iter()
+            .map(|s| (s.measured - s.start) as f64 / rec.rate_hz)
+            .fold(f64::INFINITY, f64::min);
         let dwell = format!(
             "{} s per step, measured after {:.1} s of settling (the slowest mode near the band \
-             to {:e})",
+             to {:e} in {:.1} s)",
             raw.dwell_s,
-            raw.settle_s.min(raw.dwell_s),
+            waited,
             crate::commands::test::request::DEFAULT_SETTLE,
+            raw.settle_s,
         );
         let sig = |name: &str, s: f64| format!("{name} {s:.2e}");
         let mut noise: Vec<String> = rec
@@ -169,6 +177,22 @@ impl TestRun {
             noise.join(", "),
             steps.display()
         )];
+        if waited < 0.999 * raw.settle_s {
+            v.push(format!(
+                "warning: the raw records' steps are measured {waited:.1} s after their start, \
+                 before the slowest mode near the band has settled to {:e} ({:.1} s): lengthen \
+                 the dwell to {:.1} s or more, or expect transients in the harmonics",
+                crate::commands::test::request::DEFAULT_SETTLE,
+                raw.settle_s,
+                raw.settle_s
+                    + crate::commands::test::request::DEFAULT_MEASURED_PERIODS
+                        / rec
+                            .steps
+                            .iter()
+                            .map(|s| s.frequency_hz)
+                            .fold(f64::INFINITY, f64::min)
+            ));
+        }
         if let Some(why) = &rec.stopped {
             v.push(format!(
                 "warning: the raw records stop short at {:.3} s ({}): {why}",
