@@ -68,36 +68,24 @@ pub fn shaker_plant(plant: &Plant, drive: &str, shaker: &Shaker) -> Result<Plant
 
     // The structure in real states: per diagonal state one real state where its inputs are
     // real up to one phase (a real pole), else two (the real and imaginary parts).
-    struct Real {
-        s: usize,
-        // (column, rotation) of the real part, and the imaginary part's column if kept.
-        re: usize,
-        im: Option<usize>,
-        rot: c64,
-    }
-    let mut real = Vec::with_capacity(ns);
+    // Per state: the column of its real part, that of its imaginary part if kept, and the
+    // rotation that makes its inputs real.
+    let mut real: Vec<(usize, Option<usize>, c64)> = Vec::with_capacity(ns);
     let mut nr = 0;
     for s in 0..ns {
         let big = (0..np)
             .map(|q| sys.input[(s, q)])
             .max_by(|a, b| a.norm().total_cmp(&b.norm()))
             .unwrap_or(c64::new(0.0, 0.0));
-        let rot = if big.norm() > 0.0 {
-            big.conj() / big.norm()
+        let scale = big.norm();
+        let rot = if scale > 0.0 {
+            big.conj() / scale
         } else {
             c64::new(1.0, 0.0)
         };
-        let scale = (0..np)
-            .map(|q| sys.input[(s, q)].norm())
-            .fold(0.0, f64::max);
         let one = sys.poles[s].im == 0.0
             && (0..np).all(|q| (sys.input[(s, q)] * rot).im.abs() <= 1e-13 * scale);
-        real.push(Real {
-            s,
-            re: nr,
-            im: (!one).then_some(nr + 1),
-            rot,
-        });
+        real.push((nr, (!one).then_some(nr + 1), rot));
         nr += if one { 1 } else { 2 };
     }
     let inductive = shaker.inductance > 0.0;
@@ -112,27 +100,27 @@ pub fn shaker_plant(plant: &Plant, drive: &str, shaker: &Shaker) -> Result<Plant
     let mut a = Mat::<f64>::zeros(n, n);
     let mut b = Mat::<f64>::zeros(n, nq);
     let mut cs = Mat::<f64>::zeros(np, n);
-    for r in &real {
+    for (s, &(re, im_col, rot)) in real.iter().enumerate() {
         // z' = rot·z: ż' = λ z' + rot b u, y = Σ w Re(c/rot · z').
-        let lam = sys.poles[r.s];
-        let w = sys.weights[r.s];
-        a[(r.re, r.re)] = lam.re;
-        if let Some(im) = r.im {
-            a[(r.re, im)] = -lam.im;
-            a[(im, r.re)] = lam.im;
+        let lam = sys.poles[s];
+        let w = sys.weights[s];
+        a[(re, re)] = lam.re;
+        if let Some(im) = im_col {
+            a[(re, im)] = -lam.im;
+            a[(im, re)] = lam.im;
             a[(im, im)] = lam.re;
         }
         for q in 0..np {
-            let bq = sys.input[(r.s, q)] * r.rot;
-            b[(r.re, q)] = bq.re;
-            if let Some(im) = r.im {
+            let bq = sys.input[(s, q)] * rot;
+            b[(re, q)] = bq.re;
+            if let Some(im) = im_col {
                 b[(im, q)] = bq.im;
             }
         }
         for p in 0..np {
-            let cp = sys.output[(p, r.s)] * r.rot.conj() * w;
-            cs[(p, r.re)] = cp.re;
-            if let Some(im) = r.im {
+            let cp = sys.output[(p, s)] * rot.conj() * w;
+            cs[(p, re)] = cp.re;
+            if let Some(im) = im_col {
                 cs[(p, im)] = -cp.im;
             }
         }
@@ -217,8 +205,23 @@ pub fn shaker_plant(plant: &Plant, drive: &str, shaker: &Shaker) -> Result<Plant
     }
 
     let (poles, weights, u, w) = diagonalise(&a, drive)?;
-    let input_c = mul_cr(&w, &b);
-    let output_c = mul_rc(&c, &u);
+    // Sequential products: the plant is the same bits whatever the thread count.
+    let product = |l: &Mat<c64>, r: &Mat<c64>| {
+        let mut out = Mat::<c64>::zeros(l.nrows(), r.ncols());
+        faer::linalg::matmul::matmul(
+            out.as_mut(),
+            faer::Accum::Replace,
+            l.as_ref(),
+            r.as_ref(),
+            c64::new(1.0, 0.0),
+            faer::Par::Seq,
+        );
+        out
+    };
+    let complex =
+        |m: &Mat<f64>| Mat::from_fn(m.nrows(), m.ncols(), |i, j| c64::new(m[(i, j)], 0.0));
+    let input_c = product(&w, &complex(&b));
+    let output_c = product(&complex(&c), &u);
     let keep: Vec<usize> = (0..poles.len()).filter(|&j| poles[j].im >= 0.0).collect();
     let k = keep.len();
     let mut system = ModalSystem {
@@ -361,18 +364,6 @@ fn balance(a: &Mat<f64>) -> Vec<f64> {
         }
     }
     s
-}
-
-fn mul_cr(a: &Mat<c64>, b: &Mat<f64>) -> Mat<c64> {
-    Mat::from_fn(a.nrows(), b.ncols(), |i, j| {
-        (0..a.ncols()).map(|k| a[(i, k)] * b[(k, j)]).sum()
-    })
-}
-
-fn mul_rc(a: &Mat<f64>, b: &Mat<c64>) -> Mat<c64> {
-    Mat::from_fn(a.nrows(), b.ncols(), |i, j| {
-        (0..a.ncols()).map(|k| b[(k, j)] * a[(i, k)]).sum()
-    })
 }
 
 /// How the raw records are sampled.

@@ -64,6 +64,20 @@ pub struct NlsimShaker {
     pub stinger_stiffness: f64,
 }
 
+impl From<Shaker> for NlsimShaker {
+    fn from(s: Shaker) -> Self {
+        NlsimShaker {
+            armature_mass: s.armature_mass,
+            suspension_stiffness: s.suspension_stiffness,
+            suspension_damping: s.suspension_damping,
+            resistance: s.resistance,
+            inductance: s.inductance,
+            force_constant: s.force_constant,
+            stinger_stiffness: s.stinger_stiffness,
+        }
+    }
+}
+
 impl From<NlsimShaker> for Shaker {
     fn from(s: NlsimShaker) -> Self {
         Shaker {
@@ -110,7 +124,6 @@ pub struct NlsimCalibrationInfo {
 #[unsafe(no_mangle)]
 pub extern "C" fn nlsim_calibration_settings_default() -> NlsimCalibrationSettings {
     let d = CalibrationConfig::default();
-    let sh = Shaker::default();
     NlsimCalibrationSettings {
         seed: d.seed,
         lhs_samples: d.lhs_samples,
@@ -118,15 +131,7 @@ pub extern "C" fn nlsim_calibration_settings_default() -> NlsimCalibrationSettin
         folds: d.folds,
         max_iterations: d.lm.max_iterations,
         model_shaker: 0,
-        shaker: NlsimShaker {
-            armature_mass: sh.armature_mass,
-            suspension_stiffness: sh.suspension_stiffness,
-            suspension_damping: sh.suspension_damping,
-            resistance: sh.resistance,
-            inductance: sh.inductance,
-            force_constant: sh.force_constant,
-            stinger_stiffness: sh.stinger_stiffness,
-        },
+        shaker: Shaker::default().into(),
     }
 }
 
