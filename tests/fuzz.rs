@@ -721,6 +721,11 @@ fn fuzz_inner() {
          [[param]]\nname = \"tip.k3\"\nlower = 1e8\nupper = 1e11\nspacing = \"log\"\n\n\
          [lm]\nmax_iterations = 100\n"
             .to_string(),
+        // A modal model's shape entry and residual term (issue 44 part 1).
+        "model = \"examples/models/ecl_modal.toml\"\ndata = \"test.csv\"\nmodes = 4\n\n\
+         [[param]]\nname = \"mode2.shape:21:uz\"\nlower = -3.0\nupper = -1.0\n\n\
+         [[param]]\nname = \"residual:shaker:tip\"\nlower = 0.0\nupper = 1e-5\n"
+            .to_string(),
     ];
     let cal_path = dir.join("cal.toml");
     panics.extend(survive("calibration file", 10000 * scale(), |_| {

@@ -404,6 +404,8 @@ fn is_linear_part_param(p: &Param) -> bool {
             | Param::ModalDamping(_)
             | Param::ModalMass(_)
             | Param::StiffnessScale
+            | Param::Residual(..)
+            | Param::ModeShape { .. }
     )
 }
 

@@ -18,8 +18,9 @@ use std::f64::consts::PI;
 #[derive(Debug, Clone)]
 ///
 /// Its linear parameters ([`Param::ModalFrequency`], [`Param::ModalDamping`],
-/// [`Param::ModalMass`], [`Param::StiffnessScale`]) are read and set through
-/// [`Parameterized`]; the fields stay consistent with them.
+/// [`Param::ModalMass`], [`Param::StiffnessScale`], and a test-based modal model's measured
+/// residual flexibilities [`Param::Residual`]) are read and set through [`Parameterized`]; the
+/// fields stay consistent with them.
 pub struct LinearPart {
     /// Retained eigenvalues `ω_r²` (rad²/s²), the stiffness scale included.
     pub(crate) w2: Vec<f64>,
@@ -35,6 +36,39 @@ pub struct LinearPart {
     pub(crate) kappa: f64,
     /// Modal masses `m_r` (kg, nominal 1): column `r` of `Φ_P` is `Φ_P0,r / √m_r`.
     pub(crate) modal_mass: Vec<f64>,
+    /// The measured residual flexibilities (a test-based modal model's), each with its
+    /// parameter: a share of `D` (`D_ab = D_ba`) that is set as a whole.
+    pub(crate) measured: Vec<MeasuredTerm>,
+    /// The mode-shape entries of a test-based modal model's points, each with its
+    /// parameter (`modeN.shape:POINT`).
+    pub(crate) shapes: Vec<ShapeTerm>,
+}
+
+/// One mode-shape entry `φ_pd` of a [`LinearPart`]: the point's weight on modal coordinate
+/// `d`. Port `i` on the point with weight `w` has `Φ_P(i, r) = … + w V_dr φ_pd / √m_r`, with
+/// `V` the reduction's eigenvectors (unit vectors up to sign and order for a modal model).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct ShapeTerm {
+    /// `modeN.shape:POINT`.
+    param: Param,
+    /// `(port, weight)` of the ports on the point.
+    ports: Vec<(usize, f64)>,
+    /// `V_dr`, one per retained mode.
+    dir: Vec<f64>,
+    /// Its current value (m/√kg).
+    value: f64,
+}
+
+/// One measured residual flexibility of a [`LinearPart`].
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct MeasuredTerm {
+    /// `residual:A:B`.
+    param: Param,
+    /// Port indices (`a == b` on a driving point).
+    a: usize,
+    b: usize,
+    /// Its current flexibility (m/N), included in `D` (divided by the stiffness scale there).
+    flexibility: f64,
 }
 
 /// A first-order change of the linear part's data with respect to one parameter that acts
@@ -132,6 +166,17 @@ impl LinearPart {
             residual: reduced.residual.clone(),
             kappa: 1.0,
             modal_mass: vec![1.0; m],
+            measured: reduced
+                .measured
+                .iter()
+                .map(|t| MeasuredTerm {
+                    param: Param::residual(&reduced.ports[t.a].name, &reduced.ports[t.b].name),
+                    a: t.a,
+                    b: t.b,
+                    flexibility: t.flexibility,
+                })
+                .collect(),
+            shapes: shape_terms(reduced),
         })
     }
 
@@ -189,6 +234,26 @@ impl LinearPart {
             }
             _ => Err(unknown_param(p, &self.parameters())),
         }
+    }
+
+    /// The measured residual term of parameter `p` (either spelling of the pair).
+    fn term_of(&self, p: &Param) -> Result<usize> {
+        let Param::Residual(a, b) = p else {
+            return Err(unknown_param(p, &self.parameters()));
+        };
+        let want = Param::residual(a, b);
+        self.measured
+            .iter()
+            .position(|t| t.param == want)
+            .ok_or_else(|| unknown_param(p, &self.parameters()))
+    }
+
+    /// The shape entry of parameter `p`.
+    fn shape_of(&self, p: &Param) -> Result<usize> {
+        self.shapes
+            .iter()
+            .position(|t| t.param == *p)
+            .ok_or_else(|| unknown_param(p, &self.parameters()))
     }
 
     /// Number of retained modes.
@@ -272,8 +337,10 @@ impl LinearPart {
     }
 
     /// `∂H/∂θ` (m/N per unit of θ) for linear parameter `p` ([`Param::ModalFrequency`],
-    /// [`Param::ModalDamping`], [`Param::ModalMass`], [`Param::StiffnessScale`]) at `omega`
-    /// (rad/s).
+    /// [`Param::ModalDamping`], [`Param::ModalMass`], [`Param::StiffnessScale`],
+    /// [`Param::Residual`]) at `omega` (rad/s). A measured residual flexibility enters `H`
+    /// as `D/κ`, so its derivative is `(E_ab + E_ba)/κ` (one `E_aa/κ` on a driving point),
+    /// independent of `ω`.
     pub fn receptance_dparam(
         &self,
         p: &Param,
@@ -312,6 +379,33 @@ impl LinearPart {
                     dz[(r, r)] = c64::new(self.w2[r] / self.kappa, 0.0);
                 }
                 dd = -1.0 / self.kappa;
+            }
+            Param::ModeShape { .. } => {
+                // ∂Φ_P = v uᵀ (v: the point's port weights, u_r = V_dr/√m_r):
+                // ∂H = v_rows uᵀ Z⁻¹ Φ_colsᵀ + Φ_rows Z⁻¹ u v_colsᵀ.
+                let t = &self.shapes[self.shape_of(p)?];
+                let weight = |port: usize| -> f64 {
+                    t.ports.iter().filter(|x| x.0 == port).map(|x| x.1).sum()
+                };
+                let u: Vec<f64> = (0..m)
+                    .map(|r| t.dir[r] / self.modal_mass[r].sqrt())
+                    .collect();
+                let z = self.solve(omega);
+                let x = self.zinv_phi(&z, cols);
+                let y = self.zinv_phi(&z, rows);
+                let ux =
+                    |mat: &Mat<c64>, j: usize| -> c64 { (0..m).map(|r| mat[(r, j)] * u[r]).sum() };
+                return Ok(Mat::from_fn(rows.len(), cols.len(), |i, j| {
+                    ux(&x, j) * weight(rows[i]) + ux(&y, i) * weight(cols[j])
+                }));
+            }
+            Param::Residual(..) => {
+                let t = &self.measured[self.term_of(p)?];
+                let (a, b, k) = (t.a, t.b, 1.0 / self.kappa);
+                return Ok(Mat::from_fn(rows.len(), cols.len(), |i, j| {
+                    let hit = (rows[i] == a && cols[j] == b) || (rows[i] == b && cols[j] == a);
+                    c64::new(if hit { k } else { 0.0 }, 0.0)
+                }));
             }
             _ => return Err(unknown_param(p, &self.parameters())),
         }
@@ -404,16 +498,21 @@ impl LinearPart {
 }
 
 /// `modeN.f` (Hz), `modeN.zeta` and `modeN.m` (kg) of every retained mode, then
-/// `stiffness_scale`.
+/// `stiffness_scale`, then a test-based modal model's measured residual flexibilities
+/// `residual:A:B` (m/N, the model's order) and mode-shape entries `modeN.shape:POINT`
+/// (m/√kg; mode by mode, points in the model's order).
 impl Parameterized for LinearPart {
     fn parameters(&self) -> Vec<Param> {
-        let mut p = Vec::with_capacity(2 * self.n_modes() + 1);
+        let mut p =
+            Vec::with_capacity(3 * self.n_modes() + 1 + self.measured.len() + self.shapes.len());
         for r in 0..self.n_modes() {
             p.push(Param::ModalFrequency(r));
             p.push(Param::ModalDamping(r));
             p.push(Param::ModalMass(r));
         }
         p.push(Param::StiffnessScale);
+        p.extend(self.measured.iter().map(|t| t.param.clone()));
+        p.extend(self.shapes.iter().map(|t| t.param.clone()));
         p
     }
 
@@ -423,6 +522,8 @@ impl Parameterized for LinearPart {
             Param::ModalDamping(_) => Ok(self.zeta(self.mode_of(p)?)),
             Param::ModalMass(_) => Ok(self.modal_mass[self.mode_of(p)?]),
             Param::StiffnessScale => Ok(self.kappa),
+            Param::Residual(..) => Ok(self.measured[self.term_of(p)?].flexibility),
+            Param::ModeShape { .. } => Ok(self.shapes[self.shape_of(p)?].value),
             _ => Err(unknown_param(p, &self.parameters())),
         }
     }
@@ -478,10 +579,61 @@ impl Parameterized for LinearPart {
                 self.residual = &self.residual * faer::Scale(1.0 / ratio);
                 self.kappa = value;
             }
+            Param::Residual(..) => {
+                let i = self.term_of(p)?;
+                let t = &mut self.measured[i];
+                if t.a == t.b && value < 0.0 {
+                    return Err(Error::InvalidParameter {
+                        name: p.to_string(),
+                        value,
+                        reason: "a driving-point residual flexibility is the static share of \
+                                 the modes above the band, ≥ 0"
+                            .into(),
+                    });
+                }
+                let delta = (value - t.flexibility) / self.kappa;
+                self.residual[(t.a, t.b)] += delta;
+                if t.a != t.b {
+                    self.residual[(t.b, t.a)] += delta;
+                }
+                t.flexibility = value;
+            }
+            Param::ModeShape { .. } => {
+                let i = self.shape_of(p)?;
+                let t = &mut self.shapes[i];
+                let delta = value - t.value;
+                for &(port, w) in &t.ports {
+                    for r in 0..self.w2.len() {
+                        self.phi[(port, r)] += w * t.dir[r] * delta / self.modal_mass[r].sqrt();
+                    }
+                }
+                t.value = value;
+            }
             _ => return Err(unknown_param(p, &self.parameters())),
         }
         Ok(())
     }
+}
+
+/// The shape-entry parameters of a reduced test-based modal model: one per point and modal
+/// coordinate, mode by mode (none for an FE model).
+fn shape_terms(reduced: &ReducedModel) -> Vec<ShapeTerm> {
+    let v = &reduced.modes.vectors;
+    let mut out = Vec::with_capacity(reduced.points.len() * v.nrows());
+    for d in 0..v.nrows() {
+        for pt in &reduced.points {
+            out.push(ShapeTerm {
+                param: Param::ModeShape {
+                    mode: d,
+                    point: pt.label,
+                },
+                ports: pt.ports.clone(),
+                dir: (0..v.ncols()).map(|r| v[(d, r)]).collect(),
+                value: pt.shape.iter().find(|s| s.0 == d).map_or(0.0, |s| s.1),
+            });
+        }
+    }
+    out
 }
 
 #[cfg(test)]
@@ -501,7 +653,32 @@ mod tests {
             phi: Mat::from_fn(3, 2, |p, r| 0.3 + 0.2 * p as f64 - 0.5 * r as f64),
             residual: Mat::from_fn(3, 3, |a, b| 1e-4 / (1.0 + (a + b) as f64)),
             kappa: 1.0,
-            modal_mass: vec![1.0; 2],
+            // A calibrated modal mass on mode 2 (`phi` holds its scaled column).
+            modal_mass: vec![1.0, 1.7],
+            measured: vec![
+                MeasuredTerm {
+                    param: Param::residual("p0", "p2"),
+                    a: 0,
+                    b: 2,
+                    flexibility: 1e-4 / 3.0,
+                },
+                MeasuredTerm {
+                    param: Param::residual("p2", "p2"),
+                    a: 2,
+                    b: 2,
+                    flexibility: 1e-4 / 3.0,
+                },
+            ],
+            shapes: vec![ShapeTerm {
+                param: Param::ModeShape {
+                    mode: 0,
+                    point: "7:uz".parse().unwrap(),
+                },
+                // A drive-and-sensor point (ports 0, 2) and a relative element's second end.
+                ports: vec![(0, 1.0), (2, 1.0), (1, -1.0)],
+                dir: vec![0.6, -0.8],
+                value: 0.3,
+            }],
         }
     }
 
@@ -524,7 +701,14 @@ mod tests {
                     Param::ModalDamping(0),
                     Param::ModalMass(1),
                     Param::StiffnessScale,
+                    Param::residual("p2", "p0"),
+                    Param::residual("p2", "p2"),
+                    Param::ModeShape {
+                        mode: 0,
+                        point: "7:uz".parse().unwrap(),
+                    },
                 ] {
+                    // H is linear in a residual term, so its step needs no scaling.
                     let eps = 1e-6;
                     // By hand, independently of `set_param`.
                     let by_hand = |sign: f64| {
@@ -546,6 +730,27 @@ mod tests {
                                     q.phi[(i, r)] *= f;
                                 }
                                 q.modal_mass[r] = m + sign * eps;
+                            }
+                            Param::ModeShape { .. } => {
+                                // Φ_P(i, r) = Σ_ports w V_dr φ / √m_r, by hand.
+                                let t = &mut q.shapes[0];
+                                t.value += sign * eps;
+                                for &(port, w) in &t.ports.clone() {
+                                    for r in 0..2 {
+                                        q.phi[(port, r)] +=
+                                            w * t.dir[r] * sign * eps / q.modal_mass[r].sqrt();
+                                    }
+                                }
+                            }
+                            Param::Residual(..) => {
+                                let i = q.term_of(&p).unwrap();
+                                let t = &mut q.measured[i];
+                                t.flexibility += sign * eps;
+                                let (a, b) = (t.a, t.b);
+                                q.residual[(a, b)] += sign * eps / kappa;
+                                if a != b {
+                                    q.residual[(b, a)] += sign * eps / kappa;
+                                }
                             }
                             _ => {
                                 let k = (kappa + sign * eps) / kappa;

@@ -1674,7 +1674,7 @@ impl HbSystem {
                 p => {
                     return Err(Error::invalid(
                         format!("modal sensitivity to {p}"),
-                        "supported for element parameters, modeN.f, modeN.zeta and                          stiffness_scale",
+                        "supported for element parameters, modeN.f, modeN.zeta and stiffness_scale",
                     ));
                 }
             }
@@ -1840,7 +1840,8 @@ impl HbSystem {
 }
 
 /// Element law parameters (element order), then the linear ones of [`LinearPart`]
-/// (`modeN.f`, `modeN.zeta` of every retained mode, `stiffness_scale`).
+/// (`modeN.f`, `modeN.zeta`, `modeN.m` of every retained mode, `stiffness_scale`, a modal
+/// model's measured residual flexibilities `residual:A:B`).
 impl Parameterized for HbSystem {
     fn parameters(&self) -> Vec<Param> {
         let mut p = element_parameters(&self.elements);
@@ -1857,7 +1858,9 @@ impl Parameterized for HbSystem {
             Param::ModalFrequency(_)
             | Param::ModalDamping(_)
             | Param::ModalMass(_)
-            | Param::StiffnessScale => self.linear.param(p),
+            | Param::StiffnessScale
+            | Param::Residual(..)
+            | Param::ModeShape { .. } => self.linear.param(p),
             _ => Err(unknown_param(p, &self.parameters())),
         }
     }
@@ -1884,7 +1887,9 @@ impl Parameterized for HbSystem {
             Param::ModalFrequency(_)
             | Param::ModalDamping(_)
             | Param::ModalMass(_)
-            | Param::StiffnessScale => {
+            | Param::StiffnessScale
+            | Param::Residual(..)
+            | Param::ModeShape { .. } => {
                 self.linear.set_param(p, value)?;
                 self.stamp = next_stamp();
                 Ok(())

@@ -329,6 +329,29 @@ impl Model {
         &self.points
     }
 
+    /// The ways coordinate `c` is made of the declared points ([`Model::add_point`]): one
+    /// point (`[(i, 1)]`) or the difference of two (`[(i, 1), (j, −1)]`, as a relative element
+    /// between points is built), each as `(index into` [`Model::points`]`, sign)`, compared
+    /// exactly (the same arithmetic on the same numbers). Empty when none matches; more than
+    /// one when points move alike in every mode.
+    pub fn point_terms(&self, c: &Coupling) -> Vec<Vec<(usize, f64)>> {
+        let pts = &self.points;
+        let mut found = Vec::new();
+        for (i, (_, a)) in pts.iter().enumerate() {
+            if a == c {
+                found.push(vec![(i, 1.0)]);
+            }
+        }
+        for (i, (_, a)) in pts.iter().enumerate() {
+            for (j, (_, b)) in pts.iter().enumerate() {
+                if i != j && Coupling::difference(a, b).as_ref() == Some(c) {
+                    found.push(vec![(i, 1.0), (j, -1.0)]);
+                }
+            }
+        }
+        found
+    }
+
     /// The site a label names: a declared point, on a modal model its modal coordinate
     /// `modeN` (mode `N`, 1-based), else the DOF with that label.
     pub fn site(&self, label: &str) -> Result<Site> {

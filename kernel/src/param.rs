@@ -37,12 +37,14 @@ use std::str::FromStr;
 /// | [`Param::ModalFrequency`] | `modeN.f` | Hz |
 /// | [`Param::ModalDamping`] | `modeN.zeta` | 1 (fraction of critical) |
 /// | [`Param::ModalMass`] | `modeN.m` | kg (1 for mass-normalised shapes) |
+/// | [`Param::ModeShape`] | `modeN.shape:POINT` (`mode1.shape:31:uz`) | m/√kg |
 /// | [`Param::StiffnessScale`] | `stiffness_scale` | 1 (factor on every stiffness) |
 /// | [`Param::GroupStiffness`] | `group:NAME.k_scale` | 1 (factor on the group's K) |
 /// | [`Param::GroupMass`] | `group:NAME.m_scale` | 1 (factor on the group's M) |
 /// | [`Param::BoundarySpring`] | `spring:NODE:COMP.k` | N/m (N m/rad on a rotation) |
 /// | [`Param::InputGain`] | `input_gain` | per recorded unit: N/N, N/V, or V/V into a modelled shaker |
 /// | [`Param::SensorGain`] | `sensor_gain:NAME` | 1 (recorded per true response) |
+/// | [`Param::Residual`] | `residual:PORT:PORT` | m/N |
 ///
 /// Element names may not take the form `modeN` (see
 /// [`NonlinearElement::new`](crate::NonlinearElement::new)), so every text has one meaning.
@@ -66,6 +68,17 @@ pub enum Param {
     /// model is a modal model whose shapes are not known in absolute scale (experimental
     /// modal analysis: the modal constant `1/m_r` at a drive point).
     ModalMass(usize),
+    /// The mode-shape entry `φ_pr` (m/√kg, mass-normalised, as [`crate::Model::add_point`]
+    /// takes it) of mode `mode` (0-based, the file's order) at point `point` of a test-based
+    /// modal model: every port on the point (its drives, sensors and elements, a relative
+    /// element with its sign) moves with it. With a calibrated modal mass the port sees
+    /// `φ_pr / √m_r`.
+    ModeShape {
+        /// Mode, 0-based.
+        mode: usize,
+        /// The point's label.
+        point: DofLabel,
+    },
     /// A factor on the whole linear stiffness: `K → s K` (every `ω_r² → s ω_r²`, residual
     /// flexibility `D → D / s`).
     StiffnessScale,
@@ -86,6 +99,12 @@ pub enum Param {
     /// `s` times the true response (a sensor's sensitivity error). A property of the test
     /// data, like [`Param::InputGain`].
     SensorGain(String),
+    /// The measured residual flexibility `D_ab = D_ba` (m/N) between ports `a` and `b` (element,
+    /// excitation or sensor names; `a == b` on a driving point) of a test-based modal model:
+    /// the static share of the modes above the test's band (thesis eq. 10, measured), added to
+    /// the receptance `H = Φ_P Z⁻¹ Φ_Pᵀ + D`. The pair is unordered: [`Param::residual`] and
+    /// the text form hold it with `a ≤ b`.
+    Residual(String, String),
 }
 
 impl Param {
@@ -94,6 +113,17 @@ impl Param {
         Param::Element {
             element: element.into(),
             param: param.into(),
+        }
+    }
+
+    /// The residual flexibility between ports `a` and `b`, the pair held in order (`a ≤ b`)
+    /// so that both spellings name one parameter.
+    pub fn residual(a: impl Into<String>, b: impl Into<String>) -> Self {
+        let (a, b) = (a.into(), b.into());
+        if a <= b {
+            Param::Residual(a, b)
+        } else {
+            Param::Residual(b, a)
         }
     }
 
@@ -114,7 +144,9 @@ impl Param {
             | Param::GroupStiffness(_)
             | Param::GroupMass(_) => "1",
             Param::ModalMass(_) => "kg",
+            Param::ModeShape { .. } => "m/√kg",
             Param::BoundarySpring(_) => "N/m",
+            Param::Residual(..) => "m/N",
             Param::InputGain => "per recorded unit",
             Param::SensorGain(_) => "1",
         }
@@ -128,12 +160,15 @@ impl fmt::Display for Param {
             Param::ModalFrequency(r) => write!(f, "mode{}.f", r + 1),
             Param::ModalDamping(r) => write!(f, "mode{}.zeta", r + 1),
             Param::ModalMass(r) => write!(f, "mode{}.m", r + 1),
+            Param::ModeShape { mode, point } => write!(f, "mode{}.shape:{point}", mode + 1),
             Param::StiffnessScale => f.write_str("stiffness_scale"),
             Param::GroupStiffness(g) => write!(f, "group:{g}.k_scale"),
             Param::GroupMass(g) => write!(f, "group:{g}.m_scale"),
             Param::BoundarySpring(d) => write!(f, "spring:{d}.k"),
             Param::InputGain => f.write_str("input_gain"),
             Param::SensorGain(s) => write!(f, "sensor_gain:{s}"),
+            Param::Residual(a, b) if a <= b => write!(f, "residual:{a}:{b}"),
+            Param::Residual(a, b) => write!(f, "residual:{b}:{a}"),
         }
     }
 }
@@ -148,8 +183,8 @@ impl FromStr for Param {
                 format!("parameter '{s}'"),
                 format!(
                     "{why}; expected ELEMENT.PARAM (tip.k3), modeN.f, modeN.zeta, \
-                     modeN.m, stiffness_scale, group:NAME.k_scale, group:NAME.m_scale, spring:NODE:COMP.k, \
-                     input_gain or sensor_gain:NAME"
+                     modeN.m, modeN.shape:POINT, stiffness_scale, group:NAME.k_scale, group:NAME.m_scale, spring:NODE:COMP.k, \
+                     residual:PORT:PORT, input_gain or sensor_gain:NAME"
                 ),
             )
         };
@@ -164,6 +199,24 @@ impl FromStr for Param {
                 return Err(bad("a sensor name has letters, digits, '_' and '-' only"));
             }
             return Ok(Param::SensorGain(sensor.into()));
+        }
+        if let Some(pair) = s.strip_prefix("residual:") {
+            return match pair.split_once(':') {
+                Some((a, b)) if is_port_name(a) && is_port_name(b) => Ok(Param::residual(a, b)),
+                _ => Err(bad(
+                    "a residual flexibility names two ports, residual:PORT:PORT (element, \
+                     excitation or sensor names, a coupled element's coordinate as NAME[i])",
+                )),
+            };
+        }
+        // A point label holds no '.', so the first '.' after `modeN` splits a shape entry.
+        if let Some((head, point)) = s.split_once(".shape:")
+            && let Some(mode) = mode_number(head)
+        {
+            return Ok(Param::ModeShape {
+                mode,
+                point: point.parse()?,
+            });
         }
         let (head, tail) = s.rsplit_once('.').ok_or_else(|| bad("no '.'"))?;
         if let Some(group) = head.strip_prefix("group:") {
@@ -187,7 +240,7 @@ impl FromStr for Param {
                 "f" => Ok(Param::ModalFrequency(r)),
                 "zeta" => Ok(Param::ModalDamping(r)),
                 "m" => Ok(Param::ModalMass(r)),
-                _ => Err(bad("a mode has f, zeta and m")),
+                _ => Err(bad("a mode has f, zeta, m and shape:POINT")),
             };
         }
         if head.starts_with("mode") && head[4..].bytes().all(|b| b.is_ascii_digit()) {
@@ -200,6 +253,20 @@ impl FromStr for Param {
             return Err(bad("a parameter name has letters, digits and '_' only"));
         }
         Ok(Param::element(head, tail))
+    }
+}
+
+/// A port name: an element, excitation or sensor name, or a coupled element's coordinate
+/// `NAME[i]` (`i ≥ 1`).
+fn is_port_name(s: &str) -> bool {
+    match s.strip_suffix(']').and_then(|t| t.split_once('[')) {
+        Some((name, i)) => {
+            is_valid_name(name)
+                && !i.is_empty()
+                && !i.starts_with('0')
+                && i.bytes().all(|b| b.is_ascii_digit())
+        }
+        None => is_valid_name(s),
     }
 }
 
@@ -443,6 +510,16 @@ mod tests {
                 "spring:12:uz.k",
                 Param::BoundarySpring("12:uz".parse().unwrap()),
             ),
+            ("residual:accel:shaker", Param::residual("shaker", "accel")),
+            ("residual:joint[2]:tip", Param::residual("joint[2]", "tip")),
+            ("residual:tip:tip", Param::residual("tip", "tip")),
+            (
+                "mode2.shape:31:uz",
+                Param::ModeShape {
+                    mode: 1,
+                    point: "31:uz".parse().unwrap(),
+                },
+            ),
         ] {
             assert_eq!(s.parse::<Param>().unwrap(), p, "{s}");
             assert_eq!(p.to_string(), s);
@@ -459,8 +536,21 @@ mod tests {
             "a b.k3",
             "tip.",
             ".k3",
+            "residual:tip",
+            "residual:tip:",
+            "residual:a b:tip",
+            "residual:j[0]:tip",
+            "residual:j[]:tip",
+            "residual:a:b:c",
+            "mode1.shape:",
+            "mode1.shape:31",
+            "mode0.shape:31:uz",
         ] {
             assert!(bad.parse::<Param>().is_err(), "{bad:?} parsed");
         }
+        // Both spellings of a pair are one parameter, printed in order.
+        let swapped: Param = "residual:tip:accel".parse().unwrap();
+        assert_eq!(swapped, Param::residual("accel", "tip"));
+        assert_eq!(swapped.to_string(), "residual:accel:tip");
     }
 }

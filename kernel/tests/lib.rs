@@ -1002,9 +1002,24 @@ mod params {
             Just(Param::StiffnessScale),
             name().prop_map(Param::GroupStiffness),
             name().prop_map(Param::GroupMass),
-            (0u64..u64::MAX, comp).prop_map(|(n, c)| Param::BoundarySpring(DofLabel::new(n, c))),
+            (0u64..u64::MAX, comp.clone())
+                .prop_map(|(n, c)| Param::BoundarySpring(DofLabel::new(n, c))),
             Just(Param::InputGain),
             name().prop_map(Param::SensorGain),
+            (name(), name(), 0u32..4).prop_map(|(a, b, i)| {
+                // A coupled element's coordinate `NAME[i]` on one side.
+                if i == 0 {
+                    Param::residual(a, b)
+                } else {
+                    Param::residual(format!("{a}[{i}]"), b)
+                }
+            }),
+            (0usize..100_000, 0u64..u64::MAX, comp).prop_map(|(mode, n, c)| {
+                Param::ModeShape {
+                    mode,
+                    point: DofLabel::new(n, c),
+                }
+            }),
         ]
     }
 

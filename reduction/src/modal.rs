@@ -16,7 +16,7 @@
 
 use crate::eigen::{EigenConfig, EigenProgress, EigenSolver, ModeSelection, Modes};
 use faer::Mat;
-use nlsim_kernel::{Component, Coupling, Damping, Error, Model, Result};
+use nlsim_kernel::{Component, Coupling, Damping, DofLabel, Error, Model, Result, Site};
 
 /// What a port stands for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -256,6 +256,39 @@ pub struct ReducedModel {
     pub damping: Damping,
     /// Seconds spent on the residual flexibility (solves and projection).
     pub residual_seconds: f64,
+    /// The measured residual flexibilities of a test-based modal model
+    /// ([`Model::residual_terms`]), already added to [`ReducedModel::residual`]: kept by port
+    /// so that they can be calibrated (`residual:A:B`).
+    pub measured: Vec<MeasuredResidual>,
+    /// The measured points of a test-based modal model and the ports on each (see
+    /// [`PointPorts`]): what makes its mode-shape entries calibratable
+    /// (`modeN.shape:POINT`). Empty for an FE model.
+    pub points: Vec<PointPorts>,
+}
+
+/// A measured point of a test-based modal model ([`Model::points`]) and the ports that move
+/// with it: port `p`'s coupling holds the point's with weight `w` (1 for a drive, sensor or
+/// element on the point, −1 for the second point of a relative element).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PointPorts {
+    /// The point's label.
+    pub label: DofLabel,
+    /// Its mode-shape entries `(modal coordinate, φ)` (m/√kg), as the model holds them.
+    pub shape: Vec<(usize, f64)>,
+    /// `(port index, weight)` of every port on the point.
+    pub ports: Vec<(usize, f64)>,
+}
+
+/// A measured residual flexibility between two ports of a reduced model (see
+/// [`ReducedModel::measured`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeasuredResidual {
+    /// Port index of the first port.
+    pub a: usize,
+    /// Port index of the second port (equal to `a` on a driving point).
+    pub b: usize,
+    /// The flexibility added to `D_ab` and `D_ba` (m/N).
+    pub flexibility: f64,
 }
 
 impl ReducedModel {
@@ -362,7 +395,8 @@ pub fn reduce_with(
     } else {
         (Mat::zeros(n_ports, n_ports), 0.0)
     };
-    add_measured_residual(model, &ports, &mut residual)?;
+    let measured = add_measured_residual(model, &ports, &mut residual)?;
+    let points = point_ports(model, &ports);
     Ok(ReducedModel {
         modes,
         ports,
@@ -371,13 +405,20 @@ pub fn reduce_with(
         residual_shift,
         damping: model.damping().clone(),
         residual_seconds: t.elapsed().as_secs_f64(),
+        measured,
+        points,
     })
 }
 
 /// Adds a test-based modal model's measured residual flexibilities
 /// ([`Model::residual_terms`]) to the ports' residual, symmetrically; a term naming a port the
-/// model does not have is an error.
-fn add_measured_residual(model: &Model, ports: &[Port], residual: &mut Mat<f64>) -> Result<()> {
+/// model does not have is an error. Returns the terms by port.
+pub(crate) fn add_measured_residual(
+    model: &Model,
+    ports: &[Port],
+    residual: &mut Mat<f64>,
+) -> Result<Vec<MeasuredResidual>> {
+    let mut out = Vec::with_capacity(model.residual_terms().len());
     for term in model.residual_terms() {
         let a = port_index(ports, &term.a)?;
         let b = port_index(ports, &term.b)?;
@@ -385,8 +426,78 @@ fn add_measured_residual(model: &Model, ports: &[Port], residual: &mut Mat<f64>)
         if a != b {
             residual[(b, a)] += term.flexibility;
         }
+        out.push(MeasuredResidual {
+            a,
+            b,
+            flexibility: term.flexibility,
+        });
     }
-    Ok(())
+    Ok(out)
+}
+
+/// The ports on each measured point of a test-based modal model. A drive or sensor names its
+/// point; an element's coordinate is matched to the coupling of one point, or to the
+/// difference of two (as the model file builds a relative element), exactly — the same
+/// arithmetic on the same numbers. Empty for an FE model, and when a port's coupling is
+/// matched ambiguously (two points that move alike in every mode) or not at all while it is
+/// not a modal coordinate: then no shape entry can be calibrated, rather than one that would
+/// leave a port behind.
+fn point_ports(model: &Model, ports: &[Port]) -> Vec<PointPorts> {
+    if !model.is_modal() || model.points().is_empty() {
+        return Vec::new();
+    }
+    let pts = model.points();
+    let mut out: Vec<PointPorts> = pts
+        .iter()
+        .map(|(label, c)| PointPorts {
+            label: *label,
+            shape: c
+                .dofs()
+                .iter()
+                .copied()
+                .zip(c.weights().iter().copied())
+                .collect(),
+            ports: Vec::new(),
+        })
+        .collect();
+    let by_label = |site: &Site| match site {
+        Site::Point { label, .. } => pts
+            .iter()
+            .position(|(l, _)| l == label)
+            .map(|i| vec![(i, 1.0)]),
+        Site::Dof(_) => Some(Vec::new()),
+    };
+    let by_coupling = |c: &Coupling| -> Option<Vec<(usize, f64)>> {
+        let mut found = model.point_terms(c);
+        if found.is_empty() && c.dofs().len() == 1 && c.weights()[0] == 1.0 {
+            return Some(Vec::new()); // a modal coordinate
+        }
+        (found.len() == 1).then(|| found.remove(0))
+    };
+    let mut k = 0;
+    for e in model.elements() {
+        for c in e.couplings() {
+            let Some(on) = by_coupling(c) else {
+                return Vec::new();
+            };
+            on.into_iter().for_each(|(i, w)| out[i].ports.push((k, w)));
+            k += 1;
+        }
+    }
+    for site in model
+        .excitation()
+        .iter()
+        .map(|x| &x.at)
+        .chain(model.sensors().iter().map(|s| &s.at))
+    {
+        let Some(on) = by_label(site) else {
+            return Vec::new();
+        };
+        on.into_iter().for_each(|(i, w)| out[i].ports.push((k, w)));
+        k += 1;
+    }
+    debug_assert!(k <= ports.len());
+    out
 }
 
 /// Replaces `DOF index i` in an error message of the eigen solver by the DOF label.

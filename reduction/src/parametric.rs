@@ -998,6 +998,8 @@ impl ParametricReduction {
                 residual_shift: sigma,
                 damping: model.damping().clone(),
                 residual_seconds: 0.0,
+                measured: Vec::new(),
+                points: Vec::new(),
             },
             derivatives: derivs,
             indicator,

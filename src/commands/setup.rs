@@ -57,8 +57,8 @@ pub fn apply_sets(model: &mut Model, sets: &[String]) -> Result<()> {
 }
 
 /// Applies the `--set` overrides the model knows and returns those of the reduced model
-/// (`modeN.f`, `modeN.zeta`, `modeN.m`, `stiffness_scale`: what `calibrate` estimates on a
-/// modal model), which apply after the reduction; any other unknown name is an error that
+/// (`modeN.f`, `modeN.zeta`, `modeN.m`, `stiffness_scale`, `residual:A:B`: what `calibrate`
+/// estimates on a modal model), which apply after the reduction; any other unknown name is an error that
 /// lists both kinds.
 pub fn apply_sets_deferred(model: &mut Model, sets: &[String]) -> Result<Vec<(Param, f64)>> {
     let mut deferred = Vec::new();
@@ -74,14 +74,17 @@ pub fn apply_sets_deferred(model: &mut Model, sets: &[String]) -> Result<Vec<(Pa
                 p @ (Param::ModalFrequency(_)
                 | Param::ModalDamping(_)
                 | Param::ModalMass(_)
-                | Param::StiffnessScale),
+                | Param::StiffnessScale
+                | Param::Residual(..)
+                | Param::ModeShape { .. }),
             ) => deferred.push((p, v)),
             _ => {
                 return Err(nlsim_kernel::Error::UnknownParameter {
                     name: name.trim().to_string(),
                     known: format!(
                         "{}, and of the reduced model modeN.f, modeN.zeta, modeN.m (N up to \
-                         the retained modes) and stiffness_scale",
+                         the retained modes), stiffness_scale and a modal model's \
+                         residual:PORT:PORT and modeN.shape:POINT",
                         known
                             .iter()
                             .map(ToString::to_string)

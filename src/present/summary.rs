@@ -187,7 +187,13 @@ pub fn model_summary(model: &Model, source: &str, validation: Option<&Validation
     let _ = writeln!(
         s,
         "  reduced      modeN.f (Hz), modeN.zeta, modeN.m (kg) of every retained mode N, \
-         stiffness_scale: parameters of the reduced model (--set, --param)"
+         stiffness_scale{}: parameters of the reduced model (--set, --param)",
+        if model.is_modal() {
+            ", the residual terms residual:A:B (m/N) and the shape entries modeN.shape:POINT \
+             (m/sqrt(kg)) of every mode and point"
+        } else {
+            ""
+        }
     );
     if let Some(v) = validation {
         let _ = writeln!(
@@ -283,17 +289,13 @@ fn modal_lines(model: &Model, s: &mut String) {
 /// A coordinate of a modal model named by its points: `31:uz`, or `31:uz - 1:uz`.
 fn point_coordinate(model: &Model, c: &Coupling) -> Option<String> {
     let points = model.points();
-    if let Some((l, _)) = points.iter().find(|(_, pc)| pc == c) {
-        return Some(l.to_string());
-    }
-    for (a, ca) in points {
-        for (b, cb) in points {
-            if a != b && Coupling::difference(ca, cb).as_ref() == Some(c) {
-                return Some(format!("{a} - {b}"));
-            }
-        }
-    }
-    None
+    model.point_terms(c).first().map(|terms| {
+        terms
+            .iter()
+            .map(|&(i, _)| points[i].0.to_string())
+            .collect::<Vec<_>>()
+            .join(" - ")
+    })
 }
 
 #[cfg(test)]

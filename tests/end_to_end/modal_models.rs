@@ -143,21 +143,18 @@ fn a_modal_model_calibrates_like_its_fe_model() {
     std::fs::remove_dir_all(&*dir).unwrap();
 }
 
-/// A hand-built two-mode model against the closed-form receptance `Σ φ_a φ_b / (ω_r² − ω² +
-/// 2iζ_r ω_r ω) + R`, with a point driven, a second point measured, an element at zero
-/// strength, and modal masses given as `m` beside unit-scaled shapes.
-#[test]
-fn a_modal_model_file_gives_the_closed_form_receptance() {
-    let dir = scratch("modal-closed-form");
-    let path = dir.join("two_mode.toml");
-    std::fs::write(
-        &path,
+/// A two-mode model file: points `1:uz`, `2:uz`; mode 1 at 20 Hz with shape `[0.5, s21]` as
+/// written and `m = 4` kg (so `φ = shape / 2`), mode 2 at 120 Hz `[0.8, -0.4]`; a residual
+/// flexibility `r` between the drive and the sensor; a cubic `k3` between the two points; the
+/// drive at `2:uz`, the displacement sensor `root` at `1:uz`.
+fn two_mode(s21: f64, r: f64, k3: f64) -> String {
+    format!(
         r#"[modal]
 points = ["1:uz", "2:uz"]
 [[modal.mode]]
 f_hz = 20.0
 zeta = 0.01
-shape = [0.5, 1.0]
+shape = [0.5, {s21:e}]
 m = 4.0
 [[modal.mode]]
 f_hz = 120.0
@@ -165,14 +162,14 @@ zeta = 0.02
 shape = [0.8, -0.4]
 [[modal.residual]]
 ports = ["shaker", "root"]
-flexibility = 3e-7
+flexibility = {r:e}
 
 [[element]]
 name = "spring"
 type = "cubic"
 dof = "2:uz"
 dof2 = "1:uz"
-k3 = 0.0
+k3 = {k3:e}
 
 [[excitation]]
 name = "shaker"
@@ -183,9 +180,253 @@ amplitude = 1.0
 name = "root"
 dof = "1:uz"
 quantity = "displacement"
-"#,
+"#
+    )
+}
+
+/// Shape entries (`modeN.shape:POINT`) and measured residual flexibilities
+/// (`residual:A:B`) of a modal model are parameters like any other (issue 44 part 1):
+/// listed, set (equal to the model file written with the new value, which moves every port
+/// on the point: the drive, the sensor and the element's end with its sign), differentiated
+/// (harmonic balance sensitivities against central differences at a nonlinear solution), set
+/// from the command line, and calibrated from a virtual test.
+#[test]
+fn shape_entries_and_residual_terms_are_parameters() {
+    let dir = scratch("modal-shape-params");
+    let (s21, r, k3) = (1.0, 3e-7, 3e11);
+    let system = |text: &str| {
+        let path = dir.join("m.toml");
+        std::fs::write(&path, text).unwrap();
+        let model = load(&path);
+        let reduced = reduce(&model, &ReductionConfig::lowest(2)).unwrap();
+        HbSystem::from_model(
+            &model,
+            &reduced,
+            HarmonicSet::new(3, 1).unwrap(),
+            HbConfig::default(),
+        )
+        .unwrap()
+    };
+    let nominal = system(&two_mode(s21, r, k3));
+    let p_shape: Param = "mode1.shape:2:uz".parse().unwrap();
+    let p_root: Param = "mode2.shape:1:uz".parse().unwrap();
+    let p_res: Param = "residual:shaker:root".parse().unwrap();
+    let known = nominal.parameters();
+    for p in [&p_shape, &p_root, &p_res] {
+        assert!(known.contains(p), "{p} not in {known:?}");
+    }
+    // Mass-normalised: the written 1.0 with m = 4 kg is 0.5 m/√kg.
+    assert_eq!(nominal.param(&p_shape).unwrap(), 0.5);
+    assert_eq!(nominal.param(&p_root).unwrap(), 0.8);
+    assert_eq!(nominal.param(&p_res).unwrap(), r);
+    // Setting equals the file written with the new values (φ 0.5 → 0.6, i.e. 1.2 as
+    // written; residual 3e-7 → 5e-7; mode 2 at 1:uz 0.8 → 0.7), at a nonlinear solution.
+    let mut set = nominal.clone();
+    set.set_param(&p_shape, 0.6).unwrap();
+    set.set_param(&p_res, 5e-7).unwrap();
+    set.set_param(&p_root, 0.7).unwrap();
+    let edited =
+        system(&two_mode(1.2, 5e-7, k3).replace("shape = [0.8, -0.4]", "shape = [0.7, -0.4]"));
+    let w = 2.0 * PI * 19.6;
+    let solve = |s: &HbSystem| {
+        let (x, rep) = s.solve(w, 1.0, &s.linear_guess(w, 1.0)).unwrap();
+        assert!(rep.converged());
+        (s.sensor_response(&x, w, 1.0), x)
+    };
+    let (y_set, _) = solve(&set);
+    let (y_file, _) = solve(&edited);
+    let d = (&y_set - &y_file).norm_max() / y_file.norm_max();
+    assert!(d < 1e-10, "set vs edited file: {d:e}");
+    // Sensitivities against central differences (relative step 1e-5: truncation ~1e-10,
+    // Newton's 1e-10 round-off over the step ~1e-5 of the response), as for FE parameters.
+    let (y0, x0) = solve(&nominal);
+    let third = y0[(0, 3)].norm() / y0[(0, 1)].norm();
+    assert!(third > 1e-3, "the cubic barely acts: 3rd/1st {third:e}");
+    let sens = nominal
+        .sensitivities(
+            &x0,
+            w,
+            1.0,
+            &[p_shape.clone(), p_root.clone(), p_res.clone()],
+        )
+        .unwrap();
+    for s in &sens {
+        let v = nominal.param(&s.param).unwrap();
+        let h = 1e-5 * v.abs();
+        let at = |dv: f64| {
+            let mut q = nominal.clone();
+            q.set_param(&s.param, v + dv).unwrap();
+            let (x, rep) = q.solve(w, 1.0, &x0).unwrap();
+            assert!(rep.converged());
+            q.sensor_response(&x, w, 1.0)
+        };
+        let fd = (at(h) - at(-h)) * faer::Scale(faer::c64::new(1.0 / (2.0 * h), 0.0));
+        let scale =
+            y0.norm_max() * 1e-4 + (&fd * faer::Scale(faer::c64::new(v, 0.0))).norm_max() * 1e-4;
+        let diff = (&fd - &s.dy).norm_max() * v.abs();
+        assert!(
+            diff <= scale,
+            "{}: analytic {:?} vs differences {:?}",
+            s.param,
+            s.dy,
+            fd
+        );
+        assert!(
+            s.dy.norm_max() * v.abs() > 1e-3 * y0.norm_max(),
+            "{} has no effect",
+            s.param
+        );
+    }
+    // The command line: `frf --set` equals the edited file.
+    let nominal_path = dir.join("nominal.toml");
+    std::fs::write(&nominal_path, two_mode(s21, r, k3)).unwrap();
+    let edited_path = dir.join("edited.toml");
+    std::fs::write(&edited_path, two_mode(1.2, 5e-7, k3)).unwrap();
+    let frf = |model: &Path, out: &str, sets: &[&str]| {
+        let out = dir.join(out);
+        let mut args = vec![
+            "frf",
+            model.to_str().unwrap(),
+            "--from",
+            "15",
+            "--to",
+            "25",
+            "--mode",
+            "step-up",
+            "--points",
+            "21",
+            "--modes",
+            "2",
+            "--harmonics",
+            "3",
+            "--out",
+            out.to_str().unwrap(),
+            "-q",
+        ];
+        for s in sets {
+            args.extend(["--set", s]);
+        }
+        let (rc, _, e) = nlsim(&args);
+        assert_eq!(rc, 0, "{e}");
+        std::fs::read_to_string(out).unwrap()
+    };
+    let a = frf(
+        &nominal_path,
+        "a.csv",
+        &["mode1.shape:2:uz=0.6", "residual:root:shaker=5e-7"],
+    );
+    let b = frf(&edited_path, "b.csv", &[]);
+    let numbers = |t: &str| -> Vec<f64> {
+        t.lines()
+            .filter(|l| !l.starts_with('#'))
+            .skip(1)
+            .flat_map(|l| {
+                l.split(',')
+                    .filter_map(|c| c.parse::<f64>().ok())
+                    .collect::<Vec<_>>()
+            })
+            .collect()
+    };
+    let (na, nb) = (numbers(&a), numbers(&b));
+    assert_eq!(na.len(), nb.len());
+    assert!(!na.is_empty());
+    let top = nb.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    for (x, y) in na.iter().zip(&nb) {
+        assert!(
+            (x - y).abs() <= 1e-9 * y.abs().max(1e-6 * top),
+            "{x} vs {y}"
+        );
+    }
+    // `check` names the new kinds; an entry of a mode or a pair the model lacks is refused
+    // with the parameters it has.
+    let summary = nlsim(&["check", nominal_path.to_str().unwrap()]).1;
+    assert!(
+        summary.contains("residual:A:B") && summary.contains("modeN.shape:POINT"),
+        "{summary}"
+    );
+    for (bad, says) in [
+        ("mode3.shape:2:uz=1", "mode2.shape:1:uz"),
+        ("residual:shaker:spring=1e-7", "residual:root:shaker"),
+        ("mode1.shape:9:uz=1", "mode1.shape:2:uz"),
+    ] {
+        let (rc, _, e) = nlsim(&[
+            "frf",
+            nominal_path.to_str().unwrap(),
+            "--from",
+            "15",
+            "--to",
+            "16",
+            "--modes",
+            "2",
+            "--set",
+            bad,
+        ]);
+        assert_ne!(rc, 0, "{bad} accepted");
+        assert!(
+            e.contains(bad.split('=').next().unwrap()) && e.contains(says),
+            "{bad}: {e}"
+        );
+        assert_eq!(e.trim().lines().count(), 1, "{e}");
+    }
+    // Calibration: a virtual test of the edited structure (1 % noise), the nominal model's
+    // shape entry and residual term recovered within three Cramér–Rao deviations.
+    let test = dir.join("test.toml");
+    std::fs::write(
+        &test,
+        "harmonics = 3\nmodes = 2\nseed = 5\nout = \"data.csv\"\nnoise = { relative = 0.01 }\n\n\
+         [[sweep]]\nfrom = 12.0\nto = 90.0\nsteps = 40\nforce = 0.5\n",
     )
     .unwrap();
+    let (rc, _, e) = nlsim(&[
+        "test",
+        edited_path.to_str().unwrap(),
+        test.to_str().unwrap(),
+    ]);
+    assert_eq!(rc, 0, "{e}");
+    let est = dir.join("est.csv");
+    let (rc, o, e) = nlsim(&[
+        "calibrate",
+        nominal_path.to_str().unwrap(),
+        dir.join("data.csv").to_str().unwrap(),
+        "--modes",
+        "2",
+        "--harmonics",
+        "3",
+        "--param",
+        "mode1.shape:2:uz=0.2:1.5",
+        "--param",
+        "residual:shaker:root=-2e-6:2e-6",
+        "--folds",
+        "0",
+        "--threads",
+        "1",
+        "--out",
+        est.to_str().unwrap(),
+    ]);
+    assert_eq!(rc, 0, "{e}\n{o}");
+    let got = estimates(&est);
+    for (name, truth) in [("mode1.shape:2:uz", 0.6), ("residual:root:shaker", 5e-7)] {
+        let (v, sd) = got[name];
+        eprintln!(
+            "{name}: {v:e} ± {sd:e} (truth {truth:e}, {:+.2} σ)",
+            (v - truth) / sd
+        );
+        assert!(
+            (v - truth).abs() < 3.0 * sd,
+            "{name}: {v:e} ± {sd:e}, truth {truth:e}"
+        );
+    }
+    std::fs::remove_dir_all(&*dir).unwrap();
+}
+
+/// A hand-built two-mode model against the closed-form receptance `Σ φ_a φ_b / (ω_r² − ω² +
+/// 2iζ_r ω_r ω) + R`, with a point driven, a second point measured, an element at zero
+/// strength, and modal masses given as `m` beside unit-scaled shapes.
+#[test]
+fn a_modal_model_file_gives_the_closed_form_receptance() {
+    let dir = scratch("modal-closed-form");
+    let path = dir.join("two_mode.toml");
+    std::fs::write(&path, two_mode(1.0, 3e-7, 0.0)).unwrap();
     let model = load(&path);
     let reduced = reduce(&model, &ReductionConfig::lowest(2)).unwrap();
     let hb = HbSystem::from_model(
