@@ -743,6 +743,10 @@ fn fuzz_inner() {
          [[signal]]\nlabel = \"sine+3h\"\nside = [{ harmonic = 3, fraction = 0.05 }]\n\n\
          [[band]]\nlabel = \"across\"\nfrom = 22.0\nto = 30.0\nsteps = 9\n"
             .to_string(),
+        // Gains planned along (issue 44).
+        "params = [\"tip_spring.k3\", \"input_gain\", \"sensor_gain:tip\"]\nlevels = [0.1]\n\
+         [[band]]\nlabel = \"b\"\nfrom = 22.0\nto = 26.0\nsteps = 5\n"
+            .to_string(),
     ];
     let plan_path = dir.join("plan.toml");
     panics.extend(survive("plan file", 10000 * scale(), |_| {

@@ -447,12 +447,23 @@ fn template(channels: Vec<Channel>, input: &str, harmonics: usize) -> TestData {
     }
 }
 
+/// The nominal values of `params`: a gain of the test data ([`Param::is_gain`]) at 1 (the
+/// sensor or force gauge reads as calibrated), any other from `value`.
+fn nominal_values(params: &[Param], value: impl Fn(&Param) -> Result<f64>) -> Result<Vec<f64>> {
+    params
+        .iter()
+        .map(|p| if p.is_gain() { Ok(1.0) } else { value(p) })
+        .collect()
+}
+
 impl Planner {
     /// A planner for `params` of `sys` (element law parameters, `modeN.f`, `modeN.zeta`, ...)
-    /// at their current values. The system's sensors are the candidate channels and its
+    /// at their current values; gains of the test data (`input_gain`, `sensor_gain:NAME`
+    /// of a candidate sensor) at 1, planned as calibrated along: a sensor gain is identified
+    /// only by designs that measure its sensor. The system's sensors are the candidate channels and its
     /// inputs the candidate drive points. Errors as [`FrfObjective::new`] does.
     pub fn new(sys: &HbSystem, params: &[Param]) -> Result<Self> {
-        let nominal = sys.param_values(params)?;
+        let nominal = nominal_values(params, |p| sys.param(p))?;
         let input = first_input(sys)?;
         let prototype = FrfObjective::new(
             sys,
@@ -483,11 +494,7 @@ impl Planner {
         hb: HbConfig,
         params: &[Param],
     ) -> Result<Self> {
-        let Ok(nominal) = params
-            .iter()
-            .map(|p| model.param(p))
-            .collect::<Result<Vec<f64>>>()
-        else {
+        let Ok(nominal) = nominal_values(params, |p| model.param(p)) else {
             // Parameters of the reduced model (modal ones), which FE-level ones cannot join:
             // the planner of the reduced system.
             let red = nlsim_reduction::reduce(model, reduction)?;

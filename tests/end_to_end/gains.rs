@@ -295,3 +295,70 @@ fn gains_and_voltage_records_refuse_bad_input() {
         "{e}"
     );
 }
+
+/// `nlsim plan` with gains among the parameters (planned as calibrated along, nominal 1):
+/// ranked with their Cramér–Rao deviations; a design without the tip sensor cannot identify
+/// its gain, nor one with the tip alone (the scaling law below); a gain of a sensor the model
+/// lacks is refused naming it.
+#[test]
+fn a_plan_takes_gains_as_parameters() {
+    let dir = scratch("plan-gains");
+    let plan = |params: &str| {
+        let path = dir.join("plan.toml");
+        std::fs::write(
+            &path,
+            format!(
+                "params = [{params}]\nlevels = [0.1, 0.2]\nmeasured = [[1], [1, 3]]\n\
+                 harmonics = 3\nmodes = 6\ntop = 100\nreport = \"{}\"\n\n[[band]]\n\
+                 label = \"across\"\nfrom = 22.0\nto = 26.0\nsteps = 9\n",
+                dir.join("report").display()
+            ),
+        )
+        .unwrap();
+        nlsim(&["plan", "ecl_beam", path.to_str().unwrap()])
+    };
+    let (rc, out, e) =
+        plan("\"tip_spring.k3\", \"mode2.zeta\", \"input_gain\", \"sensor_gain:tip\"");
+    assert_eq!(rc, 0, "{e}");
+    assert!(
+        out.contains(
+            "input_gain, sensor_gain:tip (nominal 6.0000e9, 1.0000e-2, 1.0000e0, 1.0000e0)"
+        ),
+        "{out}"
+    );
+    let ranking = std::fs::read_to_string(dir.join("report/ranking.csv")).unwrap();
+    let head: Vec<&str> = ranking.lines().next().unwrap().split(',').collect();
+    let col = head
+        .iter()
+        .position(|h| h.contains("sensor_gain:tip"))
+        .unwrap_or_else(|| panic!("{head:?}"));
+    let sensors = head.iter().position(|h| *h == "sensors").unwrap();
+    // With the tip alone the three cannot be told apart: a cubic driven by g F answers
+    // `g Y(F; g² k3)`, so the tip's reading `s g Y(F; g² k3)` fixes only `s g` and `g² k3`.
+    // The mid sensor (gain exact) fixes g.
+    let mut seen = [0; 3];
+    for line in ranking.lines().skip(1) {
+        let c: Vec<&str> = line.split(',').collect();
+        let sd: f64 = c[col].parse().unwrap();
+        let set: Vec<&str> = c[sensors].split('+').collect();
+        match (set.contains(&"tip"), set.contains(&"mid")) {
+            (true, true) => {
+                assert!(sd.is_finite() && sd > 0.0, "{line}");
+                seen[0] += 1;
+            }
+            (true, false) => {
+                assert!(sd.is_infinite(), "{line}");
+                seen[1] += 1;
+            }
+            _ => {
+                assert!(sd.is_infinite(), "{line}");
+                seen[2] += 1;
+            }
+        }
+    }
+    assert!(seen.iter().all(|&n| n > 0), "{seen:?}");
+    let (rc, _, e) = plan("\"tip_spring.k3\", \"sensor_gain:nope\"");
+    assert_ne!(rc, 0);
+    assert!(e.contains("sensor_gain:nope"), "{e}");
+    std::fs::remove_dir_all(&*dir).unwrap();
+}
