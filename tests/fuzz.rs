@@ -360,6 +360,20 @@ fn fuzz_inner() {
         }
     }));
 
+    // Node coordinates from a CSV file (`[geometry] nodes = "nodes.csv"`, issue 45).
+    let nodes_csv = "# the beam\nnode,x,y,z\n1,0,0,0\n2,0.035,0,0\n21,7e-1,1e-3,-2.5\n".to_string();
+    let geometry_model = models.join("geometry.toml");
+    panics.extend(survive("geometry csv", 3000 * scale(), |_| {
+        let text = mutate(&nodes_csv, &mut rng);
+        std::fs::write(models.join("nodes.csv"), text).unwrap();
+        nlsim::parse_model_file(
+            "[matrices]\nfixture = \"duffing_fig3\"\n\n[geometry]\nnodes = \"nodes.csv\"\n",
+            &geometry_model,
+        )
+        .err()
+        .map(|e| e.to_string())
+    }));
+
     // Matrix Market text.
     let mtx = [
         std::fs::read_to_string(root().join("examples/models/spring_mass.mtx")).unwrap(),
@@ -702,6 +716,12 @@ fn fuzz_inner() {
         &uff_time,
         &[time_fn("shaker", 13, 0.0), time_fn("NONE", 12, 0.4)],
         false,
+        // Coordinates: a dataset 2411 before the records, which the reader skips.
+        &[
+            (1, [0.0, 0.5, -1.0]),
+            (2, [1.0, 0.0, 0.0]),
+            (21, [0.7, 0.0, 0.0]),
+        ],
     )
     .unwrap();
     let times = [std::fs::read_to_string(&uff_time).unwrap()];

@@ -3314,6 +3314,11 @@ for s, k in zip(sets, [1, 3, 5, 7]):
     assert np.max(np.abs(s["data"] - y)) <= 1e-10 * np.max(np.abs(y)), (k, s["id1"])
 h = h5py.File(d + "/s.h5"); t = h["time"][()]
 sets = pyuff.UFF(d + "/s.uff").read_sets()
+# The ECL beam has coordinates: dataset 2411 first, with the nodes the functions name.
+assert sets[0]["type"] == 2411, sets[0]["type"]
+assert list(sets[0]["node_nums"]) == [11, 21], sets[0]["node_nums"]
+assert np.allclose(sets[0]["x"], [0.35, 0.7], rtol=1e-15) and not np.any(sets[0]["y"])
+sets = sets[1:]
 assert [s["id1"].split()[0] for s in sets] == ["tip", "mid", "shaker"]
 for s in sets:
     name = s["id1"].split()[0]
@@ -3382,6 +3387,13 @@ hz = h["modes/frequency_hz"][()]; zeta = h["modes/damping_ratio"][()]
 shapes = h["modes/shapes"][()]
 labels = [l.decode() if isinstance(l, bytes) else l for l in h["dofs/labels"][()]]
 sets = pyuff.UFF(d + "/m.uff").read_sets()
+# Dataset 2411 first: every node with a DOF, at x = (node - 1) L/20 (L = 0.7 m).
+nodes = sets[0]
+assert nodes["type"] == 2411, nodes["type"]
+assert list(nodes["node_nums"]) == list(range(2, 22)), nodes["node_nums"]
+assert np.allclose(nodes["x"], (np.arange(2, 22) - 1) * 0.035, rtol=1e-15, atol=0)
+assert not np.any(nodes["y"]) and not np.any(nodes["z"])
+sets = sets[1:]
 assert len(sets) == len(hz) >= 5, (len(sets), len(hz))
 comp = {"ux": "r1", "uy": "r2", "uz": "r3", "rx": "r4", "ry": "r5", "rz": "r6"}
 checked = 0
@@ -8000,5 +8012,7 @@ mod harmonics;
 #[path = "end_to_end/time_domain.rs"]
 mod time_domain;
 
+#[path = "end_to_end/geometry.rs"]
+mod geometry;
 #[path = "end_to_end/raw_test.rs"]
 mod raw_test;

@@ -221,6 +221,9 @@ pub struct Model {
     modal: bool,
     /// Measured residual flexibilities between ports (test-based modal models).
     residual: Vec<ResidualTerm>,
+    /// Node coordinates (m), ascending by node id: what output files that carry geometry
+    /// write (universal dataset 2411); no analysis uses them.
+    geometry: Vec<(u64, [f64; 3])>,
 }
 
 impl Model {
@@ -265,6 +268,7 @@ impl Model {
             points: Vec::new(),
             modal: false,
             residual: Vec::new(),
+            geometry: Vec::new(),
         })
     }
 
@@ -428,6 +432,45 @@ impl Model {
     /// The measured residual flexibilities ([`Model::add_residual`]).
     pub fn residual_terms(&self) -> &[ResidualTerm] {
         &self.residual
+    }
+
+    /// Sets the coordinates `(node id, [x, y, z])` (m, global Cartesian) of the model's nodes
+    /// or measured points, in any order; they replace earlier ones. Output files that carry
+    /// geometry (universal dataset 2411 beside the functions and shapes) write those of the
+    /// nodes they name; nodes without coordinates are left out. Errors on a non-finite
+    /// coordinate or a node given twice.
+    pub fn set_geometry(&mut self, mut nodes: Vec<(u64, [f64; 3])>) -> Result<()> {
+        for (node, xyz) in &nodes {
+            if let Some(v) = xyz.iter().find(|v| !v.is_finite()) {
+                return Err(Error::NonFinite {
+                    what: "node coordinate".into(),
+                    location: format!("node {node}"),
+                    value: *v,
+                });
+            }
+        }
+        nodes.sort_by_key(|n| n.0);
+        if let Some(w) = nodes.windows(2).find(|w| w[0].0 == w[1].0) {
+            return Err(Error::invalid(
+                format!("coordinates of node {}", w[0].0),
+                "are given twice",
+            ));
+        }
+        self.geometry = nodes;
+        Ok(())
+    }
+
+    /// The node coordinates ([`Model::set_geometry`]), ascending by node id (m).
+    pub fn geometry(&self) -> &[(u64, [f64; 3])] {
+        &self.geometry
+    }
+
+    /// The coordinates of `node` (m), when known.
+    pub fn node_coordinates(&self, node: u64) -> Option<[f64; 3]> {
+        self.geometry
+            .binary_search_by_key(&node, |n| n.0)
+            .ok()
+            .map(|i| self.geometry[i].1)
     }
 
     /// A builder: `Model::builder(name, dofs, M, K).damping(d).element(e).build()?` adds the

@@ -61,7 +61,8 @@ pub struct ModesArgs {
     /// Every mode below this frequency (Hz) instead of a count.
     #[arg(long)]
     fmax: Option<f64>,
-    /// Output file: .h5 (HDF5, with mode shapes) or .csv (the table).
+    /// Output file: .h5 (HDF5, with mode shapes), .csv (the table) or .uff/.unv (universal
+    /// datasets 55, after dataset 2411 of the nodes when the model has coordinates).
     #[arg(long)]
     out: Option<std::path::PathBuf>,
     /// Convergence tolerance of the Ritz residuals.

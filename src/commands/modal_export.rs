@@ -140,6 +140,19 @@ pub fn modal_file(model: &Model, modes: usize) -> Result<(ModalFile, Vec<String>
              flexibility of the truncated modes at the ports (m/N)."
                 .to_string(),
         ],
+        geometry: {
+            let mut nodes: Vec<u64> = points
+                .iter()
+                .filter_map(|p| p.parse::<nlsim_kernel::DofLabel>().ok())
+                .map(|l| l.node)
+                .collect();
+            nodes.sort_unstable();
+            nodes.dedup();
+            nodes
+                .into_iter()
+                .filter_map(|n| model.node_coordinates(n).map(|xyz| (n, xyz)))
+                .collect()
+        },
         points,
         modes: entries,
         residual,

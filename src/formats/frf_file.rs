@@ -43,6 +43,9 @@ pub struct FrfInfo {
     pub sensor_dofs: Vec<nlsim_kernel::DofLabel>,
     /// The DOF of each input of the system, in its order.
     pub input_dofs: Vec<nlsim_kernel::DofLabel>,
+    /// The model's node coordinates ([`nlsim_kernel::Model::geometry`]; m): a universal file
+    /// starts with dataset 2411 of the nodes it names.
+    pub geometry: Vec<(u64, [f64; 3])>,
 }
 
 #[cfg(feature = "hdf5")]
@@ -219,7 +222,14 @@ fn write_uff(
         }
     }
     // `path` is already the temporary file of the atomic write.
-    let bytes = crate::formats::uff_write::encode_functions(path, &functions, false)?;
+    let mut bytes = crate::formats::uff_write::nodes_text(
+        &info.geometry,
+        crate::formats::uff_write::function_nodes(&functions),
+    )
+    .into_bytes();
+    bytes.extend(crate::formats::uff_write::encode_functions(
+        path, &functions, false,
+    )?);
     std::fs::write(path, bytes).map_err(|source| Error::Io {
         path: path.to_path_buf(),
         source,

@@ -44,9 +44,10 @@ impl ModeReport {
 }
 
 /// Writes the modes to `path`: HDF5 for `.h5`/`.hdf5`, CSV (the table) for `.csv`, universal
-/// datasets 55 (shapes with frequency and damping, [`crate::formats::uff55`]) for `.uff`/`.unv`. The file is
-/// written next to its destination and renamed into place, so a failed run leaves no partial
-/// file and an existing one untouched.
+/// datasets 55 (shapes with frequency and damping, [`crate::formats::uff55`]; after dataset
+/// 2411 of the model's nodes when it has coordinates) for `.uff`/`.unv`. The file is written
+/// next to its destination and renamed into place, so a failed run leaves no partial file
+/// and an existing one untouched.
 /// `model_spec` is the model argument as given (stored with the data).
 pub fn write_modes(path: &Path, model_spec: &str, model: &Model, r: &ModeReport) -> Result<()> {
     crate::formats::files::write_atomically_uff(path, HINT, |tmp, format| match format {
@@ -59,7 +60,17 @@ pub fn write_modes(path: &Path, model_spec: &str, model: &Model, r: &ModeReport)
             Err(crate::formats::files::without_hdf5(path))
         }
         Format::Uff => {
-            let text = crate::formats::uff55::modes_text(path, model, &r.modes, &r.damping)?;
+            // A modal model's coordinates are modes, not nodes: no geometry for them.
+            let nodes = if model.is_modal() {
+                String::new()
+            } else {
+                crate::formats::uff_write::nodes_text(
+                    model.geometry(),
+                    model.dofs().labels().iter().map(|l| l.node),
+                )
+            };
+            let text =
+                nodes + &crate::formats::uff55::modes_text(path, model, &r.modes, &r.damping)?;
             std::fs::write(tmp, text).map_err(|source| Error::Io {
                 path: tmp.to_path_buf(),
                 source,

@@ -40,6 +40,9 @@ pub struct RawInfo<'a> {
     pub model_name: &'a str,
     /// UFF node and direction of each sensor and of the drive, by name.
     pub sites: &'a [(String, (i64, i64))],
+    /// The model's node coordinates (m): a universal file starts with dataset 2411 of the
+    /// nodes it names.
+    pub geometry: &'a [(u64, [f64; 3])],
 }
 
 /// The column (and HDF5 dataset) of the amplifier's input voltage of drive `name`:
@@ -197,7 +200,14 @@ fn write_uff(path: &Path, rec: &RawRecord, info: &RawInfo<'_>, cols: &[Column<'_
             }
         })
         .collect();
-    let bytes = crate::formats::uff_write::encode_functions(path, &functions, false)?;
+    let mut bytes = crate::formats::uff_write::nodes_text(
+        info.geometry,
+        crate::formats::uff_write::function_nodes(&functions),
+    )
+    .into_bytes();
+    bytes.extend(crate::formats::uff_write::encode_functions(
+        path, &functions, false,
+    )?);
     std::fs::write(path, bytes).map_err(|source| Error::Io {
         path: path.to_path_buf(),
         source,

@@ -28,7 +28,7 @@ pub fn write(path: &Path, records: &[Uff58], binary: bool) -> Result<()> {
             complex: true,
         })
         .collect();
-    write_functions(path, &functions, binary)
+    write_functions(path, &functions, binary, &[])
 }
 
 /// The abscissa of a function written by [`write_functions`].
@@ -109,9 +109,59 @@ fn axis_label(code: i64) -> (&'static str, &'static str) {
     }
 }
 
-/// Writes `functions` as datasets 58 to `path`, atomically ([`encode_functions`]).
-pub fn write_functions(path: &Path, functions: &[UffFunction], binary: bool) -> Result<()> {
-    crate::formats::files::write_bytes_atomically(path, &encode_functions(path, functions, binary)?)
+/// Writes `functions` as datasets 58 to `path`, atomically ([`encode_functions`]), after
+/// a dataset 2411 of the nodes they name that `geometry` holds.
+pub fn write_functions(
+    path: &Path,
+    functions: &[UffFunction],
+    binary: bool,
+    geometry: &[(u64, [f64; 3])],
+) -> Result<()> {
+    let mut bytes = nodes_text(geometry, function_nodes(functions)).into_bytes();
+    bytes.extend(encode_functions(path, functions, binary)?);
+    crate::formats::files::write_bytes_atomically(path, &bytes)
+}
+
+/// The response and reference nodes of `functions` (node 0, "none", left out).
+pub fn function_nodes(functions: &[UffFunction]) -> impl Iterator<Item = u64> + '_ {
+    functions
+        .iter()
+        .flat_map(|f| [f.response.0, f.reference.0])
+        .filter_map(|n| u64::try_from(n).ok().filter(|&n| n > 0))
+}
+
+/// Dataset 2411 ("nodes — double precision") of the nodes among `nodes` that `geometry`
+/// (ascending by id, as [`nlsim_kernel::Model::geometry`] holds it) has coordinates for,
+/// ascending and each once: per node record 1 (`4I10`: the node, export and displacement
+/// coordinate systems 0 — global Cartesian — and colour 1) and record 2 (`1P3D25.16`: x, y,
+/// z in m). Empty when none of them has coordinates, so that a model without geometry
+/// writes the functions alone.
+pub fn nodes_text(geometry: &[(u64, [f64; 3])], nodes: impl Iterator<Item = u64>) -> String {
+    let wanted: std::collections::BTreeSet<u64> = nodes.collect();
+    let mut s = String::new();
+    for node in wanted {
+        let Ok(i) = geometry.binary_search_by_key(&node, |g| g.0) else {
+            continue;
+        };
+        if s.is_empty() {
+            let _ = writeln!(s, "{:>6}\n{:>6}", -1, 2411);
+        }
+        let _ = writeln!(s, "{node:>10}{:>10}{:>10}{:>10}", 0, 0, 1);
+        for v in geometry[i].1 {
+            s.push_str(&fortran_d(v));
+        }
+        s.push('\n');
+    }
+    if !s.is_empty() {
+        let _ = writeln!(s, "{:>6}", -1);
+    }
+    s
+}
+
+/// A number in Fortran `1PD25.16` form: one digit before the point, 16 after, a `D`
+/// exponent of at least two digits, right-aligned in 25 columns.
+fn fortran_d(v: f64) -> String {
+    crate::formats::uff55::fortran_e(v, 25, 16).replacen('E', "D", 1)
 }
 
 /// The bytes of `functions` as datasets 58 (ASCII: records 1–11 in their fixed columns,

@@ -179,6 +179,9 @@ import sys, csv, numpy as np, pyuff
 d = sys.argv[1]
 sets = pyuff.UFF(d + "/r.uff").read_sets()
 sets = sets if isinstance(sets, list) else [sets]
+# The beam's coordinates first (dataset 2411: the tip and the midpoint), then the records.
+assert sets[0]["type"] == 2411 and list(sets[0]["node_nums"]) == [11, 21], sets[0]
+sets = sets[1:]
 rows = [r for r in csv.reader(l for l in open(d + "/r.csv") if not l.startswith("#"))]
 head, vals = rows[0], np.array(rows[1:], dtype=float)
 assert len(sets) == len(head) - 1, (len(sets), head)

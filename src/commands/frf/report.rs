@@ -433,6 +433,7 @@ impl FrfOutputs {
                     .filter_map(|(n, _)| model.excitation().iter().find(|x| &x.name == n))
                     .map(|x| x.at.label(model.dofs()))
                     .collect(),
+                geometry: model.geometry().to_vec(),
             };
             crate::formats::frf_file::write_frf(path, sys, branch, y, &info)?;
             console.say(&format!("  written to {}", path.display()));

@@ -50,6 +50,8 @@ pub struct RawRun {
     pub seconds: f64,
     /// Universal-file node and direction of each sensor and of the drive, by name.
     pub sites: Vec<(String, (i64, i64))>,
+    /// The model's node coordinates (m), for dataset 2411 of a universal file.
+    pub geometry: Vec<(u64, [f64; 3])>,
 }
 
 /// Runs `req`: the model loaded and reduced, the stepped sines through the shaker (and
@@ -67,6 +69,7 @@ pub fn run_test(req: &TestRequest, progress: &mut dyn FnMut(usize, usize)) -> Re
         let info = crate::formats::raw_records::RawInfo {
             model_name: &run.model_name,
             sites: &raw.sites,
+            geometry: &raw.geometry,
             model_spec: &req.model,
             drive: &run.drive,
             record: req.record,
@@ -393,6 +396,7 @@ fn raw_run(
         settle_s,
         sigmas,
         sites,
+        geometry: model.geometry().to_vec(),
         seconds: t.elapsed().as_secs_f64(),
     })
 }

@@ -272,7 +272,12 @@ pub fn write_prediction(path: &Path, run: &ValidationRun) -> Result<()> {
     if out_format(path)? == crate::formats::files::Format::Csv {
         crate::formats::files::write_text_atomically(path, &run.prediction_csv())
     } else {
-        crate::formats::uff_write::write_functions(path, &run.prediction_uff(), false)
+        crate::formats::uff_write::write_functions(
+            path,
+            &run.prediction_uff(),
+            false,
+            &run.geometry,
+        )
     }
 }
 

@@ -79,6 +79,8 @@ pub struct ValidationRun {
     pub input_dof: Option<nlsim_kernel::DofLabel>,
     /// The DOF of each channel's sensor in the model.
     pub channel_dofs: Vec<Option<nlsim_kernel::DofLabel>>,
+    /// The model's node coordinates (m), for dataset 2411 of a universal file.
+    pub geometry: Vec<(u64, [f64; 3])>,
     /// Wall time (s).
     pub seconds: f64,
 }
@@ -176,6 +178,7 @@ pub fn run_validation(req: &ValidateRequest) -> Result<ValidationRun> {
         data,
         input_dof,
         channel_dofs,
+        geometry: model.geometry().to_vec(),
         seconds: t.elapsed().as_secs_f64(),
     })
 }

@@ -5,6 +5,7 @@
 //! documented in `docs/model-files.md`; every error names the file, the line and the key.
 
 mod elements;
+mod geometry;
 mod modal;
 mod toml;
 pub mod write;
@@ -282,7 +283,12 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
             .map_err(|err| s.at_table(err))?;
     }
     modal::add_residuals(&top, &mut model, residuals)?;
-    top.finish("the top level takes name, units, [matrices] or [modal], [damping], [[group]], [[spring]], [[element]], [[excitation]], [[sensor]]")?;
+    if let Some(mut g) = top.sub("geometry")? {
+        let nodes = geometry::read_geometry(&mut g, &base_dir)?;
+        g.finish("[geometry] takes nodes")?;
+        model.set_geometry(nodes).map_err(|e| g.at_table(e))?;
+    }
+    top.finish("the top level takes name, units, [matrices] or [modal], [damping], [[group]], [[spring]], [[element]], [[excitation]], [[sensor]], [geometry]")?;
     Ok(LoadedModel {
         model,
         source: file.display().to_string(),

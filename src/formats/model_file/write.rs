@@ -37,6 +37,9 @@ pub struct ModalFile {
     pub excitation: Vec<(String, String, f64, Vec<nlsim_kernel::ForceHarmonic>)>,
     /// Sensors `(name, point, quantity)`.
     pub sensors: Vec<(String, String, Quantity)>,
+    /// Coordinates of the points' nodes `(node, [x, y, z])` (m), written as `[geometry]`
+    /// when any is known.
+    pub geometry: Vec<(u64, [f64; 3])>,
 }
 
 /// A TOML number that reads back to the same `f64` (Rust's shortest round-trip form).
@@ -142,6 +145,14 @@ pub fn modal_model_text(f: &ModalFile) -> Result<String> {
             text(at),
             text(q.as_str())
         );
+    }
+    if !f.geometry.is_empty() {
+        let nodes: Vec<String> = f
+            .geometry
+            .iter()
+            .map(|(n, [x, y, z])| format!("[{n}, {}, {}, {}]", num(*x), num(*y), num(*z)))
+            .collect();
+        let _ = writeln!(s, "\n[geometry]\nnodes = [{}]", nodes.join(", "));
     }
     Ok(s)
 }

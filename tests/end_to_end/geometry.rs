@@ -1,0 +1,238 @@
+//! Node coordinates (issue 45 part 5, datasets 15/2411): a model's `[geometry]` (inline or a
+//! CSV file), the built-in beams' own, carried by `nlsim export --modal`, and written as
+//! universal dataset 2411 before the functions and shapes, read back by pyuff.
+
+use super::*;
+
+/// The coordinates pyuff reads from the dataset 2411 of `file` (in `dir`), as
+/// `node x y z` lines; the types of every dataset on a first line.
+fn pyuff_nodes(dir: &Path, file: &str) -> String {
+    let script = format!(
+        r#"
+import sys, pyuff
+sets = pyuff.UFF(sys.argv[1] + "/{file}").read_sets()
+sets = sets if isinstance(sets, list) else [sets]
+print(" ".join(str(s["type"]) for s in sets))
+for s in sets:
+    if s["type"] == 2411:
+        for n, x, y, z in zip(s["node_nums"], s["x"], s["y"], s["z"]):
+            print(int(n), repr(float(x)), repr(float(y)), repr(float(z)))
+"#
+    );
+    let out = std::process::Command::new(python_h5py())
+        .arg("-c")
+        .arg(&script)
+        .arg(dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+/// `(node, [x, y, z])` of every line after the first of [`pyuff_nodes`].
+fn parse_nodes(text: &str) -> Vec<(u64, [f64; 3])> {
+    text.lines()
+        .skip(1)
+        .map(|l| {
+            let w: Vec<&str> = l.split_whitespace().collect();
+            (
+                w[0].parse().unwrap(),
+                [
+                    w[1].parse().unwrap(),
+                    w[2].parse().unwrap(),
+                    w[3].parse().unwrap(),
+                ],
+            )
+        })
+        .collect()
+}
+
+/// A model file's coordinates (CSV and inline) replace the fixture's and reach the universal
+/// files of `frf` and `simulate` exactly (`1PD25.16` holds every bit of a double); the
+/// modal model `export --modal` writes carries the coordinates of its points, and so do its
+/// files; `modes` writes every node with a DOF.
+#[test]
+fn coordinates_reach_the_universal_files() {
+    let dir = scratch("geometry");
+    let d = |n: &str| dir.join(n).to_str().unwrap().to_string();
+    // Rotated and shifted: every coordinate non-trivial.
+    let xyz = |k: u64| {
+        let x = (k - 1) as f64 * 0.035;
+        [0.1 + 0.6 * x, -0.25 + 0.8 * x, 1.0 / 3.0]
+    };
+    let mut csv = String::from("# the ECL beam, rotated in the xy plane\nnode,x,y,z\n");
+    for k in 1..=21u64 {
+        let [x, y, z] = xyz(k);
+        csv.push_str(&format!("{k},{x:e},{y:e},{z:e}\n"));
+    }
+    std::fs::write(dir.join("nodes.csv"), csv).unwrap();
+    let inline: Vec<String> = [11u64, 21]
+        .iter()
+        .map(|&k| {
+            let [x, y, z] = xyz(k);
+            format!("[{k}, {x:e}, {y:e}, {z:e}]")
+        })
+        .collect();
+    for (name, nodes) in [
+        ("csv.toml", "\"nodes.csv\"".to_string()),
+        ("inline.toml", format!("[{}]", inline.join(", "))),
+    ] {
+        std::fs::write(
+            dir.join(name),
+            format!("[matrices]\nfixture = \"ecl_beam\"\n\n[geometry]\nnodes = {nodes}\n"),
+        )
+        .unwrap();
+        for (cmd, out) in [
+            (
+                vec![
+                    "frf",
+                    &d(name),
+                    "--from",
+                    "22",
+                    "--to",
+                    "24",
+                    "--mode",
+                    "step-up",
+                ],
+                "f.uff",
+            ),
+            (
+                vec!["simulate", &d(name), "--duration", "0.02", "--rate", "1000"],
+                "s.uff",
+            ),
+        ] {
+            let mut args = cmd.clone();
+            let path = d(out);
+            args.extend(["--points", "3", "--out", &path, "-q"]);
+            if cmd[0] == "simulate" {
+                args.retain(|a| *a != "--points" && *a != "3");
+            }
+            let (rc, o, e) = nlsim(&args);
+            assert_eq!(rc, 0, "{args:?}: {o}{e}");
+            let text = pyuff_nodes(&dir, out);
+            let types = text.lines().next().unwrap();
+            assert!(types.starts_with("2411 58 58"), "{name} {out}: {types}");
+            let nodes = parse_nodes(&text);
+            assert_eq!(nodes.iter().map(|n| n.0).collect::<Vec<_>>(), [11, 21]);
+            for (k, got) in nodes {
+                assert_eq!(got, xyz(k), "{name} {out}: node {k}");
+            }
+        }
+    }
+    // The built-in beam's own coordinates for every node with a DOF in `modes`.
+    let (rc, _, e) = nlsim(&["modes", "ecl_beam", "--count", "3", "--out", &d("m.uff")]);
+    assert_eq!(rc, 0, "{e}");
+    let text = pyuff_nodes(&dir, "m.uff");
+    assert!(text.starts_with("2411 55"), "{text}");
+    let nodes = parse_nodes(&text);
+    assert_eq!(nodes.len(), 20);
+    for (k, p) in nodes {
+        assert_eq!(p, [(k - 1) as f64 * (0.7 / 20.0), 0.0, 0.0], "node {k}");
+    }
+    // Export: the modal model holds its points' coordinates, and its files write them.
+    let (rc, _, e) = nlsim(&["export", &d("csv.toml"), &d("modal"), "--modal", "4"]);
+    assert_eq!(rc, 0, "{e}");
+    let modal = std::fs::read_to_string(dir.join("modal/modal.toml")).unwrap();
+    assert!(modal.contains("[geometry]"), "{modal}");
+    let (rc, o, e) = nlsim(&[
+        "frf",
+        &d("modal/modal.toml"),
+        "--from",
+        "22",
+        "--to",
+        "24",
+        "--mode",
+        "step-up",
+        "--points",
+        "3",
+        "--out",
+        &d("mf.uff"),
+    ]);
+    assert_eq!(rc, 0, "{o}{e}");
+    let nodes = parse_nodes(&pyuff_nodes(&dir, "mf.uff"));
+    assert_eq!(nodes.len(), 2);
+    for (k, got) in nodes {
+        assert_eq!(got, xyz(k), "modal: node {k}");
+    }
+    // A model without coordinates writes the functions alone.
+    let (rc, _, e) = nlsim(&[
+        "frf",
+        "duffing_fig3",
+        "--from",
+        "26",
+        "--to",
+        "30",
+        "--out",
+        &d("plain.uff"),
+    ]);
+    assert_eq!(rc, 0, "{e}");
+    assert!(!pyuff_nodes(&dir, "plain.uff").starts_with("2411"));
+    std::fs::remove_dir_all(&*dir).unwrap();
+}
+
+/// Bad `[geometry]` input is refused in one line naming the file, the line and the key (or
+/// the CSV file and its line).
+#[test]
+fn bad_geometry_names_file_line_and_key() {
+    let dir = scratch("geometry-bad");
+    let head = "[matrices]\nfixture = \"ecl_beam\"\n\n[geometry]\n";
+    std::fs::write(dir.join("bad.csv"), "node,x,y,z\n1,0,0,0\n2,0.1,zero,0\n").unwrap();
+    std::fs::write(dir.join("empty.csv"), "# nothing\n").unwrap();
+    let cases = [
+        ("", "geometry.nodes", "node coordinates"),
+        ("nodes = 3\n", "geometry.nodes", "expected a list"),
+        ("nodes = [[1, 0.0, 0.0]]\n", "geometry.nodes", "entry 1"),
+        (
+            "nodes = [[0, 0.0, 0.0, 0.0]]\n",
+            "geometry.nodes",
+            "positive integer",
+        ),
+        (
+            "nodes = [[1, 0.0, nan, 0.0]]\n",
+            "geometry.nodes",
+            "entry 1",
+        ),
+        (
+            "nodes = [[1, 0.0, 0.0, 0.0], [1, 1.0, 0.0, 0.0]]\n",
+            "geometry",
+            "given twice",
+        ),
+        (
+            "nodes = []\nunits = \"mm\"\n",
+            "geometry.units",
+            "unknown key",
+        ),
+    ];
+    for (body, key, says) in cases {
+        let path = dir.join("bad.toml");
+        let text = format!("{head}{body}");
+        let e = nlsim::parse_model_file(&text, &path)
+            .err()
+            .unwrap_or_else(|| panic!("accepted:\n{text}"))
+            .to_string();
+        assert!(
+            e.contains("bad.toml:") && e.contains(&format!(": {key}: ")),
+            "expected key {key}: {e}"
+        );
+        assert!(e.contains(says), "expected '{says}': {e}");
+        assert_eq!(e.lines().count(), 1, "{e}");
+    }
+    for (file, says) in [
+        ("bad.csv", "bad.csv:3: expected node,x,y,z"),
+        ("empty.csv", "empty.csv: no node lines"),
+        ("absent.csv", "absent.csv"),
+    ] {
+        let path = dir.join("m.toml");
+        let e = nlsim::parse_model_file(&format!("{head}nodes = \"{file}\"\n"), &path)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains(says), "{file}: {e}");
+        assert_eq!(e.lines().count(), 1, "{e}");
+    }
+    std::fs::remove_dir_all(&*dir).unwrap();
+}
