@@ -1108,6 +1108,30 @@ fn fuzz_inner() {
             Err(e) => Some(e.to_string()),
         }
     }));
+    // Node coordinates of FE decks: Nastran GRID cards and Abaqus *NODE blocks (issue 45).
+    let grids = [
+        "BEGIN BULK\nGRID           1               0.      0.      0.\n\
+         GRID*                 21                  7.0000000D-01   0.0000000D+00\n\
+         *         0.0000000D+00\nGRID,3,0,1.-3,2.5,-4.E+2\nENDDATA\n"
+            .to_string(),
+    ];
+    panics.extend(survive("nastran grid", 5000 * scale(), |_| {
+        let text = mutate(rng.pick(&grids).clone().as_str(), &mut rng);
+        nlsim::formats::dmig::parse_grids(&text, Path::new("g.bdf"))
+            .err()
+            .map(|e| e.to_string())
+    }));
+    let inp = [
+        "*Heading\n** c\n*Node, nset=all\n1, 0., 0., 0.\n21, 0.7, 0.5\n\
+                *Element, type=B31\n1, 1, 21\n"
+            .to_string(),
+    ];
+    panics.extend(survive("abaqus nodes", 5000 * scale(), |_| {
+        let text = mutate(rng.pick(&inp).clone().as_str(), &mut rng);
+        nlsim::formats::abaqus::parse_inp_nodes(&text, Path::new("m.inp"))
+            .err()
+            .map(|e| e.to_string())
+    }));
     let abaqus =
         [std::fs::read_to_string(root().join("examples/models/spring_mass_K.abq.mtx")).unwrap()];
     panics.extend(survive("abaqus mtx", 10000 * scale(), |_| {

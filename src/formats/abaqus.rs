@@ -77,6 +77,85 @@ pub fn parse_abaqus(text: &str, path: &Path) -> Result<LabelledMatrix> {
     Ok(LabelledMatrix::named_by_file(path, labels.list, entries))
 }
 
+/// The coordinates of the `*NODE` blocks of an Abaqus input file (read from `path`): data
+/// lines `id, x, y[, z]` (m; a missing z is 0) up to the next keyword, `**` comments skipped,
+/// `(id, [x, y, z])` in file order. A file with `*PART` or `*INSTANCE` is refused: its node
+/// numbers are per part and its instances move them, which nlsim does not follow.
+pub fn parse_inp_nodes(text: &str, path: &Path) -> Result<Vec<(u64, [f64; 3])>> {
+    let err = |line: usize, message: String| Error::DataFile {
+        file: path.to_path_buf(),
+        line,
+        message,
+    };
+    let mut out = Vec::new();
+    let mut in_nodes = false;
+    for (i, raw) in text.lines().enumerate() {
+        let l = raw.trim();
+        if l.is_empty() || l.starts_with("**") {
+            continue;
+        }
+        if let Some(kw) = l.strip_prefix('*') {
+            let name = kw
+                .split(',')
+                .next()
+                .unwrap_or("")
+                .trim()
+                .to_ascii_uppercase();
+            if name == "PART" || name == "INSTANCE" {
+                return Err(err(
+                    i + 1,
+                    format!(
+                        "*{name}: node numbers of parts and instances are not read; write the \
+                         input file flat (without parts), or give the coordinates as CSV"
+                    ),
+                ));
+            }
+            in_nodes = name == "NODE";
+            continue;
+        }
+        if !in_nodes {
+            continue;
+        }
+        let cells: Vec<&str> = l.trim_end_matches(',').split(',').map(str::trim).collect();
+        let bad = || {
+            err(
+                i + 1,
+                format!(
+                    "*NODE: expected 'id, x, y[, z]', found '{}'",
+                    l.chars().take(60).collect::<String>()
+                ),
+            )
+        };
+        if !(3..=4).contains(&cells.len()) {
+            return Err(bad());
+        }
+        let id = cells[0]
+            .parse::<u64>()
+            .ok()
+            .filter(|&n| n > 0)
+            .ok_or_else(bad)?;
+        let mut xyz = [0.0; 3];
+        for (x, c) in xyz.iter_mut().zip(&cells[1..]) {
+            *x = c
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(bad)?;
+        }
+        if out.len() == crate::formats::fe_matrices::MAX_GEOMETRY_NODES {
+            return Err(err(i + 1, format!("more than {} nodes", out.len())));
+        }
+        out.push((id, xyz));
+    }
+    if out.is_empty() {
+        return Err(Error::Usage(format!(
+            "{}: no *NODE data lines (node coordinates)",
+            path.display()
+        )));
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

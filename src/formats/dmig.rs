@@ -289,6 +289,75 @@ pub fn parse_dmig(text: &str, path: &Path, name: &str) -> Result<LabelledMatrix>
     })
 }
 
+/// The coordinates of the `GRID` cards of a Nastran bulk-data text (read from `path`):
+/// `GRID ID CP X1 X2 X3 CD PS SEID` in small, large or free field, `(id, [x1, x2, x3])` in
+/// file order (m, as the deck's units are taken to be SI). A blank coordinate is 0. Only the
+/// basic system is read: a grid with `CP` other than blank or 0 is refused by line, since
+/// its coordinates are in a local system nlsim does not transform. Other cards are skipped.
+pub fn parse_grids(text: &str, path: &Path) -> Result<Vec<(u64, [f64; 3])>> {
+    let err = |line: usize, m: String| Error::DataFile {
+        file: path.to_path_buf(),
+        line,
+        message: format!("GRID: {m}"),
+    };
+    let mut out = Vec::new();
+    each_card(
+        text,
+        |n, _| n == "GRID",
+        |fields, line| {
+            let field = |k: usize| fields.get(k).map_or("", |f| f.as_ref()).trim();
+            let id = field(0)
+                .parse::<u64>()
+                .ok()
+                .filter(|&n| n > 0)
+                .ok_or_else(|| {
+                    err(
+                        line,
+                        format!("field 2 (ID) '{}' is not a positive integer", field(0)),
+                    )
+                })?;
+            let cp = field(1);
+            if !(cp.is_empty() || cp == "0") {
+                return Err(err(
+                    line,
+                    format!(
+                        "grid {id} gives its coordinates in system CP = {cp}; only the basic \
+                         system (CP blank or 0) is read: write the deck with basic coordinates"
+                    ),
+                ));
+            }
+            let mut xyz = [0.0; 3];
+            for (k, x) in xyz.iter_mut().enumerate() {
+                let f = field(2 + k);
+                if !f.is_empty() {
+                    *x = nastran_real(f).ok_or_else(|| {
+                        err(
+                            line,
+                            format!(
+                                "grid {id}: field {} (X{}) '{f}' is not a number",
+                                4 + k,
+                                k + 1
+                            ),
+                        )
+                    })?;
+                }
+            }
+            if out.len() == crate::formats::fe_matrices::MAX_GEOMETRY_NODES {
+                return Err(err(line, format!("more than {} grids", out.len())));
+            }
+            out.push((id, xyz));
+            Ok(())
+        },
+    )?;
+    if out.is_empty() {
+        return Err(Error::Usage(format!(
+            "{}: no GRID cards (node coordinates)",
+            path.display()
+        )));
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

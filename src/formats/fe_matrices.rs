@@ -374,6 +374,10 @@ pub(crate) fn label(node: i64, component: i64) -> std::result::Result<DofLabel, 
     Ok(DofLabel::new(node as u64, c))
 }
 
+/// The most nodes a geometry may hold, from a model file's `[geometry]` or an FE deck's node
+/// coordinates (10⁷: a mesh of 3·10⁷ DOFs).
+pub const MAX_GEOMETRY_NODES: usize = 10_000_000;
+
 /// A real in Nastran's notation: `1.5`, `1.5E+3`, `1.5D+3`, `1.5+3`, `-.5-2`.
 pub fn nastran_real(s: &str) -> Option<f64> {
     let t = s.trim();

@@ -195,6 +195,16 @@ pub fn model_summary(model: &Model, source: &str, validation: Option<&Validation
             ""
         }
     );
+    if let (Some(first), Some(last)) = (model.geometry().first(), model.geometry().last()) {
+        let _ = writeln!(
+            s,
+            "  geometry     {} with coordinates (nodes {} to {}): written as dataset 2411 of \
+             universal files",
+            counted(model.geometry().len(), "node"),
+            first.0,
+            last.0
+        );
+    }
     if let Some(v) = validation {
         let _ = writeln!(
             s,

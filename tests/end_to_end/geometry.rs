@@ -4,6 +4,9 @@
 
 use super::*;
 
+/// `(node, [x, y, z])` per node.
+type Nodes = Vec<(u64, [f64; 3])>;
+
 /// The coordinates pyuff reads from the dataset 2411 of `file` (in `dir`), as
 /// `node x y z` lines; the types of every dataset on a first line.
 fn pyuff_nodes(dir: &Path, file: &str) -> String {
@@ -34,7 +37,7 @@ for s in sets:
 }
 
 /// `(node, [x, y, z])` of every line after the first of [`pyuff_nodes`].
-fn parse_nodes(text: &str) -> Vec<(u64, [f64; 3])> {
+fn parse_nodes(text: &str) -> Nodes {
     text.lines()
         .skip(1)
         .map(|l| {
@@ -123,6 +126,11 @@ fn coordinates_reach_the_universal_files() {
             }
         }
     }
+    let summary = nlsim(&["check", &d("csv.toml")]).1;
+    assert!(
+        summary.contains("geometry     21 nodes with coordinates (nodes 1 to 21)"),
+        "{summary}"
+    );
     // The built-in beam's own coordinates for every node with a DOF in `modes`.
     let (rc, _, e) = nlsim(&["modes", "ecl_beam", "--count", "3", "--out", &d("m.uff")]);
     assert_eq!(rc, 0, "{e}");
@@ -232,6 +240,116 @@ fn bad_geometry_names_file_line_and_key() {
             .unwrap()
             .to_string();
         assert!(e.contains(says), "{file}: {e}");
+        assert_eq!(e.lines().count(), 1, "{e}");
+    }
+    std::fs::remove_dir_all(&*dir).unwrap();
+}
+
+/// Coordinates from the FE decks engineers hold: a Nastran bulk-data file with `GRID` cards
+/// written by pyNastran (the independent writer) in small and large field, and an Abaqus
+/// input file's `*NODE` blocks, reach the universal file equal to what pyNastran reads back
+/// from its own deck (and to the `.inp`'s numbers); a grid in a local system and an input file
+/// with parts are refused by line.
+#[test]
+fn coordinates_from_nastran_and_abaqus_decks() {
+    let dir = scratch("geometry-decks");
+    let d = |n: &str| dir.join(n).to_str().unwrap().to_string();
+    let script = r#"
+import sys
+from pyNastran.bdf.bdf import BDF, read_bdf
+d = sys.argv[1]
+for size, name in [(8, "small.bdf"), (16, "large.bdf")]:
+    m = BDF(debug=None)
+    for k in range(1, 22):
+        x = (k - 1) * 0.035
+        m.add_grid(k, [0.1 + 0.6 * x, -0.25 + 0.8 * x, 1.0 / 3.0])
+    m.add_grid(100, [5.0, 6.0, 7.0], cp=0)
+    m.write_bdf(d + "/" + name, size=size, is_double=(size == 16))
+    back = read_bdf(d + "/" + name, debug=None, xref=False)
+    with open(d + "/" + name + ".xyz", "w") as f:
+        for k in (11, 21):
+            f.write("%d %r %r %r\n" % ((k,) + tuple(float(v) for v in back.nodes[k].xyz)))
+print("ok")
+"#;
+    python_checks(script, &dir);
+    std::fs::write(
+        dir.join("beam.inp"),
+        "*Heading\n** a flat input file\n*Node, nset=all\n  11, 0.35, 0.25, -1e-3\n\
+         21,0.7,0.5\n*Element, type=B31\n1, 11, 21\n*Node\n5, 1., 2., 3.\n",
+    )
+    .unwrap();
+    let mut cases: Vec<(String, Nodes)> = ["small.bdf", "large.bdf"]
+        .iter()
+        .map(|f| {
+            let text = std::fs::read_to_string(dir.join(format!("{f}.xyz"))).unwrap();
+            (
+                f.to_string(),
+                text.lines()
+                    .map(|l| {
+                        let w: Vec<&str> = l.split_whitespace().collect();
+                        let v = |i: usize| w[i].parse::<f64>().unwrap();
+                        (w[0].parse().unwrap(), [v(1), v(2), v(3)])
+                    })
+                    .collect(),
+            )
+        })
+        .collect();
+    cases.push((
+        "beam.inp".into(),
+        vec![(11, [0.35, 0.25, -1e-3]), (21, [0.7, 0.5, 0.0])],
+    ));
+    for (deck, want) in &cases {
+        std::fs::write(
+            dir.join("m.toml"),
+            format!("[matrices]\nfixture = \"ecl_beam\"\n\n[geometry]\nnodes = \"{deck}\"\n"),
+        )
+        .unwrap();
+        let (rc, o, e) = nlsim(&[
+            "frf",
+            &d("m.toml"),
+            "--from",
+            "22",
+            "--to",
+            "24",
+            "--mode",
+            "step-up",
+            "--points",
+            "3",
+            "--out",
+            &d("f.uff"),
+        ]);
+        assert_eq!(rc, 0, "{deck}: {o}{e}");
+        let got = parse_nodes(&pyuff_nodes(&dir, "f.uff"));
+        assert_eq!(&got, want, "{deck}");
+    }
+    // Refused by line: a grid in a local system; an input file with parts.
+    std::fs::write(
+        dir.join("cp.bdf"),
+        "BEGIN BULK\nGRID,1,,0.,0.,0.\nGRID,2,5,1.,0.,0.\nENDDATA\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("parts.inp"),
+        "*Part, name=beam\n*Node\n1, 0., 0., 0.\n*End Part\n",
+    )
+    .unwrap();
+    std::fs::write(dir.join("none.bdf"), "BEGIN BULK\nENDDATA\n").unwrap();
+    for (deck, says) in [
+        (
+            "cp.bdf",
+            "cp.bdf:3: GRID: grid 2 gives its coordinates in system CP = 5",
+        ),
+        ("parts.inp", "parts.inp:1: *PART"),
+        ("none.bdf", "none.bdf: no GRID cards"),
+    ] {
+        let e = nlsim::parse_model_file(
+            &format!("[matrices]\nfixture = \"ecl_beam\"\n\n[geometry]\nnodes = \"{deck}\"\n"),
+            &dir.join("m.toml"),
+        )
+        .err()
+        .unwrap()
+        .to_string();
+        assert!(e.contains(says), "{deck}: {e}");
         assert_eq!(e.lines().count(), 1, "{e}");
     }
     std::fs::remove_dir_all(&*dir).unwrap();

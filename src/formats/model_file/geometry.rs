@@ -2,20 +2,20 @@
 //! dataset 2411 beside the functions and shapes nlsim writes). No analysis uses them.
 //!
 //! `nodes` is inline, `[[1, 0.0, 0.0, 0.0], [2, 0.07, 0.0, 0.0]]` (node id, x, y, z in m), or
-//! the path of a CSV file (relative to the model file) with one node per line,
-//! `node,x,y,z`; a first line that is not numbers is a header, lines starting with `#` are
-//! comments.
+//! the path of a file (relative to the model file): a Nastran bulk-data deck (`.bdf`, `.dat`,
+//! `.nas`, `.blk`, `.pch`: its `GRID` cards, [`crate::formats::dmig::parse_grids`]), an Abaqus
+//! input file (`.inp`: its `*NODE` blocks, [`crate::formats::abaqus::parse_inp_nodes`]), or
+//! else a CSV file with one node per line, `node,x,y,z` (a first line that is not numbers is
+//! a header, lines starting with `#` are comments).
 
 use super::toml::{Tab, number};
 use crate::error::{Error, Result};
+use crate::formats::fe_matrices::MAX_GEOMETRY_NODES as MAX_NODES;
 use std::path::Path;
 use toml::de::DeValue;
 
-/// The most nodes a geometry may hold (10⁷: a mesh of 3·10⁷ DOFs).
-pub const MAX_NODES: usize = 10_000_000;
-
-/// The most bytes a CSV file of nodes may have: [`MAX_NODES`] lines of about 100 characters.
-const MAX_CSV_BYTES: u64 = 1 << 30;
+/// The most bytes a file of nodes may have: 10⁷ lines of about 100 characters.
+const MAX_FILE_BYTES: u64 = 1 << 30;
 
 /// Reads `[geometry]`: `nodes` inline or from a CSV file beside the model file.
 pub(super) fn read_geometry(t: &mut Tab<'_, '_>, base_dir: &Path) -> Result<Vec<(u64, [f64; 3])>> {
@@ -27,7 +27,7 @@ pub(super) fn read_geometry(t: &mut Tab<'_, '_>, base_dir: &Path) -> Result<Vec<
         )
     })?;
     match v.get_ref() {
-        DeValue::String(s) => read_csv(&base_dir.join(s.as_ref())),
+        DeValue::String(s) => read_file(&base_dir.join(s.as_ref())),
         DeValue::Array(rows) => {
             if rows.len() > MAX_NODES {
                 return Err(t.err(
@@ -76,9 +76,23 @@ pub(super) fn read_geometry(t: &mut Tab<'_, '_>, base_dir: &Path) -> Result<Vec<
     }
 }
 
-/// Reads a CSV file of `node,x,y,z` lines (header and `#` comments allowed).
-fn read_csv(path: &Path) -> Result<Vec<(u64, [f64; 3])>> {
-    let text = crate::formats::files::read_text_bounded(path, MAX_CSV_BYTES)?;
+/// Reads the nodes of a file by its extension: Nastran bulk data, an Abaqus input file, or
+/// CSV.
+fn read_file(path: &Path) -> Result<Vec<(u64, [f64; 3])>> {
+    let text = crate::formats::files::read_text_bounded(path, MAX_FILE_BYTES)?;
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    match ext.as_str() {
+        "bdf" | "dat" | "nas" | "blk" | "pch" => crate::formats::dmig::parse_grids(&text, path),
+        "inp" => crate::formats::abaqus::parse_inp_nodes(&text, path),
+        _ => read_csv(&text, path),
+    }
+}
+
+/// Reads a CSV text of `node,x,y,z` lines (header and `#` comments allowed) from `path`.
+fn read_csv(text: &str, path: &Path) -> Result<Vec<(u64, [f64; 3])>> {
     let mut out = Vec::new();
     for (i, line) in text.lines().enumerate() {
         let l = line.trim();
@@ -108,7 +122,7 @@ fn read_csv(path: &Path) -> Result<Vec<(u64, [f64; 3])>> {
                 out.push(n);
             }
             // A header: the first line that is not a node.
-            None if out.is_empty() && i == first_line(&text) => {}
+            None if out.is_empty() && i == first_line(text) => {}
             None => {
                 return Err(Error::Usage(format!(
                     "{}:{}: expected node,x,y,z (a positive integer id, three finite \
