@@ -71,6 +71,28 @@ fn f1(sys: &HbSystem, p: &[Param]) -> f64 {
     sys.linear().frequency_hz(r)
 }
 
+/// The Fisher information `Σ Re(dY_a* dY_b)/σ²` over the steps' `responses` (channels ×
+/// harmonics), every channel and the `harmonics` listed, from the derivatives `d[a][step]`
+/// (same layout) and the noise model of [`noise`] at the response.
+fn information(responses: &[Mat<c64>], d: &[Vec<Mat<c64>>], harmonics: &[usize]) -> Mat<f64> {
+    let n = d.len();
+    let mut f = Mat::<f64>::zeros(n, n);
+    for (i, y) in responses.iter().enumerate() {
+        for c in 0..y.nrows() {
+            for &k in harmonics {
+                let s = noise().sigma(y[(c, k - 1)]);
+                for a in 0..n {
+                    for b in 0..n {
+                        let (da, db) = (d[a][i][(c, k - 1)], d[b][i][(c, k - 1)]);
+                        f[(a, b)] += (da.re * db.re + da.im * db.im) / (s * s);
+                    }
+                }
+            }
+        }
+    }
+    f
+}
+
 #[test]
 fn fisher_information_equals_a_finite_difference_one() {
     let (sys, _) = system(&beam(), 6);
@@ -112,20 +134,7 @@ fn fisher_information_equals_a_finite_difference_one() {
                 .collect()
         })
         .collect();
-    let mut fd = Mat::<f64>::zeros(p.len(), p.len());
-    for (i, y) in info.responses.iter().enumerate() {
-        for c in 0..y.nrows() {
-            for &k in &harmonics {
-                let s = noise().sigma(y[(c, k - 1)]);
-                for a in 0..p.len() {
-                    for b in 0..p.len() {
-                        let (da, db) = (d[a][i][(c, k - 1)], d[b][i][(c, k - 1)]);
-                        fd[(a, b)] += (da.re * db.re + da.im * db.im) / (s * s);
-                    }
-                }
-            }
-        }
-    }
+    let fd = information(&info.responses, &d, &harmonics);
     let scale = fim.norm_max();
     assert!(scale > 0.0);
     for a in 0..p.len() {
@@ -215,20 +224,7 @@ fn gains_enter_the_information_as_the_calibration_sees_them() {
             .collect(),
     );
     let n = p.len();
-    let mut fd = Mat::<f64>::zeros(n, n);
-    for (i, y) in nominal.responses.iter().enumerate() {
-        for c in 0..y.nrows() {
-            for &k in &harmonics {
-                let s = noise().sigma(y[(c, k - 1)]);
-                for a in 0..n {
-                    for b in 0..n {
-                        let (da, db) = (d[a][i][(c, k - 1)], d[b][i][(c, k - 1)]);
-                        fd[(a, b)] += (da.re * db.re + da.im * db.im) / (s * s);
-                    }
-                }
-            }
-        }
-    }
+    let fd = information(&nominal.responses, &d, &harmonics);
     // As above: the differences' round-off ~1e-5 relative.
     let scale = fim.norm_max();
     for a in 0..n {

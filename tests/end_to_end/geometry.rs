@@ -54,6 +54,28 @@ fn parse_nodes(text: &str) -> Nodes {
         .collect()
 }
 
+/// The nodes pyuff reads from the universal file of a short stepped `nlsim frf` of `model`
+/// (written to `dir/f.uff`).
+fn frf_nodes(dir: &Path, model: &str) -> Nodes {
+    let out = dir.join("f.uff");
+    let (rc, o, e) = nlsim(&[
+        "frf",
+        model,
+        "--from",
+        "22",
+        "--to",
+        "24",
+        "--mode",
+        "step-up",
+        "--points",
+        "3",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(rc, 0, "{model}: {o}{e}");
+    parse_nodes(&pyuff_nodes(dir, "f.uff"))
+}
+
 /// A model file's coordinates (CSV and inline) replace the fixture's and reach the universal
 /// files of `frf` and `simulate` exactly (`1PD25.16` holds every bit of a double); the
 /// modal model `export --modal` writes carries the coordinates of its points, and so do its
@@ -146,22 +168,7 @@ fn coordinates_reach_the_universal_files() {
     assert_eq!(rc, 0, "{e}");
     let modal = std::fs::read_to_string(dir.join("modal/modal.toml")).unwrap();
     assert!(modal.contains("[geometry]"), "{modal}");
-    let (rc, o, e) = nlsim(&[
-        "frf",
-        &d("modal/modal.toml"),
-        "--from",
-        "22",
-        "--to",
-        "24",
-        "--mode",
-        "step-up",
-        "--points",
-        "3",
-        "--out",
-        &d("mf.uff"),
-    ]);
-    assert_eq!(rc, 0, "{o}{e}");
-    let nodes = parse_nodes(&pyuff_nodes(&dir, "mf.uff"));
+    let nodes = frf_nodes(&dir, &d("modal/modal.toml"));
     assert_eq!(nodes.len(), 2);
     for (k, got) in nodes {
         assert_eq!(got, xyz(k), "modal: node {k}");
@@ -304,23 +311,7 @@ print("ok")
             format!("[matrices]\nfixture = \"ecl_beam\"\n\n[geometry]\nnodes = \"{deck}\"\n"),
         )
         .unwrap();
-        let (rc, o, e) = nlsim(&[
-            "frf",
-            &d("m.toml"),
-            "--from",
-            "22",
-            "--to",
-            "24",
-            "--mode",
-            "step-up",
-            "--points",
-            "3",
-            "--out",
-            &d("f.uff"),
-        ]);
-        assert_eq!(rc, 0, "{deck}: {o}{e}");
-        let got = parse_nodes(&pyuff_nodes(&dir, "f.uff"));
-        assert_eq!(&got, want, "{deck}");
+        assert_eq!(&frf_nodes(&dir, &d("m.toml")), want, "{deck}");
     }
     // Refused by line: a grid in a local system; an input file with parts.
     std::fs::write(
