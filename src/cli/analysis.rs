@@ -23,7 +23,8 @@ pub struct CheckArgs {
 pub struct ExportArgs {
     /// Model file (.toml) or built-in model.
     model: String,
-    /// Directory to write K.mtx, M.mtx and dofs.txt into (created if missing).
+    /// Directory to write K.mtx, M.mtx and dofs.txt (and nodes.csv, when the model has
+    /// coordinates) into (created if missing).
     dir: std::path::PathBuf,
     /// Also write K and M as Nastran OUTPUT4 `matrices.op4` (KAAX and MAAX, rows in the order
     /// of dofs.txt): `ascii`, `binary` (little-endian) or `binary-be` (big-endian).

@@ -32,7 +32,8 @@ pub fn fixtures(console: &Console) {
     }
 }
 
-/// `nlsim export MODEL DIR`: `K.mtx`, `M.mtx` and `dofs.txt`, and with `op4` also
+/// `nlsim export MODEL DIR`: `K.mtx`, `M.mtx` and `dofs.txt`, `nodes.csv` when the model has
+/// coordinates (`node,x,y,z`, as `[geometry]` reads it), and with `op4` also
 /// `matrices.op4` (KAAX and MAAX in that OUTPUT4 layout), each written atomically (a killed
 /// export or a full disk leaves no truncated file under the final name).
 pub fn export(
@@ -64,6 +65,15 @@ pub fn export(
         crate::formats::files::write_text_atomically(&dir.join(name), &text)?;
     }
     let mut wrote = "K.mtx, M.mtx, dofs.txt".to_string();
+    if !m.geometry().is_empty() {
+        // What `[geometry] nodes = "nodes.csv"` reads back, every bit kept.
+        let mut text = String::from("node,x,y,z\n");
+        for (n, [x, y, z]) in m.geometry() {
+            text.push_str(&format!("{n},{x:e},{y:e},{z:e}\n"));
+        }
+        crate::formats::files::write_text_atomically(&dir.join("nodes.csv"), &text)?;
+        wrote.push_str(", nodes.csv");
+    }
     if let Some(layout) = op4 {
         let bytes = crate::formats::op4_write::to_op4(
             &[("KAAX", m.stiffness()), ("MAAX", m.mass())],

@@ -173,6 +173,21 @@ fn coordinates_reach_the_universal_files() {
     for (k, got) in nodes {
         assert_eq!(got, xyz(k), "modal: node {k}");
     }
+    // `export` writes them as nodes.csv; a model of its files reads them back bit for bit.
+    let (rc, o, e) = nlsim(&["export", &d("csv.toml"), &d("fe")]);
+    assert_eq!(rc, 0, "{e}");
+    assert!(o.contains("K.mtx, M.mtx, dofs.txt, nodes.csv"), "{o}");
+    std::fs::write(
+        dir.join("fe/m.toml"),
+        "[matrices]\nmass = \"M.mtx\"\nstiffness = \"K.mtx\"\ndofs = \"dofs.txt\"\n\n\
+         [geometry]\nnodes = \"nodes.csv\"\n",
+    )
+    .unwrap();
+    let back = nlsim::load_model(&d("fe/m.toml")).unwrap().model;
+    assert_eq!(back.geometry().len(), 21);
+    for &(k, p) in back.geometry() {
+        assert_eq!(p, xyz(k), "exported node {k}");
+    }
     // A model without coordinates writes the functions alone.
     let (rc, _, e) = nlsim(&[
         "frf",
