@@ -284,8 +284,7 @@ pub(crate) fn read_bytes_up_to(path: &Path, max_bytes: Option<u64>) -> Result<Ve
     let len = meta.len();
     if let Some(max) = max_bytes.filter(|&m| len > m) {
         return Err(Error::Usage(format!(
-            "{}: {len} bytes; a file of this kind is read up to {max} bytes (is this the right \
-             file?)",
+            "{}: {len} bytes; a file of this kind holds at most {max} (is this the right file?)",
             path.display()
         )));
     }
