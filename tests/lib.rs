@@ -78,18 +78,25 @@ fn python_h5py() -> String {
 }
 
 /// Runs the Python `script` (with h5py, pyuff and numpy) on `dir` as its one argument and
-/// panics with its output unless it exits 0 having printed `ok`.
-fn python_checks(script: &str, dir: &Path) {
+/// returns what it printed; panics with its output unless it exits 0.
+fn python_output(script: &str, dir: &Path) -> String {
     let out = Command::new(python_h5py())
         .args(["-c", script, dir.to_str().unwrap()])
         .output()
         .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout);
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
     assert!(
-        out.status.success() && text.contains("ok"),
+        out.status.success(),
         "{text}{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    text
+}
+
+/// [`python_output`], which must have printed `ok`.
+fn python_checks(script: &str, dir: &Path) {
+    let text = python_output(script, dir);
+    assert!(text.contains("ok"), "{text}");
 }
 
 /// `(estimate, Cramér–Rao std)` per parameter of an estimates CSV (`calibrate --out`).

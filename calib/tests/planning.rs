@@ -71,6 +71,16 @@ fn f1(sys: &HbSystem, p: &[Param]) -> f64 {
     sys.linear().frequency_hz(r)
 }
 
+/// A stepped sine of 12 steps from 0.95 to 1.08 times the driven mode's frequency `f` (Hz).
+fn around_mode_1(f: f64) -> Band {
+    Band {
+        label: "around mode 1".into(),
+        from_hz: 0.95 * f,
+        to_hz: 1.08 * f,
+        steps: 12,
+    }
+}
+
 /// The Fisher information `Σ Re(dY_a* dY_b)/σ²` over the steps' `responses` (channels ×
 /// harmonics), every channel and the `harmonics` listed, from the derivatives `d[a][step]`
 /// (same layout) and the noise model of [`noise`] at the response.
@@ -100,12 +110,7 @@ fn fisher_information_equals_a_finite_difference_one() {
     let f = f1(&sys, &p);
     let planner = Planner::new(&sys, &p).unwrap();
     let ex = Exciter::sine("shaker", 0.2);
-    let band = Band {
-        label: "around mode 1".into(),
-        from_hz: 0.95 * f,
-        to_hz: 1.08 * f,
-        steps: 12,
-    };
+    let band = around_mode_1(f);
     let harmonics = [1, 3];
     let info = planner
         .sweep_information(&ex, &band, noise(), &harmonics)
@@ -168,12 +173,7 @@ fn gains_enter_the_information_as_the_calibration_sees_them() {
     p.push(Param::SensorGain("tip".into()));
     let planner = Planner::new(&sys, &p).unwrap();
     assert_eq!(&planner.nominal()[2..], &[1.0, 1.0]);
-    let band = Band {
-        label: "around mode 1".into(),
-        from_hz: 0.95 * f,
-        to_hz: 1.08 * f,
-        steps: 12,
-    };
+    let band = around_mode_1(f);
     let harmonics = [1, 3];
     let info = |level: f64, s: &HbSystem| {
         Planner::new(s, &p)

@@ -115,14 +115,8 @@ fn write_uff(path: &Path, model: &Model, h: &TimeHistory, info: &RunInfo) -> Res
         )));
     }
     // `path` is already the temporary file of the atomic write.
-    let mut bytes = crate::formats::uff_write::nodes_text(
-        model.geometry(),
-        crate::formats::uff_write::function_nodes(&functions),
-    )
-    .into_bytes();
-    bytes.extend(crate::formats::uff_write::encode_functions(
-        path, &functions, false,
-    )?);
+    let bytes =
+        crate::formats::uff_write::encode_functions(path, &functions, false, model.geometry())?;
     std::fs::write(path, bytes).map_err(|source| Error::Io {
         path: path.to_path_buf(),
         source,

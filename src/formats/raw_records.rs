@@ -200,14 +200,8 @@ fn write_uff(path: &Path, rec: &RawRecord, info: &RawInfo<'_>, cols: &[Column<'_
             }
         })
         .collect();
-    let mut bytes = crate::formats::uff_write::nodes_text(
-        info.geometry,
-        crate::formats::uff_write::function_nodes(&functions),
-    )
-    .into_bytes();
-    bytes.extend(crate::formats::uff_write::encode_functions(
-        path, &functions, false,
-    )?);
+    let bytes =
+        crate::formats::uff_write::encode_functions(path, &functions, false, info.geometry)?;
     std::fs::write(path, bytes).map_err(|source| Error::Io {
         path: path.to_path_buf(),
         source,

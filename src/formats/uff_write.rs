@@ -109,21 +109,22 @@ fn axis_label(code: i64) -> (&'static str, &'static str) {
     }
 }
 
-/// Writes `functions` as datasets 58 to `path`, atomically ([`encode_functions`]), after
-/// a dataset 2411 of the nodes they name that `geometry` holds.
+/// Writes `functions` as datasets 58 to `path`, atomically, after a dataset 2411 of the
+/// nodes they name that `geometry` holds ([`encode_functions`]).
 pub fn write_functions(
     path: &Path,
     functions: &[UffFunction],
     binary: bool,
     geometry: &[(u64, [f64; 3])],
 ) -> Result<()> {
-    let mut bytes = nodes_text(geometry, function_nodes(functions)).into_bytes();
-    bytes.extend(encode_functions(path, functions, binary)?);
-    crate::formats::files::write_bytes_atomically(path, &bytes)
+    crate::formats::files::write_bytes_atomically(
+        path,
+        &encode_functions(path, functions, binary, geometry)?,
+    )
 }
 
 /// The response and reference nodes of `functions` (node 0, "none", left out).
-pub fn function_nodes(functions: &[UffFunction]) -> impl Iterator<Item = u64> + '_ {
+fn function_nodes(functions: &[UffFunction]) -> impl Iterator<Item = u64> + '_ {
     functions
         .iter()
         .flat_map(|f| [f.response.0, f.reference.0])
@@ -168,9 +169,15 @@ fn fortran_d(v: f64) -> String {
 /// double precision values `E20.11`, an uneven abscissa `E13.5` as the format gives it) or
 /// 58b (binary little-endian IEEE doubles, the header's byte count exact). ID lines 2–5
 /// carry `nlsim` and the version; units are SI (the ordinate's over the denominator's).
+/// First a dataset 2411 of the nodes they name that `geometry` holds ([`nodes_text`]).
 /// `path` names the destination in errors.
-pub fn encode_functions(path: &Path, functions: &[UffFunction], binary: bool) -> Result<Vec<u8>> {
-    let mut out: Vec<u8> = Vec::new();
+pub fn encode_functions(
+    path: &Path,
+    functions: &[UffFunction],
+    binary: bool,
+    geometry: &[(u64, [f64; 3])],
+) -> Result<Vec<u8>> {
+    let mut out: Vec<u8> = nodes_text(geometry, function_nodes(functions)).into_bytes();
     for (i, f) in functions.iter().enumerate() {
         let n = f.values.len();
         if let Abscissa::Uneven(x) = &f.abscissa

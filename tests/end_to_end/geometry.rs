@@ -10,8 +10,9 @@ type Nodes = Vec<(u64, [f64; 3])>;
 /// The coordinates pyuff reads from the dataset 2411 of `file` (in `dir`), as
 /// `node x y z` lines; the types of every dataset on a first line.
 fn pyuff_nodes(dir: &Path, file: &str) -> String {
-    let script = format!(
-        r#"
+    python_output(
+        &format!(
+            r#"
 import sys, pyuff
 sets = pyuff.UFF(sys.argv[1] + "/{file}").read_sets()
 sets = sets if isinstance(sets, list) else [sets]
@@ -21,19 +22,24 @@ for s in sets:
         for n, x, y, z in zip(s["node_nums"], s["x"], s["y"], s["z"]):
             print(int(n), repr(float(x)), repr(float(y)), repr(float(z)))
 "#
-    );
-    let out = std::process::Command::new(python_h5py())
-        .arg("-c")
-        .arg(&script)
-        .arg(dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap()
+        ),
+        dir,
+    )
+}
+
+/// The ECL beam's model file with `[geometry] nodes = NODES` (a TOML value, as written).
+fn beam_with_nodes(nodes: &str) -> String {
+    format!("[matrices]\nfixture = \"ecl_beam\"\n\n[geometry]\nnodes = {nodes}\n")
+}
+
+/// The one-line error of reading `text` as the model file `path`.
+fn refusal(text: &str, path: &Path) -> String {
+    let e = nlsim::parse_model_file(text, path)
+        .err()
+        .unwrap_or_else(|| panic!("accepted:\n{text}"))
+        .to_string();
+    assert_eq!(e.lines().count(), 1, "{e}");
+    e
 }
 
 /// `(node, [x, y, z])` of every line after the first of [`pyuff_nodes`].
@@ -106,11 +112,7 @@ fn coordinates_reach_the_universal_files() {
         ("csv.toml", "\"nodes.csv\"".to_string()),
         ("inline.toml", format!("[{}]", inline.join(", "))),
     ] {
-        std::fs::write(
-            dir.join(name),
-            format!("[matrices]\nfixture = \"ecl_beam\"\n\n[geometry]\nnodes = {nodes}\n"),
-        )
-        .unwrap();
+        std::fs::write(dir.join(name), beam_with_nodes(&nodes)).unwrap();
         for (cmd, out) in [
             (
                 vec![
@@ -240,29 +242,23 @@ fn bad_geometry_names_file_line_and_key() {
     for (body, key, says) in cases {
         let path = dir.join("bad.toml");
         let text = format!("{head}{body}");
-        let e = nlsim::parse_model_file(&text, &path)
-            .err()
-            .unwrap_or_else(|| panic!("accepted:\n{text}"))
-            .to_string();
+        let e = refusal(&text, &path);
         assert!(
             e.contains("bad.toml:") && e.contains(&format!(": {key}: ")),
             "expected key {key}: {e}"
         );
         assert!(e.contains(says), "expected '{says}': {e}");
-        assert_eq!(e.lines().count(), 1, "{e}");
     }
     for (file, says) in [
         ("bad.csv", "bad.csv:3: expected node,x,y,z"),
         ("empty.csv", "empty.csv: no node lines"),
         ("absent.csv", "absent.csv"),
     ] {
-        let path = dir.join("m.toml");
-        let e = nlsim::parse_model_file(&format!("{head}nodes = \"{file}\"\n"), &path)
-            .err()
-            .unwrap()
-            .to_string();
+        let e = refusal(
+            &beam_with_nodes(&format!("\"{file}\"")),
+            &dir.join("m.toml"),
+        );
         assert!(e.contains(says), "{file}: {e}");
-        assert_eq!(e.lines().count(), 1, "{e}");
     }
     std::fs::remove_dir_all(&*dir).unwrap();
 }
@@ -321,11 +317,7 @@ print("ok")
         vec![(11, [0.35, 0.25, -1e-3]), (21, [0.7, 0.5, 0.0])],
     ));
     for (deck, want) in &cases {
-        std::fs::write(
-            dir.join("m.toml"),
-            format!("[matrices]\nfixture = \"ecl_beam\"\n\n[geometry]\nnodes = \"{deck}\"\n"),
-        )
-        .unwrap();
+        std::fs::write(dir.join("m.toml"), beam_with_nodes(&format!("\"{deck}\""))).unwrap();
         assert_eq!(&frf_nodes(&dir, &d("m.toml")), want, "{deck}");
     }
     // Refused by line: a grid in a local system; an input file with parts.
@@ -348,15 +340,11 @@ print("ok")
         ("parts.inp", "parts.inp:1: *PART"),
         ("none.bdf", "none.bdf: no GRID cards"),
     ] {
-        let e = nlsim::parse_model_file(
-            &format!("[matrices]\nfixture = \"ecl_beam\"\n\n[geometry]\nnodes = \"{deck}\"\n"),
+        let e = refusal(
+            &beam_with_nodes(&format!("\"{deck}\"")),
             &dir.join("m.toml"),
-        )
-        .err()
-        .unwrap()
-        .to_string();
+        );
         assert!(e.contains(says), "{deck}: {e}");
-        assert_eq!(e.lines().count(), 1, "{e}");
     }
     std::fs::remove_dir_all(&*dir).unwrap();
 }
