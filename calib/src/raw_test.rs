@@ -601,6 +601,16 @@ pub fn raw_records(
             )
         })
         .collect();
+    // The clearance's (any kinked law's) `D g̈` from the recorder's own samples.
+    let element_forces: Vec<Vec<f64>> = hist
+        .element_forces
+        .iter()
+        .map(|g| g.iter().copied().step_by(m).collect())
+        .collect();
+    {
+        let mut outs: Vec<&mut [f64]> = outputs.iter_mut().map(|o| o.2.as_mut_slice()).collect();
+        nlsim_sim::add_kinked_residual_accelerations(coupled, &element_forces, dt, &mut outs);
+    }
     let force = outputs.pop().map(|s| s.2).unwrap_or_default();
     voltage.truncate(kept);
     for s in &mut raw_steps {

@@ -276,13 +276,7 @@ pub(crate) fn residual_rates(
     let ports = plant.input_ports();
     let ne = plant.inputs.len();
     // Which forces have a smooth second derivative: the inputs, and polynomial laws.
-    let smooth = |q: usize| {
-        q < ne
-            || matches!(
-                plant.elements[q - ne].element.law(),
-                Law::Cubic { .. } | Law::Polynomial { .. } | Law::CoupledPolynomial { .. }
-            )
-    };
+    let smooth = |q: usize| q < ne || polynomial(plant.elements[q - ne].element.law());
     for (spec, out) in plant.outputs.iter().zip(outputs.iter_mut()) {
         let ord = order(spec.quantity);
         let n = out.len();
@@ -311,6 +305,64 @@ pub(crate) fn residual_rates(
             }
         }
     }
+}
+
+/// The acceleration term the integrators leave out of their outputs (the residual
+/// flexibility's `D g̈` of kinked laws), for a recorder that samples the run:
+/// `−D_{p,e} Δ²g_e / dt²` added to every acceleration output `p` for every element `e`
+/// whose law is not a polynomial (a clearance, friction, a power law), from the element
+/// forces `element_forces` (N, one series per element in [`Plant::elements`] order) sampled
+/// at the recorder's step `dt` (s) — the samples the outputs `outputs` (one per plant output,
+/// equally long) hold.
+///
+/// A kink in `g` makes `g̈` impulsive. Its second difference at the recorder's step is the
+/// impulse spread over the samples next to the kink with its area kept, so the harmonics of
+/// the sampled acceleration are those of `−k² ω² (D g)_k` up to the factor
+/// `sinc²(k ω dt / 2)` of the difference (second order in the step, as for the smooth
+/// laws), which is what the harmonic balance predicts; left out, the impulse costs the
+/// accelerations' harmonics a part independent of the step (on the bump-stop cantilever the
+/// calibrated gap moved by 3e-5 of itself). The time history itself gets a spike of width
+/// `2 dt` at each kink, whose height grows as `1/dt`: this is for records analysed by their
+/// harmonics, not for peak values. The differences must be taken on the recorder's samples,
+/// not on a finer run's: keeping every m-th sample of a spike keeps or drops it whole.
+/// Series shorter than 3 samples, and element series shorter than the outputs, are left as
+/// they are.
+pub fn add_kinked_residual_accelerations(
+    plant: &Plant,
+    element_forces: &[Vec<f64>],
+    dt: f64,
+    outputs: &mut [&mut [f64]],
+) {
+    let ports = plant.input_ports();
+    let ne = plant.inputs.len();
+    for (spec, out) in plant.outputs.iter().zip(outputs.iter_mut()) {
+        let n = out.len();
+        if order(spec.quantity) != 2 || n < 3 {
+            continue;
+        }
+        for (e, g) in element_forces.iter().enumerate().take(plant.elements.len()) {
+            if polynomial(plant.elements[e].element.law()) || g.len() < n {
+                continue;
+            }
+            let d = plant.system.feedthrough[(spec.port, ports[ne + e])];
+            if d == 0.0 {
+                continue;
+            }
+            for k in 0..n {
+                let m = k.clamp(1, n - 2);
+                out[k] -= d * (g[m + 1] - 2.0 * g[m] + g[m - 1]) / (dt * dt);
+            }
+        }
+    }
+}
+
+/// Whether an element law is a polynomial of the displacements (its force as smooth as the
+/// motion, so that its second difference is a rate and not an impulse).
+fn polynomial(law: &Law) -> bool {
+    matches!(
+        law,
+        Law::Cubic { .. } | Law::Polynomial { .. } | Law::CoupledPolynomial { .. }
+    )
 }
 
 /// Calls a progress callback `progress(done, total)` about 200 times over a run of `total`

@@ -27,7 +27,10 @@ pub mod signal;
 pub use batch::run_batch;
 pub use feedback::NewtonConfig;
 pub use foh::{FohConfig, OutputSensitivities, Simulator};
-pub use history::{ContactEvent, InitialState, LoadCase, RunStats, Series, TimeHistory};
+pub use history::{
+    ContactEvent, InitialState, LoadCase, RunStats, Series, TimeHistory,
+    add_kinked_residual_accelerations,
+};
 pub use hold::{Hold, bias_error, reconstruction_gain, step_coefficients};
 pub use newmark::{Newmark, NewmarkConfig};
 pub use plant::{ElementPort, OutputSpec, Plant, PlantBuilder};

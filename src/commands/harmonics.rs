@@ -590,6 +590,9 @@ fn say_dwells(
             d.iter().map(|d| d.drift).fold(0.0, f64::max)
         ));
     }
+    if let Some(w) = drive_truncation_warning(&r.data) {
+        console.say(&w);
+    }
     for d in r.dwells.iter().filter(|d| !d.kept) {
         let why = if d.periods < req.dwell.min_periods {
             format!(
@@ -607,4 +610,45 @@ fn say_dwells(
             d.origin, d.frequency_hz
         ));
     }
+}
+
+/// Largest measured drive harmonic, relative to the fundamental, among the upper half of the
+/// harmonics kept (`H/2 < k ≤ H`) that the summary warns above: the calibration drives the
+/// balance with the measured force's harmonics 1..H and cannot see what lies above, so a
+/// force whose harmonics are still this large at H has more above it.
+const DRIVE_TRUNCATION_WARN: f64 = 1e-3;
+
+/// The summary's warning when a measured force still carries harmonics of more than
+/// [`DRIVE_TRUNCATION_WARN`] of its fundamental in the upper half of those kept (a contact
+/// at the drive point, whose kink the stinger force follows), naming the step; `None` for a
+/// voltage record (the generator's own signal) or fewer than 2 harmonics.
+fn drive_truncation_warning(data: &nlsim_calib::TestData) -> Option<String> {
+    let h = data.harmonics;
+    if data.drive != nlsim_calib::Drive::Force || h < 2 {
+        return None;
+    }
+    let mut worst: Option<(f64, usize, &str, f64)> = None;
+    for s in &data.sweeps {
+        for st in &s.steps {
+            let f1 = st.force.first().map_or(0.0, |f| f.norm());
+            if f1 <= 0.0 {
+                continue;
+            }
+            for (k, fk) in st.force.iter().enumerate().skip(h / 2) {
+                let r = fk.norm() / f1;
+                if r > worst.map_or(0.0, |w| w.0) {
+                    worst = Some((r, k + 1, &s.label, st.frequency_hz));
+                }
+            }
+        }
+    }
+    let (r, k, label, f) = worst?;
+    (r > DRIVE_TRUNCATION_WARN).then(|| {
+        format!(
+            "warning: the drive's harmonic {k} is still {r:.1e} of its fundamental (sweep \
+             '{label}', {f:.4} Hz): the calibration takes the force's harmonics 1..{h} as its \
+             input and cannot see those above; extract and calibrate with more (--harmonics, \
+             at most 64) where the drive point meets a contact"
+        )
+    })
 }
