@@ -623,27 +623,26 @@ fn a_tracked_sweep_agrees_with_harmonic_balance_within_the_sweep_bias() {
 }
 
 /// Noise-free records against the harmonic balance: the ECL beam (0.2 N, cubic tip spring)
-/// through two 40-s dwells at 22.5 and 24 Hz, FOH at 4, 8 and 16 kHz, the steady state held
-/// to 1e-8 (`--settle-tol`), against the stepped-sine harmonic balance with 11 harmonics at
-/// the extracted frequencies and forces, on the same 20 modes with residual flexibility (the
-/// FOH's accelerations keep the cubic spring's residual term `D g̈` — `add_residual_rates`
-/// in sim/src/history.rs — as the harmonic balance does; leaving it out cost 2e-5 of the
-/// fundamental in the tip's third harmonic here, so this test once ran without residual
-/// flexibility; 21 harmonics change nothing below). The FOH holds the sampled force
-/// linearly between samples (an error second order in the step): the fundamentals' error
-/// falls by 4 per halving from 8 to 16 kHz, and the Richardson extrapolation of those two,
-/// `(4 X₁₆ − X₈)/3`, equals the harmonic balance within 1e-6 of the fundamental for the
-/// harmonics 1 and 2 of every channel (the table is printed; a 20-s dwell at 24 Hz, near the
-/// hardening fold, still held 1e-6 of its slow transient). The third harmonic at the tip at
-/// 24 Hz keeps 1.06e-6 of the fundamental, above the issue's 1e-6 (a floor that does not
-/// move with the rate or the dwell's length); it is held below 1e-5 as a regression guard.
+/// through two 40-s dwells at 22.5 and 24 Hz, FOH at 8, 16 and 32 kHz (HDF5 records), the
+/// steady state held to 1e-8 (`--settle-tol`), against the stepped-sine harmonic balance with
+/// 11 harmonics at the extracted frequencies and forces, on the same 20 modes with residual
+/// flexibility (the FOH's accelerations keep the cubic spring's residual term `D g̈` —
+/// `add_residual_rates` in sim/src/history.rs — as the harmonic balance does; leaving it out
+/// cost 2e-5 of the fundamental in the tip's third harmonic). The FOH holds the sampled
+/// force linearly between samples (an error second order in the step): the fundamentals'
+/// error falls by 4 per halving from 8 to 16 kHz (asserted), and the Richardson
+/// extrapolation of the 16 and 32 kHz records, `(4 X₃₂ − X₁₆)/3`, equals the harmonic balance
+/// within 1e-6 of the fundamental for the harmonics 1 to 3 of every channel (the table is
+/// printed: 2.2e-7 and 8e-8). At 4 and 8 kHz the third harmonic kept 1.06e-6: the modes
+/// near 8 kHz are not yet in the step's asymptotic range there (with 40 modes it was 7e-6),
+/// so the extrapolation needs the finer pair.
 #[test]
 fn noise_free_dwells_equal_harmonic_balance() {
     let d = scratch("harmonics-hb");
     let p = |n: &str| d.join(n).to_str().unwrap().to_string();
     let mut extracted = Vec::new();
-    for rate in ["4000", "8000", "16000"] {
-        let raw = p(&format!("raw{rate}.csv"));
+    for rate in ["8000", "16000", "32000"] {
+        let raw = p(&format!("raw{rate}.h5"));
         let data = p(&format!("h{rate}.csv"));
         let (rc, out, err) = nlsim(&[
             "simulate",
@@ -675,8 +674,8 @@ fn noise_free_dwells_equal_harmonic_balance() {
     let fine = &extracted[2];
     let ev = ecl_beam_balance(fine, 11);
     eprintln!(
-        "step  f (Hz)  channel  k   |X_k|/|X_1|   err 4 kHz   err 8 kHz  err 16 kHz  \
-         Richardson 8/16  Richardson 4/8/16"
+        "step  f (Hz)  channel  k   |X_k|/|X_1|   err 8 kHz  err 16 kHz  err 32 kHz  \
+         Richardson 16/32  Richardson 8/16/32"
     );
     let (mut worst, mut third) = (0.0f64, 0.0f64);
     let mut ratios = Vec::new();
@@ -702,9 +701,9 @@ fn noise_free_dwells_equal_harmonic_balance() {
                     .iter()
                     .map(|s| s.response[(c, k)] * (steps[2].force[0] / s.force[0]))
                     .collect();
-                let r48 = (4.0 * x[1] - x[0]) / 3.0;
-                let r816 = (4.0 * x[2] - x[1]) / 3.0;
-                let r3 = (16.0 * r816 - r48) / 15.0;
+                let r816 = (4.0 * x[1] - x[0]) / 3.0;
+                let r1632 = (4.0 * x[2] - x[1]) / 3.0;
+                let r3 = (16.0 * r1632 - r816) / 15.0;
                 let e = |v: faer::c64| (v - hb).norm() / fund;
                 eprintln!(
                     "{:>4}  {f:>6.3}  {:>7}  {}  {:>11.3e}  {:>10.2e}  {:>10.2e}  {:>10.2e}  \
@@ -716,13 +715,13 @@ fn noise_free_dwells_equal_harmonic_balance() {
                     e(x[0]),
                     e(x[1]),
                     e(x[2]),
-                    e(r816),
+                    e(r1632),
                     e(r3),
                 );
                 if k < 2 {
-                    worst = worst.max(e(r816));
+                    worst = worst.max(e(r1632));
                 } else {
-                    third = third.max(e(r816));
+                    third = third.max(e(r1632));
                 }
                 if k == 0 {
                     ratios.push((e(x[0]) / e(x[1]), e(x[1]) / e(x[2])));
@@ -730,16 +729,18 @@ fn noise_free_dwells_equal_harmonic_balance() {
             }
         }
     }
-    eprintln!("fundamental error ratios 4/8 and 8/16 kHz: {ratios:.2?}");
+    // From 16 to 32 kHz the fundamental's error at 24 Hz meets what is left of the slow
+    // transient (about 1e-7), so the order is read on the coarser pair.
+    eprintln!("fundamental error ratios 8/16 and 16/32 kHz: {ratios:.2?}");
     eprintln!(
-        "Richardson 8/16 kHz vs HB: harmonics 1-2 {worst:.2e}, harmonic 3 {third:.2e} of the \
+        "Richardson 16/32 kHz vs HB: harmonics 1-2 {worst:.2e}, harmonic 3 {third:.2e} of the \
          fundamental"
     );
-    for (_, b) in &ratios {
-        assert!((b - 4.0).abs() < 0.6, "{ratios:?}");
+    for (a, _) in &ratios {
+        assert!((a - 4.0).abs() < 0.6, "{ratios:?}");
     }
     assert!(worst < 1e-6, "extrapolated records vs HB: {worst:e}");
-    assert!(third < 1e-5, "third harmonic: {third:e}");
+    assert!(third < 1e-6, "third harmonic: {third:e}");
 }
 
 /// Time records in HDF5: what `nlsim simulate --out F.h5` writes gives the harmonics of its
