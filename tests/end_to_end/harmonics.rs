@@ -633,9 +633,10 @@ fn a_tracked_sweep_agrees_with_harmonic_balance_within_the_sweep_bias() {
 /// error falls by 4 per halving from 8 to 16 kHz (asserted), and the Richardson
 /// extrapolation of the 16 and 32 kHz records, `(4 X₃₂ − X₁₆)/3`, equals the harmonic balance
 /// within 1e-6 of the fundamental for the harmonics 1 to 3 of every channel (the table is
-/// printed: 2.2e-7 and 8e-8). At 4 and 8 kHz the third harmonic kept 1.06e-6: the modes
-/// near 8 kHz are not yet in the step's asymptotic range there (with 40 modes it was 7e-6),
-/// so the extrapolation needs the finer pair.
+/// printed: 2.2e-7 and 8e-8). Extrapolated from 8 and 16 kHz the tip's third harmonic kept
+/// 1.06e-6: the upper retained modes (up to 4.8 kHz, `ωh` = 3.8 at 8 kHz) are not yet in
+/// the step's asymptotic range there (with 40 modes it kept 7e-6), so the extrapolation
+/// takes the finer pair.
 #[test]
 fn noise_free_dwells_equal_harmonic_balance() {
     let d = scratch("harmonics-hb");
