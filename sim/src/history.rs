@@ -259,19 +259,31 @@ pub(crate) fn add_residual_rates(plant: &Plant, h: &mut TimeHistory) {
         .iter_mut()
         .map(|o| o.values.as_mut_slice())
         .collect();
-    residual_rates(plant, &forces, dt, &mut outputs);
+    residual_rates(plant, &forces, dt, &mut outputs, RateTerms::Run);
+}
+
+/// Which residual-flexibility rate terms [`residual_rates`] adds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum RateTerms {
+    /// Those the integrators add to their outputs: velocities of every force, accelerations
+    /// of the excitations and the polynomial laws.
+    Run,
+    /// Accelerations of the kinked laws alone (a recorder's, from its own samples).
+    Kinked,
 }
 
 /// The rate terms of [`add_residual_rates`] added to `outputs` (one per plant output, every
 /// sample at step `dt`) from the port forces `forces` (one per force input in
 /// [`Plant::input_ports`] order: the excitations, then the element ports, `−g`; an empty
 /// series is no force). The forward sensitivities add the same terms of the force
-/// sensitivities.
+/// sensitivities. `terms` picks which: [`RateTerms::Run`] those of [`add_residual_rates`],
+/// [`RateTerms::Kinked`] those of [`add_kinked_residual_accelerations`].
 pub(crate) fn residual_rates(
     plant: &Plant,
     forces: &[Vec<f64>],
     dt: f64,
     outputs: &mut [&mut [f64]],
+    terms: RateTerms,
 ) {
     let ports = plant.input_ports();
     let ne = plant.inputs.len();
@@ -285,7 +297,11 @@ pub(crate) fn residual_rates(
         }
         for (q, u) in forces.iter().enumerate() {
             let d = plant.system.feedthrough[(spec.port, ports[q])];
-            if d == 0.0 || u.len() < n || (ord == 2 && !smooth(q)) {
+            let wanted = match terms {
+                RateTerms::Run => ord == 1 || smooth(q),
+                RateTerms::Kinked => ord == 2 && !smooth(q),
+            };
+            if d == 0.0 || u.len() < n || !wanted {
                 continue;
             }
             for k in 0..n {
@@ -333,27 +349,18 @@ pub fn add_kinked_residual_accelerations(
     dt: f64,
     outputs: &mut [&mut [f64]],
 ) {
-    let ports = plant.input_ports();
-    let ne = plant.inputs.len();
-    for (spec, out) in plant.outputs.iter().zip(outputs.iter_mut()) {
-        let n = out.len();
-        if order(spec.quantity) != 2 || n < 3 {
-            continue;
-        }
-        for (e, g) in element_forces.iter().enumerate().take(plant.elements.len()) {
-            if polynomial(plant.elements[e].element.law()) || g.len() < n {
-                continue;
-            }
-            let d = plant.system.feedthrough[(spec.port, ports[ne + e])];
-            if d == 0.0 {
-                continue;
-            }
-            for k in 0..n {
-                let m = k.clamp(1, n - 2);
-                out[k] -= d * (g[m + 1] - 2.0 * g[m] + g[m - 1]) / (dt * dt);
-            }
-        }
-    }
+    let forces: Vec<Vec<f64>> = plant
+        .inputs
+        .iter()
+        .map(|_| Vec::new())
+        .chain(
+            element_forces
+                .iter()
+                .take(plant.elements.len())
+                .map(|g| g.iter().map(|x| -x).collect()),
+        )
+        .collect();
+    residual_rates(plant, &forces, dt, outputs, RateTerms::Kinked);
 }
 
 /// Whether an element law is a polynomial of the displacements (its force as smooth as the

@@ -42,6 +42,18 @@ fn refusal(text: &str, path: &Path) -> String {
     e
 }
 
+/// Asserts that a model file `m.toml` in `dir` whose `[geometry] nodes` names each file of
+/// `cases` is refused in one line containing the case's text.
+fn refuses_node_files(dir: &Path, cases: &[(&str, &str)]) {
+    for (file, says) in cases {
+        let e = refusal(
+            &beam_with_nodes(&format!("\"{file}\"")),
+            &dir.join("m.toml"),
+        );
+        assert!(e.contains(says), "{file}: {e}");
+    }
+}
+
 /// `(node, [x, y, z])` of every line after the first of [`pyuff_nodes`].
 fn parse_nodes(text: &str) -> Nodes {
     text.lines()
@@ -249,17 +261,14 @@ fn bad_geometry_names_file_line_and_key() {
         );
         assert!(e.contains(says), "expected '{says}': {e}");
     }
-    for (file, says) in [
-        ("bad.csv", "bad.csv:3: expected node,x,y,z"),
-        ("empty.csv", "empty.csv: no node lines"),
-        ("absent.csv", "absent.csv"),
-    ] {
-        let e = refusal(
-            &beam_with_nodes(&format!("\"{file}\"")),
-            &dir.join("m.toml"),
-        );
-        assert!(e.contains(says), "{file}: {e}");
-    }
+    refuses_node_files(
+        &dir,
+        &[
+            ("bad.csv", "bad.csv:3: expected node,x,y,z"),
+            ("empty.csv", "empty.csv: no node lines"),
+            ("absent.csv", "absent.csv"),
+        ],
+    );
     std::fs::remove_dir_all(&*dir).unwrap();
 }
 
@@ -332,19 +341,16 @@ print("ok")
     )
     .unwrap();
     std::fs::write(dir.join("none.bdf"), "BEGIN BULK\nENDDATA\n").unwrap();
-    for (deck, says) in [
-        (
-            "cp.bdf",
-            "cp.bdf:3: GRID: grid 2 gives its coordinates in system CP = 5",
-        ),
-        ("parts.inp", "parts.inp:1: *PART"),
-        ("none.bdf", "none.bdf: no GRID cards"),
-    ] {
-        let e = refusal(
-            &beam_with_nodes(&format!("\"{deck}\"")),
-            &dir.join("m.toml"),
-        );
-        assert!(e.contains(says), "{deck}: {e}");
-    }
+    refuses_node_files(
+        &dir,
+        &[
+            (
+                "cp.bdf",
+                "cp.bdf:3: GRID: grid 2 gives its coordinates in system CP = 5",
+            ),
+            ("parts.inp", "parts.inp:1: *PART"),
+            ("none.bdf", "none.bdf: no GRID cards"),
+        ],
+    );
     std::fs::remove_dir_all(&*dir).unwrap();
 }

@@ -226,7 +226,13 @@ impl Simulator {
                 .chain(df.iter().map(|g| g.iter().map(|x| -x).collect()))
                 .collect();
             let mut outs: Vec<&mut [f64]> = out.iter_mut().map(|v| v.as_mut_slice()).collect();
-            crate::history::residual_rates(&self.plant, &forces, self.cfg.dt, &mut outs);
+            crate::history::residual_rates(
+                &self.plant,
+                &forces,
+                self.cfg.dt,
+                &mut outs,
+                crate::history::RateTerms::Run,
+            );
             sens.push(out);
         }
         Ok((
