@@ -746,6 +746,12 @@ fn fuzz_inner() {
          [[param]]\nname = \"mode2.shape:21:uz\"\nlower = -3.0\nupper = -1.0\n\n\
          [[param]]\nname = \"residual:shaker:tip\"\nlower = 0.0\nupper = 1e-5\n"
             .to_string(),
+        // A calibration's result with its cross validation's held-out mean square.
+        "model = \"ecl_beam\"\ndata = \"test.csv\"\ntrain = [\"a\"]\nfolds = 1\n\
+         fold_by = \"sweeps\"\n\n[[param]]\nname = \"tip.k3\"\nlower = 1e8\nupper = 1e11\n\n\
+         [result]\nstatus = \"converged\"\nestimate = [1e9]\ncovariance = [[1e14]]\n\
+         reduced_chi2 = 5.8\npoints = 41\nresiduals = 82\nheld_out_mean_square = 24.5\n"
+            .to_string(),
     ];
     let cal_path = dir.join("cal.toml");
     panics.extend(survive("calibration file", 10000 * scale(), |_| {

@@ -504,6 +504,29 @@ pub fn kfold(
 }
 
 impl KFold {
+    /// Mean square of the weighted residuals over every fold's held-out points, each fold
+    /// weighted by its point count (1 when the model and the noise model predict data they
+    /// were not trained on; infinite when the harmonic balance failed at a held-out point).
+    /// Folds that leave whole sweeps out measure how the model predicts another run,
+    /// run-to-run differences included, which the training reduced χ² does not hold.
+    pub fn held_out_mean_square(&self) -> f64 {
+        let mut count = vec![0usize; self.k];
+        for &g in &self.fold_of {
+            count[g] += 1;
+        }
+        let total: usize = count.iter().sum();
+        if total == 0 {
+            return f64::NAN;
+        }
+        let sum: f64 = self
+            .held_out_rms
+            .iter()
+            .zip(&count)
+            .map(|(r, &n)| r * r * n as f64)
+            .sum();
+        sum / total as f64
+    }
+
     /// The statistics of the folds `folds` (fold `f` at index `f`) of the assignment
     /// `fold_of`: mean, covariance, standard deviation and the jackknife spread.
     pub fn from_folds(fold_of: Vec<usize>, folds: Vec<FoldResult>) -> Result<Self> {

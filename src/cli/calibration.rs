@@ -144,9 +144,11 @@ pub struct ValidateArgs {
     #[arg(long)]
     level: Option<f64>,
     /// Scale of the band's variances: `chi2` (by the training's reduced chi2 where it
-    /// exceeds 1) or `none` (the Cramér–Rao covariance and the noise model as they are)
+    /// exceeds 1), `folds` (by the calibration's cross-validation held-out mean square, or
+    /// the reduced chi2 where larger: with folds that leave sweeps out, the band of a run
+    /// not trained on) or `none` (the Cramér–Rao covariance and the noise model as they are)
     /// [default: chi2].
-    #[arg(long, value_parser = ["chi2", "none"])]
+    #[arg(long, value_parser = ["chi2", "folds", "none"])]
     scale: Option<String>,
     /// Report folder: summary, scores.csv, prediction.csv, a plot per sweep and harmonic
     /// (measured, predicted, band) and report.h5.
@@ -167,8 +169,10 @@ impl ValidateArgs {
         if let Some(l) = self.level {
             r.level = l;
         }
-        if self.scale.as_deref() == Some("none") {
-            r.scale = commands::validate::BandScale::None;
+        match self.scale.as_deref() {
+            Some("none") => r.scale = commands::validate::BandScale::None,
+            Some("folds") => r.scale = commands::validate::BandScale::Folds,
+            _ => {}
         }
         r.report = self.report.clone();
         r.out = self.out.clone();

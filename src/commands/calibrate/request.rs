@@ -479,6 +479,11 @@ pub struct StoredResult {
     pub points: usize,
     /// Training residuals `m`.
     pub residuals: usize,
+    /// The cross validation's mean square held-out weighted residual
+    /// ([`nlsim_calib::KFold::held_out_mean_square`]), when folds ran: `nlsim validate
+    /// --scale folds` scales the band by it.
+    #[serde(default)]
+    pub held_out_mean_square: Option<f64>,
 }
 
 impl StoredResult {
@@ -519,6 +524,14 @@ impl StoredResult {
             return Err((
                 "result.reduced_chi2",
                 format!("{} is not a non-negative number", self.reduced_chi2),
+            ));
+        }
+        if let Some(v) = self.held_out_mean_square
+            && (v.is_nan() || v < 0.0)
+        {
+            return Err((
+                "result.held_out_mean_square",
+                format!("{v}: a mean square is a non-negative number (inf where a fold failed)"),
             ));
         }
         Ok(())

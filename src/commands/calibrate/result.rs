@@ -13,6 +13,7 @@
 //! reduced_chi2 = 1.3
 //! points = 164                      # training points
 //! residuals = 328
+//! held_out_mean_square = 24.5       # the cross validation's, when it ran
 //! ```
 
 use crate::commands::calibrate::request::{CalibrationRequest, StoredResult};
@@ -176,6 +177,13 @@ pub fn result_toml(run: &CalibrationRun) -> String {
         run.prepared.objective.data().n_points(),
         c.fit.residuals.len()
     );
+    if let Some(kf) = &c.kfold {
+        let _ = writeln!(
+            s,
+            "held_out_mean_square = {}",
+            num(kf.held_out_mean_square())
+        );
+    }
     s
 }
 

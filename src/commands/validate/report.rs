@@ -63,6 +63,9 @@ impl ValidationRun {
                 match self.request.scale {
                     BandScale::Chi2 if r.reduced_chi2 > 1.0 => " (the training reduced chi2)",
                     BandScale::Chi2 => " (training reduced chi2 <= 1: not scaled)",
+                    BandScale::Folds =>
+                        " (--scale folds: the cross validation's held-out \
+                                          mean square, or the reduced chi2 where larger)",
                     BandScale::None => " (--scale none)",
                 }
             ),

@@ -15,6 +15,11 @@ pub enum BandScale {
     /// the training misfit), else 1.
     #[default]
     Chi2,
+    /// By the calibration's cross-validation: the larger of the mean square held-out
+    /// weighted residual of its folds (`held_out_mean_square` of the result; with
+    /// `fold_by = "sweeps"` it holds how the model predicts a run it was not trained on) and
+    /// the reduced χ², at least 1.
+    Folds,
     /// As given: the Cramér–Rao covariance and the data's noise model.
     None,
 }
@@ -136,6 +141,21 @@ pub fn run_validation(req: &ValidateRequest) -> Result<ValidationRun> {
     }
     let scale = match req.scale {
         BandScale::Chi2 => result.reduced_chi2.max(1.0),
+        BandScale::Folds => match result.held_out_mean_square {
+            Some(ms) if ms.is_finite() => ms.max(result.reduced_chi2).max(1.0),
+            Some(_) => {
+                return Err(Error::Usage(format!(
+                    "{}: --scale folds: a fold's harmonic balance failed at a held-out point                      (held_out_mean_square = inf); use --scale chi2",
+                    req.calibration.display()
+                )));
+            }
+            None => {
+                return Err(Error::Usage(format!(
+                    "{}: --scale folds needs the cross validation's held_out_mean_square in                      [result]: calibrate with folds (e.g. fold_by = \"sweeps\") and validate                      the new result",
+                    req.calibration.display()
+                )));
+            }
+        },
         BandScale::None => 1.0,
     };
     let input_dof = model
