@@ -131,6 +131,49 @@ fn the_parameter_band_matches_central_differences() {
     }
 }
 
+/// Values of the held-out 0.1 N and 0.15 N levels (2 % noise, seed `1000 + seed`) inside
+/// the band of a calibration, pooled over seeds.
+#[derive(Default)]
+struct Coverage {
+    amplitude: f64,
+    phase: f64,
+    values: usize,
+}
+
+impl Coverage {
+    fn add(
+        &mut self,
+        sys: &HbSystem,
+        cal: &nlsim_calib::Calibration,
+        band: &BandConfig,
+        seed: u64,
+    ) {
+        let held = synthesize(
+            sys,
+            "shaker",
+            &levels(&[0.1, 0.15]),
+            3,
+            Noise::relative(0.02),
+            1000 + seed,
+        )
+        .unwrap();
+        let mut obj = objective(sys, held);
+        let p = predict(&mut obj, &cal.estimate, &cal.cramer_rao.covariance, band).unwrap();
+        for s in &p.sweeps {
+            assert_eq!(s.failed, 0);
+            self.amplitude += s.inside_amplitude * s.values as f64;
+            self.phase += s.inside_phase * s.values as f64;
+            self.values += s.values;
+        }
+    }
+
+    /// Shares of amplitudes and phases inside, and the number of values.
+    fn shares(&self) -> (f64, f64, usize) {
+        let n = self.values as f64;
+        (self.amplitude / n, self.phase / n, self.values)
+    }
+}
+
 /// On synthetic data with the right noise model (2 %), the 95 % band of a calibration on the
 /// 0.05 N and 0.2 N levels covers 90–99 % of the held-out 0.1 N and 0.15 N levels' values
 /// (fresh noise), pooled over 20 seeds — the issue's check of the band.
@@ -143,7 +186,7 @@ fn the_95_percent_band_covers_held_out_values_at_its_level() {
         folds: 0,
         ..Default::default()
     };
-    let (mut inside_a, mut inside_p, mut n) = (0.0, 0.0, 0usize);
+    let mut cover = Coverage::default();
     for seed in 0..20u64 {
         let train = synthesize(
             &sys,
@@ -156,31 +199,9 @@ fn the_95_percent_band_covers_held_out_values_at_its_level() {
         .unwrap();
         let cal = calibrate(&objective(&sys, train), &cfg).unwrap();
         assert!(cal.status.is_converged(), "seed {seed}: {}", cal.status);
-        let held = synthesize(
-            &sys,
-            "shaker",
-            &levels(&[0.1, 0.15]),
-            3,
-            Noise::relative(0.02),
-            1000 + seed,
-        )
-        .unwrap();
-        let mut obj = objective(&sys, held);
-        let p = predict(
-            &mut obj,
-            &cal.estimate,
-            &cal.cramer_rao.covariance,
-            &BandConfig::default(),
-        )
-        .unwrap();
-        for s in &p.sweeps {
-            assert_eq!(s.failed, 0);
-            inside_a += s.inside_amplitude * s.values as f64;
-            inside_p += s.inside_phase * s.values as f64;
-            n += s.values;
-        }
+        cover.add(&sys, &cal, &BandConfig::default(), seed);
     }
-    let (ca, cp) = (inside_a / n as f64, inside_p / n as f64);
+    let (ca, cp, n) = cover.shares();
     eprintln!(
         "coverage of the 95 % band over {n} held-out values: amplitude {ca:.4}, phase {cp:.4}"
     );
@@ -218,7 +239,7 @@ fn the_folds_scale_is_near_one_with_the_right_noise_and_its_band_covers() {
         fold_by: FoldBy::Sweeps,
         ..Default::default()
     };
-    let (mut inside_a, mut inside_p, mut n) = (0.0, 0.0, 0usize);
+    let mut cover = Coverage::default();
     let mut scales = Vec::new();
     for seed in 0..20u64 {
         let train = synthesize(
@@ -236,30 +257,14 @@ fn the_folds_scale_is_near_one_with_the_right_noise_and_its_band_covers() {
         assert_eq!(kf.k, 4);
         let s2 = kf.held_out_mean_square();
         scales.push(s2);
-        let held = synthesize(
-            &sys,
-            "shaker",
-            &levels(&[0.1, 0.15]),
-            3,
-            Noise::relative(0.02),
-            1000 + seed,
-        )
-        .unwrap();
-        let mut obj = objective(&sys, held);
         let band = BandConfig {
             scale: s2.max(cal.cramer_rao.reduced_chi2).max(1.0),
             ..BandConfig::default()
         };
-        let p = predict(&mut obj, &cal.estimate, &cal.cramer_rao.covariance, &band).unwrap();
-        for s in &p.sweeps {
-            assert_eq!(s.failed, 0);
-            inside_a += s.inside_amplitude * s.values as f64;
-            inside_p += s.inside_phase * s.values as f64;
-            n += s.values;
-        }
+        cover.add(&sys, &cal, &band, seed);
     }
     let mean = scales.iter().sum::<f64>() / scales.len() as f64;
-    let (ca, cp) = (inside_a / n as f64, inside_p / n as f64);
+    let (ca, cp, _) = cover.shares();
     eprintln!(
         "held-out mean square over 20 seeds: mean {mean:.4}, range {:.4}-{:.4}; coverage of the \
          folds-scaled 95 % band: amplitude {ca:.4}, phase {cp:.4}",
