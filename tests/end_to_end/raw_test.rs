@@ -45,25 +45,33 @@ fn virtual_raw_records_calibrate_within_their_bounds() {
     assert!(out.contains("7 of 7 dwells settled"), "{out}");
     assert!(out.contains("sweep 'up' (up): 7 steps"), "{out}");
     let zeta = super::harmonics::ecl_driven_zeta(&d);
-    let (rc, out, err) = nlsim(&[
-        "calibrate",
-        "ecl_beam",
-        &p("h.csv"),
-        "--param",
-        "tip_spring.k3=6e8:6e10",
-        "--param",
-        "mode2.zeta=0.002:0.05",
-        "--folds",
-        "0",
-        "--out",
-        &p("est.csv"),
-    ]);
+    calibrate_within_three_deviations(
+        &d,
+        &["ecl_beam", &p("h.csv")],
+        &[
+            ("tip_spring.k3", "6e8:6e10", 6e9),
+            ("mode2.zeta", "0.002:0.05", zeta),
+        ],
+    );
+}
+
+/// Runs `nlsim calibrate ARGS` with every `(name, "LOWER:UPPER", truth)` of `params` as a
+/// `--param`, no folds, the estimates written to `dir/est.csv`, and asserts every estimate
+/// within 3 Cramér–Rao deviations of its truth ([`within_three_deviations`]).
+fn calibrate_within_three_deviations(dir: &Path, args: &[&str], params: &[(&str, &str, f64)]) {
+    let est = dir.join("est.csv");
+    let bounds: Vec<String> = params.iter().map(|(n, b, _)| format!("{n}={b}")).collect();
+    let mut all: Vec<&str> = vec!["calibrate"];
+    all.extend_from_slice(args);
+    for b in &bounds {
+        all.extend(["--param", b.as_str()]);
+    }
+    all.extend(["--folds", "0", "--out", est.to_str().unwrap()]);
+    let (rc, out, err) = nlsim(&all);
     assert_eq!(rc, 0, "{out}{err}");
     eprintln!("{out}");
-    within_three_deviations(
-        Path::new(&p("est.csv")),
-        &[("tip_spring.k3", 6e9), ("mode2.zeta", zeta)],
-    );
+    let truths: Vec<(&str, f64)> = params.iter().map(|&(n, _, t)| (n, t)).collect();
+    within_three_deviations(&est, &truths);
 }
 
 /// Asserts that every estimate of the calibration's estimates file `path` lies within 3 of
@@ -129,26 +137,10 @@ fn bump_stop_raw_records_through_the_shaker_calibrate_within_their_bounds() {
         "{out}"
     );
     std::fs::remove_file(p("raw.h5")).unwrap();
-    let (rc, out, err) = nlsim(&[
-        "calibrate",
-        "bumpstop_cantilever",
-        &p("h.csv"),
-        "--param",
-        "stop.k1=5e4:1e6",
-        "--param",
-        "stop.e1=5e-4:2e-3",
-        "--harmonics",
-        "41",
-        "--folds",
-        "0",
-        "--out",
-        &p("est.csv"),
-    ]);
-    assert_eq!(rc, 0, "{out}{err}");
-    eprintln!("{out}");
-    within_three_deviations(
-        Path::new(&p("est.csv")),
-        &[("stop.k1", 2e5), ("stop.e1", 1e-3)],
+    calibrate_within_three_deviations(
+        &d,
+        &["bumpstop_cantilever", &p("h.csv"), "--harmonics", "41"],
+        &[("stop.k1", "5e4:1e6", 2e5), ("stop.e1", "5e-4:2e-3", 1e-3)],
     );
 }
 
