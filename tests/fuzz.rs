@@ -1100,6 +1100,11 @@ fn fuzz_inner() {
         "DMIG,KAAX,0,6,2,0,,,2\nDMIG,KAAX,1,3,,1,3,2.0E6,,\n+,2,3,-1.0E6\n\
          DMIG,KAAX,2,3,,2,3,1.0E6\n"
             .to_string(),
+        // Free field with a named continuation marker in field 10, and a line whose fields
+        // run past it (refused: they would be lost).
+        "DMIG,KAAX,0,6,2,0,,,2\nDMIG,KAAX,1,3,,1,3,2.0E6,,+C1,,\n+C1,2,3,-1.0E6\n\
+         DMIG,KAAX,2,3,,2,3,1.0E6,,2,3,4.0\n"
+            .to_string(),
     ];
     let fe_place = |m: nlsim::formats::fe_matrices::LabelledMatrix| -> Option<String> {
         nlsim::formats::fe_matrices::union_dofs(&[&m])
@@ -1114,6 +1119,115 @@ fn fuzz_inner() {
             Err(e) => Some(e.to_string()),
         }
     }));
+    // Node numbers of every width in universal files (datasets 2411 and 58): written only
+    // where the I10 fields hold them, and read back as written.
+    let wide = [
+        0i64,
+        1,
+        21,
+        999_999_999,
+        2_147_483_647,
+        2_147_483_648,
+        9_999_999_999,
+        10_000_000_000,
+        -1,
+        i64::MAX,
+        i64::MIN,
+    ];
+    panics.extend(survive("uff node ids", 10000 * scale(), |_| {
+        let node = *rng.pick(&wide) + [0, 1, -1][rng.below(3)];
+        let reference = *rng.pick(&wide);
+        let f = nlsim::formats::uff_write::UffFunction {
+            id: "tip".into(),
+            function_type: 4,
+            response: (node, 3),
+            reference: (reference, 3),
+            abscissa_type: 18,
+            ordinate_type: 12,
+            denominator_type: 13,
+            abscissa: nlsim::formats::uff_write::Abscissa::Uneven(vec![10.0, 11.0]),
+            values: vec![faer::c64::new(1.0, -1.0); 2],
+            complex: true,
+        };
+        let geometry: Vec<(u64, [f64; 3])> = [node, reference]
+            .iter()
+            .filter_map(|&n| u64::try_from(n).ok())
+            .map(|n| (n, [0.0, 1.0, 2.0]))
+            .collect::<std::collections::BTreeMap<_, _>>()
+            .into_iter()
+            .collect();
+        let binary = rng.below(2) == 0;
+        let path = Path::new("ids.uff");
+        match nlsim::formats::uff_write::encode_functions(path, &[f], binary, &geometry) {
+            Err(e) => Some(e.to_string()),
+            Ok(bytes) => {
+                let back = nlsim::formats::uff::parse(&bytes, path).expect("written files read");
+                assert_eq!(back.len(), 1);
+                assert_eq!(
+                    (back[0].response_node, back[0].reference_node),
+                    (node, reference)
+                );
+                None
+            }
+        }
+    }));
+
+    // The values of a `[modal]` model file replaced by hostile numbers: refused at their
+    // key, or a model that validates (no later failure without a file and key).
+    let modal_text =
+        std::fs::read_to_string(root().join("examples/models/ecl_modal.toml")).unwrap();
+    let modal_path = models.join("modal.toml");
+    let numbers = [
+        "1e308",
+        "-1e308",
+        "1e-320",
+        "-1e-320",
+        "1e151",
+        "1e-151",
+        "1e150",
+        "0.0",
+        "-0.0",
+        "nan",
+        "inf",
+        "5e-324",
+        "1.7976931348623157e308",
+    ];
+    panics.extend(survive("modal values", 10000 * scale(), |_| {
+        let lines: Vec<&str> = modal_text.lines().collect();
+        let candidates: Vec<usize> = (0..lines.len())
+            .filter(|&i| lines[i].contains('=') && lines[i].contains(|c: char| c.is_ascii_digit()))
+            .collect();
+        let i = *rng.pick(&candidates);
+        let (key, value) = lines[i].split_once('=').unwrap();
+        let hostile = *rng.pick(&numbers);
+        let value = if value.trim_start().starts_with('[') {
+            let parts: Vec<&str> = value.trim().trim_matches(['[', ']']).split(',').collect();
+            let k = rng.below(parts.len());
+            let parts: Vec<&str> = parts
+                .iter()
+                .enumerate()
+                .map(|(j, p)| if j == k { hostile } else { p })
+                .collect();
+            format!("[{}]", parts.join(","))
+        } else {
+            hostile.to_string()
+        };
+        let mut edited: Vec<String> = lines.iter().map(|l| l.to_string()).collect();
+        edited[i] = format!("{key}= {value}");
+        match nlsim::parse_model_file(&edited.join("\n"), &modal_path) {
+            Ok(m) => m
+                .model
+                .validate(&nlsim::kernel::ValidationConfig::default())
+                .err()
+                .map(|e| e.to_string()),
+            Err(e) => {
+                let e = e.to_string();
+                assert!(e.contains("modal.toml:"), "no file and line: {e}");
+                Some(e)
+            }
+        }
+    }));
+
     // Node coordinates of FE decks: Nastran GRID cards and Abaqus *NODE blocks (issue 45).
     let grids = [
         "BEGIN BULK\nGRID           1               0.      0.      0.\n\

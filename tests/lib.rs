@@ -1472,7 +1472,7 @@ mod modes {
         let (rc, _, err) = nlsim(&["modes", "ecl_beam", "--count", "500"]);
         assert_eq!(rc, 1);
         assert!(err.contains("only 120 DOFs"), "{err}");
-        // An unwritable destination: a clear error, no partial file.
+        // An unwritable destination: refused before the solve (a usage error), no file.
         let missing = d.join("no/such/dir/m.h5");
         let (rc, _, err) = nlsim(&[
             "-q",
@@ -1481,7 +1481,8 @@ mod modes {
             "--out",
             missing.to_str().unwrap(),
         ]);
-        assert_eq!(rc, 1);
+        assert_eq!(rc, 2);
+        assert!(!d.join("no").exists());
         assert!(err.contains("no/such/dir"), "{err}");
     }
 
@@ -8023,3 +8024,6 @@ mod time_domain;
 mod geometry;
 #[path = "end_to_end/raw_test.rs"]
 mod raw_test;
+
+#[path = "end_to_end/outputs.rs"]
+mod outputs;

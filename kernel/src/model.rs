@@ -851,6 +851,20 @@ impl Model {
             }
         }
         self.damping.validate()?;
+        // A damping matrix dissipates: a negative diagonal entry feeds energy in at that DOF
+        // (checked whatever the definiteness setting: it costs one pass).
+        if let Damping::Matrix(v) = &self.damping
+            && let Some((i, c)) = v.diag().iter().copied().enumerate().find(|(_, c)| *c < 0.0)
+        {
+            return Err(Error::NotDefinite {
+                matrix: "damping matrix".into(),
+                required: "positive semi-definite".into(),
+                detail: format!(
+                    "negative diagonal entry {c:e} at DOF {}: it would feed energy in",
+                    self.dofs.describe(i)
+                ),
+            });
+        }
         for e in &self.elements {
             e.law().validate(e.name())?;
         }
@@ -911,6 +925,27 @@ impl Model {
                     detail: format!(
                         "K + σM with σ = {sigma:.3e} 1/s² is not positive definite (non-positive pivot at elimination step {step}): \
                          K has a negative eigenvalue (check element signs, or a negative spring)"
+                    ),
+                });
+            }
+        }
+        if cfg.check_definiteness
+            && let Damping::Matrix(v) = &self.damping
+        {
+            // As K: V + σM with a small shift is positive definite unless V has a negative
+            // eigenvalue.
+            let vmax = v.diag().iter().fold(0.0_f64, |a, &b| a.max(b));
+            let mmax = md.iter().fold(0.0_f64, |a, &b| a.max(b));
+            let sigma = cfg.definiteness_shift * vmax.max(f64::MIN_POSITIVE) / mmax;
+            let shifted = SparseSym::linear_combination("V + σM", 1.0, v, sigma, &self.mass)?;
+            if let Err(step) = shifted.cholesky() {
+                return Err(Error::NotDefinite {
+                    matrix: "damping matrix".into(),
+                    required: "positive semi-definite".into(),
+                    detail: format!(
+                        "V + σM with σ = {sigma:.3e} 1/s is not positive definite (non-positive \
+                         pivot at elimination step {step}): V has a negative eigenvalue, which \
+                         feeds energy in"
                     ),
                 });
             }

@@ -821,6 +821,37 @@ mod model {
                 assert!(err.contains(e), "expected '{e}' in: {err}");
             }
         }
+        // A damping matrix that feeds energy in: a negative diagonal entry (whatever the
+        // definiteness setting), an indefinite matrix with a positive diagonal.
+        let rows = |a: [[f64; 2]; 2]| vec![a[0].to_vec(), a[1].to_vec()];
+        for (v, check, expect) in [
+            (
+                [[-0.1, 0.0], [0.0, -0.1]],
+                false,
+                "negative diagonal entry -1e-1 at DOF 1:u",
+            ),
+            (
+                [[0.1, 0.3], [0.3, 0.1]],
+                true,
+                "V has a negative eigenvalue",
+            ),
+        ] {
+            let mut m = two_dof(good_m, good_k).unwrap();
+            m.set_damping(Damping::Matrix(
+                SparseSym::from_dense_rows("damping matrix", &rows(v)).unwrap(),
+            ))
+            .unwrap();
+            let cfg = ValidationConfig {
+                check_definiteness: check,
+                ..Default::default()
+            };
+            let err = m.validate(&cfg).unwrap_err().to_string();
+            assert!(
+                err.contains("damping matrix is not positive semi-definite")
+                    && err.contains(expect),
+                "{err}"
+            );
+        }
         // A free-free structure (singular K) is valid.
         two_dof(good_m, [[1.0, -1.0], [-1.0, 1.0]])
             .unwrap()

@@ -7,7 +7,7 @@
 use crate::runs::{Stop, Subject, run};
 use crate::{input, py_err};
 use faer::c64;
-use nlsim::hb::{HarmonicSet, HbConfig, HbSystem, HbWorkspace};
+use nlsim::hb::{HbConfig, HbSystem, HbWorkspace};
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1};
 use pyo3::prelude::*;
@@ -112,7 +112,7 @@ impl Balance {
                 subject.model().name()
             )));
         }
-        let set = HarmonicSet::new(harmonics, 1).map_err(|e| input(format!("harmonics: {e}")))?;
+        let set = crate::harmonic_set(harmonics, crate::MAX_HARMONICS)?;
         let system = run(py, threads, move |stop: &Stop| -> nlsim::Result<_> {
             let (reduced, m) = subject.reduced(modes, residual_flexibility, threads, stop)?;
             Ok(HbSystem::from_model(

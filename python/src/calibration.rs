@@ -11,7 +11,7 @@ use nlsim::calib::{
     BranchChoice, CalibrationConfig, FeReduction, FeReductionStats, Form, FrfObjective,
     ObjectiveConfig, ParamSpec, ParametricConfig,
 };
-use nlsim::hb::{HarmonicSet, HbConfig};
+use nlsim::hb::HbConfig;
 use nlsim::kernel::{Param, Parameterized};
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray1, PyArray2};
@@ -496,7 +496,7 @@ pub fn calibrate(
             "uff_noise: {uff_noise}; give a positive fraction"
         )));
     }
-    let set = HarmonicSet::new(harmonics, 1).map_err(|e| input(format!("harmonics: {e}")))?;
+    let set = crate::harmonic_set(harmonics, crate::MAX_CALIBRATION_HARMONICS)?;
     let config = search_config(lhs, seed, starts, folds)?;
     let m = model.inner.clone();
     let result = run(py, threads, move |stop: &Stop| -> nlsim::Result<_> {

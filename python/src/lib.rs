@@ -75,6 +75,26 @@ pub(crate) fn kernel_err(e: nlsim::kernel::Error) -> PyErr {
     py_err(nlsim::Error::Model(e))
 }
 
+/// Most harmonics a harmonic balance takes from Python, as `nlsim frf --harmonics` takes
+/// (the Jacobian and the AFT grid grow with the square of H; 5000 took gigabytes before it
+/// failed).
+pub(crate) const MAX_HARMONICS: usize = 256;
+
+/// Most harmonics a calibration takes (`nlsim calibrate`'s bound: every evaluation is a
+/// continuation of the harmonic balance).
+pub(crate) const MAX_CALIBRATION_HARMONICS: usize = 64;
+
+/// The harmonic set `1..=harmonics`, refused in one line beyond `max`.
+pub(crate) fn harmonic_set(harmonics: usize, max: usize) -> PyResult<nlsim::hb::HarmonicSet> {
+    if harmonics == 0 || harmonics > max {
+        return Err(input(format!(
+            "harmonics={harmonics}: give 1 to {max} (the Jacobian and the AFT grid grow with \
+             the square of the harmonics)"
+        )));
+    }
+    nlsim::hb::HarmonicSet::new(harmonics, 1).map_err(|e| input(format!("harmonics: {e}")))
+}
+
 /// An [`InputError`] with `message`.
 pub(crate) fn input(message: impl Into<String>) -> PyErr {
     InputError::new_err(message.into())

@@ -7,7 +7,6 @@ use crate::model::Model;
 use crate::runs::{run, vec1};
 use crate::{input, py_err};
 use faer::c64;
-use nlsim::hb::HarmonicSet;
 use nlsim::hb::nnm::{MAX_NNM_POINTS, MAX_NNM_UNKNOWNS, NnmReport};
 use numpy::ndarray::Array3;
 use numpy::{IntoPyArray, PyArray1, PyArray3};
@@ -184,7 +183,7 @@ pub fn nnm(
              Newton matrix is dense): retain fewer modes or harmonics"
         )));
     }
-    let set = HarmonicSet::new(harmonics, 1).map_err(|e| input(format!("harmonics: {e}")))?;
+    let set = crate::harmonic_set(harmonics, crate::MAX_HARMONICS)?;
     let m = model.inner.clone();
     if mode > m.n_dofs() {
         return Err(input(format!(

@@ -7,7 +7,7 @@
 use crate::model::Model;
 use crate::{ComputationError, input, py_err};
 use faer::c64;
-use nlsim::hb::{ContinuationConfig, HarmonicSet, HbConfig, HbSystem, PointKind};
+use nlsim::hb::{ContinuationConfig, HbConfig, HbSystem, PointKind};
 use nlsim::reduction::{EigenConfig, ModeSelection, ReducedModel, ReductionConfig};
 use numpy::ndarray::{Array2, Array3};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3};
@@ -687,7 +687,7 @@ pub fn frf(
             return Err(input(format!("model '{name}' has {what}")));
         }
     }
-    let set = HarmonicSet::new(harmonics, 1).map_err(|e| input(format!("harmonics: {e}")))?;
+    let set = crate::harmonic_set(harmonics, crate::MAX_HARMONICS)?;
     let (system, report, y) = run(py, threads, move |stop| -> nlsim::Result<_> {
         let (reduced, m) = subject.reduced(modes, residual_flexibility, threads, stop)?;
         let system = HbSystem::from_model(&m, &reduced, set, HbConfig::default())?;

@@ -170,10 +170,7 @@ pub fn sbatch(
         source,
     })?;
     let path = b.output.join("nlsim-batch.sbatch");
-    std::fs::write(&path, &script).map_err(|source| Error::Io {
-        path: path.clone(),
-        source,
-    })?;
+    crate::formats::files::write_text_atomically(&path, &script)?;
     console.say(&format!(
         "batch {}: {} jobs in a {}-task array, script {}",
         b.name,

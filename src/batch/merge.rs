@@ -114,7 +114,7 @@ pub fn merge(b: &Batch) -> Result<MergeOutcome> {
         let shards: Vec<hdf5::File> = (0..count)
             .map(|t| {
                 let p = b.shard_path(t, count);
-                crate::formats::files::regular_file(&p)?;
+                crate::formats::files::input_file(&p)?;
                 hdf5::File::open(&p).map_err(h5err(&p))
             })
             .collect::<Result<_>>()?;

@@ -316,6 +316,9 @@ pub fn run_shard(
         path: b.output.clone(),
         source,
     })?;
+    // Held until the shard is in place: a second run of the same shard at once is refused
+    // here, and with the lock held every temporary file of the shard is an orphan.
+    let _lock = crate::formats::guard::OutputLock::acquire(&path)?;
     for p in crate::formats::files::remove_temporaries(&path, false) {
         event(ShardEvent::Note(format!(
             "removed {} (left by a run that was killed)",

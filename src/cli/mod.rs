@@ -119,6 +119,9 @@ impl Cli {
 /// Runs the parsed command: its arguments into its request, then the command's `execute`.
 /// `Err` carries what failed; [`crate::Error::Usage`] is a bad combination of arguments.
 pub fn dispatch(cli: &Cli, console: &Console) -> crate::Result<()> {
+    // Every file the command reads and writes is recorded, so that no output replaces an
+    // input (`formats::guard`).
+    let _run = crate::formats::guard::Run::begin();
     let par = cli.par();
     match &cli.command {
         Command::Check(a) => a.execute(console),

@@ -319,14 +319,19 @@ pub fn execute(req: &ModesRequest, console: &crate::present::console::Console) -
         console.say(&format!("  written to {}", path.display()));
     }
     if let Some(dir) = &req.report {
-        let page = write_report(
-            dir,
-            &req.model,
-            &loaded.model,
-            &report,
-            &crate::present::report::command_line(),
-        )?;
-        console.say(&format!("  report {}", page.display()));
+        crate::formats::guard::write_folder(dir, |dir| {
+            write_report(
+                dir,
+                &req.model,
+                &loaded.model,
+                &report,
+                &crate::present::report::command_line(),
+            )
+        })?;
+        console.say(&format!(
+            "  report {}",
+            dir.join(crate::present::report::PAGE).display()
+        ));
     }
     Ok(())
 }

@@ -110,7 +110,37 @@ pub fn parse_inp_nodes(text: &str, path: &Path) -> Result<Vec<(u64, [f64; 3])>> 
                     ),
                 ));
             }
+            if name == "SYSTEM" {
+                return Err(err(
+                    i + 1,
+                    "*SYSTEM: nodes in a local coordinate system are not transformed; give \
+                     global coordinates (or the coordinates as CSV)"
+                        .into(),
+                ));
+            }
             in_nodes = name == "NODE";
+            if in_nodes {
+                // Parameters: SYSTEM=R (rectangular, the default) only; INPUT= reads the
+                // nodes from another file, which is not followed.
+                for param in kw.split(',').skip(1) {
+                    let (key, value) = param.split_once('=').unwrap_or((param, ""));
+                    let (key, value) = (key.trim().to_ascii_uppercase(), value.trim());
+                    let refused = match key.as_str() {
+                        "SYSTEM" if !value.eq_ignore_ascii_case("R") => Some(format!(
+                            "SYSTEM={value}: cylindrical or spherical coordinates are not \
+                             converted; give rectangular (global x, y, z) coordinates"
+                        )),
+                        "INPUT" => Some(format!(
+                            "INPUT={value}: nodes read from another file are not followed; \
+                             put them in this file or give the coordinates as CSV"
+                        )),
+                        _ => None,
+                    };
+                    if let Some(why) = refused {
+                        return Err(err(i + 1, format!("*NODE, {why}")));
+                    }
+                }
+            }
             continue;
         }
         if !in_nodes {
@@ -160,6 +190,29 @@ pub fn parse_inp_nodes(text: &str, path: &Path) -> Result<Vec<(u64, [f64; 3])>> 
 mod tests {
     use super::*;
     use crate::formats::fe_matrices::union_dofs;
+
+    #[test]
+    fn nodes_outside_global_rectangular_coordinates_are_refused() {
+        let p = Path::new("m.inp");
+        let plain = "*NODE, NSET=ALL, SYSTEM=R\n1, 0.0, 0.5, 1.0\n2, 1.0, 0.0\n*ELEMENT\n";
+        let nodes = parse_inp_nodes(plain, p).unwrap();
+        assert_eq!(nodes, vec![(1, [0.0, 0.5, 1.0]), (2, [1.0, 0.0, 0.0])]);
+        for (text, want) in [
+            (
+                "*NODE, SYSTEM=C\n1, 1.0, 90.0, 0.0\n",
+                "m.inp:1: *NODE, SYSTEM=C",
+            ),
+            ("*Node, system=s\n1, 1.0, 90.0, 0.0\n", "SYSTEM=s"),
+            ("*NODE, INPUT=nodes.inp\n", "INPUT=nodes.inp"),
+            (
+                "*SYSTEM\n0,0,1\n*NODE\n1, 1.0, 0.0, 0.0\n",
+                "m.inp:1: *SYSTEM",
+            ),
+        ] {
+            let e = parse_inp_nodes(text, p).unwrap_err().to_string();
+            assert!(e.contains(want), "{text:?}: {e}");
+        }
+    }
 
     #[test]
     fn symmetric_storage_is_checked() {

@@ -15,7 +15,7 @@ const CANDIDATE_BUDGET: usize = 1 << 26;
 pub fn read_candidates(path: &Path) -> Result<Vec<nlsim_calib::Candidate>> {
     let err = h5err(path);
     let bad = |m: String| Error::Usage(format!("{}: {m}", path.display()));
-    crate::formats::files::regular_file(path)?;
+    crate::formats::files::input_file(path)?;
     let file = hdf5::File::open(path).map_err(&err)?;
     let command: Option<hdf5::types::VarLenUnicode> =
         file.attr("command").and_then(|a| a.read_scalar()).ok();

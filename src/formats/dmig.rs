@@ -11,8 +11,10 @@ use std::collections::BTreeSet;
 use std::path::Path;
 
 /// Splits a physical line: its first field is returned, its data fields are appended to
-/// `out` (borrowed from the line unless tabs had to be expanded).
-fn split_line<'a>(raw: &'a str, out: &mut Vec<Cow<'a, str>>) -> Cow<'a, str> {
+/// `out` (borrowed from the line unless tabs had to be expanded). `overflow` is set to the
+/// number of fields a free-field line holds beyond the nine a card line has room for (a
+/// tenth that is a number, or any non-blank field after it), which would otherwise be lost.
+fn split_line<'a>(raw: &'a str, out: &mut Vec<Cow<'a, str>>, overflow: &mut usize) -> Cow<'a, str> {
     if raw.contains('\t') {
         // Tabs stop at multiples of 8, as Nastran reads them.
         let mut l = String::with_capacity(raw.len() + 8);
@@ -25,20 +27,32 @@ fn split_line<'a>(raw: &'a str, out: &mut Vec<Cow<'a, str>>) -> Cow<'a, str> {
             }
         }
         let mut fields = Vec::new();
-        let first = split_expanded(&l, &mut fields).into_owned();
+        let first = split_expanded(&l, &mut fields, overflow).into_owned();
         out.extend(fields.into_iter().map(|f| Cow::Owned(f.into_owned())));
         return Cow::Owned(first);
     }
-    split_expanded(raw, out)
+    split_expanded(raw, out, overflow)
 }
 
 /// [`split_line`] of a line without tabs.
-fn split_expanded<'a>(line: &'a str, out: &mut Vec<Cow<'a, str>>) -> Cow<'a, str> {
+fn split_expanded<'a>(
+    line: &'a str,
+    out: &mut Vec<Cow<'a, str>>,
+    overflow: &mut usize,
+) -> Cow<'a, str> {
+    *overflow = 0;
     if line.contains(',') {
         let mut it = line.split(',').map(|s| Cow::Borrowed(s.trim()));
         let first = it.next().unwrap_or_default();
-        // A free-field card holds at most 8 data fields per line; a ninth is the marker.
-        out.extend(it.take(8));
+        // A free-field card holds at most 8 data fields per line; a ninth is the
+        // continuation marker (a name, never a number), and nothing may follow it.
+        out.extend(it.by_ref().take(8));
+        let marker = it.next();
+        let data_in_marker = marker
+            .as_deref()
+            .is_some_and(|m| crate::formats::fe_matrices::nastran_real(m).is_some());
+        let after = it.filter(|f| !f.is_empty()).count();
+        *overflow = after + usize::from(data_in_marker);
         return first;
     }
     // Fields are columns of characters (bytes when the line is ASCII, as it nearly always is).
@@ -80,6 +94,7 @@ struct Card<'c, 'a> {
 /// which cards are passed (others are skipped with their continuations, unsplit).
 fn each_card<'a>(
     text: &'a str,
+    path: &Path,
     mut keep: impl FnMut(&str, &[Cow<'a, str>]) -> bool,
     mut f: impl FnMut(&[Cow<'a, str>], usize) -> Result<()>,
 ) -> Result<()> {
@@ -104,11 +119,23 @@ fn each_card<'a>(
             }
         }
         let at = cur.len();
-        let first = split_line(raw, &mut cur);
+        let mut overflow = 0;
+        let first = split_line(raw, &mut cur, &mut overflow);
         let continuation = first.is_empty() || first.starts_with('+') || first.starts_with('*');
+        let lost = || Error::DataFile {
+            file: path.to_path_buf(),
+            line: i + 1,
+            message: format!(
+                "a free-field line holds the card's name, 8 data fields and a continuation \
+                 marker; this one has {overflow} more field(s), which would be lost: put them \
+                 on a continuation line (`+,…`)"
+            ),
+        };
         if continuation {
             if !keeping {
                 cur.truncate(at);
+            } else if overflow > 0 {
+                return Err(lost());
             }
             continue;
         }
@@ -124,6 +151,9 @@ fn each_card<'a>(
             break;
         }
         keeping = keep(&name, &cur);
+        if keeping && overflow > 0 {
+            return Err(lost());
+        }
         cur_line = i + 1;
         if !keeping {
             cur.clear();
@@ -164,7 +194,7 @@ pub fn parse_dmig(text: &str, path: &Path, name: &str) -> Result<LabelledMatrix>
         }
         false
     };
-    each_card(text, keep, |fields, line| {
+    each_card(text, path, keep, |fields, line| {
         let c = Card { fields, line };
         let field = |k: usize| c.fields.get(k).map_or("", |f| f.as_ref());
         let int = |k: usize, what: &str, blank: Option<i64>| -> Result<i64> {
@@ -303,6 +333,7 @@ pub fn parse_grids(text: &str, path: &Path) -> Result<Vec<(u64, [f64; 3])>> {
     let mut out = Vec::new();
     each_card(
         text,
+        path,
         |n, _| n == "GRID",
         |fields, line| {
             let field = |k: usize| fields.get(k).map_or("", |f| f.as_ref()).trim();
@@ -364,6 +395,26 @@ mod tests {
     use crate::formats::abaqus::parse_abaqus;
     use crate::formats::fe_matrices::union_dofs;
     use nlsim_kernel::{Component, DofLabel};
+
+    #[test]
+    fn a_free_field_line_with_more_fields_than_a_card_holds_is_refused() {
+        // DMIG,NAME,GJ,CJ,,G1,C1,A1,,G2 — the 10th field a number: the off-diagonal term
+        // would vanish. Field 10 as a marker and trailing blanks are fine.
+        let p = Path::new("k.pch");
+        let head = "DMIG,KAAX,0,6,2,0,,,2\n";
+        let lost =
+            format!("{head}DMIG,KAAX,1,3,,1,3,2.0E6,,2,3,-1.0E6\nDMIG,KAAX,2,3,,2,3,1.0E6\n");
+        let e = parse_dmig(&lost, p, "KAAX").unwrap_err().to_string();
+        assert!(
+            e.contains("k.pch") && e.contains(":2") && e.contains("would be lost"),
+            "{e}"
+        );
+        let marked = format!(
+            "{head}DMIG,KAAX,1,3,,1,3,2.0E6,,+A,,\n+A,2,3,-1.0E6\nDMIG,KAAX,2,3,,2,3,1.0E6\n"
+        );
+        let m = parse_dmig(&marked, p, "KAAX").unwrap();
+        assert_eq!(m.entries.len(), 3, "{:?}", m.entries);
+    }
 
     #[test]
     fn dmig_small_large_and_free_field_give_one_matrix() {

@@ -317,7 +317,7 @@ pub fn detect(path: &Path) -> Result<Option<FeFormat>> {
         "rsa" | "rua" | "hb" | "rb" | "matrix" => Some(FeFormat::HarwellBoeing),
         "mtx" => {
             use std::io::Read;
-            crate::formats::files::regular_file(path)?;
+            crate::formats::files::input_file(path)?;
             let io = |source| Error::Io {
                 path: path.to_path_buf(),
                 source,

@@ -88,6 +88,7 @@ pub fn write_bytes_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
 /// the temporary file is removed on failure. Temporary files of the same destination left
 /// by runs that no longer exist are removed first.
 pub fn replace_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    crate::formats::guard::before_write(path)?;
     remove_temporaries(path, true);
     let tmp = temp_path(path);
     let io = |source| Error::Io {
@@ -151,26 +152,15 @@ pub fn remove_temporaries(path: &Path, orphans_only: bool) -> Vec<PathBuf> {
     removed
 }
 
-/// The path `p` names after resolving links: the file itself when it exists, else its
-/// resolved folder joined with its name (`None` when the folder does not exist either).
-fn resolved(p: &Path) -> Option<PathBuf> {
-    if let Ok(c) = std::fs::canonicalize(p) {
-        return Some(c);
-    }
-    let name = p.file_name()?;
-    let parent = match p.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    std::fs::canonicalize(parent).ok().map(|d| d.join(name))
-}
-
 /// Checks a run's outputs before anything is computed or written: no output (a result
-/// file in `files`, a report folder in `folders`) names one of the run's `inputs` or
-/// another output (compared after resolving links); a result file is not an existing
-/// folder nor a symbolic link (the atomic rename would replace the link, not its target);
-/// a report folder is not an existing file. `None` entries (an option not given) and inputs
-/// that do not exist (a built-in model's name) are skipped.
+/// file in `files`, a report or export folder in `folders`) is one of the run's `inputs` or
+/// of the inputs the run has read so far (through [`crate::formats::guard`]: the same path
+/// after resolving links, or the same inode — a hard link), no folder holds an input, and no
+/// two outputs are one file; a result file is not an existing folder nor a symbolic link
+/// (the atomic rename would replace the link, not its target); a report folder is not an
+/// existing file. `None` entries (an option not given) and inputs that do not exist (a
+/// built-in model's name) are skipped. Inside a [`crate::formats::guard::Run`] the outputs
+/// are recorded, so that an input read later is checked against them as it is opened.
 pub fn check_outputs(
     inputs: &[Option<&Path>],
     files: &[Option<&Path>],
@@ -203,6 +193,9 @@ pub fn check_outputs(
             }
         }
     }
+    for f in &files {
+        writable_folder(f)?;
+    }
     for d in &folders {
         if std::fs::metadata(d).is_ok_and(|m| !m.is_dir()) {
             return usage(format!(
@@ -211,32 +204,60 @@ pub fn check_outputs(
             ));
         }
     }
-    let ins: Vec<(PathBuf, &PathBuf)> = inputs
-        .iter()
-        .filter(|p| p.exists())
-        .filter_map(|p| resolved(p).map(|r| (r, p)))
-        .collect();
     let mut outs: Vec<(PathBuf, &PathBuf)> = Vec::new();
     for o in files.iter().chain(&folders) {
-        let Some(r) = resolved(o) else { continue };
-        if let Some((_, i)) = ins.iter().find(|(ri, _)| *ri == r) {
+        let Some(r) = crate::formats::guard::resolved(o) else {
+            continue;
+        };
+        if let Some((_, other)) = outs
+            .iter()
+            .find(|(ro, _)| *ro == r || r.starts_with(ro) || ro.starts_with(&r))
+        {
             return usage(format!(
-                "{}: is where the input {} is; writing there would replace it — name \
-                 another output",
-                o.display(),
-                i.display()
-            ));
-        }
-        if let Some((_, other)) = outs.iter().find(|(ro, _)| *ro == r) {
-            return usage(format!(
-                "{} and {} are the same file; name two outputs",
+                "{} and {} are the same file or one holds the other; name two outputs",
                 other.display(),
                 o.display()
             ));
         }
         outs.push((r, o));
     }
-    Ok(())
+    fn as_paths(v: &[PathBuf]) -> Vec<&Path> {
+        v.iter().map(PathBuf::as_path).collect()
+    }
+    crate::formats::guard::plan_outputs(&as_paths(&inputs), &as_paths(&files), &as_paths(&folders))
+}
+
+/// Refuses, before anything is computed, an output file whose folder does not exist or
+/// cannot be written (a file is created there and removed again, the honest test of both).
+pub fn writable_folder(out: &Path) -> Result<()> {
+    let dir = match out.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    if !dir.is_dir() {
+        return Err(Error::Usage(format!(
+            "{}: the folder {} does not exist; create it first or name another output",
+            out.display(),
+            dir.display()
+        )));
+    }
+    let probe = temp_path(out);
+    match std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&probe)
+    {
+        Ok(_) => {
+            let _ = std::fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Ok(()),
+        Err(e) => Err(Error::Usage(format!(
+            "{}: cannot write in the folder {} ({e})",
+            out.display(),
+            dir.display()
+        ))),
+    }
 }
 
 /// 1-based line of byte `offset` in `text` (where a TOML parser's error span starts).
@@ -274,7 +295,7 @@ pub(crate) fn read_bytes_up_to(path: &Path, max_bytes: Option<u64>) -> Result<Ve
         source,
     };
     // Checked before opening: opening a FIFO blocks until somebody writes into it.
-    regular_file(path)?;
+    input_file(path)?;
     let file = std::fs::File::open(path).map_err(io)?;
     let meta = file.metadata().map_err(io)?;
     // Checked again on what was opened (the name may have been replaced meanwhile).
@@ -307,6 +328,14 @@ pub fn regular_file(path: &Path) -> Result<()> {
     } else {
         Err(not_regular(path))
     }
+}
+
+/// [`regular_file`] for a file a run reads: also recorded as the run's input
+/// ([`crate::formats::guard::input`]), refused when an output of the run would replace it.
+/// Every reader of a user's file calls it (or reads through [`read_bytes`]) before opening.
+pub fn input_file(path: &Path) -> Result<()> {
+    regular_file(path)?;
+    crate::formats::guard::input(path)
 }
 
 fn not_regular(path: &Path) -> Error {

@@ -290,7 +290,7 @@ pub fn read_hdf5_matrix(file: &Path, object: &str, name: &str) -> Result<SparseS
         message: format!("{object}: {message}"),
     };
     let h5 = |e: hdf5::Error| err(e.to_string());
-    crate::formats::files::regular_file(file)?;
+    crate::formats::files::input_file(file)?;
     let f = hdf5::File::open(file).map_err(|e| Error::Hdf5 {
         path: file.to_path_buf(),
         message: e.to_string(),

@@ -27,6 +27,7 @@
 //! | [`raw_records`] | the raw time records of a virtual test (`nlsim test --raw`) and their step table |
 //! | [`candidates`] | the candidates file of a merged calibration batch |
 //! | [`files`] | atomic writes, bounded reads, provenance attributes, one-line messages |
+//! | [`guard`] | no output over an input: the run's files recorded, output folders written whole under a lock |
 
 pub mod abaqus;
 pub mod cache;
@@ -38,6 +39,7 @@ pub mod fe_matrices;
 pub mod fe_read;
 pub mod files;
 pub mod frf_file;
+pub mod guard;
 pub mod harwell_boeing;
 pub mod history_file;
 pub mod matrices;

@@ -38,6 +38,28 @@ pub struct TimeRecords {
     pub lines: Vec<usize>,
 }
 
+/// Largest ratio of a sample time to the sample interval that keeps every time within
+/// 10⁻⁴ of an interval in f64 (2⁻⁵² · 10¹² ≈ 2·10⁻⁴): times further from zero lose the
+/// sampling itself to rounding.
+pub const MAX_TIME_OVER_INTERVAL: f64 = 1e12;
+
+/// Why times from `first` to `last` (s), `dt` apart, cannot be read as a sampling (`None`
+/// when they can): beyond [`MAX_TIME_OVER_INTERVAL`] intervals from zero the f64 times no
+/// longer resolve the interval (an absolute clock such as 1e300 s, or a wrong unit).
+pub fn coarse_times(first: f64, last: f64, dt: f64) -> Option<String> {
+    let far = first.abs().max(last.abs());
+    (far / dt > MAX_TIME_OVER_INTERVAL).then(|| {
+        format!(
+            "times reach {} s with samples {} s apart: at more than {:e} intervals from zero \
+             an f64 time no longer resolves the sampling; give times from the start of the \
+             record",
+            crate::formats::files::number(far),
+            crate::formats::files::number(dt),
+            MAX_TIME_OVER_INTERVAL
+        )
+    })
+}
+
 /// One row of a step table.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StepRow {
@@ -166,6 +188,9 @@ pub fn parse_records(text: &str, path: &Path) -> Result<TimeRecords> {
             at[n - 1],
             "the times do not increase: time_s must rise from the first sample to the last".into(),
         ));
+    }
+    if let Some(m) = coarse_times(time[0], time[n - 1], dt) {
+        return Err(data_error(path, at[0], m));
     }
     for (i, &t) in time.iter().enumerate() {
         let even = time[0] + i as f64 * dt;
@@ -313,6 +338,12 @@ pub fn from_uff(records: &[crate::formats::uff::Uff58], path: &Path) -> Result<T
         ));
     }
     let dt = (x[n - 1] - x[0]) / (n - 1) as f64;
+    if let Some(m) = (dt > 0.0)
+        .then(|| coarse_times(x[0], x[n - 1], dt))
+        .flatten()
+    {
+        return Err(bad(0, m));
+    }
     if dt.is_nan() || dt <= 0.0 {
         return Err(bad(0, "the abscissa does not increase".into()));
     }

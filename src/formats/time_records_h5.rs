@@ -25,7 +25,7 @@ pub fn read_records_h5(path: &Path) -> Result<TimeRecords> {
         path: path.to_path_buf(),
         message: format!("{object}: {message}"),
     };
-    crate::formats::files::regular_file(path)?;
+    crate::formats::files::input_file(path)?;
     let f = hdf5::File::open(path).map_err(|e| err("file", e.to_string()))?;
     // A one-dimensional floating-point dataset: its length.
     let series = |d: &hdf5::Dataset, name: &str| -> Result<Option<usize>> {
@@ -97,6 +97,21 @@ pub fn read_records_h5(path: &Path) -> Result<TimeRecords> {
                         ),
                     ));
                 }
+                // In /inputs and /outputs every dataset is a signal: one that is not f64 [n]
+                // is refused, not passed over (a sensor left out would calibrate on the rest).
+                None if group != "/" => {
+                    return Err(err(
+                        &at,
+                        format!(
+                            "shape {:?} of {}: a signal is a floating-point dataset [{n}] \
+                             (convert integer counts to units first)",
+                            d.shape(),
+                            d.dtype()
+                                .and_then(|t| t.to_descriptor())
+                                .map_or_else(|e| e.to_string(), |t| t.to_string())
+                        ),
+                    ));
+                }
                 None => continue,
             }
             if found.iter().any(|(name, _)| *name == m) {
@@ -140,6 +155,9 @@ pub fn read_records_h5(path: &Path) -> Result<TimeRecords> {
             time_name,
             "the times do not increase from the first sample to the last".into(),
         ));
+    }
+    if let Some(m) = crate::formats::time_records::coarse_times(time[0], time[n - 1], dt) {
+        return Err(err(time_name, m));
     }
     if let Some(k) = (0..n).find(|&k| (time[k] - (time[0] + k as f64 * dt)).abs() > 0.01 * dt) {
         return Err(err(

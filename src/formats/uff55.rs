@@ -88,6 +88,10 @@ pub fn modes_text(path: &Path, model: &Model, modes: &Modes, damping: &[f64]) ->
         let s = slot(l.component).unwrap_or(0);
         nodes.entry(l.node).or_default().push((s, i));
     }
+    for &node in nodes.keys() {
+        let node = i64::try_from(node).unwrap_or(i64::MAX);
+        crate::formats::uff_write::check_node(path, node, "a mode shape's node")?;
+    }
     let freq = modes.frequencies_hz();
     let e13 = |v: f64| fortran_e(v, 13, 5);
     let mut out = String::new();

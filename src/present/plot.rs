@@ -188,6 +188,7 @@ pub fn check_path(path: &Path) -> Result<()> {
 /// Renders `fig` to `path` (SVG or PNG by extension) through a temporary file.
 pub fn write(path: &Path, fig: &impl Figure) -> Result<()> {
     check_path(path)?;
+    crate::formats::guard::before_write(path)?;
     ensure_font()?;
     let tmp = crate::formats::files::temp_path(path);
     let (w, h) = fig.size();

@@ -454,14 +454,13 @@ pub(crate) fn write_calibration_outputs(
         console.say(line);
     }
     if let Some(o) = &req.out {
-        std::fs::write(o, estimates_csv).map_err(|source| Error::Io {
-            path: o.clone(),
-            source,
-        })?;
+        // Beside it first, then renamed: a killed run or a full disk keeps the older file,
+        // and a hard link to another file is never written through.
+        crate::formats::files::write_text_atomically(o, estimates_csv)?;
         console.say(&format!("wrote {}", o.display()));
     }
     if let Some(dir) = &req.report {
-        let files = report(dir)?;
+        let files = crate::formats::guard::write_folder(dir, report)?;
         console.say(&format!(
             "report: {} files in {} ({contents})",
             files.len(),

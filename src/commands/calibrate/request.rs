@@ -162,6 +162,45 @@ impl CalibrationRequest {
                 ),
             );
         }
+        // Counted twice, a harmonic's residuals would weigh double and every Cramér–Rao std
+        // would shrink by √2.
+        if let Some(k) = self
+            .compare
+            .iter()
+            .enumerate()
+            .find_map(|(i, k)| self.compare[..i].contains(k).then_some(*k))
+        {
+            return bad(
+                "compare",
+                format!(
+                    "{:?}: harmonic {k} is named twice; name each compared harmonic once",
+                    self.compare
+                ),
+            );
+        }
+        if self.time_domain {
+            // Options a time-domain calibration has no use for are refused, not ignored.
+            let ignored = [
+                (
+                    !self.train.is_empty(),
+                    "train",
+                    "a raw record has no sweeps to select",
+                ),
+                (
+                    self.config.fold_by == nlsim_calib::FoldBy::Sweeps,
+                    "fold_by",
+                    "\"sweeps\": a raw record's folds are contiguous blocks of samples",
+                ),
+                (
+                    self.shaker.is_some(),
+                    "shaker",
+                    "the recorded drive is the force (times input_gain) in the time domain",
+                ),
+            ];
+            if let Some((_, key, why)) = ignored.iter().find(|(on, _, _)| *on) {
+                return bad(key, format!("not with --time-domain: {why}"));
+            }
+        }
         if self.modes == 0 {
             return bad("modes", "retain at least one mode".into());
         }
@@ -394,7 +433,7 @@ impl CalibrationTable {
                 .map(|t| crate::formats::settings::ShakerTable::shaker(Some(t))),
         };
         if let Some(r) = &req.result {
-            r.check(req.params.len()).map_err(|(key, m)| err(key, m))?;
+            r.check(&req.params).map_err(|(key, m)| err(key, m))?;
         }
         req.check().map_err(|e| file.located("calibration", e))?;
         Ok(req)
@@ -487,8 +526,11 @@ pub struct StoredResult {
 }
 
 impl StoredResult {
-    /// Checks the sizes against `n` parameters; the message names the key.
-    pub fn check(&self, n: usize) -> std::result::Result<(), (&'static str, String)> {
+    /// Checks the result against the calibration's `params`: the sizes, every estimate
+    /// within its parameter's bounds, a symmetric positive semi-definite covariance, and a
+    /// held-out mean square that scales a band to finite numbers; the message names the key.
+    pub fn check(&self, params: &[ParamSpec]) -> std::result::Result<(), (&'static str, String)> {
+        let n = params.len();
         if self.estimate.len() != n {
             return Err((
                 "result.estimate",
@@ -520,18 +562,70 @@ impl StoredResult {
                 ));
             }
         }
+        // A calibration bounds its estimates: one outside the bounds was not computed by it.
+        for (p, &v) in params.iter().zip(&self.estimate) {
+            if !(p.lower..=p.upper).contains(&v) {
+                return Err((
+                    "result.estimate",
+                    format!(
+                        "{} = {} is outside its bounds [{}, {}]; a calibration's estimate lies \
+                         within them",
+                        p.param,
+                        crate::formats::files::number(v),
+                        crate::formats::files::number(p.lower),
+                        crate::formats::files::number(p.upper)
+                    ),
+                ));
+            }
+        }
+        // A covariance is positive semi-definite: the least eigenvalue of the correlation
+        // matrix (scale-free) is not below rounding.
+        if n > 0 {
+            let d: Vec<f64> = (0..n).map(|i| self.covariance[i][i].sqrt()).collect();
+            let corr = faer::Mat::from_fn(n, n, |i, j| {
+                if d[i] > 0.0 && d[j] > 0.0 {
+                    self.covariance[i][j] / (d[i] * d[j])
+                } else if i == j {
+                    1.0
+                } else if self.covariance[i][j] == 0.0 {
+                    0.0
+                } else {
+                    f64::NAN
+                }
+            });
+            let least = corr
+                .self_adjoint_eigenvalues(faer::Side::Lower)
+                .ok()
+                .and_then(|e| e.into_iter().reduce(f64::min));
+            if least.is_none_or(|l| !(l >= -1e-9 * n as f64)) {
+                return Err((
+                    "result.covariance",
+                    format!(
+                        "not positive semi-definite (least eigenvalue of the correlation {}); \
+                         a covariance bound never is",
+                        least.map_or("not computable".into(), |l| format!("{l:.3e}"))
+                    ),
+                ));
+            }
+        }
         if !(self.reduced_chi2.is_finite() && self.reduced_chi2 >= 0.0) {
             return Err((
                 "result.reduced_chi2",
                 format!("{} is not a non-negative number", self.reduced_chi2),
             ));
         }
+        // Weighted residuals are in noise deviations: beyond 1e30 (10¹⁵ σ) no fold predicted
+        // anything, and a band scaled by it would span every number.
         if let Some(v) = self.held_out_mean_square
-            && (v.is_nan() || v < 0.0)
+            && (v.is_nan() || v < 0.0 || (v.is_finite() && v > 1e30))
         {
             return Err((
                 "result.held_out_mean_square",
-                format!("{v}: a mean square is a non-negative number (inf where a fold failed)"),
+                format!(
+                    "{}: a mean square is a non-negative number up to 1e30 (inf where a fold \
+                     failed)",
+                    crate::formats::files::number(v)
+                ),
             ));
         }
         Ok(())

@@ -82,10 +82,19 @@ fn prepare_time(req: &CalibrationRequest) -> Result<PreparedTime> {
             })
         })
         .collect::<Result<Vec<_>>>()?;
+    let force = std::mem::take(&mut columns[mapped.drive_column]);
+    if !force.iter().any(|f| *f != 0.0) {
+        return Err(Error::Usage(format!(
+            "{}: the drive '{}' is zero throughout: the model would rest, nothing to \
+             calibrate",
+            req.data.display(),
+            mapped.drive
+        )));
+    }
     let records = Arc::new(TimeRecords {
         rate_hz: mapped.records.rate_hz,
         input: mapped.drive.clone(),
-        force: std::mem::take(&mut columns[mapped.drive_column]),
+        force,
         channels,
     });
     let modes = req.modes.min(model.n_dofs());

@@ -176,6 +176,9 @@ pub fn execute(
     console: &crate::present::console::Console,
 ) -> Result<()> {
     refuse_foreign_folder(report_dir)?;
+    // Locked for the run (a second demo into the same folder is refused), and refused if a
+    // model file the demo reads lies in it.
+    crate::formats::files::check_outputs(&[Some(Path::new(model))], &[], &[Some(report_dir)])?;
     let command_line = crate::present::report::command_line();
     run_demo(model, report_dir, &command_line, &|s: &str| console.say(s))
 }

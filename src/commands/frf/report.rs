@@ -399,17 +399,22 @@ impl FrfOutputs {
         }
         let (sys, branch, y) = (&run.system, &run.branch, &run.responses);
         if let Some(dir) = &self.report {
-            let page = write_report(
-                dir,
-                spec,
-                model,
-                req,
-                run,
-                &summary,
-                (self.magnitude, self.phase),
-                &crate::present::report::command_line(),
-            )?;
-            console.say(&format!("  report {}", page.display()));
+            crate::formats::guard::write_folder(dir, |dir| {
+                write_report(
+                    dir,
+                    spec,
+                    model,
+                    req,
+                    run,
+                    &summary,
+                    (self.magnitude, self.phase),
+                    &crate::present::report::command_line(),
+                )
+            })?;
+            console.say(&format!(
+                "  report {}",
+                dir.join(crate::present::report::PAGE).display()
+            ));
         }
         if let Some(path) = &self.out {
             let info = crate::formats::frf_file::FrfInfo {

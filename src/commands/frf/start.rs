@@ -35,7 +35,7 @@ pub fn read_start(sf: &StartFile, sys: &HbSystem, from_hz: f64, to_hz: f64) -> R
         path: path.to_path_buf(),
         message: format!("start file, {object}: {message}"),
     };
-    crate::formats::files::regular_file(path)?;
+    crate::formats::files::input_file(path)?;
     let f = hdf5::File::open(path).map_err(|e| err("file", e.to_string()))?;
     let attr = |name: &str| -> Result<f64> {
         crate::formats::files::number_attr(&f, name).map_err(|e| {

@@ -60,7 +60,7 @@ pub fn execute(req: &PlanRequest, console: &crate::present::console::Console) ->
         console.say(&line);
     }
     if let Some(dir) = &req.report {
-        let files = write_plan_report(dir, &run)?;
+        let files = crate::formats::guard::write_folder(dir, |d| write_plan_report(d, &run))?;
         console.say(&format!(
             "report: {} files in {} (summary.txt, ranking.csv, fim_best.csv, plots as SVG \
              and PNG); the best design as a test file: nlsim test {} {}",

@@ -265,15 +265,20 @@ impl SimOutputs {
             console.say(&format!("  written to {}", path.display()));
         }
         if let Some(dir) = &self.report {
-            let page = write_report(
-                dir,
-                model,
-                history,
-                &info,
-                &summary,
-                &crate::present::report::command_line(),
-            )?;
-            console.say(&format!("  report {}", page.display()));
+            crate::formats::guard::write_folder(dir, |dir| {
+                write_report(
+                    dir,
+                    model,
+                    history,
+                    &info,
+                    &summary,
+                    &crate::present::report::command_line(),
+                )
+            })?;
+            console.say(&format!(
+                "  report {}",
+                dir.join(crate::present::report::PAGE).display()
+            ));
         }
         // Stopped short: the samples computed are kept (and written), and the run fails.
         match run.stopped_short(req.check()?) {

@@ -73,7 +73,7 @@ pub fn execute(req: &TestRequest, console: &crate::present::console::Console) ->
         console.say(&line);
     }
     if let Some(dir) = &req.report {
-        let files = write_test_report(dir, &run)?;
+        let files = crate::formats::guard::write_folder(dir, |d| write_test_report(d, &run))?;
         console.say(&format!(
             "report: {} files in {} (summary.txt, control.csv, force and response plots)",
             files.len(),

@@ -39,7 +39,7 @@ pub fn execute(
         console.say(&format!("prediction written to {}", out.display()));
     }
     if let Some(dir) = &req.report {
-        let files = write_report(dir, &run)?;
+        let files = crate::formats::guard::write_folder(dir, |d| write_report(d, &run))?;
         console.say(&format!(
             "report: {} files in {} (summary.txt, scores.csv, prediction.csv, plots as SVG and PNG)",
             files.len(),

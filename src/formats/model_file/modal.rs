@@ -18,6 +18,24 @@ pub(super) struct PendingResidual {
     pub path: String,
 }
 
+/// Largest magnitude of a `[modal]` value: the model squares frequencies and multiplies shape
+/// entries in pairs, and 10¹⁵⁰ squared still is a finite, normal f64 (as 10⁻¹⁵⁰ is).
+const MODAL_MAX: f64 = 1e150;
+
+/// Whether `v` is 0 or of a magnitude in [1/[`MODAL_MAX`], [`MODAL_MAX`]].
+fn representable(v: f64) -> bool {
+    v == 0.0 || (1.0 / MODAL_MAX..=MODAL_MAX).contains(&v.abs())
+}
+
+/// The message for a value [`representable`] refuses.
+fn out_of_range(v: f64) -> String {
+    format!(
+        "{}: out of range; a modal value is 0 or of a magnitude from 1e-150 to 1e150 (its \
+         products and squares must stay finite)",
+        crate::formats::files::number(v)
+    )
+}
+
 /// Reads `[modal]`: `points`, `[[modal.mode]]` (`f_hz`, `zeta`, `shape`, optional `m`) and
 /// `[[modal.residual]]` (`ports`, `flexibility`).
 pub(super) fn read_modal(t: &mut Tab<'_, '_>, name: &str) -> Result<(Model, Vec<PendingResidual>)> {
@@ -34,6 +52,12 @@ pub(super) fn read_modal(t: &mut Tab<'_, '_>, name: &str) -> Result<(Model, Vec<
     for mut m in tables {
         let frequency_hz = m.req_f64("f_hz", "the mode's natural frequency in Hz")?;
         let zeta = m.req_f64("zeta", "the mode's damping ratio, e.g. zeta = 0.002")?;
+        for (key, v) in [("f_hz", frequency_hz), ("zeta", zeta)] {
+            if !representable(v) {
+                let at = m.get(key).expect("read above");
+                return Err(m.err(at, key, out_of_range(v)));
+            }
+        }
         let shape_val = m.get("shape").ok_or_else(|| {
             m.missing(
                 "shape",
@@ -67,10 +91,17 @@ pub(super) fn read_modal(t: &mut Tab<'_, '_>, name: &str) -> Result<(Model, Vec<
         }
         let mut shape = Vec::with_capacity(list.len());
         for x in list.iter() {
-            shape.push(number(x).ok_or_else(|| m.err(x, "shape", "expected a finite number"))?);
+            let v = number(x).ok_or_else(|| m.err(x, "shape", "expected a finite number"))?;
+            if !representable(v) {
+                return Err(m.err(x, "shape", out_of_range(v)));
+            }
+            shape.push(v);
         }
         if let Some(v) = m.get("m") {
             let mass = number(v).ok_or_else(|| m.err(v, "m", "expected a finite number"))?;
+            if !representable(mass) {
+                return Err(m.err(v, "m", out_of_range(mass)));
+            }
             if mass <= 0.0 {
                 return Err(m.err(
                     v,
@@ -135,6 +166,10 @@ pub(super) fn read_modal(t: &mut Tab<'_, '_>, name: &str) -> Result<(Model, Vec<
             ));
         };
         let flexibility = r.req_f64("flexibility", "the residual flexibility in m/N")?;
+        if !representable(flexibility) {
+            let at = r.get("flexibility").expect("read above");
+            return Err(r.err(at, "flexibility", out_of_range(flexibility)));
+        }
         let term =
             ResidualTerm::new(&names[0], &names[1], flexibility).map_err(|e| r.at_table(e))?;
         r.finish("a residual term takes ports and flexibility")?;

@@ -136,7 +136,7 @@ pub fn read_h5(path: &Path) -> Result<TestData> {
         path: path.to_path_buf(),
         message: format!("{object}: {message}"),
     };
-    crate::formats::files::regular_file(path)?;
+    crate::formats::files::input_file(path)?;
     let f = hdf5::File::open(path).map_err(|e| err("file", e.to_string()))?;
     let str_attr = |loc: &hdf5::Location, object: &str, name: &str| -> Result<String> {
         loc.attr(name)

@@ -550,13 +550,7 @@ pub fn write_csv(path: &Path, data: &TestData) -> Result<()> {
             }
         }
     }
-    let tmp = crate::formats::files::temp_path(path);
-    std::fs::write(&tmp, s)
-        .and_then(|()| std::fs::rename(&tmp, path))
-        .map_err(|source| Error::Io {
-            path: path.to_path_buf(),
-            source,
-        })
+    crate::formats::files::write_text_atomically(path, &s)
 }
 
 /// What a test-data file does not say, given beside it (calibration-file keys, options of
