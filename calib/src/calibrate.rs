@@ -265,7 +265,9 @@ pub fn calibrate_with_progress(
     config: &CalibrationConfig,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Calibration> {
-    config.validate(objective.data().n_points())?;
+    // The folds are planned first: a setting the data cannot meet (folds by sweeps of one
+    // sweep) is refused before the candidates, not after them.
+    fold_plan(objective.data(), config)?;
     let starts = candidate_points(objective, config)?;
     let candidates = evaluate_candidates(
         objective,

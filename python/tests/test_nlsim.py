@@ -181,6 +181,11 @@ def test_calibration_equals_the_command_line_and_finds_the_truth(tmp_path: Path)
         nlsim.calibrate(nlsim.load("ecl_beam"), tmp_path / "d.csv", {"tip.k9": (1, 2)})
     with pytest.raises(nlsim.InputError, match="bounds"):
         nlsim.calibrate(nlsim.load("ecl_beam"), tmp_path / "d.csv", {"tip_spring.k3": (2e10, 1e9)})
+    # Sizes are bounded as the command line bounds them (5000 harmonics once panicked).
+    with pytest.raises(nlsim.InputError, match="harmonics=5000: give 1 to 64"):
+        nlsim.calibrate(nlsim.load("ecl_beam"), tmp_path / "d.csv", {"tip_spring.k3": (1e9, 2e10)}, harmonics=5000)
+    with pytest.raises(nlsim.InputError, match="harmonics=5000: give 1 to 256"):
+        nlsim.Balance(nlsim.load("ecl_beam"), harmonics=5000)
     with pytest.raises(nlsim.FileError, match="d.h5: HDF5: this build of nlsim reads and writes no HDF5"):
         nlsim.calibrate(nlsim.load("ecl_beam"), tmp_path / "d.h5", {"tip_spring.k3": (1e9, 2e10)})
     with pytest.raises(nlsim.FileError, match="nothing.csv"):

@@ -102,7 +102,21 @@ pub fn replace_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) 
     });
     if let Err(e) = written {
         let _ = std::fs::remove_file(&tmp);
-        return Err(e);
+        // The message names the file the user asked for, not the temporary one.
+        return Err(match e {
+            Error::Io { path: p, source } if p == tmp => Error::Io {
+                path: path.to_path_buf(),
+                source,
+            },
+            Error::Hdf5 { path: p, message } if p == tmp => Error::Hdf5 {
+                path: path.to_path_buf(),
+                message: message.replace(
+                    tmp.to_string_lossy().as_ref(),
+                    path.to_string_lossy().as_ref(),
+                ),
+            },
+            e => e,
+        });
     }
     if let Err(e) = std::fs::rename(&tmp, path) {
         let _ = std::fs::remove_file(&tmp);

@@ -597,7 +597,7 @@ impl StoredResult {
                 .self_adjoint_eigenvalues(faer::Side::Lower)
                 .ok()
                 .and_then(|e| e.into_iter().reduce(f64::min));
-            if least.is_none_or(|l| !(l >= -1e-9 * n as f64)) {
+            if least.is_none_or(|l| l.is_nan() || l < -1e-9 * n as f64) {
                 return Err((
                     "result.covariance",
                     format!(

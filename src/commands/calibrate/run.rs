@@ -242,6 +242,8 @@ impl CalibrationEstimate {
 pub fn estimate_calibration(req: &CalibrationRequest) -> Result<CalibrationEstimate> {
     let prepared = prepare(req)?;
     let mut obj = prepared.objective.clone();
+    // What the run refuses at its start, the dry run refuses too.
+    nlsim_calib::fold_plan(obj.data(), &req.config)?;
     let points = nlsim_calib::candidate_points(&obj, &req.config)?;
     let first = points[0].clone();
     let t = Instant::now();
