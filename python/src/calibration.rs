@@ -488,6 +488,16 @@ pub fn calibrate(
             "compare: {compare:?}; give harmonics 1 (the fundamental) or above"
         )));
     }
+    if let Some(k) = compare
+        .iter()
+        .enumerate()
+        .find_map(|(i, k)| compare[..i].contains(k).then_some(*k))
+    {
+        // Counted twice, its residuals would weigh double (the std shrinks by √2).
+        return Err(input(format!(
+            "compare: {compare:?}; harmonic {k} is named twice, name each once"
+        )));
+    }
     if modes == 0 {
         return Err(input("modes: 0; keep at least one mode"));
     }

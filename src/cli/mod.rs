@@ -202,6 +202,14 @@ mod tests {
         assert!(parse("nlsim frf m --from 1 --to 2 --start-hz 1.5").is_err());
         assert!(parse("nlsim modes m --count 3 --fmax 100").is_err());
         assert!(parse("nlsim calibrate m d --config c.toml").is_err());
+        // A compared harmonic named twice would count its residuals twice.
+        let cli =
+            parse("nlsim calibrate m.toml d.csv --param s.k3=1e8:1e11 --compare 1,1").unwrap();
+        let Command::Calibrate(a) = &cli.command else {
+            panic!("parsed as {:?}", cli.command)
+        };
+        let e = a.request().unwrap().check().unwrap_err().to_string();
+        assert!(e.contains("harmonic 1 is named twice"), "{e}");
         // A memory budget that is no positive number is a usage error of the request.
         let cli = parse("nlsim modes m --memory-budget -1").unwrap();
         let Command::Modes(a) = &cli.command else {
