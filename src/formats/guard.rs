@@ -63,6 +63,15 @@ struct Ledger {
     locks: Vec<(PathBuf, OutputLock)>,
 }
 
+impl Ledger {
+    /// Records the input `seen` once.
+    fn record(&mut self, seen: Seen) {
+        if !self.inputs.iter().any(|i| i.resolved == seen.resolved) {
+            self.inputs.push(seen);
+        }
+    }
+}
+
 static LEDGER: Mutex<Ledger> = Mutex::new(Ledger {
     runs: 0,
     inputs: Vec::new(),
@@ -181,9 +190,7 @@ pub fn input(path: &Path) -> Result<()> {
     if let Some(e) = conflict(std::slice::from_ref(&seen), &l.files, &l.folders) {
         return Err(e);
     }
-    if !l.inputs.iter().any(|i| i.resolved == seen.resolved) {
-        l.inputs.push(seen);
-    }
+    l.record(seen);
     Ok(())
 }
 
@@ -218,9 +225,7 @@ pub fn plan_outputs(inputs: &[&Path], files: &[&Path], folders: &[&Path]) -> Res
             }
         }
         for i in named {
-            if !l.inputs.iter().any(|r| r.resolved == i.resolved) {
-                l.inputs.push(i);
-            }
+            l.record(i);
         }
         l.files.extend(files);
         l.folders.extend(folders);
