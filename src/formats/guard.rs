@@ -492,10 +492,15 @@ impl StagedFolder {
             let path = path.to_path_buf();
             move |source| Error::Io { path, source }
         };
-        crate::formats::files::write_text_atomically(
-            &self.staging.join(MANIFEST),
-            &format!("{manifest}\n"),
-        )?;
+        // The staging folder is private to this run and is committed whole below, so the
+        // manifest needs no temporary of its own: written and flushed in place.
+        let manifest_path = self.staging.join(MANIFEST);
+        std::fs::File::create(&manifest_path)
+            .and_then(|mut f| {
+                std::io::Write::write_all(&mut f, format!("{manifest}\n").as_bytes())?;
+                f.sync_all()
+            })
+            .map_err(io(&manifest_path))?;
         let _ = std::fs::File::open(&self.staging).and_then(|d| d.sync_all());
         let old = self.staging.with_file_name(format!(
             "{}.old",

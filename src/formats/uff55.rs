@@ -90,7 +90,7 @@ pub fn modes_text(path: &Path, model: &Model, modes: &Modes, damping: &[f64]) ->
     }
     for &node in nodes.keys() {
         let node = i64::try_from(node).unwrap_or(i64::MAX);
-        crate::formats::uff_write::check_node(path, node, "a mode shape's node")?;
+        check_node(path, node, "a mode shape's node")?;
     }
     let freq = modes.frequencies_hz();
     let e13 = |v: f64| fortran_e(v, 13, 5);
@@ -125,6 +125,24 @@ pub fn modes_text(path: &Path, model: &Model, modes: &Modes, damping: &[f64]) ->
         let _ = writeln!(out, "{:>6}", -1);
     }
     Ok(out)
+}
+
+/// Largest node number a universal file holds: its node fields are 10 characters (`I10`),
+/// read as 32-bit integers by the programs that read these files.
+pub const UFF_MAX_NODE: i64 = i32::MAX as i64;
+
+/// Refuses a node number a universal file's `I10` fields cannot hold (beyond
+/// [`UFF_MAX_NODE`], or negative): written anyway it would run into the next field and the
+/// file would be corrupt. `what` names the function or shape for the message.
+pub fn check_node(path: &Path, node: i64, what: &str) -> Result<()> {
+    if (0..=UFF_MAX_NODE).contains(&node) {
+        return Ok(());
+    }
+    Err(Error::Usage(format!(
+        "{}: node {node} ({what}) does not fit the 10-character node fields of a universal \
+         file (0 to {UFF_MAX_NODE}); renumber the nodes or write .h5 or .csv instead",
+        path.display()
+    )))
 }
 
 #[cfg(test)]

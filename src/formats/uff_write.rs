@@ -123,24 +123,6 @@ pub fn write_functions(
     )
 }
 
-/// Largest node number a universal file holds: its node fields are 10 characters (`I10`),
-/// read as 32-bit integers by the programs that read these files.
-pub const UFF_MAX_NODE: i64 = i32::MAX as i64;
-
-/// Refuses a node number a universal file's `I10` fields cannot hold (beyond
-/// [`UFF_MAX_NODE`], or negative): written anyway it would run into the next field and the
-/// file would be corrupt. `what` names the function or shape for the message.
-pub fn check_node(path: &Path, node: i64, what: &str) -> Result<()> {
-    if (0..=UFF_MAX_NODE).contains(&node) {
-        return Ok(());
-    }
-    Err(Error::Usage(format!(
-        "{}: node {node} ({what}) does not fit the 10-character node fields of a universal \
-         file (0 to {UFF_MAX_NODE}); renumber the nodes or write .h5 or .csv instead",
-        path.display()
-    )))
-}
-
 /// The response and reference nodes of `functions` (node 0, "none", left out).
 fn function_nodes(functions: &[UffFunction]) -> impl Iterator<Item = u64> + '_ {
     functions
@@ -197,7 +179,7 @@ pub fn encode_functions(
 ) -> Result<Vec<u8>> {
     for f in functions {
         for node in [f.response.0, f.reference.0] {
-            check_node(path, node, &f.id)?;
+            crate::formats::uff55::check_node(path, node, &f.id)?;
         }
     }
     let mut out: Vec<u8> = nodes_text(geometry, function_nodes(functions)).into_bytes();
