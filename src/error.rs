@@ -61,6 +61,10 @@ pub enum Error {
     /// A command-line value is unusable (exit code 2).
     #[error("{0}")]
     Usage(String),
+    /// A stop signal (Ctrl-C, SIGTERM) ended the run at a safe point after it wrote what was
+    /// complete; the message says what was kept (exit code 128 + the signal, 130 for Ctrl-C).
+    #[error("{0}")]
+    Interrupted(String),
 }
 
 /// `key: ` before a message, or nothing for an error of the file as a whole (a key that the

@@ -4143,7 +4143,7 @@ seed = 9
             dir.join("est2.csv").to_str().unwrap(),
         ]);
         assert_eq!(rc, 0, "{out}{err}");
-        assert!(out.contains("evaluated in"), "{out}");
+        assert!(out.contains("with the costs"), "{out}");
         assert_eq!(
             std::fs::read(dir.join("est2.csv")).unwrap(),
             std::fs::read(dir.join("estimates.csv")).unwrap()
@@ -8027,3 +8027,6 @@ mod raw_test;
 
 #[path = "end_to_end/outputs.rs"]
 mod outputs;
+
+#[path = "end_to_end/interrupts.rs"]
+mod interrupts;

@@ -265,17 +265,55 @@ pub fn calibrate_with_progress(
     config: &CalibrationConfig,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Calibration> {
+    match calibrate_until(objective, config, &[], progress, &|| false)? {
+        Outcome::Finished(c) => Ok(*c),
+        Outcome::Interrupted(_) => unreachable!("nothing stops a calibration without a stop"),
+    }
+}
+
+/// [`calibrate_with_progress`] that reuses the candidate costs in `known` (one per point of
+/// [`candidate_points`], `None` where not evaluated; empty for none) and stops at the next
+/// safe point once `stop()` returns `true` — before a candidate, before a
+/// Levenberg–Marquardt evaluation — with what was complete ([`Outcome::Interrupted`]).
+/// Run again with the interrupted run's costs as `known`, it reaches bit-identical
+/// estimates to one uninterrupted run.
+pub fn calibrate_until(
+    objective: &FrfObjective,
+    config: &CalibrationConfig,
+    known: &[Option<f64>],
+    progress: &(dyn Fn(Progress) + Sync),
+    stop: Stop<'_>,
+) -> Result<Outcome> {
     // The folds are planned first: a setting the data cannot meet (folds by sweeps of one
     // sweep) is refused before the candidates, not after them.
     fold_plan(objective.data(), config)?;
-    let starts = candidate_points(objective, config)?;
-    let candidates = evaluate_candidates(
+    let points = candidate_points(objective, config)?;
+    let costs = evaluate_costs(
         objective,
-        starts,
+        &points,
+        known,
         |obj, v| obj.cost_values(v),
         &|done, total| progress(Progress::Candidates { done, total }),
+        stop,
     )?;
-    calibrate_from_candidates(objective, candidates, config, progress)
+    if costs.iter().any(Option::is_none) {
+        return Ok(Outcome::Interrupted(Box::new(Interrupted {
+            params: objective.specs().iter().map(|s| s.param.clone()).collect(),
+            points,
+            costs,
+            runs: Vec::new(),
+            phase: Phase::Candidates,
+        })));
+    }
+    let candidates = points
+        .into_iter()
+        .zip(costs)
+        .map(|(values, c)| Candidate {
+            values,
+            cost: c.unwrap_or(f64::NAN),
+        })
+        .collect();
+    calibrate_from_candidates_until(objective, candidates, config, progress, stop)
 }
 
 /// The start candidates of a calibration: the model's current values clamped to the bounds,
@@ -301,6 +339,21 @@ pub fn calibrate_from_candidates(
     config: &CalibrationConfig,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Calibration> {
+    match calibrate_from_candidates_until(objective, candidates, config, progress, &|| false)? {
+        Outcome::Finished(c) => Ok(*c),
+        Outcome::Interrupted(_) => unreachable!("nothing stops a calibration without a stop"),
+    }
+}
+
+/// [`calibrate_from_candidates`] that stops at the next Levenberg–Marquardt evaluation once
+/// `stop()` returns `true` ([`calibrate_until`]).
+pub fn calibrate_from_candidates_until(
+    objective: &FrfObjective,
+    candidates: Vec<Candidate>,
+    config: &CalibrationConfig,
+    progress: &(dyn Fn(Progress) + Sync),
+    stop: Stop<'_>,
+) -> Result<Outcome> {
     config.validate(objective.data().n_points())?;
     let specs = objective.specs().to_vec();
     let n = specs.len();
@@ -326,14 +379,31 @@ pub fn calibrate_from_candidates(
             ),
         });
     }
-    let runs = run_starts(
+    let (runs, all) = run_starts_until(
         objective,
         &specs,
         &candidates,
         &order,
         &config.lm,
         &|done, total| progress(Progress::Start { done, total }),
+        stop,
     )?;
+    let interrupted = |runs: Vec<StartRun>, candidates: Vec<Candidate>, phase| {
+        let (points, costs) = candidates
+            .into_iter()
+            .map(|c| (c.values, Some(c.cost)))
+            .unzip();
+        Ok(Outcome::Interrupted(Box::new(Interrupted {
+            params: params.clone(),
+            points,
+            costs,
+            runs,
+            phase,
+        })))
+    };
+    if !all {
+        return interrupted(runs, candidates, Phase::Optimisation);
+    }
     let best = &runs[0];
     let estimate = best.values.clone();
     let mut obj = objective.clone();
@@ -349,11 +419,14 @@ pub fn calibrate_from_candidates(
     let poorly_identified = cramer_rao.poorly_identified();
     let status = best.report.status;
     let kfold = if config.folds > 0 {
-        Some(kfold(objective, &estimate, config, progress)?)
+        match kfold_until(objective, &estimate, config, progress, stop)? {
+            Some(k) => Some(k),
+            None => return interrupted(runs, candidates, Phase::CrossValidation),
+        }
     } else {
         None
     };
-    Ok(Calibration {
+    Ok(Outcome::Finished(Box::new(Calibration {
         params,
         estimate,
         status,
@@ -365,7 +438,7 @@ pub fn calibrate_from_candidates(
         fit,
         cost,
         kfold,
-    })
+    })))
 }
 
 /// The fold of every point of `data` and the number of folds, as `config` deals them
@@ -438,6 +511,18 @@ pub fn fold(
     config: &CalibrationConfig,
     f: usize,
 ) -> Result<FoldResult> {
+    fold_until(objective, estimate, config, f, &|| false)
+        .map(|r| r.expect("nothing stops a fold without a stop"))
+}
+
+/// [`fold`] that stops at the next Levenberg–Marquardt evaluation once `stop()` holds.
+fn fold_until(
+    objective: &FrfObjective,
+    estimate: &[f64],
+    config: &CalibrationConfig,
+    f: usize,
+    stop: Stop<'_>,
+) -> Result<Option<FoldResult>> {
     let (fold_of, k) = fold_plan(objective.data(), config)?;
     if f >= k {
         return Err(Error::invalid(
@@ -462,7 +547,9 @@ pub fn fold(
     let held: Vec<bool> = train.iter().map(|t| !t).collect();
     obj.set_training(train)?;
     let u0 = obj.to_internal(estimate);
-    let rep = levenberg_marquardt(&mut obj, &u0, &lo, &hi, &config.lm)?;
+    let Some(rep) = lm_until(&mut obj, &u0, &lo, &hi, &config.lm, stop)? else {
+        return Ok(None);
+    };
     let values = obj.to_values(&rep.u);
     let training_rms = rep
         .evaluation
@@ -474,12 +561,12 @@ pub fn fold(
     } else {
         f64::INFINITY
     };
-    Ok(FoldResult {
+    Ok(Some(FoldResult {
         values,
         status: rep.status,
         held_out_rms,
         training_rms,
-    })
+    }))
 }
 
 /// k-fold cross validation from `estimate`: each fold is held out in turn ([`fold`], in
@@ -490,19 +577,32 @@ pub fn kfold(
     config: &CalibrationConfig,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<KFold> {
+    kfold_until(objective, estimate, config, progress, &|| false)
+        .map(|k| k.expect("nothing stops a cross validation without a stop"))
+}
+
+/// [`kfold`] that stops at the next Levenberg–Marquardt evaluation once `stop()` holds
+/// (`Ok(None)` then).
+fn kfold_until(
+    objective: &FrfObjective,
+    estimate: &[f64],
+    config: &CalibrationConfig,
+    progress: &(dyn Fn(Progress) + Sync),
+    stop: Stop<'_>,
+) -> Result<Option<KFold>> {
     let (fold_of, k) = fold_plan(objective.data(), config)?;
     let done = AtomicUsize::new(0);
-    let results: Vec<Result<FoldResult>> = (0..k)
+    let results: Vec<Result<Option<FoldResult>>> = (0..k)
         .into_par_iter()
         .map(|f| {
-            let r = fold(objective, estimate, config, f);
+            let r = fold_until(objective, estimate, config, f, stop);
             let d = done.fetch_add(1, Ordering::Relaxed) + 1;
             progress(Progress::Fold { done: d, total: k });
             r
         })
         .collect();
-    let folds = results.into_iter().collect::<Result<Vec<_>>>()?;
-    KFold::from_folds(fold_of, folds)
+    let folds = results.into_iter().collect::<Result<Option<Vec<_>>>>()?;
+    folds.map(|f| KFold::from_folds(fold_of, f)).transpose()
 }
 
 impl KFold {
@@ -614,22 +714,171 @@ pub(crate) fn evaluate_candidates<O: Clone + Send + Sync>(
     cost: impl Fn(&mut O, &[f64]) -> Result<f64> + Sync,
     done: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Vec<Candidate>> {
-    let total = starts.len();
+    let costs = evaluate_costs(objective, &starts, &[], cost, done, &|| false)?;
+    Ok(starts
+        .into_iter()
+        .zip(costs)
+        .map(|(values, c)| Candidate {
+            values,
+            cost: c.unwrap_or(f64::NAN),
+        })
+        .collect())
+}
+
+/// [`evaluate_candidates`] that reuses the costs in `known` (one per point, or empty for
+/// none) and leaves a point unevaluated (`None`) once `stop()` returns `true`: each point's
+/// cost depends on that point alone, so costs kept from an interrupted run and the rest
+/// evaluated later are bit-identical to one uninterrupted evaluation.
+pub(crate) fn evaluate_costs<O: Clone + Send + Sync>(
+    objective: &O,
+    points: &[Vec<f64>],
+    known: &[Option<f64>],
+    cost: impl Fn(&mut O, &[f64]) -> Result<f64> + Sync,
+    done: &(dyn Fn(usize, usize) + Sync),
+    stop: Stop<'_>,
+) -> Result<Vec<Option<f64>>> {
+    if !known.is_empty() && known.len() != points.len() {
+        return Err(Error::DimensionMismatch {
+            what: "known candidate costs".into(),
+            expected: points.len(),
+            found: known.len(),
+        });
+    }
+    let known_at = |i: usize| known.get(i).copied().flatten();
+    let total = (0..points.len()).filter(|&i| known_at(i).is_none()).count();
     let finished = AtomicUsize::new(0);
-    let costs: Vec<Result<f64>> = starts
+    let costs: Vec<Result<Option<f64>>> = points
         .par_iter()
-        .map(|v| {
+        .enumerate()
+        .map(|(i, v)| {
+            if let Some(c) = known_at(i) {
+                return Ok(Some(c));
+            }
+            if stop() {
+                return Ok(None);
+            }
             let mut obj = objective.clone();
             let c = cost(&mut obj, v);
             done(finished.fetch_add(1, Ordering::Relaxed) + 1, total);
-            c
+            c.map(Some)
         })
         .collect();
-    starts
-        .into_iter()
-        .zip(costs)
-        .map(|(values, c)| Ok(Candidate { values, cost: c? }))
-        .collect()
+    costs.into_iter().collect()
+}
+
+/// Asked between units of work (a candidate, a Levenberg–Marquardt evaluation): `true`
+/// stops the calibration at that point ([`calibrate_until`]). The numeric crates read no
+/// signal; a caller sets a flag from its own (a Ctrl-C handler, a cancel call).
+pub type Stop<'a> = &'a (dyn Fn() -> bool + Sync);
+
+/// A calibration's end: finished, or stopped at a safe point with what was complete.
+#[derive(Debug, Clone)]
+pub enum Outcome {
+    /// Ran to its end.
+    Finished(Box<Calibration>),
+    /// Stopped by [`Stop`] before its end.
+    Interrupted(Box<Interrupted>),
+}
+
+/// The phase a calibration was stopped in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Phase {
+    /// Evaluating the candidates.
+    Candidates,
+    /// The Levenberg–Marquardt runs from the best candidates.
+    Optimisation,
+    /// The cross validation (the estimate was complete).
+    CrossValidation,
+}
+
+impl Phase {
+    /// Lower-case name, as messages print it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Phase::Candidates => "candidates",
+            Phase::Optimisation => "optimisation",
+            Phase::CrossValidation => "cross validation",
+        }
+    }
+}
+
+/// What an interrupted calibration had completed.
+#[derive(Debug, Clone)]
+pub struct Interrupted {
+    /// The calibrated parameters.
+    pub params: Vec<Param>,
+    /// Every candidate point of the calibration ([`candidate_points`]), in order.
+    pub points: Vec<Vec<f64>>,
+    /// The cost `½‖r‖²` of each point; `None` where it was not evaluated. Given back to
+    /// [`calibrate_until`] as `known`, the calibration goes on to the same estimates as an
+    /// uninterrupted run.
+    pub costs: Vec<Option<f64>>,
+    /// The Levenberg–Marquardt runs that finished, best first.
+    pub runs: Vec<StartRun>,
+    /// Where it stopped.
+    pub phase: Phase,
+}
+
+impl Interrupted {
+    /// Candidates evaluated.
+    pub fn evaluated(&self) -> usize {
+        self.costs.iter().filter(|c| c.is_some()).count()
+    }
+
+    /// The best values so far and their cost: the best finished optimisation, else the
+    /// evaluated candidate of lowest finite cost; `None` when nothing finite was evaluated.
+    pub fn best(&self) -> Option<(&[f64], f64)> {
+        if let Some(r) = self.runs.first() {
+            return Some((&r.values, r.report.cost));
+        }
+        self.points
+            .iter()
+            .zip(&self.costs)
+            .filter_map(|(p, c)| c.filter(|c| c.is_finite()).map(|c| (p.as_slice(), c)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+    }
+}
+
+/// A [`LeastSquares`] problem that refuses to evaluate once `stop()` holds: the optimiser
+/// then returns at once with that `Err`, which the caller reads as the interruption.
+struct Stoppable<'a, O> {
+    inner: &'a mut O,
+    stop: Stop<'a>,
+}
+
+impl<O: LeastSquares> LeastSquares for Stoppable<'_, O> {
+    fn n_params(&self) -> usize {
+        self.inner.n_params()
+    }
+
+    fn evaluate(&mut self, u: &[f64]) -> Result<Option<crate::lm::Evaluation>> {
+        if (self.stop)() {
+            return Err(Error::Numerical {
+                what: "calibration".into(),
+                detail: "interrupted".into(),
+            });
+        }
+        self.inner.evaluate(u)
+    }
+}
+
+/// [`levenberg_marquardt`] on `problem` that stops when `stop()` holds: `Ok(None)` then.
+fn lm_until<O: LeastSquares>(
+    problem: &mut O,
+    u0: &[f64],
+    lo: &[f64],
+    hi: &[f64],
+    lm: &LmConfig,
+    stop: Stop<'_>,
+) -> Result<Option<LmReport>> {
+    let mut s = Stoppable {
+        inner: problem,
+        stop,
+    };
+    match levenberg_marquardt(&mut s, u0, lo, hi, lm) {
+        Err(_) if stop() => Ok(None),
+        r => r.map(Some),
+    }
 }
 
 /// Indices of the `starts` candidates of lowest finite cost, best first (ties by index).
@@ -648,7 +897,7 @@ pub(crate) fn best_candidates(candidates: &[Candidate], starts: usize) -> Vec<us
 }
 
 /// Levenberg–Marquardt from each candidate in `order`, in parallel (each run on its own copy
-/// of `objective`), best first; `done(finished, total)` after each run.
+/// of `objective`), best first; `done(finished, total)` after each.
 pub(crate) fn run_starts<O: LeastSquares + Clone + Sync>(
     objective: &O,
     specs: &[ParamSpec],
@@ -657,27 +906,46 @@ pub(crate) fn run_starts<O: LeastSquares + Clone + Sync>(
     lm: &LmConfig,
     done: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Vec<StartRun>> {
+    let (runs, _) = run_starts_until(objective, specs, candidates, order, lm, done, &|| false)?;
+    Ok(runs)
+}
+
+/// [`run_starts`] that stops when `stop()` holds: the finished runs, best first, and
+/// whether every run finished.
+pub(crate) fn run_starts_until<O: LeastSquares + Clone + Sync>(
+    objective: &O,
+    specs: &[ParamSpec],
+    candidates: &[Candidate],
+    order: &[usize],
+    lm: &LmConfig,
+    done: &(dyn Fn(usize, usize) + Sync),
+    stop: Stop<'_>,
+) -> Result<(Vec<StartRun>, bool)> {
     let (lo, hi): (Vec<f64>, Vec<f64>) = specs.iter().map(ParamSpec::internal_bounds).unzip();
     let finished = AtomicUsize::new(0);
-    let runs: Vec<Result<StartRun>> = order
+    let runs: Vec<Result<Option<StartRun>>> = order
         .par_iter()
         .map(|&i| {
             let mut obj = objective.clone();
             let start = candidates[i].values.clone();
             let u0 = specs_to_internal(specs, &start);
-            let report = levenberg_marquardt(&mut obj, &u0, &lo, &hi, lm)?;
+            let Some(report) = lm_until(&mut obj, &u0, &lo, &hi, lm, stop)? else {
+                return Ok(None);
+            };
             let values = specs_to_values(specs, &report.u);
             done(finished.fetch_add(1, Ordering::Relaxed) + 1, order.len());
-            Ok(StartRun {
+            Ok(Some(StartRun {
                 start,
                 values,
                 report,
-            })
+            }))
         })
         .collect();
-    let mut runs = runs.into_iter().collect::<Result<Vec<_>>>()?;
+    let runs = runs.into_iter().collect::<Result<Vec<_>>>()?;
+    let all = runs.iter().all(Option::is_some);
+    let mut runs: Vec<StartRun> = runs.into_iter().flatten().collect();
     runs.sort_by(|a, b| a.report.cost.total_cmp(&b.report.cost));
-    Ok(runs)
+    Ok((runs, all))
 }
 
 /// A Jacobian per internal variable (the optimiser's) turned per parameter value at

@@ -48,10 +48,10 @@ pub mod time_domain;
 pub mod track;
 
 pub use calibrate::{
-    Calibration, CalibrationConfig, Candidate, FoldBy, FoldResult, KFold, MAX_FOLDS,
-    MAX_LHS_SAMPLES, MAX_MAXIMIN_SWAPS, MAX_STARTS, Progress, StartRun, calibrate,
-    calibrate_from_candidates, calibrate_with_progress, candidate_points, fold, fold_assignment,
-    fold_plan, kfold,
+    Calibration, CalibrationConfig, Candidate, FoldBy, FoldResult, Interrupted, KFold, MAX_FOLDS,
+    MAX_LHS_SAMPLES, MAX_MAXIMIN_SWAPS, MAX_STARTS, Outcome, Phase, Progress, StartRun, Stop,
+    calibrate, calibrate_from_candidates, calibrate_from_candidates_until, calibrate_until,
+    calibrate_with_progress, candidate_points, fold, fold_assignment, fold_plan, kfold,
 };
 pub use data::{Channel, Drive, Noise, PointId, Step, Sweep, SweepDirection, TestData};
 pub use dwell::{Dwell, DwellConfig, StepWindow, detect_steps, extract_dwell};
@@ -84,6 +84,6 @@ pub use stats::{CHI2_WARN, CramerRao};
 pub use synthetic::{Gaussian, SweepPlan, synthesize};
 pub use time_domain::{
     MAX_TIME_SAMPLES, TimeCalibration, TimeChannel, TimeFit, TimeObjective, TimeRecords,
-    calibrate_time, synthesize_time, time_blocks,
+    calibrate_time, check_time_folds, synthesize_time, time_blocks,
 };
 pub use track::{Track, TrackConfig, TrackPoint, sweep_bias, sweep_rate_parameter, track_sweep};

@@ -486,6 +486,20 @@ fn horizon_lm(
     }
 }
 
+/// Refuses a cross validation the record cannot hold: `config.folds` contiguous blocks of
+/// at least 2 samples each. Run at the start of [`calibrate_time`] and by the
+/// CLI's `--dry-run`.
+pub fn check_time_folds(objective: &TimeObjective, config: &CalibrationConfig) -> Result<()> {
+    let (k, n) = (config.folds, objective.data.len());
+    if k >= 2 && n < 2 * k {
+        return Err(Error::invalid(
+            "time-domain calibration",
+            format!("folds = {k}: the record's {n} samples do not make {k} blocks of 2"),
+        ));
+    }
+    Ok(())
+}
+
 /// Calibrates `objective`'s parameters on its record: Latin-hypercube candidates (in
 /// parallel), Levenberg–Marquardt from the best `config.starts`, the Cramér–Rao bound at the
 /// optimum and, with `config.folds ≥ 2`, the cross validation over that many contiguous
@@ -498,6 +512,8 @@ pub fn calibrate_time(
 ) -> Result<TimeCalibration> {
     config.validate_settings()?;
     config.lm.validate()?;
+    // Refused at the start, not after the candidates and the optimisation.
+    check_time_folds(objective, config)?;
     let specs = objective.specs.clone();
     let params: Vec<Param> = specs.iter().map(|s| s.param.clone()).collect();
     let starts = objective.candidate_points(config)?;
@@ -556,12 +572,6 @@ pub fn calibrate_time(
     let kfold = if config.folds >= 2 {
         let k = config.folds;
         let n = objective.data.len();
-        if n < 2 * k {
-            return Err(Error::invalid(
-                "time-domain calibration",
-                format!("folds = {k}: the record's {n} samples do not make {k} blocks of 2"),
-            ));
-        }
         let fold_of = time_blocks(n, k);
         let done = AtomicUsize::new(0);
         let rms = |r: &[f64]| (r.iter().map(|v| v * v).sum::<f64>() / r.len().max(1) as f64).sqrt();

@@ -2,8 +2,9 @@
 //! beam's cubic tip spring and first-mode damping come back from a stepped-sine test.
 
 use nlsim_calib::{
-    CalibrationConfig, FoldBy, Form, FrfObjective, LeastSquares, Noise, ObjectiveConfig, ParamSpec,
-    Status, SweepPlan, TestData, calibrate, synthesize,
+    CalibrationConfig, FoldBy, Form, FrfObjective, LeastSquares, Noise, ObjectiveConfig, Outcome,
+    ParamSpec, Phase, Progress, Status, SweepPlan, TestData, calibrate, calibrate_until,
+    synthesize,
 };
 use nlsim_hb::{HarmonicSet, HbConfig, HbSystem};
 use nlsim_kernel::{Param, Parameterized};
@@ -238,6 +239,99 @@ fn estimates_are_identical_on_one_and_two_threads() {
         a.candidates.iter().map(|c| c.cost).collect::<Vec<_>>(),
         b.candidates.iter().map(|c| c.cost).collect::<Vec<_>>()
     );
+}
+
+/// A calibration stopped at a safe point in each phase — after 5 candidates, after the first
+/// optimisation, after the first fold — keeps what was complete, and resumed from the costs
+/// it kept reaches the uninterrupted estimates, statistics and folds bit for bit. The stop is
+/// raised from the progress callback (as a signal handler's flag would be, between units of
+/// work), on one thread so that the count at which it lands is fixed.
+#[test]
+fn a_stopped_calibration_resumes_to_the_uninterrupted_result_bit_for_bit() {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let sys = ecl(3);
+    let d = Arc::new(data(&sys, 0.02, 5, 0.02));
+    let obj = FrfObjective::new(&sys, d, specs_of(&sys), ObjectiveConfig::default()).unwrap();
+    let cfg = CalibrationConfig {
+        lhs_samples: 12,
+        starts: 2,
+        folds: 4,
+        ..Default::default()
+    };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let whole = pool.install(|| calibrate(&obj, &cfg).unwrap());
+    type Trigger = fn(Progress) -> bool;
+    let cases: [(&str, Trigger, Phase); 3] = [
+        (
+            "after 5 candidates",
+            |p| matches!(p, Progress::Candidates { done: 5, .. }),
+            Phase::Candidates,
+        ),
+        (
+            "after the first optimisation",
+            |p| matches!(p, Progress::Start { done: 1, .. }),
+            Phase::Optimisation,
+        ),
+        (
+            "after the first fold",
+            |p| matches!(p, Progress::Fold { done: 1, .. }),
+            Phase::CrossValidation,
+        ),
+    ];
+    for (when, trigger, phase) in cases {
+        let stop = AtomicBool::new(false);
+        let outcome = pool.install(|| {
+            calibrate_until(
+                &obj,
+                &cfg,
+                &[],
+                &|p| {
+                    if trigger(p) {
+                        stop.store(true, Ordering::SeqCst);
+                    }
+                },
+                &|| stop.load(Ordering::SeqCst),
+            )
+            .unwrap()
+        });
+        let Outcome::Interrupted(kept) = outcome else {
+            panic!("{when}: the calibration was not stopped");
+        };
+        assert_eq!(kept.phase, phase, "{when}");
+        let expected_costs: Vec<f64> = whole.candidates.iter().map(|c| c.cost).collect();
+        for (i, c) in kept.costs.iter().enumerate() {
+            if let Some(c) = c {
+                assert_eq!(
+                    c.to_bits(),
+                    expected_costs[i].to_bits(),
+                    "{when}: candidate {i}"
+                );
+            }
+        }
+        if phase == Phase::Candidates {
+            assert_eq!(kept.evaluated(), 5, "{when}");
+            assert!(kept.runs.is_empty());
+        } else {
+            assert_eq!(kept.evaluated(), kept.points.len(), "{when}");
+        }
+        let best = kept.best().expect("a finite cost was reached");
+        assert!(best.1.is_finite());
+        let resumed =
+            pool.install(|| calibrate_until(&obj, &cfg, &kept.costs, &|_| {}, &|| false).unwrap());
+        let Outcome::Finished(c) = resumed else {
+            panic!("{when}: the resumed calibration stopped");
+        };
+        assert_eq!(c.estimate, whole.estimate, "{when}");
+        assert_eq!(c.cramer_rao.std, whole.cramer_rao.std, "{when}");
+        assert_eq!(
+            c.kfold.as_ref().unwrap().estimates,
+            whole.kfold.as_ref().unwrap().estimates,
+            "{when}"
+        );
+    }
 }
 
 #[test]

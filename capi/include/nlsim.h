@@ -410,6 +410,14 @@ typedef struct NlsimCalibrationSettings {
    * The shaker, when `model_shaker` is 1.
    */
   struct NlsimShaker shaker;
+  /**
+   * Null, or a flag the caller may set to nonzero from another thread or a signal
+   * handler (a `volatile sig_atomic_t`-sized `int32_t`) to stop the calibration at its
+   * next safe point (before a candidate, before a Levenberg–Marquardt evaluation):
+   * [`nlsim_calibrate`] then returns `NLSIM_CODE_STOPPED_SHORT` with the best values so
+   * far in `estimate` and NaN in `std`. Read atomically; never written by nlsim.
+   */
+  const int32_t *cancel;
 } NlsimCalibrationSettings;
 
 /**
@@ -910,11 +918,15 @@ NlsimCode nlsim_testdata_add_sweep_sigma(NlsimTestData data,
  * deviations (Cramér–Rao, parameter units) into `estimate` and `std` (`n_params` each).
  * The system's own parameter values are the first candidate and are not changed; set the
  * estimate with [`crate::nlsim_set_param`] to use it. `settings` null means the defaults.
- * A best run that did not converge returns `NLSIM_CODE_STOPPED_SHORT` with its estimate.
+ * A best run that did not converge returns `NLSIM_CODE_STOPPED_SHORT` with its estimate; so
+ * does a calibration stopped by `settings.cancel`, with the best values so far (the
+ * system's own where no candidate was evaluated), NaN standard deviations, `info.cost` the
+ * best cost so far, and [`crate::nlsim_last_error`] saying where it stopped.
  *
  * # Safety
  * `names` holds `n_params` strings; `lower`, `upper`, `estimate` and `std` hold `n_params`
- * doubles (the last two writable); `settings` is null or readable; `info` null or writable.
+ * doubles (the last two writable); `settings` is null or readable, its `cancel` null or an
+ * aligned `int32_t` alive for the call; `info` null or writable.
  */
 NlsimCode nlsim_calibrate(NlsimHb hb,
                           NlsimTestData data,

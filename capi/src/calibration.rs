@@ -7,8 +7,8 @@ use crate::{
 };
 use faer::c64;
 use nlsim::calib::{
-    CalibrationConfig, Channel, Drive, FrfObjective, Noise, ObjectiveConfig, ParamSpec, Shaker,
-    Step, Sweep, SweepDirection, TestData, calibrate,
+    CalibrationConfig, Channel, Drive, FrfObjective, Noise, ObjectiveConfig, Outcome, ParamSpec,
+    Shaker, Step, Sweep, SweepDirection, TestData, calibrate_until,
 };
 use nlsim::kernel::{Param, Parameterized, param::parse_known};
 use std::ffi::c_char;
@@ -41,6 +41,29 @@ pub struct NlsimCalibrationSettings {
     pub model_shaker: i32,
     /// The shaker, when `model_shaker` is 1.
     pub shaker: NlsimShaker,
+    /// Null, or a flag the caller may set to nonzero from another thread or a signal
+    /// handler (a `volatile sig_atomic_t`-sized `int32_t`) to stop the calibration at its
+    /// next safe point (before a candidate, before a Levenberg–Marquardt evaluation):
+    /// [`nlsim_calibrate`] then returns `NLSIM_CODE_STOPPED_SHORT` with the best values so
+    /// far in `estimate` and NaN in `std`. Read atomically; never written by nlsim.
+    pub cancel: *const i32,
+}
+
+/// The caller's cancel flag, read atomically from the calibration's worker threads.
+struct CancelFlag(*const std::sync::atomic::AtomicI32);
+
+// SAFETY: the flag is only read, atomically; the caller keeps it alive for the call
+// (`NlsimCalibrationSettings::cancel`).
+#[allow(unsafe_code)]
+unsafe impl Sync for CancelFlag {}
+
+impl CancelFlag {
+    #[allow(unsafe_code)]
+    fn raised(&self) -> bool {
+        // SAFETY: non-null by the check; the contract of `cancel` keeps it valid and
+        // aligned for the call; an `AtomicI32` has the layout of an `int32_t`.
+        !self.0.is_null() && unsafe { &*self.0 }.load(std::sync::atomic::Ordering::Relaxed) != 0
+    }
 }
 
 /// An electrodynamic shaker on a stinger (SI units), as the virtual test couples it
@@ -132,6 +155,7 @@ pub extern "C" fn nlsim_calibration_settings_default() -> NlsimCalibrationSettin
         max_iterations: d.lm.max_iterations,
         model_shaker: 0,
         shaker: Shaker::default().into(),
+        cancel: std::ptr::null(),
     }
 }
 
@@ -360,11 +384,15 @@ pub unsafe extern "C" fn nlsim_testdata_add_sweep_sigma(
 /// deviations (Cramér–Rao, parameter units) into `estimate` and `std` (`n_params` each).
 /// The system's own parameter values are the first candidate and are not changed; set the
 /// estimate with [`crate::nlsim_set_param`] to use it. `settings` null means the defaults.
-/// A best run that did not converge returns `NLSIM_CODE_STOPPED_SHORT` with its estimate.
+/// A best run that did not converge returns `NLSIM_CODE_STOPPED_SHORT` with its estimate; so
+/// does a calibration stopped by `settings.cancel`, with the best values so far (the
+/// system's own where no candidate was evaluated), NaN standard deviations, `info.cost` the
+/// best cost so far, and [`crate::nlsim_last_error`] saying where it stopped.
 ///
 /// # Safety
 /// `names` holds `n_params` strings; `lower`, `upper`, `estimate` and `std` hold `n_params`
-/// doubles (the last two writable); `settings` is null or readable; `info` null or writable.
+/// doubles (the last two writable); `settings` is null or readable, its `cancel` null or an
+/// aligned `int32_t` alive for the call; `info` null or writable.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn nlsim_calibrate(
     hb: NlsimHb,
@@ -443,7 +471,44 @@ pub unsafe extern "C" fn nlsim_calibrate(
             ..CalibrationConfig::default()
         };
         cfg.lm.max_iterations = settings.max_iterations;
-        let cal = calibrate(&objective, &cfg)?;
+        let cancel = CancelFlag(settings.cancel.cast());
+        let cal = match calibrate_until(&objective, &cfg, &[], &|_| {}, &|| cancel.raised())? {
+            Outcome::Finished(c) => *c,
+            Outcome::Interrupted(kept) => {
+                let best = match kept.best() {
+                    Some((v, c)) => (v.to_vec(), c),
+                    None => (
+                        objective
+                            .specs()
+                            .iter()
+                            .map(|s| objective.param_value(&s.param))
+                            .collect::<Result<Vec<_>, _>>()?,
+                        f64::NAN,
+                    ),
+                };
+                estimate.copy_from_slice(&best.0);
+                std.fill(f64::NAN);
+                if let Some(info) = info {
+                    *info = NlsimCalibrationInfo {
+                        status: NlsimStatus::IterationLimit as i32,
+                        cost: best.1,
+                        reduced_chi2: f64::NAN,
+                        collinearity: f64::NAN,
+                        chi2_scale: f64::NAN,
+                        ..NlsimCalibrationInfo::default()
+                    };
+                }
+                return Ok(Done::Short(format!(
+                    "cancelled in the {} phase: {} of {} candidates evaluated, {} \
+                     optimisations finished; `estimate` holds the best values so far (not a \
+                     calibration: `std` is NaN)",
+                    kept.phase.as_str(),
+                    kept.evaluated(),
+                    kept.points.len(),
+                    kept.runs.len()
+                )));
+            }
+        };
         estimate.copy_from_slice(&cal.estimate);
         std.copy_from_slice(&cal.cramer_rao.std);
         if let Some(info) = info {

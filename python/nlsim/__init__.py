@@ -22,7 +22,9 @@ Every function runs the same code as the ``nlsim`` command line with the same de
 numbers equal the command's to the last bit. Results are numpy arrays, time or frequency
 first; frequencies are in Hz. Computations release the GIL, run on ``threads`` threads
 (default: one per core; the numbers do not depend on it) and stop at Ctrl-C with
-``KeyboardInterrupt``. Errors are :class:`Error` subclasses with the command line's
+``KeyboardInterrupt``; a :func:`calibrate` interrupted so carries what it completed as
+``args[1]`` (a :class:`PartialCalibration`), and ``calibrate(..., resume=partial)`` goes on
+from it to the uninterrupted call's estimates. Errors are :class:`Error` subclasses with the command line's
 one-line messages. See ``docs/python.md`` for a worked example.
 """
 
@@ -47,6 +49,7 @@ from ._native import (
     Model,
     Modes,
     Nnm,
+    PartialCalibration,
     Plan,
     Reduced,
     TestData,
@@ -78,6 +81,7 @@ __all__ = [
     "Model",
     "Modes",
     "Nnm",
+    "PartialCalibration",
     "Plan",
     "Reduced",
     "TestData",

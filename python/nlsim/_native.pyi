@@ -237,7 +237,31 @@ def calibrate(
     gains: Optional[Mapping[str, float]] = None,
     shaker: Union[None, bool, Mapping[str, float]] = None,
     threads: Optional[int] = None,
+    resume: Optional[PartialCalibration] = None,
 ) -> Calibration: ...
+
+class PartialCalibration:
+    """What a calibration stopped by Ctrl-C had completed (KeyboardInterrupt's args[1])."""
+
+    @property
+    def params(self) -> List[str]: ...
+    @property
+    def candidates(self) -> npt.NDArray[np.float64]:
+        """(candidate, param)"""
+    @property
+    def candidate_cost(self) -> npt.NDArray[np.float64]:
+        """(candidate,); NaN where not evaluated"""
+    @property
+    def evaluated(self) -> int: ...
+    @property
+    def phase(self) -> str: ...
+    @property
+    def optimisations(self) -> int: ...
+    @property
+    def best(self) -> Optional[npt.NDArray[np.float64]]:
+        """(param,)"""
+    @property
+    def best_cost(self) -> Optional[float]: ...
 def modes(
     model: Model,
     count: Optional[int] = None,

@@ -5,7 +5,7 @@
 
 use crate::data::TestData;
 use crate::model::Model;
-use crate::runs::{Stop, run};
+use crate::runs::{Ended, Stop, run_keeping};
 use crate::{input, py_err};
 use nlsim::calib::{
     BranchChoice, CalibrationConfig, FeReduction, FeReductionStats, Form, FrfObjective,
@@ -441,7 +441,7 @@ pub(crate) fn param_specs(model: &Model, params: &Bound<'_, PyDict>) -> PyResult
 /// `suspension_damping`, `resistance`, `inductance`, `force_constant`, `stinger_stiffness`;
 /// the others default), as a calibration file's `[shaker]`.
 #[pyfunction]
-#[pyo3(signature = (model, data, params, compare=vec![1], form="complex", branch="nearest", harmonics=3, modes=20, uff_noise=0.01, lhs=64, seed=1, starts=3, folds=10, fe_reduction="parametric", fe_tolerance=None, gains=None, shaker=None, threads=None))]
+#[pyo3(signature = (model, data, params, compare=vec![1], form="complex", branch="nearest", harmonics=3, modes=20, uff_noise=0.01, lhs=64, seed=1, starts=3, folds=10, fe_reduction="parametric", fe_tolerance=None, gains=None, shaker=None, threads=None, resume=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn calibrate(
     py: Python<'_>,
@@ -463,8 +463,10 @@ pub fn calibrate(
     gains: Option<&Bound<'_, PyDict>>,
     shaker: Option<&Bound<'_, PyAny>>,
     threads: Option<usize>,
+    resume: Option<&PartialCalibration>,
 ) -> PyResult<Calibration> {
     let fe = self::fe_reduction(fe_reduction, fe_tolerance)?;
+    let resumed = resume.map(|r| (*r.kept).clone());
     let fixed = fixed_gains(gains)?;
     let shaker = shaker_of(shaker)?;
     let data = Source::of(data)?;
@@ -509,7 +511,7 @@ pub fn calibrate(
     let set = crate::harmonic_set(harmonics, crate::MAX_CALIBRATION_HARMONICS)?;
     let config = search_config(lhs, seed, starts, folds)?;
     let m = model.inner.clone();
-    let result = run(py, threads, move |stop: &Stop| -> nlsim::Result<_> {
+    let job = move |stop: &Stop| -> nlsim::Result<_> {
         let data = data.read(&m, uff_noise)?;
         let reduction = nlsim::reduction::ReductionConfig::lowest(modes.min(m.n_dofs()));
         let objective = FrfObjective::from_model_with(
@@ -531,12 +533,159 @@ pub fn calibrate(
             objective.set_gain(p, *v)?;
         }
         objective.set_shaker(shaker)?;
-        let c = nlsim::calib::calibrate_with_progress(&objective, &config, &|_| stop.check())?;
-        Ok((c, objective.fe_stats()))
-    })?
-    .map_err(py_err)?;
+        let known = match &resumed {
+            None => Vec::new(),
+            Some(r) => {
+                let points = nlsim::calib::candidate_points(&objective, &config)?;
+                let same = points.len() == r.points.len()
+                    && points.iter().zip(&r.points).all(|(a, b)| {
+                        a.len() == b.len()
+                            && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+                    });
+                if !same {
+                    return Err(nlsim::Error::Usage(
+                        "resume: its candidates are not this calibration's (params, bounds, \
+                         lhs, seed and the model's values must be those of the interrupted \
+                         call)"
+                            .into(),
+                    ));
+                }
+                r.costs.clone()
+            }
+        };
+        let outcome = nlsim::calib::calibrate_until(&objective, &config, &known, &|_| {}, &|| {
+            stop.requested()
+        })?;
+        Ok((outcome, objective.fe_stats()))
+    };
+    let result = match run_keeping(py, threads, job)? {
+        Ended::Done(r) => r.map_err(py_err)?,
+        Ended::Interrupted(interrupt, kept) => {
+            let Some(Ok((outcome, _))) = kept else {
+                return Err(interrupt);
+            };
+            let kept = match outcome {
+                nlsim::calib::Outcome::Interrupted(k) => *k,
+                // Finished as the interrupt came: kept whole, the caller asked to stop.
+                nlsim::calib::Outcome::Finished(c) => {
+                    let c = *c;
+                    let (points, costs) = c
+                        .candidates
+                        .into_iter()
+                        .map(|c| (c.values, Some(c.cost)))
+                        .unzip();
+                    nlsim::calib::Interrupted {
+                        params: c.params,
+                        points,
+                        costs,
+                        runs: c.runs,
+                        phase: nlsim::calib::Phase::CrossValidation,
+                    }
+                }
+            };
+            let partial = PartialCalibration {
+                kept: Arc::new(kept),
+            };
+            let line = partial.__repr__();
+            return Err(pyo3::exceptions::PyKeyboardInterrupt::new_err((
+                line,
+                Py::new(py, partial)?,
+            )));
+        }
+    };
+    let result = match result {
+        (nlsim::calib::Outcome::Finished(c), fe) => (*c, fe),
+        (nlsim::calib::Outcome::Interrupted(_), _) => {
+            return Err(crate::ComputationError::new_err(
+                "the calibration stopped without an interrupt (an internal error; please \
+                 report it)",
+            ));
+        }
+    };
     Ok(Calibration {
         c: result.0,
         fe: result.1,
     })
+}
+
+/// What a calibration interrupted by Ctrl-C had completed: carried by the
+/// `KeyboardInterrupt` it raises (`err.args[1]`) and given back to `calibrate(...,
+/// resume=partial)` with the same arguments, which goes on to the estimates of an
+/// uninterrupted call, bit for bit.
+#[pyclass(module = "nlsim._native", name = "PartialCalibration", frozen)]
+pub struct PartialCalibration {
+    kept: Arc<nlsim::calib::Interrupted>,
+}
+
+#[pymethods]
+impl PartialCalibration {
+    /// The calibrated parameters' names, in the order of every array.
+    #[getter]
+    fn params(&self) -> Vec<String> {
+        self.kept.params.iter().map(ToString::to_string).collect()
+    }
+
+    /// Every candidate point, shape `(candidate, param)`.
+    #[getter]
+    fn candidates<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let p = &self.kept.points;
+        let n = self.kept.params.len();
+        Array2::from_shape_fn((p.len(), n), |(i, j)| p[i][j]).into_pyarray(py)
+    }
+
+    /// Each candidate's cost `½ Σ r²`, shape `(candidate,)`; NaN where not evaluated.
+    #[getter]
+    fn candidate_cost<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        vec1(
+            py,
+            self.kept
+                .costs
+                .iter()
+                .map(|c| c.unwrap_or(f64::NAN))
+                .collect(),
+        )
+    }
+
+    /// Candidates evaluated.
+    #[getter]
+    fn evaluated(&self) -> usize {
+        self.kept.evaluated()
+    }
+
+    /// `"candidates"`, `"optimisation"` or `"cross validation"`: where it stopped.
+    #[getter]
+    fn phase(&self) -> &'static str {
+        self.kept.phase.as_str()
+    }
+
+    /// Levenberg–Marquardt runs that finished.
+    #[getter]
+    fn optimisations(&self) -> usize {
+        self.kept.runs.len()
+    }
+
+    /// The best values so far (the best finished optimisation, else the best evaluated
+    /// candidate), shape `(param,)`; `None` when nothing finite was evaluated. Not a
+    /// calibration result: no statistics come with it.
+    #[getter]
+    fn best<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
+        self.kept.best().map(|(v, _)| vec1(py, v.to_vec()))
+    }
+
+    /// The cost of [`best`](Self::best); `None` with it.
+    #[getter]
+    fn best_cost(&self) -> Option<f64> {
+        self.kept.best().map(|(_, c)| c)
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "PartialCalibration(stopped in the {} phase, {} of {} candidates evaluated, {} \
+             optimisations finished; resume with calibrate(..., resume=this))",
+            self.kept.phase.as_str(),
+            self.kept.evaluated(),
+            self.kept.points.len(),
+            self.kept.runs.len()
+        )
+    }
 }

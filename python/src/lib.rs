@@ -122,6 +122,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(runs::frf, m)?)?;
     m.add_function(wrap_pyfunction!(runs::builtin_models, m)?)?;
     m.add_class::<calibration::Calibration>()?;
+    m.add_class::<calibration::PartialCalibration>()?;
     m.add_function(wrap_pyfunction!(calibration::calibrate, m)?)?;
     m.add_class::<data::TestData>()?;
     m.add_class::<modal::ModalCalibration>()?;

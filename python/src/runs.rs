@@ -74,6 +74,12 @@ struct Interrupted;
 pub(crate) struct Stop(Arc<AtomicBool>);
 
 impl Stop {
+    /// Whether the run was asked to stop (for runs that stop at their own safe points and
+    /// return what they completed).
+    pub(crate) fn requested(&self) -> bool {
+        self.0.load(AtomicOrdering::Relaxed)
+    }
+
     /// Unwinds out of the run when it was asked to stop.
     pub(crate) fn check(&self) {
         if self.0.load(AtomicOrdering::Relaxed) {
@@ -91,6 +97,28 @@ pub(crate) fn run<T: Send + 'static>(
     threads: Option<usize>,
     job: impl FnOnce(&Stop) -> T + Send + 'static,
 ) -> PyResult<T> {
+    match run_keeping(py, threads, job)? {
+        Ended::Done(t) => Ok(t),
+        Ended::Interrupted(e, _) => Err(e),
+    }
+}
+
+/// How [`run_keeping`] ended.
+pub(crate) enum Ended<T> {
+    /// The job returned without an interrupt.
+    Done(T),
+    /// Ctrl-C: the `KeyboardInterrupt` to raise, and what the job returned after it was
+    /// told to stop (`None` when it unwound or a second Ctrl-C ended the wait).
+    Interrupted(PyErr, Option<T>),
+}
+
+/// [`run`] that keeps what the job returns after Ctrl-C: a job that stops at its own safe
+/// points ([`Stop::requested`]) hands back what it completed.
+pub(crate) fn run_keeping<T: Send + 'static>(
+    py: Python<'_>,
+    threads: Option<usize>,
+    job: impl FnOnce(&Stop) -> T + Send + 'static,
+) -> PyResult<Ended<T>> {
     if let Some(n) = threads
         && !(1..=MAX_THREADS).contains(&n)
     {
@@ -129,7 +157,7 @@ pub(crate) fn run<T: Send + 'static>(
     };
     loop {
         match wait() {
-            Ok(Ok(r)) => return Ok(r),
+            Ok(Ok(r)) => return Ok(Ended::Done(r)),
             Ok(Err(payload)) => {
                 let what = payload
                     .downcast_ref::<&str>()
@@ -143,12 +171,13 @@ pub(crate) fn run<T: Send + 'static>(
             Err(RecvTimeoutError::Timeout) => {
                 if let Err(interrupt) = py.check_signals() {
                     stop.0.store(true, AtomicOrdering::Relaxed);
-                    while matches!(wait(), Err(RecvTimeoutError::Timeout)) {
-                        if py.check_signals().is_err() {
-                            break;
+                    loop {
+                        match wait() {
+                            Ok(Ok(r)) => return Ok(Ended::Interrupted(interrupt, Some(r))),
+                            Err(RecvTimeoutError::Timeout) if py.check_signals().is_ok() => {}
+                            _ => return Ok(Ended::Interrupted(interrupt, None)),
                         }
                     }
-                    return Err(interrupt);
                 }
             }
             Err(RecvTimeoutError::Disconnected) => {

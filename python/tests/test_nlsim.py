@@ -285,6 +285,41 @@ def test_ctrl_c_interrupts_a_long_run() -> None:
     assert nlsim.modes(model, count=1).frequency_hz[0] > 0
 
 
+def test_ctrl_c_keeps_a_calibration_and_resume_matches_bit_for_bit(tmp_path: Path) -> None:
+    """Ctrl-C during a calibration raises KeyboardInterrupt carrying what was complete (a
+    PartialCalibration: the candidates evaluated so far); calibrate(..., resume=it) goes on to
+    the estimates of an uninterrupted call, bit for bit."""
+    (tmp_path / "t.toml").write_text(TEST_FILE)
+    cli("test", "ecl_beam", "t.toml", "--out", "d.csv", cwd=tmp_path)
+    model = nlsim.load("ecl_beam")
+    params = {"tip_spring.k3": (1e9, 2e10), "mode1.zeta": (0.001, 0.05)}
+    args = dict(harmonics=7, modes=8, lhs=400, folds=4, threads=1)
+    whole = nlsim.calibrate(model, tmp_path / "d.csv", params, **args)
+    timer = threading.Timer(0.3, _thread.interrupt_main)
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt) as caught:
+            nlsim.calibrate(model, tmp_path / "d.csv", params, **args)
+    finally:
+        timer.cancel()
+    partial = caught.value.args[1]
+    assert isinstance(partial, nlsim.PartialCalibration)
+    assert partial.params == whole.params
+    assert partial.candidates.shape == (401, 2)
+    evaluated = ~np.isnan(partial.candidate_cost)
+    assert partial.evaluated == evaluated.sum()
+    assert partial.phase in ("candidates", "optimisation", "cross validation")
+    # What it kept are the uninterrupted call's candidates and costs.
+    np.testing.assert_array_equal(partial.candidates, whole.candidates)
+    np.testing.assert_array_equal(partial.candidate_cost[evaluated], whole.candidate_cost[evaluated])
+    resumed = nlsim.calibrate(model, tmp_path / "d.csv", params, resume=partial, **args)
+    np.testing.assert_array_equal(resumed.estimate, whole.estimate)
+    np.testing.assert_array_equal(resumed.cramer_rao_std, whole.cramer_rao_std)
+    np.testing.assert_array_equal(resumed.kfold_mean, whole.kfold_mean)
+    with pytest.raises(nlsim.InputError, match="resume: its candidates are not this calibration's"):
+        nlsim.calibrate(model, tmp_path / "d.csv", params, resume=partial, **{**args, "seed": 2})
+
+
 def test_reduced_model_is_reused_by_the_runs() -> None:
     model = nlsim.load("ecl_beam")
     red = nlsim.reduce(model, modes=20)

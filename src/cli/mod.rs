@@ -8,6 +8,7 @@
 mod analysis;
 mod batch;
 mod calibration;
+pub mod interrupt;
 mod lanczos;
 
 pub use analysis::*;

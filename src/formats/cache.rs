@@ -205,6 +205,7 @@ fn write_cache(path: &Path, (len, hash): (u64, u64), m: &SparseSym) -> std::io::
     std::fs::create_dir_all(dir)?;
     let a = m.as_faer();
     let tmp = crate::formats::files::temp_path(path);
+    let _registered = crate::formats::interrupt::Temporary::new(&tmp);
     let write = || -> std::io::Result<()> {
         let mut w = std::io::BufWriter::new(std::fs::File::create(&tmp)?);
         w.write_all(MAGIC)?;

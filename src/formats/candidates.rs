@@ -1,5 +1,6 @@
-//! The candidates file of a merged `calibrate-candidates` batch, as
-//! `nlsim calibrate --candidates` reads it (layout in `docs/batch.md`).
+//! The candidates file `nlsim calibrate --candidates` reads: a merged
+//! `calibrate-candidates` batch (layout in `docs/batch.md`), or the candidates an
+//! interrupted calibration kept ([`write_interrupted`]; docs/file-formats.md).
 
 use crate::error::{Error, Result};
 use crate::formats::files::{h5err, job_group_name, u64_attr};
@@ -9,9 +10,12 @@ use std::path::Path;
 /// Most values a merged candidates file may declare (parameters × candidates): 2²⁶.
 const CANDIDATE_BUDGET: usize = 1 << 26;
 
-/// The evaluated candidates of a merged `calibrate-candidates` batch (for
-/// `nlsim calibrate --candidates`): values from `parameters`, costs from `cost`. Fails on
-/// another kind of file, an incomplete merge or a failed candidate.
+/// The evaluated candidates of a merged `calibrate-candidates` batch or of an interrupted
+/// calibration (for `nlsim calibrate --candidates`): values from `parameters`, costs from
+/// `cost`. In a file an interrupted calibration wrote (attribute `interrupted = 1`) a NaN
+/// cost marks a candidate not evaluated yet (the calibration evaluates it); in a merged
+/// batch it marks a failed job, refused. Fails on another kind of file or an incomplete
+/// merge.
 pub fn read_candidates(path: &Path) -> Result<Vec<nlsim_calib::Candidate>> {
     let err = h5err(path);
     let bad = |m: String| Error::Usage(format!("{}: {m}", path.display()));
@@ -42,12 +46,16 @@ pub fn read_candidates(path: &Path) -> Result<Vec<nlsim_calib::Candidate>> {
             cost.shape()
         )));
     }
+    let interrupted = u64_attr(&file, "interrupted") == Some(1);
     let values = table.read_raw::<f64>().map_err(&err)?;
     let costs = cost.read_raw::<f64>().map_err(&err)?;
     let mut out = Vec::with_capacity(rows);
     for (i, c) in costs.iter().enumerate() {
         let v = values[i * cols..(i + 1) * cols].to_vec();
-        if c.is_nan() || v.iter().any(|x| x.is_nan()) {
+        if v.iter().any(|x| x.is_nan()) {
+            return Err(bad(format!("candidate {i}: a parameter value is NaN")));
+        }
+        if c.is_nan() && !interrupted {
             return Err(bad(format!(
                 "candidate {i} failed (see jobs/{}/error); rerun its shard",
                 job_group_name(i)
@@ -59,4 +67,68 @@ pub fn read_candidates(path: &Path) -> Result<Vec<nlsim_calib::Candidate>> {
         });
     }
     Ok(out)
+}
+
+/// Writes the candidates an interrupted calibration kept to `path` (HDF5, atomically): the
+/// layout [`read_candidates`] reads — `parameters` (candidates × parameters), `cost` (NaN
+/// where not evaluated), attributes `command = "calibrate-candidates"`, `complete = 1`,
+/// `interrupted = 1`, `phase`, `evaluated` — plus `parameter_names`, and `best` with its
+/// `best_cost` when a finite cost was reached. `--candidates` resumes from it.
+pub fn write_interrupted(path: &Path, kept: &nlsim_calib::Interrupted) -> Result<()> {
+    use hdf5::types::VarLenUnicode;
+    let err = h5err(path);
+    let rows = kept.points.len();
+    let cols = kept.params.len();
+    let text = |s: &str| -> VarLenUnicode { s.parse().unwrap_or_default() };
+    crate::formats::files::replace_atomically(path, |tmp| {
+        let file = hdf5::File::create(tmp).map_err(&err)?;
+        let flat: Vec<f64> = kept.points.iter().flatten().copied().collect();
+        file.new_dataset::<f64>()
+            .shape((rows, cols))
+            .create("parameters")
+            .and_then(|d| d.write_raw(&flat))
+            .map_err(&err)?;
+        let costs: Vec<f64> = kept.costs.iter().map(|c| c.unwrap_or(f64::NAN)).collect();
+        file.new_dataset::<f64>()
+            .shape(rows)
+            .create("cost")
+            .and_then(|d| d.write_raw(&costs))
+            .map_err(&err)?;
+        let names: Vec<VarLenUnicode> = kept.params.iter().map(|p| text(&p.to_string())).collect();
+        file.new_attr::<VarLenUnicode>()
+            .shape(names.len())
+            .create("parameter_names")
+            .and_then(|a| a.write(&names))
+            .map_err(&err)?;
+        file.new_attr::<VarLenUnicode>()
+            .create("command")
+            .and_then(|a| a.write_scalar(&text("calibrate-candidates")))
+            .map_err(&err)?;
+        file.new_attr::<VarLenUnicode>()
+            .create("phase")
+            .and_then(|a| a.write_scalar(&text(kept.phase.as_str())))
+            .map_err(&err)?;
+        for (name, v) in [
+            ("complete", 1u64),
+            ("interrupted", 1),
+            ("evaluated", kept.evaluated() as u64),
+        ] {
+            file.new_attr::<u64>()
+                .create(name)
+                .and_then(|a| a.write_scalar(&v))
+                .map_err(&err)?;
+        }
+        if let Some((best, cost)) = kept.best() {
+            file.new_dataset::<f64>()
+                .shape(best.len())
+                .create("best")
+                .and_then(|d| d.write_raw(best))
+                .map_err(&err)?;
+            file.new_attr::<f64>()
+                .create("best_cost")
+                .and_then(|a| a.write_scalar(&cost))
+                .map_err(&err)?;
+        }
+        file.flush().map_err(&err)
+    })
 }

@@ -91,6 +91,7 @@ pub fn replace_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) 
     crate::formats::guard::before_write(path)?;
     remove_temporaries(path, true);
     let tmp = temp_path(path);
+    let _registered = crate::formats::interrupt::Temporary::new(&tmp);
     let io = |source| Error::Io {
         path: path.to_path_buf(),
         source,
@@ -256,6 +257,7 @@ pub fn writable_folder(out: &Path) -> Result<()> {
         )));
     }
     let probe = temp_path(out);
+    let _registered = crate::formats::interrupt::Temporary::new(&probe);
     match std::fs::OpenOptions::new()
         .write(true)
         .create_new(true)

@@ -308,6 +308,7 @@ pub fn before_write(path: &Path) -> Result<()> {
 pub struct OutputLock {
     path: PathBuf,
     file: Option<std::fs::File>,
+    _registered: crate::formats::interrupt::Temporary,
 }
 
 impl OutputLock {
@@ -380,6 +381,7 @@ impl OutputLock {
                 let _ = write!(f, "{}", std::process::id());
             }
             return Ok(OutputLock {
+                _registered: crate::formats::interrupt::Temporary::new(&path),
                 path,
                 file: Some(file),
             });
@@ -416,6 +418,7 @@ pub struct StagedFolder {
     target: PathBuf,
     staging: PathBuf,
     committed: bool,
+    _registered: crate::formats::interrupt::Temporary,
     _lock: Option<OutputLock>,
 }
 
@@ -461,6 +464,7 @@ impl StagedFolder {
         })?;
         Ok(StagedFolder {
             target: target.to_path_buf(),
+            _registered: crate::formats::interrupt::Temporary::new(&staging),
             staging,
             committed: false,
             _lock: lock,

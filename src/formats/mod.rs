@@ -28,6 +28,7 @@
 //! | [`candidates`] | the candidates file of a merged calibration batch |
 //! | [`files`] | atomic writes, bounded reads, provenance attributes, one-line messages |
 //! | [`guard`] | no output over an input: the run's files recorded, output folders written whole under a lock |
+//! | [`interrupt`] | stop signals as commands see them: safe points, and the temporaries removed when a run stops at once |
 
 pub mod abaqus;
 pub mod cache;
@@ -42,6 +43,7 @@ pub mod frf_file;
 pub mod guard;
 pub mod harwell_boeing;
 pub mod history_file;
+pub mod interrupt;
 pub mod matrices;
 pub mod modal_data;
 pub mod model_file;

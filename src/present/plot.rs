@@ -191,6 +191,7 @@ pub fn write(path: &Path, fig: &impl Figure) -> Result<()> {
     crate::formats::guard::before_write(path)?;
     ensure_font()?;
     let tmp = crate::formats::files::temp_path(path);
+    let _registered = crate::formats::interrupt::Temporary::new(&tmp);
     let (w, h) = fig.size();
     let render = || -> DrawResult {
         if path.extension().is_some_and(|e| e == "svg") {

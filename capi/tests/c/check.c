@@ -181,6 +181,19 @@ int main(void) {
   OK(nlsim_calibrate(hb, data, cal_names, 1, lo, hi_, &cs, est, sd, &ci));
   printf("calibration %.17g %.17g %d\n", est[0], sd[0], ci.status);
 
+  /* The same calibration with its cancel flag raised before it starts (as a signal handler
+   * would raise it): stopped at its first safe point, the system's own value in est, NaN in
+   * sd. */
+  int32_t cancel = 1;
+  cs.cancel = &cancel;
+  bad("cancelled", nlsim_calibrate(hb, data, cal_names, 1, lo, hi_, &cs, est, sd, &ci),
+      NLSIM_CODE_STOPPED_SHORT);
+  if (!(est[0] == 3e9 && isnan(sd[0]))) {
+    fprintf(stderr, "cancelled calibration: est %g sd %g\n", est[0], sd[0]);
+    failures++;
+  }
+  cs.cancel = NULL;
+
   /* The same data recorded as the amplifier's voltage (0.4 V for 1 N: an input gain of
    * 2.5 N/V, calibrated beside k3), each step weighed by its own standard deviations (1 % of
    * the response per part). */

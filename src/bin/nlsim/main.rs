@@ -1,7 +1,8 @@
 //! The `nlsim` binary: the command line parsed by `nlsim::cli` (every option and its help,
 //! and each subcommand's request), the thread pool set, the command dispatched, the outcome
 //! mapped to an exit code. Nothing is computed, formatted or written here. Exit codes: 0
-//! success, 1 a run failed (bad model, numerical failure), 2 bad usage.
+//! success, 1 a run failed (bad model, numerical failure), 2 bad usage, 128 + the signal
+//! (130 for Ctrl-C, 143 for SIGTERM) when a stop signal ended the run.
 
 use clap::Parser as _;
 use nlsim::cli::Cli;
@@ -38,8 +39,16 @@ fn main() -> ExitCode {
     // numbers do not depend on the thread count.
     faer::set_global_parallelism(faer::Par::Seq);
     let console = Console::terminal(cli.quiet, cli.verbose);
-    match nlsim::cli::dispatch(&cli, &console) {
+    nlsim::cli::interrupt::install();
+    let outcome = nlsim::cli::dispatch(&cli, &console);
+    nlsim::cli::interrupt::settle();
+    match outcome {
         Ok(()) => ExitCode::SUCCESS,
+        Err(nlsim::Error::Interrupted(kept)) => {
+            eprintln!("interrupted: {}", nlsim::formats::files::one_line(&kept));
+            let signal = nlsim::formats::interrupt::last_signal().clamp(1, 64);
+            ExitCode::from(128 + signal as u8)
+        }
         Err(e @ nlsim::Error::Usage(_)) => {
             eprintln!("error: {}", nlsim::formats::files::one_line(&e.to_string()));
             ExitCode::from(2)

@@ -116,6 +116,101 @@ pub fn execute(
         let run = run_modal_calibration(req, &progress)?;
         return write_modal_outputs(req, &run, console);
     }
-    let run = run_calibration(req, candidates, &progress)?;
-    write_outputs(req, &run, console)
+    // A stop signal is honoured at the calibration's safe points: the candidates evaluated
+    // so far are kept in a file `--candidates` resumes from.
+    let safe = crate::formats::interrupt::SafePoints::begin();
+    let stop = crate::formats::interrupt::requested;
+    let kept = match run_calibration_until(req, candidates, &progress, &stop)? {
+        RunOutcome::Finished(run) if !stop() => {
+            // From here a stop signal ends the run at once; the report folder is staged,
+            // so the older one stays whole.
+            drop(safe);
+            return write_outputs(req, &run, console);
+        }
+        RunOutcome::Finished(run) => {
+            let c = run.calibration;
+            let (points, costs) = c
+                .candidates
+                .into_iter()
+                .map(|c| (c.values, Some(c.cost)))
+                .unzip();
+            nlsim_calib::Interrupted {
+                params: c.params,
+                points,
+                costs,
+                runs: c.runs,
+                phase: nlsim_calib::Phase::CrossValidation,
+            }
+        }
+        RunOutcome::Interrupted(kept) => *kept,
+    };
+    let path = keep_interrupted(req, &kept)?;
+    safe.hold_to_exit();
+    Err(crate::Error::Interrupted(interrupted_line(&kept, &path)))
+}
+
+/// Writes the candidates an interrupted calibration kept beside its first output (the
+/// report folder's name, else the estimates file's, else `calibration`, with
+/// `.interrupted.h5`; `-2`, `-3`, … when that name is an input of the run, e.g. the file it
+/// resumed from) and returns the path.
+fn keep_interrupted(
+    req: &CalibrationRequest,
+    kept: &nlsim_calib::Interrupted,
+) -> crate::Result<std::path::PathBuf> {
+    use std::path::{Path, PathBuf};
+    let base: PathBuf = match (req.report.as_deref(), req.out.as_deref()) {
+        (Some(r), _) => r.to_path_buf(),
+        (None, Some(o)) => o.with_extension(""),
+        (None, None) => PathBuf::from("calibration"),
+    };
+    let name = |k: usize| {
+        let mut n = base
+            .file_name()
+            .unwrap_or(Path::new("calibration").as_os_str())
+            .to_os_string();
+        if k > 1 {
+            n.push(format!("-{k}"));
+        }
+        n.push(".interrupted.h5");
+        base.with_file_name(n)
+    };
+    let mut last = None;
+    for k in 1..=100 {
+        let p = name(k);
+        match crate::formats::guard::before_write(&p) {
+            Ok(()) => {
+                crate::formats::candidates::write_interrupted(&p, kept)?;
+                return Ok(p);
+            }
+            Err(e) => last = Some(e),
+        }
+    }
+    Err(last.unwrap_or_else(|| crate::Error::Usage("no name for the candidates file".into())))
+}
+
+/// The one line an interrupted calibration prints: what was kept and how to go on.
+fn interrupted_line(kept: &nlsim_calib::Interrupted, path: &std::path::Path) -> String {
+    let best = match kept.best() {
+        Some((values, cost)) => format!(
+            "; best so far (cost {cost:.6e}): {}",
+            kept.params
+                .iter()
+                .zip(values)
+                .map(|(p, v)| format!("{p} = {v:.6e}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        None => String::new(),
+    };
+    format!(
+        "stopped in the {} phase with {} of {} candidates evaluated and {} optimisations \
+         finished; kept in {} (not a calibration result){best}; go on with the same \
+         command and --candidates {}",
+        kept.phase.as_str(),
+        kept.evaluated(),
+        kept.points.len(),
+        kept.runs.len(),
+        path.display(),
+        path.display()
+    )
 }

@@ -35,7 +35,7 @@ impl CalibrationRun {
                 best,
                 c.candidates.len(),
                 &self.candidates_from.as_ref().map_or(String::new(), |p| {
-                    format!(" (evaluated in {})", p.display())
+                    format!(" (with the costs {} holds)", p.display())
                 }),
                 self.seconds,
             ),

@@ -126,13 +126,35 @@ pub fn run_calibration(
     candidates: Option<(PathBuf, Vec<Candidate>)>,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<CalibrationRun> {
+    match run_calibration_until(req, candidates, progress, &|| false)? {
+        RunOutcome::Finished(run) => Ok(*run),
+        RunOutcome::Interrupted(_) => unreachable!("nothing stops a run without a stop"),
+    }
+}
+
+/// How [`run_calibration_until`] ended.
+pub enum RunOutcome {
+    /// The calibration ran to its end.
+    Finished(Box<CalibrationRun>),
+    /// Stopped at a safe point: what was complete.
+    Interrupted(Box<nlsim_calib::Interrupted>),
+}
+
+/// [`run_calibration`] that stops at the next safe point once `stop()` holds
+/// ([`nlsim_calib::calibrate_until`]). `candidates` may come from an interrupted run (NaN
+/// costs where not evaluated): those are evaluated here, the others reused, and the
+/// estimates are those of one uninterrupted run, bit for bit.
+pub fn run_calibration_until(
+    req: &CalibrationRequest,
+    candidates: Option<(PathBuf, Vec<Candidate>)>,
+    progress: &(dyn Fn(Progress) + Sync),
+    stop: nlsim_calib::Stop<'_>,
+) -> Result<RunOutcome> {
     let prepared = prepare(req)?;
     let t = Instant::now();
-    let (calibration, candidates_from) = match candidates {
-        None => (
-            nlsim_calib::calibrate_with_progress(&prepared.objective, &req.config, progress)?,
-            None,
-        ),
+    let mut known = Vec::new();
+    let candidates_from = match candidates {
+        None => None,
         Some((path, c)) => {
             let expected = nlsim_calib::candidate_points(&prepared.objective, &req.config)?;
             let same = expected.len() == c.len()
@@ -145,29 +167,33 @@ pub fn run_calibration(
             if !same {
                 return Err(Error::Usage(format!(
                     "{}: its {} candidates are not the {} of this calibration (parameters, \
-                     bounds, lhs, seed and the model's values must match the batch's)",
+                     bounds, lhs, seed and the model's values must match the run that wrote \
+                     it)",
                     path.display(),
                     c.len(),
                     expected.len()
                 )));
             }
-            (
-                nlsim_calib::calibrate_from_candidates(
-                    &prepared.objective,
-                    c,
-                    &req.config,
-                    progress,
-                )?,
-                Some(path),
-            )
+            known = c
+                .iter()
+                .map(|c| Some(c.cost).filter(|c| !c.is_nan()))
+                .collect();
+            Some(path)
         }
     };
-    Ok(CalibrationRun {
-        request: req.clone(),
-        prepared,
-        calibration,
-        seconds: t.elapsed().as_secs_f64(),
-        candidates_from,
+    let outcome =
+        nlsim_calib::calibrate_until(&prepared.objective, &req.config, &known, progress, stop)?;
+    Ok(match outcome {
+        nlsim_calib::Outcome::Finished(calibration) => {
+            RunOutcome::Finished(Box::new(CalibrationRun {
+                request: req.clone(),
+                prepared,
+                calibration: *calibration,
+                seconds: t.elapsed().as_secs_f64(),
+                candidates_from,
+            }))
+        }
+        nlsim_calib::Outcome::Interrupted(kept) => RunOutcome::Interrupted(kept),
     })
 }
 

@@ -139,6 +139,8 @@ pub fn estimate_time_calibration(req: &CalibrationRequest) -> Result<super::Cali
     use nlsim_calib::LeastSquares;
     let p = prepare_time(req)?;
     let mut obj = p.objective.clone();
+    // What the run refuses at its start, the dry run refuses too.
+    nlsim_calib::check_time_folds(&obj, &req.config)?;
     let points = obj.candidate_points(&req.config)?;
     let t = Instant::now();
     obj.cost_values(&points[0])?;

@@ -25,6 +25,7 @@ pub fn write_h5(path: &Path, data: &TestData) -> Result<()> {
     use hdf5::types::VarLenUnicode;
     use hdf5_metno as hdf5;
     let tmp = crate::formats::files::temp_path(path);
+    let _registered = crate::formats::interrupt::Temporary::new(&tmp);
     let stds = data
         .sweeps
         .iter()

@@ -1,0 +1,400 @@
+//! Interrupts keep what was computed (issue 72 part 3): Ctrl-C (SIGINT) at seeded points of
+//! a calibration stops it at the next safe point, keeps the candidates evaluated so far in a
+//! file `--candidates` resumes from — to the estimates of an uninterrupted run, bit for bit —
+//! and exits 130; `kill -9` leaves the older outputs or complete new ones; a command without
+//! safe points stops at once and leaves no temporary behind.
+
+use super::*;
+
+/// A delay in `[lo, hi)` of `whole` seconds from the splitmix64 sequence of `state`.
+fn seeded_delay(state: &mut u64, whole: f64, lo: f64, hi: f64) -> std::time::Duration {
+    *state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    let mut z = *state;
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    let frac = ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64;
+    std::time::Duration::from_secs_f64(whole * (lo + (hi - lo) * frac))
+}
+
+/// Starts the binary with `args`, sends `signal` (a `kill` name: INT, KILL) after `delay`,
+/// and returns its exit code (`None` when a signal ended it before nlsim could answer) and
+/// its standard error.
+fn signalled(args: &[&str], delay: std::time::Duration, signal: &str) -> (Option<i32>, String) {
+    let child = Command::new(env!("CARGO_BIN_EXE_nlsim"))
+        .args(args)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(delay);
+    let _ = Command::new("kill")
+        .args([&format!("-{signal}"), &child.id().to_string()])
+        .status();
+    let out = child.wait_with_output().unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Temporary files, staging folders and lock files in `dir`.
+fn leftovers(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains(".tmp-") || n.ends_with(".lock"))
+        .collect()
+}
+
+/// A stepped-sine test of the ECL beam and a calibration of its cubic spring and damping
+/// on it that runs about half a second: long enough for seeded signals to land in the
+/// candidates, the optimisations, the folds and the report.
+fn calibration_case(dir: &Path) -> Vec<String> {
+    std::fs::write(
+        dir.join("t.toml"),
+        "harmonics = 3\nmodes = 4\nseed = 2\n\n\
+         [[sweep]]\nlabel = \"low\"\nfrom = 21.5\nto = 25.5\nsteps = 17\nforce = 0.05\n\n\
+         [[sweep]]\nlabel = \"high\"\nfrom = 21.5\nto = 26.5\nsteps = 21\nforce = 0.2\n",
+    )
+    .unwrap();
+    let d = |n: &str| dir.join(n).to_str().unwrap().to_string();
+    let (rc, _, e) = nlsim(&["test", "ecl_beam", &d("t.toml"), "--out", &d("d.csv"), "-q"]);
+    assert_eq!(rc, 0, "{e}");
+    [
+        "calibrate",
+        "ecl_beam",
+        &d("d.csv"),
+        "--param",
+        "tip_spring.k3=6e7:6e11",
+        "--param",
+        "mode2.zeta=0.001:0.1",
+        "--harmonics",
+        "7",
+        "--modes",
+        "8",
+        "--lhs",
+        "200",
+        "--folds",
+        "4",
+        "-q",
+        "--report",
+        &d("rep"),
+    ]
+    .map(String::from)
+    .to_vec()
+}
+
+/// Ctrl-C at 20 seeded points of `calibrate --out --report`: exit 130 with one line naming
+/// the candidates file (or 0 when the run had ended), the older report folder whole, no
+/// temporary left; `--candidates` on the kept file ends in the estimates of the
+/// uninterrupted run, bit for bit.
+#[test]
+fn ctrl_c_keeps_the_candidates_and_the_resumed_run_matches_bit_for_bit() {
+    let dir = scratch("interrupt-calibrate");
+    let case = calibration_case(&dir);
+    let with = |extra: &[&str]| -> Vec<String> {
+        let mut a = case.clone();
+        a.extend(extra.iter().map(|s| s.to_string()));
+        a
+    };
+    let reference = dir.join("ref.csv");
+    let args = with(&["--out", reference.to_str().unwrap()]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let t = std::time::Instant::now();
+    let (rc, _, e) = nlsim(&args);
+    assert_eq!(rc, 0, "{e}");
+    let whole = t.elapsed().as_secs_f64();
+    let expected = std::fs::read(&reference).unwrap();
+    let out = dir.join("b.csv");
+    let kept = dir.join("rep.interrupted.h5");
+    let args = with(&["--out", out.to_str().unwrap()]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let resume = with(&[
+        "--out",
+        out.to_str().unwrap(),
+        "--candidates",
+        kept.to_str().unwrap(),
+    ]);
+    let resume: Vec<&str> = resume.iter().map(String::as_str).collect();
+    let mut state = 0x1e7e_2272_u64;
+    let mut interrupted = 0;
+    for k in 0..20 {
+        let _ = std::fs::remove_file(&out);
+        let _ = std::fs::remove_file(&kept);
+        let delay = seeded_delay(&mut state, whole, 0.05, 1.0);
+        let (rc, err) = signalled(&args, delay, "INT");
+        let why = format!("Ctrl-C {k} at {delay:?} of {whole:.2} s");
+        assert!(
+            rep_complete(&dir.join("rep")),
+            "{why}: the report folder is not whole"
+        );
+        assert!(leftovers(&dir).is_empty(), "{why}: {:?}", leftovers(&dir));
+        match rc {
+            Some(0) => assert_eq!(std::fs::read(&out).unwrap(), expected, "{why}"),
+            Some(130) if kept.exists() => {
+                interrupted += 1;
+                assert_eq!(err.lines().count(), 1, "{why}: {err}");
+                assert!(err.contains("--candidates"), "{why}: {err}");
+                assert!(!out.exists(), "{why}: an estimates file from a stopped run");
+                let (rc, _, e) = nlsim(&resume);
+                assert_eq!(rc, 0, "{why}: {e}");
+                assert_eq!(
+                    std::fs::read(&out).unwrap(),
+                    expected,
+                    "{why}: the resumed run differs"
+                );
+                assert!(leftovers(&dir).is_empty(), "{why}: {:?}", leftovers(&dir));
+            }
+            // Stopped in the report phase: at once, nothing kept, the older folder whole.
+            Some(130) => assert!(err.contains("stopped at once"), "{why}: {err}"),
+            other => panic!("{why}: exit {other:?}: {err}"),
+        }
+    }
+    assert!(
+        interrupted >= 10,
+        "only {interrupted} of 20 stopped at a safe point"
+    );
+}
+
+/// Whether `rep` is a complete report folder (its manifest and a whole page).
+fn rep_complete(rep: &Path) -> bool {
+    rep.join(".nlsim-report").is_file()
+        && std::fs::read_to_string(rep.join("index.html"))
+            .is_ok_and(|p| p.trim_end().ends_with("</html>"))
+}
+
+/// `kill -9` at 20 seeded points of `calibrate --out --report`: the estimates file is the
+/// older one or the new complete one, the report folder whole, and the next run leaves no
+/// temporary file or staging folder.
+#[test]
+fn a_killed_calibration_leaves_older_outputs_or_complete_new_ones() {
+    let dir = scratch("interrupt-kill-calibrate");
+    let mut args = calibration_case(&dir);
+    let out = dir.join("b.csv");
+    args.extend(["--out".to_string(), out.to_str().unwrap().to_string()]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let t = std::time::Instant::now();
+    let (rc, _, e) = nlsim(&args);
+    assert_eq!(rc, 0, "{e}");
+    let whole = t.elapsed().as_secs_f64();
+    let expected = std::fs::read(&out).unwrap();
+    let mut state = 0x0dea_d0c5_u64;
+    for k in 0..20 {
+        let delay = seeded_delay(&mut state, whole, 0.0, 1.0);
+        let _ = signalled(&args, delay, "KILL");
+        let why = format!("kill -9 {k} at {delay:?} of {whole:.2} s");
+        assert_eq!(std::fs::read(&out).unwrap(), expected, "{why}");
+        assert!(rep_complete(&dir.join("rep")), "{why}");
+    }
+    let (rc, _, e) = nlsim(&args);
+    assert_eq!(rc, 0, "{e}");
+    assert_eq!(std::fs::read(&out).unwrap(), expected);
+    assert!(leftovers(&dir).is_empty(), "{:?}", leftovers(&dir));
+}
+
+/// Ctrl-C at 10 seeded points of a command without safe points (`modes` with a result file
+/// and a report): it stops at once with exit 130 and one line, removes its temporaries,
+/// staging folder and lock itself (no later run needed), and the final names keep the
+/// older complete outputs.
+#[test]
+fn ctrl_c_stops_a_command_without_safe_points_at_once_and_leaves_nothing() {
+    let dir = scratch("interrupt-modes");
+    let (rep, out) = (dir.join("rep"), dir.join("m.h5"));
+    let args = [
+        "modes",
+        "bracket:refinement=2",
+        "--count",
+        "6",
+        "-q",
+        "--out",
+        out.to_str().unwrap(),
+        "--report",
+        rep.to_str().unwrap(),
+    ];
+    let t = std::time::Instant::now();
+    let (rc, _, e) = nlsim(&args);
+    assert_eq!(rc, 0, "{e}");
+    let whole = t.elapsed().as_secs_f64();
+    let mut state = 0x0000_0c7c_u64;
+    let mut stopped = 0;
+    for k in 0..10 {
+        let delay = seeded_delay(&mut state, whole, 0.1, 1.0);
+        let (rc, err) = signalled(&args, delay, "INT");
+        let why = format!("Ctrl-C {k} at {delay:?} of {whole:.2} s");
+        match rc {
+            Some(0) => {}
+            Some(130) => {
+                stopped += 1;
+                assert_eq!(err.lines().count(), 1, "{why}: {err}");
+                assert!(err.contains("stopped at once"), "{why}: {err}");
+            }
+            other => panic!("{why}: exit {other:?}: {err}"),
+        }
+        assert!(leftovers(&dir).is_empty(), "{why}: {:?}", leftovers(&dir));
+        assert!(rep_complete(&rep), "{why}");
+        let f = hdf5_metno::File::open(&out).unwrap_or_else(|e| panic!("{why}: {e}"));
+        assert!(f.attr("nlsim_version").is_ok(), "{why}");
+    }
+    assert!(
+        stopped >= 5,
+        "only {stopped} of 10 signals landed in the run"
+    );
+}
+
+/// Two `calibrate --report rep` runs started together, 10 times (seeds 1 and 2): one
+/// writes the folder whole, the other is refused in one line (exit 2) or runs after it;
+/// the folder's manifest, calibration file and HDF5 always come from one run.
+#[test]
+fn two_runs_on_one_report_folder_never_mix_it() {
+    let dir = scratch("interrupt-race");
+    let case = calibration_case(&dir);
+    let rep = dir.join("rep");
+    let mut refused = 0;
+    for k in 0..10 {
+        let children: Vec<_> = [1, 2]
+            .map(|seed| {
+                let mut a = case.clone();
+                a.extend(["--seed".into(), seed.to_string()]);
+                Command::new(env!("CARGO_BIN_EXE_nlsim"))
+                    .args(&a)
+                    .stdout(std::process::Stdio::null())
+                    .stderr(std::process::Stdio::piped())
+                    .spawn()
+                    .unwrap()
+            })
+            .into_iter()
+            .collect();
+        let outs: Vec<_> = children
+            .into_iter()
+            .map(|c| c.wait_with_output().unwrap())
+            .collect();
+        let why = format!("try {k}");
+        let mut won = 0;
+        for o in &outs {
+            let err = String::from_utf8_lossy(&o.stderr);
+            match o.status.code() {
+                Some(0) => won += 1,
+                Some(2) => {
+                    assert_eq!(err.lines().count(), 1, "{why}: {err}");
+                    assert!(
+                        err.contains("another nlsim run is writing it"),
+                        "{why}: {err}"
+                    );
+                    refused += 1;
+                }
+                other => panic!("{why}: exit {other:?}: {err}"),
+            }
+        }
+        assert!(won >= 1, "{why}: neither run wrote the folder");
+        assert!(rep_complete(&rep), "{why}");
+        let manifest = std::fs::read_to_string(rep.join(".nlsim-report")).unwrap();
+        let seed = if manifest.trim_end().ends_with("--seed 1") {
+            1
+        } else {
+            2
+        };
+        let toml = std::fs::read_to_string(rep.join("calibration.toml")).unwrap();
+        assert!(
+            toml.contains(&format!("\nseed = {seed}\n")),
+            "{why}: a mixed folder"
+        );
+        let h5 = hdf5_metno::File::open(rep.join("report.h5")).unwrap();
+        let line: hdf5_metno::types::VarLenUnicode =
+            h5.attr("command_line").unwrap().read_scalar().unwrap();
+        assert!(
+            line.as_str().ends_with(&format!("--seed {seed}")),
+            "{why}: {line}"
+        );
+        assert!(leftovers(&dir).is_empty(), "{why}: {:?}", leftovers(&dir));
+    }
+    // Started together, the runs overlapped at least once (else the test tried nothing).
+    assert!(refused >= 1, "no try had both runs at once");
+}
+
+/// The same batch shard run twice at once, 10 times: one run writes it, the other is
+/// refused in one line (exit 2) or finds it complete; the shard is never damaged (the merge
+/// of the last try equals a single run's).
+#[test]
+fn two_runs_of_one_shard_never_damage_it() {
+    let dir = scratch("interrupt-shard-race");
+    let jobs = dir.join("jobs.toml");
+    std::fs::write(
+        &jobs,
+        "name = \"race\"\ncommand = \"simulate\"\nmodel = \"ecl_beam\"\nseed = 4\n\
+         [simulate]\nduration = 2.0\nrate = 4000.0\nmodes = 8\n\
+         [lhs]\nsamples = 16\nparams = [{ set = \"tip_spring.k3\", min = 1e9, max = 1e10 }]\n",
+    )
+    .unwrap();
+    let j = jobs.to_str().unwrap();
+    let shard = dir.join("race-results/shard-00000-of-00001.h5");
+    let args = [
+        "-q",
+        "--threads",
+        "1",
+        "batch",
+        j,
+        "--task-count",
+        "1",
+        "--task-index",
+        "0",
+    ];
+    let mut refused = 0;
+    for k in 0..10 {
+        let _ = std::fs::remove_file(&shard);
+        let children: Vec<_> = (0..2)
+            .map(|_| {
+                Command::new(env!("CARGO_BIN_EXE_nlsim"))
+                    .args(args)
+                    .stdout(std::process::Stdio::null())
+                    .stderr(std::process::Stdio::piped())
+                    .spawn()
+                    .unwrap()
+            })
+            .collect();
+        let why = format!("try {k}");
+        let mut won = 0;
+        for c in children {
+            let o = c.wait_with_output().unwrap();
+            let err = String::from_utf8_lossy(&o.stderr);
+            match o.status.code() {
+                Some(0) => won += 1,
+                Some(2) => {
+                    assert_eq!(err.lines().count(), 1, "{why}: {err}");
+                    assert!(
+                        err.contains("another nlsim run is writing it"),
+                        "{why}: {err}"
+                    );
+                    refused += 1;
+                }
+                other => panic!("{why}: exit {other:?}: {err}"),
+            }
+        }
+        assert!(won >= 1, "{why}: neither run wrote the shard");
+        assert!(shard.is_file(), "{why}");
+        assert!(leftovers(&dir.join("race-results")).is_empty(), "{why}");
+    }
+    assert!(refused >= 1, "no try had both runs at once");
+    let (rc, _, e) = nlsim(&["batch", "merge", j]);
+    assert_eq!(rc, 0, "{e}");
+    let single = dir.join("single");
+    for a in [
+        vec!["-q", "batch", j, "--output", single.to_str().unwrap()],
+        vec![
+            "-q",
+            "batch",
+            "merge",
+            j,
+            "--output",
+            single.to_str().unwrap(),
+        ],
+    ] {
+        let (rc, _, e) = nlsim(&a);
+        assert_eq!(rc, 0, "{e}");
+    }
+    h5check(&[
+        "same",
+        dir.join("race-results/merged.h5").to_str().unwrap(),
+        single.join("merged.h5").to_str().unwrap(),
+    ]);
+}
