@@ -239,7 +239,7 @@ pub fn plan_outputs(inputs: &[&Path], files: &[&Path], folders: &[&Path]) -> Res
 /// ([`StagedFolder::final_path`] names them as committed).
 pub fn write_folder<T>(target: &Path, write: impl FnOnce(&Path) -> Result<T>) -> Result<T> {
     let staged = StagedFolder::begin(target)?;
-    let value = write(staged.path())?;
+    let value = write(staged.path()).map_err(|e| staged.named_finally(e))?;
     staged.commit(&command_line())?;
     Ok(value)
 }
@@ -479,6 +479,24 @@ impl StagedFolder {
     /// The final folder.
     pub fn target(&self) -> &Path {
         &self.target
+    }
+
+    /// `e` with the paths inside the staging folder named as they will be once committed:
+    /// a message names the file the user asked for, not the hidden staging folder.
+    pub fn named_finally(&self, e: Error) -> Error {
+        let staging = self.staging.to_string_lossy().into_owned();
+        let target = self.target.to_string_lossy().into_owned();
+        match e {
+            Error::Io { path, source } => Error::Io {
+                path: self.final_path(&path),
+                source,
+            },
+            Error::Hdf5 { path, message } => Error::Hdf5 {
+                path: self.final_path(&path),
+                message: message.replace(&staging, &target),
+            },
+            e => e,
+        }
     }
 
     /// `p` (a path inside the staging folder) as it will be named once committed.

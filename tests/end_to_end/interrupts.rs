@@ -398,3 +398,235 @@ fn two_runs_of_one_shard_never_damage_it() {
         single.join("merged.h5").to_str().unwrap(),
     ]);
 }
+
+/// A full disk (a 1 MiB tmpfs, mounted in a user namespace where the machine allows it):
+/// `export`, `test --out --report` and `validate --report` rerun into it with nothing free
+/// and with 12 KiB free fail with exit 1 naming the file, keep the older complete outputs
+/// byte for byte, and leave no temporary file, staging folder or lock.
+#[test]
+fn a_full_disk_keeps_older_outputs_and_leaves_nothing_partial() {
+    let ok = Command::new("unshare")
+        .args(["--user", "--map-root-user", "--mount", "true"])
+        .status()
+        .is_ok_and(|s| s.success());
+    if !ok {
+        eprintln!("skipped: this machine cannot mount a tmpfs in a user namespace (unshare -rm)");
+        return;
+    }
+    let dir = scratch("interrupt-full-disk");
+    let mut case = calibration_case(&dir);
+    // The calibration's report (outside the small file system) is what validate reads.
+    case.retain(|a| a != "-q");
+    let args: Vec<&str> = case.iter().map(String::as_str).collect();
+    let (rc, _, e) = nlsim(&args);
+    assert_eq!(rc, 0, "{e}");
+    let fs = dir.join("fs");
+    std::fs::create_dir(&fs).unwrap();
+    let script = r#"set -u
+mount -t tmpfs -o size=1m tmpfs "$FS" || { echo "mount failed"; exit 0; }
+cd "$FS"
+state() { find . -path ./filler -prune -o -type f -print | sort | xargs sha256sum | sha256sum | cut -c1-16; }
+left() { find . -name '*.tmp-*' -o -name '*.lock' | tr '\n' ' '; }
+"$NLSIM" -q export ecl_beam ex || echo "setup export failed"
+"$NLSIM" -q test ecl_beam "$DIR/t.toml" --out d.csv --report trep || echo "setup test failed"
+"$NLSIM" -q validate "$DIR/rep/calibration.toml" --report vrep || echo "setup validate failed"
+before=$(state)
+for free in 0 12; do
+  rm -f filler
+  dd if=/dev/zero of=filler bs=1k 2>/dev/null
+  if [ "$free" -gt 0 ]; then truncate -s -${free}k filler; fi
+  "$NLSIM" -q export ecl_beam ex 2>"$DIR/err"; echo "export free=$free rc=$? err=$(head -c 300 "$DIR/err")"
+  "$NLSIM" -q test ecl_beam "$DIR/t.toml" --out d.csv --report trep 2>"$DIR/err"; echo "test free=$free rc=$? err=$(head -c 300 "$DIR/err")"
+  "$NLSIM" -q validate "$DIR/rep/calibration.toml" --report vrep 2>"$DIR/err"; echo "validate free=$free rc=$? err=$(head -c 300 "$DIR/err")"
+  echo "state free=$free same=$([ "$before" = "$(state)" ] && echo yes || echo no) left=[$(left)]"
+done
+"#;
+    let out = Command::new("unshare")
+        .args(["--user", "--map-root-user", "--mount", "sh", "-c", script])
+        .env("FS", &fs)
+        .env("DIR", &*dir)
+        .env("NLSIM", env!("CARGO_BIN_EXE_nlsim"))
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stdout).into_owned();
+    if said.contains("mount failed") {
+        eprintln!("skipped: no tmpfs in a user namespace here\n{said}");
+        return;
+    }
+    assert!(!said.contains("setup"), "{said}");
+    let mut runs = 0;
+    for line in said.lines() {
+        if line.starts_with("state") {
+            assert!(
+                line.contains("same=yes") && line.contains("left=[]"),
+                "{line}\n{said}"
+            );
+        } else {
+            runs += 1;
+            assert!(line.contains(" rc=1 "), "{line}\n{said}");
+            assert!(line.contains("No space left on device"), "{line}");
+            // The message names the file asked for, not a temporary or staging name.
+            assert!(!line.contains(".tmp-"), "{line}");
+        }
+    }
+    assert_eq!(runs, 6, "{said}");
+}
+
+/// kill -9 and Ctrl-C (alternating) at 20 seeded points each of `export`, `validate
+/// --report --out`, `test --out --raw` and a batch shard: after every stop the final names
+/// hold the older complete outputs (text files byte for byte as the first run wrote them,
+/// HDF5 files whole, folders with their manifest) or none where there was none; Ctrl-C
+/// exits 130 or 0; the run after the last stop leaves no temporary, staging folder or lock.
+#[test]
+fn killed_or_interrupted_writers_leave_older_outputs_whole() {
+    let dir = scratch("interrupt-writers");
+    let case = calibration_case(&dir);
+    let args: Vec<&str> = case.iter().map(String::as_str).collect();
+    let (rc, _, e) = nlsim(&args);
+    assert_eq!(rc, 0, "{e}");
+    std::fs::write(
+        dir.join("rt.toml"),
+        "harmonics = 3\nmodes = 4\nseed = 2\n\n\
+         [[sweep]]\nlabel = \"low\"\nfrom = 22.0\nto = 25.0\nsteps = 4\nforce = 0.05\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("jobs.toml"),
+        "name = \"w\"\ncommand = \"simulate\"\nmodel = \"ecl_beam\"\nseed = 4\n\
+         [simulate]\nduration = 2.0\nrate = 4000.0\nmodes = 8\n\
+         [lhs]\nsamples = 16\nparams = [{ set = \"tip_spring.k3\", min = 1e9, max = 1e10 }]\n",
+    )
+    .unwrap();
+    let d = |n: &str| dir.join(n).to_str().unwrap().to_string();
+    let shard = dir.join("w-results/shard-00000-of-00001.h5");
+    // (what, arguments, outputs: files and folders; whether the output is removed before
+    // each try, so that the run has to write it again)
+    let cases: Vec<(&str, Vec<String>, Vec<PathBuf>, bool)> = vec![
+        (
+            "export",
+            vec!["export".into(), "ecl_beam".into(), d("ex")],
+            vec![dir.join("ex")],
+            false,
+        ),
+        (
+            "validate",
+            [
+                "validate",
+                &d("rep/calibration.toml"),
+                "--report",
+                &d("vrep"),
+                "--out",
+                &d("v.csv"),
+            ]
+            .map(String::from)
+            .to_vec(),
+            vec![dir.join("vrep"), dir.join("v.csv")],
+            false,
+        ),
+        (
+            "test --raw",
+            [
+                "test",
+                "ecl_beam",
+                &d("rt.toml"),
+                "--out",
+                &d("rd.csv"),
+                "--raw",
+                &d("raw.h5"),
+            ]
+            .map(String::from)
+            .to_vec(),
+            vec![
+                dir.join("rd.csv"),
+                dir.join("raw.h5"),
+                dir.join("raw_steps.csv"),
+            ],
+            false,
+        ),
+        (
+            "batch shard",
+            [
+                "--threads",
+                "1",
+                "batch",
+                &d("jobs.toml"),
+                "--task-count",
+                "1",
+                "--task-index",
+                "0",
+            ]
+            .map(String::from)
+            .to_vec(),
+            vec![shard.clone()],
+            true,
+        ),
+    ];
+    let mut state = 0x0005_1a7e_u64;
+    for (what, args, outputs, fresh) in cases {
+        let mut args: Vec<&str> = args.iter().map(String::as_str).collect();
+        args.insert(0, "-q");
+        let t = std::time::Instant::now();
+        let (rc, _, e) = nlsim(&args);
+        assert_eq!(rc, 0, "{what}: {e}");
+        let whole = t.elapsed().as_secs_f64();
+        let first: Vec<Option<Vec<u8>>> = outputs
+            .iter()
+            .map(|p| {
+                (p.is_file() && p.extension().is_some_and(|e| e == "csv"))
+                    .then(|| std::fs::read(p).unwrap())
+            })
+            .collect();
+        let whole_outputs = |why: &str, may_be_missing: bool| {
+            for (p, text) in outputs.iter().zip(&first) {
+                if may_be_missing && !p.exists() {
+                    continue;
+                }
+                if p.is_dir() {
+                    assert!(
+                        p.join(".nlsim-report").is_file(),
+                        "{why}: {} partial",
+                        p.display()
+                    );
+                } else if let Some(bytes) = text {
+                    assert_eq!(&std::fs::read(p).unwrap(), bytes, "{why}: {}", p.display());
+                } else {
+                    let f = hdf5_metno::File::open(p)
+                        .unwrap_or_else(|e| panic!("{why}: {}: {e}", p.display()));
+                    assert!(f.attr("nlsim_version").is_ok(), "{why}: {}", p.display());
+                }
+            }
+        };
+        for k in 0..20 {
+            if fresh {
+                for p in &outputs {
+                    let _ = std::fs::remove_file(p);
+                }
+            }
+            let signal = if k % 2 == 0 { "KILL" } else { "INT" };
+            let delay = seeded_delay(&mut state, whole, 0.05, 1.0);
+            let (rc, err) = signalled(&args, delay, signal);
+            let why = format!("{what}: {signal} {k} at {delay:?} of {whole:.3} s");
+            // (`None`: the signal came before `main` installed the handler, nothing
+            // touched yet.)
+            if signal == "INT" {
+                assert!(
+                    matches!(rc, Some(0) | Some(130) | None),
+                    "{why}: exit {rc:?}: {err}"
+                );
+            }
+            whole_outputs(&why, fresh);
+        }
+        let (rc, _, e) = nlsim(&args);
+        assert_eq!(rc, 0, "{what}: the run after the stops: {e}");
+        whole_outputs(&format!("{what}: the run after the stops"), false);
+        for folder in [dir.to_path_buf(), dir.join("w-results")] {
+            if folder.is_dir() {
+                assert!(
+                    leftovers(&folder).is_empty(),
+                    "{what}: {:?}",
+                    leftovers(&folder)
+                );
+            }
+        }
+    }
+}

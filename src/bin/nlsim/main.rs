@@ -16,16 +16,18 @@ const MAX_THREADS: usize = 1024;
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn main() -> ExitCode {
+    // First, so that Ctrl-C during the start of a run is handled as during the rest.
+    nlsim::cli::interrupt::install();
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) => return usage_error(&e),
     };
     if let Some(n) = cli.threads {
         if !(1..=MAX_THREADS).contains(&n) {
-            eprintln!(
+            say(&format!(
                 "error: --threads {n}: give 1 to {MAX_THREADS} (each thread reserves a stack; \
                  more threads than cores only slow the run down)"
-            );
+            ));
             return ExitCode::from(2);
         }
         // The first and only global pool: cannot fail here.
@@ -39,25 +41,40 @@ fn main() -> ExitCode {
     // numbers do not depend on the thread count.
     faer::set_global_parallelism(faer::Par::Seq);
     let console = Console::terminal(cli.quiet, cli.verbose);
-    nlsim::cli::interrupt::install();
     let outcome = nlsim::cli::dispatch(&cli, &console);
     nlsim::cli::interrupt::settle();
     match outcome {
         Ok(()) => ExitCode::SUCCESS,
         Err(nlsim::Error::Interrupted(kept)) => {
-            eprintln!("interrupted: {}", nlsim::formats::files::one_line(&kept));
+            say(&format!(
+                "interrupted: {}",
+                nlsim::formats::files::one_line(&kept)
+            ));
             let signal = nlsim::formats::interrupt::last_signal().clamp(1, 64);
             ExitCode::from(128 + signal as u8)
         }
         Err(e @ nlsim::Error::Usage(_)) => {
-            eprintln!("error: {}", nlsim::formats::files::one_line(&e.to_string()));
+            say(&format!(
+                "error: {}",
+                nlsim::formats::files::one_line(&e.to_string())
+            ));
             ExitCode::from(2)
         }
         Err(e) => {
-            eprintln!("error: {}", nlsim::formats::files::one_line(&e.to_string()));
+            say(&format!(
+                "error: {}",
+                nlsim::formats::files::one_line(&e.to_string())
+            ));
             ExitCode::from(1)
         }
     }
+}
+
+/// Writes `line` to standard error; where that cannot be written (a full disk under a
+/// redirection) the exit code alone says what happened, without a panic.
+fn say(line: &str) {
+    use std::io::Write as _;
+    let _ = writeln!(std::io::stderr(), "{line}");
 }
 
 /// Prints a command-line error of clap in one line (its first line, with its tip) and
@@ -103,6 +120,9 @@ fn usage_error(e: &clap::Error) -> ExitCode {
     } else {
         format!(" ({})", one_line(&tips.join("; ")))
     };
-    eprintln!("error: {}{tips} — see nlsim --help", one_line(&message));
+    say(&format!(
+        "error: {}{tips} — see nlsim --help",
+        one_line(&message)
+    ));
     ExitCode::from(2)
 }
