@@ -157,6 +157,28 @@ fn ctrl_c_keeps_the_candidates_and_the_resumed_run_matches_bit_for_bit() {
     );
 }
 
+/// The runs of a race that wrote their output (exit 0); every other run must have been
+/// refused in one line because the other held the lock (exit 2), counted in `refused`.
+fn settle_race(outs: &[std::process::Output], why: &str, refused: &mut usize) -> usize {
+    let mut won = 0;
+    for o in outs {
+        let err = String::from_utf8_lossy(&o.stderr);
+        match o.status.code() {
+            Some(0) => won += 1,
+            Some(2) => {
+                assert_eq!(err.lines().count(), 1, "{why}: {err}");
+                assert!(
+                    err.contains("another nlsim run is writing it"),
+                    "{why}: {err}"
+                );
+                *refused += 1;
+            }
+            other => panic!("{why}: exit {other:?}: {err}"),
+        }
+    }
+    won
+}
+
 /// Whether `rep` is a complete report folder (its manifest and a whole page).
 fn rep_complete(rep: &Path) -> bool {
     rep.join(".nlsim-report").is_file()
@@ -270,22 +292,7 @@ fn two_runs_on_one_report_folder_never_mix_it() {
             .map(|c| c.wait_with_output().unwrap())
             .collect();
         let why = format!("try {k}");
-        let mut won = 0;
-        for o in &outs {
-            let err = String::from_utf8_lossy(&o.stderr);
-            match o.status.code() {
-                Some(0) => won += 1,
-                Some(2) => {
-                    assert_eq!(err.lines().count(), 1, "{why}: {err}");
-                    assert!(
-                        err.contains("another nlsim run is writing it"),
-                        "{why}: {err}"
-                    );
-                    refused += 1;
-                }
-                other => panic!("{why}: exit {other:?}: {err}"),
-            }
-        }
+        let won = settle_race(&outs, &why, &mut refused);
         assert!(won >= 1, "{why}: neither run wrote the folder");
         assert!(rep_complete(&rep), "{why}");
         let manifest = std::fs::read_to_string(rep.join(".nlsim-report")).unwrap();
@@ -353,23 +360,11 @@ fn two_runs_of_one_shard_never_damage_it() {
             })
             .collect();
         let why = format!("try {k}");
-        let mut won = 0;
-        for c in children {
-            let o = c.wait_with_output().unwrap();
-            let err = String::from_utf8_lossy(&o.stderr);
-            match o.status.code() {
-                Some(0) => won += 1,
-                Some(2) => {
-                    assert_eq!(err.lines().count(), 1, "{why}: {err}");
-                    assert!(
-                        err.contains("another nlsim run is writing it"),
-                        "{why}: {err}"
-                    );
-                    refused += 1;
-                }
-                other => panic!("{why}: exit {other:?}: {err}"),
-            }
-        }
+        let outs: Vec<_> = children
+            .into_iter()
+            .map(|c| c.wait_with_output().unwrap())
+            .collect();
+        let won = settle_race(&outs, &why, &mut refused);
         assert!(won >= 1, "{why}: neither run wrote the shard");
         assert!(shard.is_file(), "{why}");
         assert!(leftovers(&dir.join("race-results")).is_empty(), "{why}");
