@@ -927,8 +927,8 @@ fn fuzz_inner() {
         fit_records(nlsim::formats::time_records_h5::read_records_h5(&rec_h5))
     }));
 
-    // The candidates file of a merged calibrate-candidates batch: its attributes and two
-    // tables with hostile types, shapes and values.
+    // The candidates file of a merged calibrate-candidates batch or of an interrupted
+    // calibration: its attributes and two tables with hostile types, shapes and values.
     let cands = dir.join("candidates.h5");
     panics.extend(survive("candidates file", 10000 * scale(), |_| {
         let _ = std::fs::remove_file(&cands);
@@ -950,6 +950,15 @@ fn fuzz_inner() {
                     .write_scalar(rng.pick(&[1u64, 1, 1, 0, u64::MAX]))?;
             } else {
                 hostile_attr(&root, "complete", rng)?;
+            }
+            // The mark of an interrupted calibration's file (NaN costs: not evaluated).
+            match rng.below(4) {
+                0 => root
+                    .new_attr::<u64>()
+                    .create("interrupted")?
+                    .write_scalar(rng.pick(&[1u64, 0, 2]))?,
+                1 => hostile_attr(&root, "interrupted", rng)?,
+                _ => {}
             }
             let rows = *rng.pick(&[0usize, 1, 2, 3]);
             let cols = *rng.pick(&[0usize, 1, 2]);
