@@ -95,11 +95,12 @@ pub fn parse_op4_binary(bytes: &[u8], path: &Path, name: Option<&str>) -> Result
             i32::from_be_bytes(a)
         }
     };
-    let err = |record: usize, offset: usize, m: String| {
-        Error::Usage(format!(
-            "{}: record {record} (byte {offset}): {m}",
-            path.display()
-        ))
+    // A content error: exit code 1, as the same error in the ASCII form (the "line" is the
+    // record's number).
+    let err = |record: usize, offset: usize, m: String| Error::DataFile {
+        file: path.to_path_buf(),
+        line: record,
+        message: format!("record {record} (byte {offset}): {m}"),
     };
     // The records: (1-based number, byte offset, payload).
     let mut at = 0usize;
@@ -635,6 +636,9 @@ pub fn parse_op4(text: &str, path: &Path, name: Option<&str>) -> Result<Op4Matri
                         break;
                     }
                     let sl = at + 1;
+                    // The string's length L in its header is not checked against the values
+                    // that follow: writers count it differently (pyNastran's files and
+                    // nlsim's own disagree); see issue 73 for real files.
                     let row = if bigmat {
                         ints(sl, t, 2)?[1]
                     } else {
