@@ -389,17 +389,12 @@ pub fn calibrate_from_candidates_until(
         stop,
     )?;
     let interrupted = |runs: Vec<StartRun>, candidates: Vec<Candidate>, phase| {
-        let (points, costs) = candidates
-            .into_iter()
-            .map(|c| (c.values, Some(c.cost)))
-            .unzip();
-        Ok(Outcome::Interrupted(Box::new(Interrupted {
-            params: params.clone(),
-            points,
-            costs,
+        Ok(Outcome::Interrupted(Box::new(Interrupted::evaluated_all(
+            params.clone(),
+            candidates,
             runs,
             phase,
-        })))
+        ))))
     };
     if !all {
         return interrupted(runs, candidates, Phase::Optimisation);
@@ -820,6 +815,48 @@ pub struct Interrupted {
 }
 
 impl Interrupted {
+    /// A stop after every one of `candidates` was evaluated, with the finished `runs`.
+    pub fn evaluated_all(
+        params: Vec<Param>,
+        candidates: Vec<Candidate>,
+        runs: Vec<StartRun>,
+        phase: Phase,
+    ) -> Interrupted {
+        let (points, costs) = candidates
+            .into_iter()
+            .map(|c| (c.values, Some(c.cost)))
+            .unzip();
+        Interrupted {
+            params,
+            points,
+            costs,
+            runs,
+            phase,
+        }
+    }
+
+    /// A calibration that finished as it was asked to stop, kept as one stopped at its end
+    /// (every candidate and run, [`Phase::CrossValidation`]): the caller that asked to
+    /// stop gets what it can resume from, not a result it did not wait for.
+    pub fn finished(c: Calibration) -> Interrupted {
+        Interrupted::evaluated_all(c.params, c.candidates, c.runs, Phase::CrossValidation)
+    }
+
+    /// Whether `given` are these `points` (the candidates of a calibration,
+    /// [`candidate_points`]) bit for bit: a file of kept costs belongs to this calibration
+    /// only then.
+    pub fn same_points<'a>(
+        points: &[Vec<f64>],
+        mut given: impl ExactSizeIterator<Item = &'a [f64]>,
+    ) -> bool {
+        given.len() == points.len()
+            && points.iter().all(|p| {
+                given.next().is_some_and(|g| {
+                    g.len() == p.len() && g.iter().zip(p).all(|(a, b)| a.to_bits() == b.to_bits())
+                })
+            })
+    }
+
     /// Candidates evaluated.
     pub fn evaluated(&self) -> usize {
         self.costs.iter().filter(|c| c.is_some()).count()

@@ -537,12 +537,8 @@ pub fn calibrate(
             None => Vec::new(),
             Some(r) => {
                 let points = nlsim::calib::candidate_points(&objective, &config)?;
-                let same = points.len() == r.points.len()
-                    && points.iter().zip(&r.points).all(|(a, b)| {
-                        a.len() == b.len()
-                            && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
-                    });
-                if !same {
+                let given = r.points.iter().map(Vec::as_slice);
+                if !nlsim::calib::Interrupted::same_points(&points, given) {
                     return Err(nlsim::Error::Usage(
                         "resume: its candidates are not this calibration's (params, bounds, \
                          lhs, seed and the model's values must be those of the interrupted \
@@ -567,21 +563,7 @@ pub fn calibrate(
             let kept = match outcome {
                 nlsim::calib::Outcome::Interrupted(k) => *k,
                 // Finished as the interrupt came: kept whole, the caller asked to stop.
-                nlsim::calib::Outcome::Finished(c) => {
-                    let c = *c;
-                    let (points, costs) = c
-                        .candidates
-                        .into_iter()
-                        .map(|c| (c.values, Some(c.cost)))
-                        .unzip();
-                    nlsim::calib::Interrupted {
-                        params: c.params,
-                        points,
-                        costs,
-                        runs: c.runs,
-                        phase: nlsim::calib::Phase::CrossValidation,
-                    }
-                }
+                nlsim::calib::Outcome::Finished(c) => nlsim::calib::Interrupted::finished(*c),
             };
             let partial = PartialCalibration {
                 kept: Arc::new(kept),

@@ -222,15 +222,10 @@ fn a_killed_calibration_leaves_older_outputs_or_complete_new_ones() {
     assert!(leftovers(&dir).is_empty(), "{:?}", leftovers(&dir));
 }
 
-/// Ctrl-C at 10 seeded points of a command without safe points (`modes` with a result file
-/// and a report): it stops at once with exit 130 and one line, removes its temporaries,
-/// staging folder and lock itself (no later run needed), and the final names keep the
-/// older complete outputs.
-#[test]
-fn ctrl_c_stops_a_command_without_safe_points_at_once_and_leaves_nothing() {
-    let dir = scratch("interrupt-modes");
-    let (rep, out) = (dir.join("rep"), dir.join("m.h5"));
-    let args = [
+/// `modes` of the refined bracket with a result file `out` and a report `rep`: long enough
+/// (about 0.2 s) for signals to land in the load, the solve, the result file and the report.
+fn modes_args(out: &Path, rep: &Path) -> Vec<String> {
+    [
         "modes",
         "bracket:refinement=2",
         "--count",
@@ -240,7 +235,58 @@ fn ctrl_c_stops_a_command_without_safe_points_at_once_and_leaves_nothing() {
         out.to_str().unwrap(),
         "--report",
         rep.to_str().unwrap(),
-    ];
+    ]
+    .map(String::from)
+    .to_vec()
+}
+
+/// `kill -9` at seeded points of a run that writes a result file and a report folder: the
+/// final names hold the older complete outputs or the new complete ones, never a partial
+/// file or a mixed folder, and the next run leaves no temporary file or staging folder.
+#[test]
+fn a_killed_run_leaves_older_outputs_or_complete_new_ones() {
+    let dir = scratch("outputs-kill");
+    let (rep, out) = (dir.join("rep"), dir.join("m.h5"));
+    let args = modes_args(&out, &rep);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let t = std::time::Instant::now();
+    let (rc, _, e) = nlsim(&args);
+    assert_eq!(rc, 0, "{e}");
+    let whole = t.elapsed().as_secs_f64();
+    let complete = |why: &str| {
+        assert!(rep_complete(&rep), "{why}: no manifest or a partial page");
+        for f in [rep.join("report.h5"), out.clone()] {
+            let f = hdf5_metno::File::open(&f).unwrap_or_else(|e| panic!("{why}: {e}"));
+            assert!(f.attr("nlsim_version").is_ok(), "{why}");
+        }
+    };
+    complete("the first run");
+    let mut state = 0x5eed_u64;
+    for k in 0..20 {
+        let delay = seeded_delay(&mut state, whole, 0.0, 1.0);
+        let _ = signalled(&args, delay, "KILL");
+        complete(&format!("kill {k} at {delay:?}"));
+    }
+    let (rc, _, e) = nlsim(&args);
+    assert_eq!(rc, 0, "{e}");
+    complete("the run after the kills");
+    assert!(
+        leftovers(&dir).is_empty(),
+        "left behind: {:?}",
+        leftovers(&dir)
+    );
+}
+
+/// Ctrl-C at 10 seeded points of a command without safe points (`modes` with a result file
+/// and a report): it stops at once with exit 130 and one line, removes its temporaries,
+/// staging folder and lock itself (no later run needed), and the final names keep the
+/// older complete outputs.
+#[test]
+fn ctrl_c_stops_a_command_without_safe_points_at_once_and_leaves_nothing() {
+    let dir = scratch("interrupt-modes");
+    let (rep, out) = (dir.join("rep"), dir.join("m.h5"));
+    let args = modes_args(&out, &rep);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
     let t = std::time::Instant::now();
     let (rc, _, e) = nlsim(&args);
     assert_eq!(rc, 0, "{e}");

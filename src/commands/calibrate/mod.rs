@@ -127,21 +127,7 @@ pub fn execute(
             drop(safe);
             return write_outputs(req, &run, console);
         }
-        RunOutcome::Finished(run) => {
-            let c = run.calibration;
-            let (points, costs) = c
-                .candidates
-                .into_iter()
-                .map(|c| (c.values, Some(c.cost)))
-                .unzip();
-            nlsim_calib::Interrupted {
-                params: c.params,
-                points,
-                costs,
-                runs: c.runs,
-                phase: nlsim_calib::Phase::CrossValidation,
-            }
-        }
+        RunOutcome::Finished(run) => nlsim_calib::Interrupted::finished(run.calibration),
         RunOutcome::Interrupted(kept) => *kept,
     };
     let path = keep_interrupted(req, &kept)?;

@@ -157,14 +157,8 @@ pub fn run_calibration_until(
         None => None,
         Some((path, c)) => {
             let expected = nlsim_calib::candidate_points(&prepared.objective, &req.config)?;
-            let same = expected.len() == c.len()
-                && expected.iter().zip(&c).all(|(e, c)| {
-                    e.len() == c.values.len()
-                        && e.iter()
-                            .zip(&c.values)
-                            .all(|(a, b)| a.to_bits() == b.to_bits())
-                });
-            if !same {
+            let given = c.iter().map(|c| c.values.as_slice());
+            if !nlsim_calib::Interrupted::same_points(&expected, given) {
                 return Err(Error::Usage(format!(
                     "{}: its {} candidates are not the {} of this calibration (parameters, \
                      bounds, lhs, seed and the model's values must match the run that wrote \
