@@ -296,23 +296,11 @@ pub fn calibrate_until(
         &|done, total| progress(Progress::Candidates { done, total }),
         stop,
     )?;
-    if costs.iter().any(Option::is_none) {
-        return Ok(Outcome::Interrupted(Box::new(Interrupted {
-            params: objective.specs().iter().map(|s| s.param.clone()).collect(),
-            points,
-            costs,
-            runs: Vec::new(),
-            phase: Phase::Candidates,
-        })));
-    }
-    let candidates = points
-        .into_iter()
-        .zip(costs)
-        .map(|(values, c)| Candidate {
-            values,
-            cost: c.unwrap_or(f64::NAN),
-        })
-        .collect();
+    let params: Vec<Param> = objective.specs().iter().map(|s| s.param.clone()).collect();
+    let candidates = match Interrupted::unless_evaluated(params, points, costs) {
+        Ok(c) => c,
+        Err(kept) => return Ok(Outcome::Interrupted(kept)),
+    };
     calibrate_from_candidates_until(objective, candidates, config, progress, stop)
 }
 
@@ -698,32 +686,15 @@ pub(crate) fn start_points(
     Ok(starts)
 }
 
-/// The cost of every start point, in parallel, each on a fresh copy of `objective` (setting
+/// The cost of every point, in parallel, each on a fresh copy of `objective` (setting
 /// parameters in place rounds differently after different earlier values, e.g. a mode's
 /// damping ratio recovered from `2ζω` when its frequency changes, so a copy reused across
 /// the candidates one worker happens to take would make the costs depend on the thread
-/// count), in the order given; `done(finished, total)` after each.
-pub(crate) fn evaluate_candidates<O: Clone + Send + Sync>(
-    objective: &O,
-    starts: Vec<Vec<f64>>,
-    cost: impl Fn(&mut O, &[f64]) -> Result<f64> + Sync,
-    done: &(dyn Fn(usize, usize) + Sync),
-) -> Result<Vec<Candidate>> {
-    let costs = evaluate_costs(objective, &starts, &[], cost, done, &|| false)?;
-    Ok(starts
-        .into_iter()
-        .zip(costs)
-        .map(|(values, c)| Candidate {
-            values,
-            cost: c.unwrap_or(f64::NAN),
-        })
-        .collect())
-}
-
-/// [`evaluate_candidates`] that reuses the costs in `known` (one per point, or empty for
-/// none) and leaves a point unevaluated (`None`) once `stop()` returns `true`: each point's
-/// cost depends on that point alone, so costs kept from an interrupted run and the rest
-/// evaluated later are bit-identical to one uninterrupted evaluation.
+/// count), in the order given; `done(finished, total)` after each. The costs in `known` (one
+/// per point, or empty for none) are reused, and a point is left unevaluated (`None`) once
+/// `stop()` returns `true`: each point's cost depends on that point alone, so costs kept
+/// from an interrupted run and the rest evaluated later are bit-identical to one
+/// uninterrupted evaluation.
 pub(crate) fn evaluate_costs<O: Clone + Send + Sync>(
     objective: &O,
     points: &[Vec<f64>],
@@ -766,13 +737,39 @@ pub(crate) fn evaluate_costs<O: Clone + Send + Sync>(
 /// signal; a caller sets a flag from its own (a Ctrl-C handler, a cancel call).
 pub type Stop<'a> = &'a (dyn Fn() -> bool + Sync);
 
-/// A calibration's end: finished, or stopped at a safe point with what was complete.
+/// A calibration's end: finished, or stopped at a safe point with what was complete. `C` is
+/// the finished result: [`Calibration`] (stepped sines), [`ModalCalibration`](crate::ModalCalibration)
+/// or [`TimeCalibration`](crate::TimeCalibration).
 #[derive(Debug, Clone)]
-pub enum Outcome {
+pub enum Outcome<C = Calibration> {
     /// Ran to its end.
-    Finished(Box<Calibration>),
+    Finished(Box<C>),
     /// Stopped by [`Stop`] before its end.
     Interrupted(Box<Interrupted>),
+}
+
+/// A finished calibration's search — what [`Interrupted::finished`] keeps of it.
+pub trait Searched {
+    /// The parameters, every candidate with its cost, and the optimisations (best first).
+    fn into_search(self) -> (Vec<Param>, Vec<Candidate>, Vec<StartRun>);
+}
+
+impl Searched for Calibration {
+    fn into_search(self) -> (Vec<Param>, Vec<Candidate>, Vec<StartRun>) {
+        (self.params, self.candidates, self.runs)
+    }
+}
+
+impl Searched for crate::ModalCalibration {
+    fn into_search(self) -> (Vec<Param>, Vec<Candidate>, Vec<StartRun>) {
+        (self.params, self.candidates, self.runs)
+    }
+}
+
+impl Searched for crate::TimeCalibration {
+    fn into_search(self) -> (Vec<Param>, Vec<Candidate>, Vec<StartRun>) {
+        (self.params, self.candidates, self.runs)
+    }
 }
 
 /// The phase a calibration was stopped in.
@@ -815,6 +812,32 @@ pub struct Interrupted {
 }
 
 impl Interrupted {
+    /// The candidates when every point has its cost, else the stop in the candidate phase
+    /// with the costs evaluated so far.
+    pub(crate) fn unless_evaluated(
+        params: Vec<Param>,
+        points: Vec<Vec<f64>>,
+        costs: Vec<Option<f64>>,
+    ) -> std::result::Result<Vec<Candidate>, Box<Interrupted>> {
+        if costs.iter().any(Option::is_none) {
+            return Err(Box::new(Interrupted {
+                params,
+                points,
+                costs,
+                runs: Vec::new(),
+                phase: Phase::Candidates,
+            }));
+        }
+        Ok(points
+            .into_iter()
+            .zip(costs)
+            .map(|(values, c)| Candidate {
+                values,
+                cost: c.unwrap_or(f64::NAN),
+            })
+            .collect())
+    }
+
     /// A stop after every one of `candidates` was evaluated, with the finished `runs`.
     pub fn evaluated_all(
         params: Vec<Param>,
@@ -838,8 +861,9 @@ impl Interrupted {
     /// A calibration that finished as it was asked to stop, kept as one stopped at its end
     /// (every candidate and run, [`Phase::CrossValidation`]): the caller that asked to
     /// stop gets what it can resume from, not a result it did not wait for.
-    pub fn finished(c: Calibration) -> Interrupted {
-        Interrupted::evaluated_all(c.params, c.candidates, c.runs, Phase::CrossValidation)
+    pub fn finished(c: impl Searched) -> Interrupted {
+        let (params, candidates, runs) = c.into_search();
+        Interrupted::evaluated_all(params, candidates, runs, Phase::CrossValidation)
     }
 
     /// Whether `given` are these `points` (the candidates of a calibration,
@@ -900,7 +924,7 @@ impl<O: LeastSquares> LeastSquares for Stoppable<'_, O> {
 }
 
 /// [`levenberg_marquardt`] on `problem` that stops when `stop()` holds: `Ok(None)` then.
-fn lm_until<O: LeastSquares>(
+pub(crate) fn lm_until<O: LeastSquares>(
     problem: &mut O,
     u0: &[f64],
     lo: &[f64],
@@ -934,21 +958,8 @@ pub(crate) fn best_candidates(candidates: &[Candidate], starts: usize) -> Vec<us
 }
 
 /// Levenberg–Marquardt from each candidate in `order`, in parallel (each run on its own copy
-/// of `objective`), best first; `done(finished, total)` after each.
-pub(crate) fn run_starts<O: LeastSquares + Clone + Sync>(
-    objective: &O,
-    specs: &[ParamSpec],
-    candidates: &[Candidate],
-    order: &[usize],
-    lm: &LmConfig,
-    done: &(dyn Fn(usize, usize) + Sync),
-) -> Result<Vec<StartRun>> {
-    let (runs, _) = run_starts_until(objective, specs, candidates, order, lm, done, &|| false)?;
-    Ok(runs)
-}
-
-/// [`run_starts`] that stops when `stop()` holds: the finished runs, best first, and
-/// whether every run finished.
+/// of `objective`), best first; `done(finished, total)` after each. Stops when `stop()`
+/// holds: the finished runs, best first, and whether every run finished.
 pub(crate) fn run_starts_until<O: LeastSquares + Clone + Sync>(
     objective: &O,
     specs: &[ParamSpec],

@@ -49,8 +49,8 @@ pub mod track;
 
 pub use calibrate::{
     Calibration, CalibrationConfig, Candidate, FoldBy, FoldResult, Interrupted, KFold, MAX_FOLDS,
-    MAX_LHS_SAMPLES, MAX_MAXIMIN_SWAPS, MAX_STARTS, Outcome, Phase, Progress, StartRun, Stop,
-    calibrate, calibrate_from_candidates, calibrate_from_candidates_until, calibrate_until,
+    MAX_LHS_SAMPLES, MAX_MAXIMIN_SWAPS, MAX_STARTS, Outcome, Phase, Progress, Searched, StartRun,
+    Stop, calibrate, calibrate_from_candidates, calibrate_from_candidates_until, calibrate_until,
     calibrate_with_progress, candidate_points, fold, fold_assignment, fold_plan, kfold,
 };
 pub use data::{Channel, Drive, Noise, PointId, Step, Sweep, SweepDirection, TestData};
@@ -60,7 +60,7 @@ pub use linalg::Svd;
 pub use lm::{Evaluation, LeastSquares, LmConfig, LmReport, StopReason, levenberg_marquardt};
 pub use modal::{
     MeasuredMode, ModalCalibration, ModalData, ModalFit, ModalObjective, calibrate_modal,
-    calibrate_modal_with_progress, mac_of,
+    calibrate_modal_until, calibrate_modal_with_progress, mac_of,
 };
 pub use nlsim_kernel::Status;
 pub use nlsim_reduction::{ParametricConfig, ParametricStats};
@@ -84,6 +84,6 @@ pub use stats::{CHI2_WARN, CramerRao};
 pub use synthetic::{Gaussian, SweepPlan, synthesize};
 pub use time_domain::{
     MAX_TIME_SAMPLES, TimeCalibration, TimeChannel, TimeFit, TimeObjective, TimeRecords,
-    calibrate_time, check_time_folds, synthesize_time, time_blocks,
+    calibrate_time, calibrate_time_until, check_time_folds, synthesize_time, time_blocks,
 };
 pub use track::{Track, TrackConfig, TrackPoint, sweep_bias, sweep_rate_parameter, track_sweep};

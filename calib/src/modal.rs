@@ -25,8 +25,8 @@
 
 use crate::CalibrationConfig;
 use crate::calibrate::{
-    Candidate, Progress, StartRun, best_candidates, evaluate_candidates, per_value, run_starts,
-    start_points,
+    Candidate, Interrupted, Outcome, Phase, Progress, StartRun, Stop, best_candidates,
+    evaluate_costs, per_value, run_starts_until, start_points,
 };
 use crate::lm::{Evaluation, LeastSquares};
 use crate::objective::{
@@ -672,16 +672,41 @@ pub fn calibrate_modal_with_progress(
     config: &CalibrationConfig,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<ModalCalibration> {
+    match calibrate_modal_until(objective, config, &[], progress, &|| false)? {
+        Outcome::Finished(c) => Ok(*c),
+        Outcome::Interrupted(_) => unreachable!("nothing stops a calibration without a stop"),
+    }
+}
+
+/// [`calibrate_modal_with_progress`] that reuses the candidate costs in `known` (one per
+/// point of [`ModalObjective::candidate_points`], `None` where not evaluated; empty for none)
+/// and stops at the next safe point once `stop()` holds — before a candidate, before a
+/// Levenberg–Marquardt evaluation — with what was complete. Each cost depends on its point
+/// alone, so run again with the kept costs as `known` it reaches the uninterrupted run's
+/// estimates bit for bit (as [`crate::calibrate_until`] does for stepped sines).
+pub fn calibrate_modal_until(
+    objective: &ModalObjective,
+    config: &CalibrationConfig,
+    known: &[Option<f64>],
+    progress: &(dyn Fn(Progress) + Sync),
+    stop: Stop<'_>,
+) -> Result<Outcome<ModalCalibration>> {
     config.lm.validate()?;
     let specs = objective.specs.clone();
     let params: Vec<Param> = specs.iter().map(|s| s.param.clone()).collect();
-    let starts = objective.candidate_points(config)?;
-    let candidates = evaluate_candidates(
+    let points = objective.candidate_points(config)?;
+    let costs = evaluate_costs(
         objective,
-        starts,
+        &points,
+        known,
         |obj, v| obj.cost_values(v),
         &|done, total| progress(Progress::Candidates { done, total }),
+        stop,
     )?;
+    let candidates = match Interrupted::unless_evaluated(params.clone(), points, costs) {
+        Ok(c) => c,
+        Err(kept) => return Ok(Outcome::Interrupted(kept)),
+    };
     let order = best_candidates(&candidates, config.starts.max(1));
     if order.is_empty() {
         return Err(Error::Numerical {
@@ -689,14 +714,23 @@ pub fn calibrate_modal_with_progress(
             detail: "the eigen solve failed for every candidate".into(),
         });
     }
-    let runs = run_starts(
+    let (runs, all) = run_starts_until(
         objective,
         &specs,
         &candidates,
         &order,
         &config.lm,
         &|done, total| progress(Progress::Start { done, total }),
+        stop,
     )?;
+    if !all {
+        return Ok(Outcome::Interrupted(Box::new(Interrupted::evaluated_all(
+            params,
+            candidates,
+            runs,
+            Phase::Optimisation,
+        ))));
+    }
     let estimate = runs[0].values.clone();
     let mut obj = objective.clone();
     let fit = obj.fit_values(&estimate)?.ok_or_else(|| Error::Numerical {
@@ -709,7 +743,7 @@ pub fn calibrate_modal_with_progress(
         &fit.residuals,
         &estimate,
     );
-    Ok(ModalCalibration {
+    Ok(Outcome::Finished(Box::new(ModalCalibration {
         params,
         status: runs[0].report.status,
         at_bound: runs[0].report.active_bounds.clone(),
@@ -719,5 +753,5 @@ pub fn calibrate_modal_with_progress(
         cramer_rao,
         fit,
         cost,
-    })
+    })))
 }

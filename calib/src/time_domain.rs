@@ -19,10 +19,10 @@
 
 use crate::CalibrationConfig;
 use crate::calibrate::{
-    Candidate, FoldResult, KFold, Progress, StartRun, best_candidates, evaluate_candidates,
-    per_value, start_points,
+    Candidate, FoldResult, Interrupted, KFold, Outcome, Phase, Progress, StartRun, Stop,
+    best_candidates, evaluate_costs, lm_until, per_value, start_points,
 };
-use crate::lm::{Evaluation, LeastSquares, levenberg_marquardt};
+use crate::lm::{Evaluation, LeastSquares};
 use crate::objective::{ParamSpec, specs_to_internal, specs_to_values};
 use crate::stats::CramerRao;
 use faer::Mat;
@@ -446,13 +446,14 @@ const FIRST_HORIZON: usize = 64;
 /// record makes the whole record's cost oscillate in them (many local minima); over a short
 /// horizon it is nearly quadratic, and each doubling starts inside the next basin. Returns the
 /// whole record's report, with the iterations and evaluations of every horizon counted and
-/// their histories joined.
+/// their histories joined; `None` when `stop()` held before an evaluation.
 fn horizon_lm(
     objective: &TimeObjective,
     u0: &[f64],
     mask: &[bool],
     lm: &crate::LmConfig,
-) -> Result<crate::LmReport> {
+    stop: Stop<'_>,
+) -> Result<Option<crate::LmReport>> {
     let (lo, hi): (Vec<f64>, Vec<f64>) = objective
         .specs
         .iter()
@@ -466,7 +467,9 @@ fn horizon_lm(
     let mut history = Vec::new();
     loop {
         obj.set_mask((0..n).map(|k| mask[k] && k < end).collect())?;
-        let mut rep = levenberg_marquardt(&mut obj, &u, &lo, &hi, lm)?;
+        let Some(mut rep) = lm_until(&mut obj, &u, &lo, &hi, lm, stop)? else {
+            return Ok(None);
+        };
         iterations += rep.iterations;
         evaluations += rep.evaluations;
         rejected += rep.rejected;
@@ -479,7 +482,7 @@ fn horizon_lm(
             rep.failed_evaluations = failed;
             history.append(&mut rep.history);
             rep.history = history;
-            return Ok(rep);
+            return Ok(Some(rep));
         }
         history.append(&mut rep.history);
         end = (2 * end).min(n);
@@ -510,19 +513,43 @@ pub fn calibrate_time(
     config: &CalibrationConfig,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<TimeCalibration> {
+    match calibrate_time_until(objective, config, &[], progress, &|| false)? {
+        Outcome::Finished(c) => Ok(*c),
+        Outcome::Interrupted(_) => unreachable!("nothing stops a calibration without a stop"),
+    }
+}
+
+/// [`calibrate_time`] that reuses the candidate costs in `known` (one per point of
+/// [`TimeObjective::candidate_points`], `None` where not evaluated; empty for none) and stops at the
+/// next safe point once `stop()` holds — before a candidate, before a Levenberg–Marquardt
+/// evaluation of any horizon or fold — with what was complete. Run again with the kept costs
+/// as `known` it reaches the uninterrupted run's estimates bit for bit.
+pub fn calibrate_time_until(
+    objective: &TimeObjective,
+    config: &CalibrationConfig,
+    known: &[Option<f64>],
+    progress: &(dyn Fn(Progress) + Sync),
+    stop: Stop<'_>,
+) -> Result<Outcome<TimeCalibration>> {
     config.validate_settings()?;
     config.lm.validate()?;
     // Refused at the start, not after the candidates and the optimisation.
     check_time_folds(objective, config)?;
     let specs = objective.specs.clone();
     let params: Vec<Param> = specs.iter().map(|s| s.param.clone()).collect();
-    let starts = objective.candidate_points(config)?;
-    let candidates = evaluate_candidates(
+    let points = objective.candidate_points(config)?;
+    let costs = evaluate_costs(
         objective,
-        starts,
+        &points,
+        known,
         |obj, v| obj.cost_values(v),
         &|done, total| progress(Progress::Candidates { done, total }),
+        stop,
     )?;
+    let candidates = match Interrupted::unless_evaluated(params.clone(), points, costs) {
+        Ok(c) => c,
+        Err(kept) => return Ok(Outcome::Interrupted(kept)),
+    };
     let order = best_candidates(&candidates, config.starts.max(1));
     if order.is_empty() {
         return Err(Error::Numerical {
@@ -531,30 +558,47 @@ pub fn calibrate_time(
         });
     }
     let finished = AtomicUsize::new(0);
-    let runs: Vec<Result<StartRun>> = order
+    let runs: Vec<Result<Option<StartRun>>> = order
         .par_iter()
         .map(|&i| {
             let start = candidates[i].values.clone();
-            let report = horizon_lm(
+            let Some(report) = horizon_lm(
                 objective,
                 &objective.to_internal(&start),
                 &objective.mask,
                 &config.lm,
-            )?;
+                stop,
+            )?
+            else {
+                return Ok(None);
+            };
             let values = objective.to_values(&report.u);
             progress(Progress::Start {
                 done: finished.fetch_add(1, Ordering::Relaxed) + 1,
                 total: order.len(),
             });
-            Ok(StartRun {
+            Ok(Some(StartRun {
                 start,
                 values,
                 report,
-            })
+            }))
         })
         .collect();
-    let mut runs = runs.into_iter().collect::<Result<Vec<_>>>()?;
+    let runs = runs.into_iter().collect::<Result<Vec<_>>>()?;
+    let all = runs.iter().all(Option::is_some);
+    let mut runs: Vec<StartRun> = runs.into_iter().flatten().collect();
     runs.sort_by(|a, b| a.report.cost.total_cmp(&b.report.cost));
+    let interrupted = |runs: Vec<StartRun>, candidates: Vec<Candidate>, phase| {
+        Ok(Outcome::Interrupted(Box::new(Interrupted::evaluated_all(
+            params.clone(),
+            candidates,
+            runs,
+            phase,
+        ))))
+    };
+    if !all {
+        return interrupted(runs, candidates, Phase::Optimisation);
+    }
     let estimate = runs[0].values.clone();
     let fit = objective
         .fit_values(&estimate, None, true)?
@@ -575,13 +619,17 @@ pub fn calibrate_time(
         let fold_of = time_blocks(n, k);
         let done = AtomicUsize::new(0);
         let rms = |r: &[f64]| (r.iter().map(|v| v * v).sum::<f64>() / r.len().max(1) as f64).sqrt();
-        let folds: Vec<Result<FoldResult>> = (0..k)
+        let folds: Vec<Result<Option<FoldResult>>> = (0..k)
             .into_par_iter()
             .map(|f| {
                 let obj = objective;
                 let train: Vec<bool> = fold_of.iter().map(|&g| g != f).collect();
                 let held: Vec<bool> = train.iter().map(|t| !t).collect();
-                let rep = horizon_lm(obj, &obj.to_internal(&estimate), &train, &config.lm)?;
+                let Some(rep) =
+                    horizon_lm(obj, &obj.to_internal(&estimate), &train, &config.lm, stop)?
+                else {
+                    return Ok(None);
+                };
                 let values = obj.to_values(&rep.u);
                 let training_rms = rep
                     .evaluation
@@ -592,20 +640,23 @@ pub fn calibrate_time(
                     .map_or(f64::INFINITY, |h| rms(&h.residuals));
                 let d = done.fetch_add(1, Ordering::Relaxed) + 1;
                 progress(Progress::Fold { done: d, total: k });
-                Ok(FoldResult {
+                Ok(Some(FoldResult {
                     values,
                     status: rep.status,
                     held_out_rms,
                     training_rms,
-                })
+                }))
             })
             .collect();
-        let folds = folds.into_iter().collect::<Result<Vec<_>>>()?;
+        let folds = folds.into_iter().collect::<Result<Option<Vec<_>>>>()?;
+        let Some(folds) = folds else {
+            return interrupted(runs, candidates, Phase::CrossValidation);
+        };
         Some(KFold::from_folds(fold_of, folds)?)
     } else {
         None
     };
-    Ok(TimeCalibration {
+    Ok(Outcome::Finished(Box::new(TimeCalibration {
         params,
         status: runs[0].report.status,
         at_bound: runs[0].report.active_bounds.clone(),
@@ -617,7 +668,7 @@ pub fn calibrate_time(
         fit,
         cost,
         kfold,
-    })
+    })))
 }
 
 /// A virtual time record: `model` (reduced as `reduction` says) with `specs`' parameters at

@@ -483,3 +483,62 @@ fn shapeless_modes_pair_by_frequency() {
         assert!((fit.frequencies_hz[i] - f).abs() <= 1e-9 * f, "mode {r}");
     }
 }
+
+/// A modal calibration stopped after 4 candidates, and one stopped in its first
+/// optimisation, resume with the kept costs to the uninterrupted estimate, bit for bit.
+#[test]
+fn a_stopped_modal_calibration_resumes_bit_for_bit() {
+    use nlsim_calib::{Outcome, Phase, Progress, calibrate_modal_until};
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let obj = objective(measured(2e-3, 1e-2, 11));
+    let cfg = CalibrationConfig {
+        lhs_samples: 8,
+        starts: 2,
+        ..CalibrationConfig::default()
+    };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let whole = pool.install(|| calibrate_modal(&obj, &cfg).unwrap());
+    type Trigger = fn(Progress) -> bool;
+    let cases: [(Trigger, Phase); 2] = [
+        (
+            |p| matches!(p, Progress::Candidates { done: 4, .. }),
+            Phase::Candidates,
+        ),
+        (
+            |p| matches!(p, Progress::Start { done: 1, .. }),
+            Phase::Optimisation,
+        ),
+    ];
+    for (trigger, phase) in cases {
+        let stop = AtomicBool::new(false);
+        let outcome = pool.install(|| {
+            calibrate_modal_until(
+                &obj,
+                &cfg,
+                &[],
+                &|p| {
+                    if trigger(p) {
+                        stop.store(true, Ordering::SeqCst);
+                    }
+                },
+                &|| stop.load(Ordering::SeqCst),
+            )
+            .unwrap()
+        });
+        let Outcome::Interrupted(kept) = outcome else {
+            panic!("{phase:?}: not stopped");
+        };
+        assert_eq!(kept.phase, phase);
+        let resumed =
+            match calibrate_modal_until(&obj, &cfg, &kept.costs, &|_| {}, &|| false).unwrap() {
+                Outcome::Finished(c) => c,
+                Outcome::Interrupted(_) => panic!("stopped without a stop"),
+            };
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&resumed.estimate), bits(&whole.estimate), "{phase:?}");
+        assert_eq!(resumed.cost.to_bits(), whole.cost.to_bits(), "{phase:?}");
+    }
+}

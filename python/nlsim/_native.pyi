@@ -448,6 +448,7 @@ def calibrate_modal(
     fe_reduction: str = "parametric",
     fe_tolerance: Optional[float] = None,
     threads: Optional[int] = None,
+    resume: Optional[PartialCalibration] = None,
 ) -> ModalCalibration: ...
 
 class TimeCalibration:
@@ -505,6 +506,7 @@ def calibrate_time(
     starts: int = 3,
     folds: int = 10,
     threads: Optional[int] = None,
+    resume: Optional[PartialCalibration] = None,
 ) -> TimeCalibration: ...
 
 class VirtualTest:

@@ -466,7 +466,7 @@ pub fn calibrate(
     resume: Option<&PartialCalibration>,
 ) -> PyResult<Calibration> {
     let fe = self::fe_reduction(fe_reduction, fe_tolerance)?;
-    let resumed = resume.map(|r| (*r.kept).clone());
+    let resumed = resume.map(PartialCalibration::kept);
     let fixed = fixed_gains(gains)?;
     let shaker = shaker_of(shaker)?;
     let data = Source::of(data)?;
@@ -533,28 +533,47 @@ pub fn calibrate(
             objective.set_gain(p, *v)?;
         }
         objective.set_shaker(shaker)?;
-        let known = match &resumed {
-            None => Vec::new(),
-            Some(r) => {
-                let points = nlsim::calib::candidate_points(&objective, &config)?;
-                let given = r.points.iter().map(Vec::as_slice);
-                if !nlsim::calib::Interrupted::same_points(&points, given) {
-                    return Err(nlsim::Error::Usage(
-                        "resume: its candidates are not this calibration's (params, bounds, \
-                         lhs, seed and the model's values must be those of the interrupted \
-                         call)"
-                            .into(),
-                    ));
-                }
-                r.costs.clone()
-            }
-        };
+        let points = nlsim::calib::candidate_points(&objective, &config)?;
+        let known = resumed_costs(resumed.as_deref(), &points)?;
         let outcome = nlsim::calib::calibrate_until(&objective, &config, &known, &|_| {}, &|| {
             stop.requested()
         })?;
         Ok((outcome, objective.fe_stats()))
     };
-    let result = match run_keeping(py, threads, job)? {
+    let (c, fe) = finished_or_raise(py, run_keeping(py, threads, job)?)?;
+    Ok(Calibration { c, fe })
+}
+
+/// The costs of `resumed` (a [`PartialCalibration`] given back) for a calibration whose
+/// candidate points are `points`: none without one; refused when its points are not these
+/// bit for bit.
+pub(crate) fn resumed_costs(
+    resumed: Option<&nlsim::calib::Interrupted>,
+    points: &[Vec<f64>],
+) -> nlsim::Result<Vec<Option<f64>>> {
+    let Some(r) = resumed else {
+        return Ok(Vec::new());
+    };
+    let given = r.points.iter().map(Vec::as_slice);
+    if !nlsim::calib::Interrupted::same_points(points, given) {
+        return Err(nlsim::Error::Usage(
+            "resume: its candidates are not this calibration's (params, bounds, lhs, seed and \
+             the model's values must be those of the interrupted call)"
+                .into(),
+        ));
+    }
+    Ok(r.costs.clone())
+}
+
+/// A stoppable calibration's end in Python: the finished result (with what the job returned
+/// beside it), or after Ctrl-C the `KeyboardInterrupt` carrying a [`PartialCalibration`]
+/// (`err.args[1]`) with what was complete — a calibration that finished as the interrupt
+/// came is kept whole, the caller asked to stop.
+pub(crate) fn finished_or_raise<C: nlsim::calib::Searched, X>(
+    py: Python<'_>,
+    ended: Ended<nlsim::Result<(nlsim::calib::Outcome<C>, X)>>,
+) -> PyResult<(C, X)> {
+    let result = match ended {
         Ended::Done(r) => r.map_err(py_err)?,
         Ended::Interrupted(interrupt, kept) => {
             let Some(Ok((outcome, _))) = kept else {
@@ -562,7 +581,6 @@ pub fn calibrate(
             };
             let kept = match outcome {
                 nlsim::calib::Outcome::Interrupted(k) => *k,
-                // Finished as the interrupt came: kept whole, the caller asked to stop.
                 nlsim::calib::Outcome::Finished(c) => nlsim::calib::Interrupted::finished(*c),
             };
             let partial = PartialCalibration {
@@ -575,19 +593,12 @@ pub fn calibrate(
             )));
         }
     };
-    let result = match result {
-        (nlsim::calib::Outcome::Finished(c), fe) => (*c, fe),
-        (nlsim::calib::Outcome::Interrupted(_), _) => {
-            return Err(crate::ComputationError::new_err(
-                "the calibration stopped without an interrupt (an internal error; please \
-                 report it)",
-            ));
-        }
-    };
-    Ok(Calibration {
-        c: result.0,
-        fe: result.1,
-    })
+    match result {
+        (nlsim::calib::Outcome::Finished(c), x) => Ok((*c, x)),
+        (nlsim::calib::Outcome::Interrupted(_), _) => Err(crate::ComputationError::new_err(
+            "the calibration stopped without an interrupt (an internal error; please report it)",
+        )),
+    }
 }
 
 /// What a calibration interrupted by Ctrl-C had completed: carried by the
@@ -597,6 +608,13 @@ pub fn calibrate(
 #[pyclass(module = "nlsim._native", name = "PartialCalibration", frozen)]
 pub struct PartialCalibration {
     kept: Arc<nlsim::calib::Interrupted>,
+}
+
+impl PartialCalibration {
+    /// What was kept, shared (handed to the job that resumes from it).
+    pub(crate) fn kept(&self) -> Arc<nlsim::calib::Interrupted> {
+        Arc::clone(&self.kept)
+    }
 }
 
 #[pymethods]

@@ -4,9 +4,12 @@
 //! Levenberg–Marquardt with the modes and their sensitivities from the parametric reduced
 //! model (or full eigen solves), modes paired by MAC, the Cramér–Rao bound at the estimate.
 
-use crate::calibration::{fe_reduction, fe_stats_dict, param_specs, search_config};
+use crate::calibration::{
+    PartialCalibration, fe_reduction, fe_stats_dict, finished_or_raise, param_specs, resumed_costs,
+    search_config,
+};
 use crate::model::Model;
-use crate::runs::{Stop, run, vec1};
+use crate::runs::{Stop, run_keeping, vec1};
 use crate::{input, py_err};
 use nlsim::calib::{CalibrationConfig, MeasuredMode, ModalData, ModalObjective};
 use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray2};
@@ -149,9 +152,11 @@ fn modal_arrays(model: &Model, d: &Bound<'_, PyDict>, shape_noise: f64) -> PyRes
 /// the computed modes the MAC pairing chooses from (at least the measured ones);
 /// `fe_reduction` `"parametric"` (the parametric reduced model, certified to `fe_tolerance`,
 /// default 1e-6) or `"full"` (a full eigen solve per evaluation). The other arguments are
-/// `nlsim calibrate`'s, with its defaults.
+/// `nlsim calibrate`'s, with its defaults. Ctrl-C raises `KeyboardInterrupt` carrying what
+/// was complete (`err.args[1]`); `resume=` that value with the same arguments goes on to the
+/// estimates of an uninterrupted call, bit for bit.
 #[pyfunction]
-#[pyo3(signature = (model, data, params, shape_noise=0.02, modes=20, lhs=64, seed=1, starts=3, fe_reduction="parametric", fe_tolerance=None, threads=None))]
+#[pyo3(signature = (model, data, params, shape_noise=0.02, modes=20, lhs=64, seed=1, starts=3, fe_reduction="parametric", fe_tolerance=None, threads=None, resume=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn calibrate_modal(
     py: Python<'_>,
@@ -166,8 +171,10 @@ pub fn calibrate_modal(
     fe_reduction: &str,
     fe_tolerance: Option<f64>,
     threads: Option<usize>,
+    resume: Option<&PartialCalibration>,
 ) -> PyResult<ModalCalibration> {
     let fe = self::fe_reduction(fe_reduction, fe_tolerance)?;
+    let resumed = resume.map(PartialCalibration::kept);
     if !(shape_noise > 0.0 && shape_noise.is_finite()) {
         return Err(input(format!(
             "shape_noise: {shape_noise}; give a positive standard deviation"
@@ -195,7 +202,7 @@ pub fn calibrate_modal(
     // Folds do not apply to a handful of modes: the default's are not used.
     let config = search_config(lhs, seed, starts, CalibrationConfig::default().folds)?;
     let m = model.inner.clone();
-    let result = run(py, threads, move |stop: &Stop| -> nlsim::Result<_> {
+    let job = move |stop: &Stop| -> nlsim::Result<_> {
         let objective = ModalObjective::with_reduction(
             m,
             Arc::new(measured),
@@ -204,13 +211,14 @@ pub fn calibrate_modal(
             faer::Par::Seq,
             &fe,
         )?;
-        let c =
-            nlsim::calib::calibrate_modal_with_progress(&objective, &config, &|_| stop.check())?;
-        Ok((c, objective.fe_stats()))
-    })?
-    .map_err(py_err)?;
-    Ok(ModalCalibration {
-        c: result.0,
-        fe: result.1,
-    })
+        let points = objective.candidate_points(&config)?;
+        let known = resumed_costs(resumed.as_deref(), &points)?;
+        let outcome =
+            nlsim::calib::calibrate_modal_until(&objective, &config, &known, &|_| {}, &|| {
+                stop.requested()
+            })?;
+        Ok((outcome, objective.fe_stats()))
+    };
+    let (c, fe) = finished_or_raise(py, run_keeping(py, threads, job)?)?;
+    Ok(ModalCalibration { c, fe })
 }

@@ -4,9 +4,11 @@
 //! sensitivities of the hold, Latin-hypercube candidates, Levenberg–Marquardt over growing
 //! horizons, the Cramér–Rao bound and k-fold cross validation over contiguous blocks.
 
-use crate::calibration::{param_specs, search_config};
+use crate::calibration::{
+    PartialCalibration, finished_or_raise, param_specs, resumed_costs, search_config,
+};
 use crate::model::Model;
-use crate::runs::{Stop, run, vec1};
+use crate::runs::{Stop, run_keeping, vec1};
 use crate::{input, py_err};
 use nlsim::calib::{TimeChannel, TimeObjective, TimeRecords};
 use numpy::{PyArray1, PyReadonlyArray1};
@@ -66,9 +68,11 @@ crate::calibration::calibration_result!(TimeCalibration, "TimeCalibration", {
 /// `rate_hz` from rest. Each channel's noise standard deviation is `data_noise` times its
 /// rms. `params` maps element parameters (`"stop.k1"`) to their bounds; `modes` retained
 /// (with residual flexibility); `lhs`, `seed`, `starts`, `folds` (contiguous blocks of samples)
-/// as `nlsim calibrate`.
+/// as `nlsim calibrate`. Ctrl-C raises `KeyboardInterrupt` carrying what was complete
+/// (`err.args[1]`); `resume=` that value with the same arguments goes on to the estimates of
+/// an uninterrupted call, bit for bit.
 #[pyfunction]
-#[pyo3(signature = (model, force, responses, rate_hz, params, drive=None, data_noise=0.01, modes=20, lhs=64, seed=1, starts=3, folds=10, threads=None))]
+#[pyo3(signature = (model, force, responses, rate_hz, params, drive=None, data_noise=0.01, modes=20, lhs=64, seed=1, starts=3, folds=10, threads=None, resume=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn calibrate_time(
     py: Python<'_>,
@@ -85,7 +89,9 @@ pub fn calibrate_time(
     starts: usize,
     folds: usize,
     threads: Option<usize>,
+    resume: Option<&PartialCalibration>,
 ) -> PyResult<TimeCalibration> {
+    let resumed = resume.map(PartialCalibration::kept);
     if !(data_noise > 0.0 && data_noise.is_finite()) {
         return Err(input(format!(
             "data_noise: {data_noise}; give a positive fraction of each channel's rms"
@@ -147,16 +153,17 @@ pub fn calibrate_time(
         .map_err(|e| py_err(nlsim::Error::from(e)))?;
     let config = search_config(lhs, seed, starts, folds)?;
     let m = model.inner.clone();
-    let result = run(py, threads, move |stop: &Stop| -> nlsim::Result<_> {
+    let job = move |stop: &Stop| -> nlsim::Result<_> {
         let reduction = nlsim::reduction::ReductionConfig::lowest(modes.min(m.n_dofs()));
         let objective = TimeObjective::new(&m, &reduction, records, specs)?;
-        Ok(nlsim::calib::calibrate_time(&objective, &config, &|_| {
-            stop.check()
-        })?)
-    })?
-    .map_err(py_err)?;
-    Ok(TimeCalibration {
-        c: result,
-        channels: names,
-    })
+        let points = objective.candidate_points(&config)?;
+        let known = resumed_costs(resumed.as_deref(), &points)?;
+        let outcome =
+            nlsim::calib::calibrate_time_until(&objective, &config, &known, &|_| {}, &|| {
+                stop.requested()
+            })?;
+        Ok((outcome, ()))
+    };
+    let (c, ()) = finished_or_raise(py, run_keeping(py, threads, job)?)?;
+    Ok(TimeCalibration { c, channels: names })
 }

@@ -7,7 +7,9 @@ The command line is taken from $NLSIM_BIN (make test sets it to the debug build)
 
 from __future__ import annotations
 
+import _thread
 import math
+import threading
 from pathlib import Path
 
 import h5py
@@ -538,6 +540,25 @@ def test_time_domain_calibration_equals_the_command_line(tmp_path: Path) -> None
         assert got.kfold[0][j] == float(r[3])
     assert abs(got.estimate[0] / 2e5 - 1) < 0.02 and abs(got.estimate[1] / 1e-3 - 1) < 0.005
     assert set(got.simulated) == {"tip", "mid"} and got.simulated["tip"].shape == (table.shape[0],)
+    # Ctrl-C keeps the candidates evaluated so far; resume= goes on to the estimates of an
+    # uninterrupted call, bit for bit.
+    force = table[:, col["shaker_force_N"]]
+    responses = {"tip": table[:, col["tip_acceleration_m_per_s2"]]}
+    bounds_py = {"stop.k1": (5e4, 1e6), "stop.e1": (5e-4, 2e-3)}
+    args = dict(lhs=300, folds=2, threads=1)
+    whole = nlsim.calibrate_time(model, force, responses, 3786.0, bounds_py, **args)
+    timer = threading.Timer(0.2, _thread.interrupt_main)
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt) as caught:
+            nlsim.calibrate_time(model, force, responses, 3786.0, bounds_py, **args)
+    finally:
+        timer.cancel()
+    partial = caught.value.args[1]
+    assert isinstance(partial, nlsim.PartialCalibration) and partial.candidates.shape == (301, 2)
+    resumed = nlsim.calibrate_time(model, force, responses, 3786.0, bounds_py, resume=partial, **args)
+    np.testing.assert_array_equal(resumed.estimate, whole.estimate)
+    np.testing.assert_array_equal(resumed.cramer_rao_std, whole.cramer_rao_std)
     with pytest.raises(nlsim.InputError, match="responses\\['tip'\\]: zero"):
         nlsim.calibrate_time(model, table[:, 3], {"tip": np.zeros(table.shape[0])}, 3786.0,
                              {"stop.k1": (5e4, 1e6)})

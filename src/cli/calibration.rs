@@ -114,7 +114,8 @@ pub struct CalibrateArgs {
     #[arg(long)]
     dry_run: bool,
     /// Candidates already evaluated: the merged file of a `calibrate-candidates` batch
-    /// of this calibration (docs/batch.md).
+    /// of this calibration (docs/batch.md), or the `.interrupted.h5` file a stopped run
+    /// kept (its missing candidates are evaluated here).
     #[arg(long)]
     candidates: Option<std::path::PathBuf>,
     /// Estimates and statistics as CSV.
@@ -489,12 +490,7 @@ impl CalibrateArgs {
             req.check()?;
             let estimate = if req.time_domain {
                 commands::calibrate::estimate_time_calibration(&req)?
-            } else if req
-                .data
-                .extension()
-                .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
-                && crate::formats::modal_data::is_modal_csv(&req.data)?
-            {
+            } else if commands::calibrate::is_modal(&req)? {
                 commands::calibrate::estimate_modal_calibration(&req)?
             } else {
                 commands::calibrate::estimate_calibration(&req)?

@@ -678,3 +678,274 @@ fn killed_or_interrupted_writers_leave_older_outputs_whole() {
         }
     }
 }
+
+/// Runs `args` (which write `out`) once whole, then Ctrl-C at `tries` seeded points: exit
+/// 130 with the line naming `kept` (then `--candidates kept` resumes to the whole run's
+/// `out`, bit for bit) or 0 with that `out`; no temporary left in `dir`. Returns how many
+/// stopped at a safe point.
+fn interrupt_and_resume(
+    dir: &Path,
+    args: &[String],
+    out: &Path,
+    kept: &Path,
+    tries: usize,
+    seed: u64,
+) -> usize {
+    let with = |extra: &[&str]| -> Vec<String> {
+        let mut a = args.to_vec();
+        a.extend(extra.iter().map(|s| s.to_string()));
+        a
+    };
+    let reference = dir.join("whole.csv");
+    let first = with(&["--out", reference.to_str().unwrap()]);
+    let first: Vec<&str> = first.iter().map(String::as_str).collect();
+    let t = std::time::Instant::now();
+    let (rc, _, e) = nlsim(&first);
+    assert_eq!(rc, 0, "{e}");
+    let whole = t.elapsed().as_secs_f64();
+    let expected = std::fs::read(&reference).unwrap();
+    let run = with(&["--out", out.to_str().unwrap()]);
+    let run: Vec<&str> = run.iter().map(String::as_str).collect();
+    let resume = with(&[
+        "--out",
+        out.to_str().unwrap(),
+        "--candidates",
+        kept.to_str().unwrap(),
+    ]);
+    // Not quiet: the summary says where the costs came from.
+    let resume: Vec<&str> = resume
+        .iter()
+        .map(String::as_str)
+        .filter(|a| *a != "-q")
+        .collect();
+    let mut state = seed;
+    let mut stopped = 0;
+    for k in 0..tries {
+        let _ = std::fs::remove_file(out);
+        let _ = std::fs::remove_file(kept);
+        let delay = seeded_delay(&mut state, whole, 0.1, 0.8);
+        let (rc, err) = signalled(&run, delay, "INT");
+        let why = format!("{} Ctrl-C {k} at {delay:?} of {whole:.2} s", args[2]);
+        assert!(leftovers(dir).is_empty(), "{why}: {:?}", leftovers(dir));
+        match rc {
+            Some(0) => assert_eq!(std::fs::read(out).unwrap(), expected, "{why}"),
+            Some(130) if kept.exists() => {
+                stopped += 1;
+                eprintln!("{why}: {err}");
+                assert_eq!(err.lines().count(), 1, "{why}: {err}");
+                assert!(err.contains("--candidates"), "{why}: {err}");
+                assert!(!out.exists(), "{why}: an estimates file from a stopped run");
+                let (rc, o, e) = nlsim(&resume);
+                assert_eq!(rc, 0, "{why}: {e}");
+                assert!(o.contains("with the costs"), "{why}: {o}");
+                assert_eq!(
+                    std::fs::read(out).unwrap(),
+                    expected,
+                    "{why}: the resumed run differs"
+                );
+            }
+            other => panic!("{why}: exit {other:?}: {err}"),
+        }
+    }
+    stopped
+}
+
+/// A chain of `n` unit masses and 1e4 N/m springs clamped at DOF 1 with a grounded spring at
+/// its tip (the FE-level parameter `spring:n:ux.k`), as Matrix Market files, and measured
+/// modes `m.csv` with its first mode at `hz`; returns the model file's path.
+fn chain_model(dir: &Path, n: usize, hz: f64) -> String {
+    let mut k = format!(
+        "%%MatrixMarket matrix coordinate real symmetric\n{n} {n} {}\n",
+        2 * n - 1
+    );
+    let mut m = format!("%%MatrixMarket matrix coordinate real symmetric\n{n} {n} {n}\n");
+    let mut dofs = String::new();
+    for i in 1..=n {
+        k.push_str(&format!("{i} {i} {}\n", if i < n { 2.0e4 } else { 1.0e4 }));
+        if i < n {
+            k.push_str(&format!("{} {i} -1.0e4\n", i + 1));
+        }
+        m.push_str(&format!("{i} {i} 1.0\n"));
+        dofs.push_str(&format!("{i}:ux\n"));
+    }
+    std::fs::write(dir.join("K.mtx"), k).unwrap();
+    std::fs::write(dir.join("M.mtx"), m).unwrap();
+    std::fs::write(dir.join("dofs.txt"), dofs).unwrap();
+    std::fs::write(
+        dir.join("chain.toml"),
+        format!(
+            "name = \"chain\"\n[matrices]\nstiffness = \"K.mtx\"\nmass = \"M.mtx\"\n\
+             dofs = \"dofs.txt\"\n[[spring]]\ndof = \"{n}:ux\"\nk = 500.0\n"
+        ),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("m.csv"),
+        format!(
+            "mode,frequency_hz,frequency_std_hz\n1,{hz},{}\n",
+            hz / 100.0
+        ),
+    )
+    .unwrap();
+    dir.join("chain.toml").to_str().unwrap().to_string()
+}
+
+/// Calibrations on measured modes and on raw time records stop at a safe point at Ctrl-C and
+/// keep their candidates like stepped-sine ones: 6 seeded points each, every kept file
+/// resumed to the uninterrupted run's estimates bit for bit.
+#[test]
+fn modal_and_time_domain_calibrations_keep_their_candidates_at_ctrl_c() {
+    let dir = scratch("interrupt-modal-time");
+    let d = |n: &str| dir.join(n).to_str().unwrap().to_string();
+    // A chain of 3000 DOFs: 41 candidates, each a full eigen solve (about 1 s in all).
+    let model = chain_model(&dir, 3000, 0.02);
+    let modal: Vec<String> = [
+        "-q",
+        "calibrate",
+        &model,
+        &d("m.csv"),
+        "--param",
+        "spring:3000:ux.k=100:5000",
+        "--fe-reduction",
+        "full",
+        "--lhs",
+        "40",
+        "--starts",
+        "2",
+    ]
+    .map(String::from)
+    .to_vec();
+    let stopped = interrupt_and_resume(
+        &dir,
+        &modal,
+        &dir.join("est.csv"),
+        &dir.join("est.interrupted.h5"),
+        6,
+        0x00de_7a11,
+    );
+    assert!(stopped >= 2, "only {stopped} of 6 modal runs stopped");
+    // A 3 s sine sweep through the bump stop (12 001 samples), 301 candidates, 4 starts
+    // and 2 folds: about 0.8 s.
+    let (rc, _, e) = nlsim(&[
+        "-q",
+        "simulate",
+        "bumpstop_cantilever",
+        "--excitation",
+        "sweep:f0=19,f1=28.4,amp=0.6",
+        "--rate",
+        "4000",
+        "--duration",
+        "3",
+        "--out",
+        &d("sweep.csv"),
+    ]);
+    assert_eq!(rc, 0, "{e}");
+    let time: Vec<String> = [
+        "-q",
+        "calibrate",
+        "bumpstop_cantilever",
+        &d("sweep.csv"),
+        "--time-domain",
+        "--param",
+        "stop.k1=5e4:1e6",
+        "--param",
+        "stop.e1=5e-4:2e-3",
+        "--set",
+        "stop.k1=4e5",
+        "--set",
+        "stop.e1=1.5e-3",
+        "--folds",
+        "2",
+        "--lhs",
+        "300",
+        "--starts",
+        "4",
+    ]
+    .map(String::from)
+    .to_vec();
+    let stopped = interrupt_and_resume(
+        &dir,
+        &time,
+        &dir.join("t.csv"),
+        &dir.join("t.interrupted.h5"),
+        6,
+        0x07a1_3d0e,
+    );
+    assert!(stopped >= 2, "only {stopped} of 6 time-domain runs stopped");
+}
+
+/// A second Ctrl-C while a calibration heads for its next safe point stops it at once: a
+/// chain of 30 000 DOFs whose every candidate is a full eigen solve (about half a second)
+/// gets both signals inside its first candidate; it exits 130 saying so, keeps nothing,
+/// leaves no temporary and its older estimates file whole. One Ctrl-C alone stops it at the
+/// end of that candidate (or before it, when it lands in the set-up) with the candidates
+/// file.
+#[test]
+fn a_second_ctrl_c_stops_a_calibration_at_once() {
+    let dir = scratch("interrupt-twice");
+    let n = 30_000;
+    let model = chain_model(&dir, n, 0.008);
+    let d = |n: &str| dir.join(n).to_str().unwrap().to_string();
+    let param = format!("spring:{n}:ux.k=100:5000");
+    let args = |out: &str| -> Vec<String> {
+        [
+            "-q",
+            "--threads",
+            "1",
+            "calibrate",
+            &model,
+            &d("m.csv"),
+            "--param",
+            &param,
+            "--fe-reduction",
+            "full",
+            "--lhs",
+            "2",
+            "--starts",
+            "1",
+            "--out",
+            out,
+        ]
+        .map(String::from)
+        .to_vec()
+    };
+    let older = b"an older estimates file\n";
+    std::fs::write(dir.join("e.csv"), older).unwrap();
+    let kept = dir.join("e.interrupted.h5");
+    let twice = args(&d("e.csv"));
+    let twice: Vec<&str> = twice.iter().map(String::as_str).collect();
+    let child = Command::new(env!("CARGO_BIN_EXE_nlsim"))
+        .args(&twice)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pid = child.id() as libc::pid_t;
+    for wait in [150, 30] {
+        std::thread::sleep(std::time::Duration::from_millis(wait));
+        // SAFETY: a signal to our own child, which has not been waited for.
+        #[allow(unsafe_code)]
+        unsafe {
+            libc::kill(pid, libc::SIGINT);
+        }
+    }
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{err}");
+    assert!(err.contains("stopped at once"), "{err}");
+    assert!(!kept.exists(), "a second Ctrl-C still kept the candidates");
+    assert_eq!(std::fs::read(dir.join("e.csv")).unwrap(), older);
+    assert!(leftovers(&dir).is_empty(), "{:?}", leftovers(&dir));
+    // One Ctrl-C: the first candidate ends, then the run stops with what it kept.
+    let once = args(&d("e.csv"));
+    let once: Vec<&str> = once.iter().map(String::as_str).collect();
+    let (rc, err) = signalled(&once, std::time::Duration::from_millis(150), "INT");
+    assert_eq!(rc, Some(130), "{err}");
+    assert!(
+        err.contains("stopped in the candidates phase with 1 of 3"),
+        "{err}"
+    );
+    assert!(kept.is_file(), "{err}");
+    assert_eq!(std::fs::read(dir.join("e.csv")).unwrap(), older);
+    assert!(leftovers(&dir).is_empty(), "{:?}", leftovers(&dir));
+}

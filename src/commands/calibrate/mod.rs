@@ -44,10 +44,12 @@ pub use result::*;
 pub use run::*;
 pub use time::*;
 
-/// `nlsim calibrate`: the request checked; measured modes (a modal CSV) go to
-/// [`run_modal_calibration`], stepped-sine data (CSV, HDF5, UFF 58) to [`run_calibration`]
-/// with progress lines per phase, optionally from the candidates of an earlier batch; then the
-/// summary, the estimates CSV and the report folder.
+/// `nlsim calibrate`: the request checked; raw records (`--time-domain`) go to
+/// [`run_time_calibration_until`], measured modes (a modal CSV) to
+/// [`run_modal_calibration_until`], stepped-sine data (CSV, HDF5, UFF 58) to
+/// [`run_calibration_until`], with progress lines per phase, optionally from the candidates
+/// of an earlier batch or an interrupted run; then the summary, the estimates CSV and the
+/// report folder. Stopped by a signal, it keeps the candidates evaluated so far.
 pub fn execute(
     req: &CalibrationRequest,
     candidates: Option<&std::path::Path>,
@@ -89,50 +91,52 @@ pub fn execute(
         }
         console.phase(what, d, n, ph.1, ph.2);
     };
-    if req.time_domain {
-        if candidates.is_some() {
-            return Err(crate::Error::Usage(
-                "--candidates: a time-domain calibration evaluates its candidates itself (it \
-                 has no batch kinds)"
-                    .into(),
-            ));
-        }
-        let run = run_time_calibration(req, &progress)?;
-        return write_time_outputs(req, &run, console);
-    }
-    let modal = req
-        .data
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
-        && crate::formats::modal_data::is_modal_csv(&req.data)?;
-    if modal {
-        if candidates.is_some() {
-            return Err(crate::Error::Usage(
-                "--candidates: a modal-data calibration evaluates its candidates itself (it \
-                 has no batch kinds)"
-                    .into(),
-            ));
-        }
-        let run = run_modal_calibration(req, &progress)?;
-        return write_modal_outputs(req, &run, console);
-    }
     // A stop signal is honoured at the calibration's safe points: the candidates evaluated
-    // so far are kept in a file `--candidates` resumes from.
+    // so far are kept in a file `--candidates` resumes from. Once the calibration finished,
+    // a stop signal ends the run at once; the report folder is staged, so the older one
+    // stays whole.
     let safe = crate::formats::interrupt::SafePoints::begin();
     let stop = crate::formats::interrupt::requested;
-    let kept = match run_calibration_until(req, candidates, &progress, &stop)? {
-        RunOutcome::Finished(run) if !stop() => {
-            // From here a stop signal ends the run at once; the report folder is staged,
-            // so the older one stays whole.
-            drop(safe);
-            return write_outputs(req, &run, console);
+    let kept = if req.time_domain {
+        match run_time_calibration_until(req, candidates, &progress, &stop)? {
+            RunOutcome::Finished(run) if !stop() => {
+                drop(safe);
+                return write_time_outputs(req, &run, console);
+            }
+            RunOutcome::Finished(run) => nlsim_calib::Interrupted::finished(run.calibration),
+            RunOutcome::Interrupted(kept) => *kept,
         }
-        RunOutcome::Finished(run) => nlsim_calib::Interrupted::finished(run.calibration),
-        RunOutcome::Interrupted(kept) => *kept,
+    } else if is_modal(req)? {
+        match run_modal_calibration_until(req, candidates, &progress, &stop)? {
+            RunOutcome::Finished(run) if !stop() => {
+                drop(safe);
+                return write_modal_outputs(req, &run, console);
+            }
+            RunOutcome::Finished(run) => nlsim_calib::Interrupted::finished(run.calibration),
+            RunOutcome::Interrupted(kept) => *kept,
+        }
+    } else {
+        match run_calibration_until(req, candidates, &progress, &stop)? {
+            RunOutcome::Finished(run) if !stop() => {
+                drop(safe);
+                return write_outputs(req, &run, console);
+            }
+            RunOutcome::Finished(run) => nlsim_calib::Interrupted::finished(run.calibration),
+            RunOutcome::Interrupted(kept) => *kept,
+        }
     };
     let path = keep_interrupted(req, &kept)?;
     safe.hold_to_exit();
     Err(crate::Error::Interrupted(interrupted_line(&kept, &path)))
+}
+
+/// Whether `req`'s data is measured modes (a modal CSV) rather than stepped sines.
+pub fn is_modal(req: &CalibrationRequest) -> crate::Result<bool> {
+    Ok(req
+        .data
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
+        && crate::formats::modal_data::is_modal_csv(&req.data)?)
 }
 
 /// Writes the candidates an interrupted calibration kept beside its first output (the

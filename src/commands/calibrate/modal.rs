@@ -37,6 +37,8 @@ pub struct ModalRun {
     pub setup_seconds: f64,
     /// Wall time of the candidates and the optimisations (s).
     pub seconds: f64,
+    /// The candidates file whose costs were reused (`--candidates`), if any.
+    pub candidates_from: Option<PathBuf>,
 }
 
 /// The modal calibration of a request, built: the model loaded, the data read, the objective
@@ -83,16 +85,38 @@ fn prepare_modal(req: &CalibrationRequest) -> Result<PreparedModal> {
 
 /// Runs `req` on modal data: Latin-hypercube candidates, Levenberg–Marquardt from the best,
 /// the Cramér–Rao bound at the estimate. Every parameter must be FE-level. `progress` is
-/// told of the candidates and optimisations done (from the worker threads).
-pub fn run_modal_calibration(
+/// told of the candidates and optimisations done (from the worker threads). With
+/// `candidates` (a file an interrupted run kept) the costs it holds are reused; the run stops
+/// at the next safe point once `stop()` holds ([`nlsim_calib::calibrate_modal_until`]).
+pub fn run_modal_calibration_until(
     req: &CalibrationRequest,
+    candidates: Option<(PathBuf, Vec<nlsim_calib::Candidate>)>,
     progress: &(dyn Fn(nlsim_calib::Progress) + Sync),
-) -> Result<ModalRun> {
+    stop: nlsim_calib::Stop<'_>,
+) -> Result<super::RunOutcome<ModalRun>> {
     let prepared = prepare_modal(req)?;
     let t = Instant::now();
-    let calibration =
-        nlsim_calib::calibrate_modal_with_progress(&prepared.objective, &req.config, progress)?;
-    Ok(ModalRun {
+    let (known, candidates_from) = match candidates {
+        None => (Vec::new(), None),
+        Some((path, c)) => {
+            let expected = prepared.objective.candidate_points(&req.config)?;
+            (super::known_costs(&path, &c, &expected)?, Some(path))
+        }
+    };
+    let outcome = nlsim_calib::calibrate_modal_until(
+        &prepared.objective,
+        &req.config,
+        &known,
+        progress,
+        stop,
+    )?;
+    let calibration = match outcome {
+        nlsim_calib::Outcome::Finished(c) => *c,
+        nlsim_calib::Outcome::Interrupted(kept) => {
+            return Ok(super::RunOutcome::Interrupted(kept));
+        }
+    };
+    Ok(super::RunOutcome::Finished(Box::new(ModalRun {
         request: req.clone(),
         model_name: prepared.model_name,
         file: prepared.file,
@@ -101,7 +125,8 @@ pub fn run_modal_calibration(
         calibration,
         setup_seconds: prepared.seconds,
         seconds: t.elapsed().as_secs_f64(),
-    })
+        candidates_from,
+    })))
 }
 
 /// Builds the objective of a modal-data `req` and times one evaluation of each kind at the
@@ -152,7 +177,7 @@ impl ModalRun {
             crate::commands::calibrate::report::optimisation_line(
                 best,
                 c.candidates.len(),
-                "",
+                &super::report::reused_costs(self.candidates_from.as_deref()),
                 self.seconds,
             ),
             format!(

@@ -34,9 +34,7 @@ impl CalibrationRun {
             optimisation_line(
                 best,
                 c.candidates.len(),
-                &self.candidates_from.as_ref().map_or(String::new(), |p| {
-                    format!(" (with the costs {} holds)", p.display())
-                }),
+                &reused_costs(self.candidates_from.as_deref()),
                 self.seconds,
             ),
             format!(
@@ -563,6 +561,14 @@ impl EstimateView<'_> {
         }
         v
     }
+}
+
+/// Where an optimisation line says the candidate costs came from: ` (with the costs FILE
+/// holds)` when a candidates file was given, else nothing.
+pub fn reused_costs(from: Option<&std::path::Path>) -> String {
+    from.map_or(String::new(), |p| {
+        format!(" (with the costs {} holds)", p.display())
+    })
 }
 
 /// The summary line of a search's best optimisation: its status, iterations, evaluations

@@ -132,12 +132,37 @@ pub fn run_calibration(
     }
 }
 
-/// How [`run_calibration_until`] ended.
-pub enum RunOutcome {
+/// How a calibration run that can be stopped ended ([`run_calibration_until`],
+/// [`super::run_modal_calibration_until`], [`super::run_time_calibration_until`]).
+pub enum RunOutcome<R = CalibrationRun> {
     /// The calibration ran to its end.
-    Finished(Box<CalibrationRun>),
+    Finished(Box<R>),
     /// Stopped at a safe point: what was complete.
     Interrupted(Box<nlsim_calib::Interrupted>),
+}
+
+/// The costs a candidates file holds for a calibration whose candidate points are
+/// `expected`, `None` where the file says not evaluated (an interrupted run's NaN); refused
+/// when its points are not `expected` bit for bit.
+pub fn known_costs(
+    path: &std::path::Path,
+    candidates: &[Candidate],
+    expected: &[Vec<f64>],
+) -> Result<Vec<Option<f64>>> {
+    let given = candidates.iter().map(|c| c.values.as_slice());
+    if !nlsim_calib::Interrupted::same_points(expected, given) {
+        return Err(Error::Usage(format!(
+            "{}: its {} candidates are not the {} of this calibration (parameters, bounds, \
+             lhs, seed and the model's values must match the run that wrote it)",
+            path.display(),
+            candidates.len(),
+            expected.len()
+        )));
+    }
+    Ok(candidates
+        .iter()
+        .map(|c| Some(c.cost).filter(|c| !c.is_nan()))
+        .collect())
 }
 
 /// [`run_calibration`] that stops at the next safe point once `stop()` holds
@@ -157,21 +182,7 @@ pub fn run_calibration_until(
         None => None,
         Some((path, c)) => {
             let expected = nlsim_calib::candidate_points(&prepared.objective, &req.config)?;
-            let given = c.iter().map(|c| c.values.as_slice());
-            if !nlsim_calib::Interrupted::same_points(&expected, given) {
-                return Err(Error::Usage(format!(
-                    "{}: its {} candidates are not the {} of this calibration (parameters, \
-                     bounds, lhs, seed and the model's values must match the run that wrote \
-                     it)",
-                    path.display(),
-                    c.len(),
-                    expected.len()
-                )));
-            }
-            known = c
-                .iter()
-                .map(|c| Some(c.cost).filter(|c| !c.is_nan()))
-                .collect();
+            known = known_costs(&path, &c, &expected)?;
             Some(path)
         }
     };

@@ -41,6 +41,8 @@ pub struct TimeRun {
     pub setup_seconds: f64,
     /// Wall time of the candidates, optimisations and folds (s).
     pub seconds: f64,
+    /// The candidates file whose costs were reused (`--candidates`), if any.
+    pub candidates_from: Option<PathBuf>,
 }
 
 /// The objective of a time-domain request, built.
@@ -113,15 +115,33 @@ fn prepare_time(req: &CalibrationRequest) -> Result<PreparedTime> {
 }
 
 /// Runs a time-domain `req`; `progress` is told of the candidates, optimisations and folds
-/// done (from the worker threads).
-pub fn run_time_calibration(
+/// done (from the worker threads). With `candidates` (a file an interrupted run kept) the
+/// costs it holds are reused; the run stops at the next safe point once `stop()` holds
+/// ([`nlsim_calib::calibrate_time_until`]).
+pub fn run_time_calibration_until(
     req: &CalibrationRequest,
+    candidates: Option<(PathBuf, Vec<nlsim_calib::Candidate>)>,
     progress: &(dyn Fn(nlsim_calib::Progress) + Sync),
-) -> Result<TimeRun> {
+    stop: nlsim_calib::Stop<'_>,
+) -> Result<super::RunOutcome<TimeRun>> {
     let p = prepare_time(req)?;
     let t = Instant::now();
-    let calibration = nlsim_calib::calibrate_time(&p.objective, &req.config, progress)?;
-    Ok(TimeRun {
+    let (known, candidates_from) = match candidates {
+        None => (Vec::new(), None),
+        Some((path, c)) => {
+            let expected = p.objective.candidate_points(&req.config)?;
+            (super::known_costs(&path, &c, &expected)?, Some(path))
+        }
+    };
+    let outcome =
+        nlsim_calib::calibrate_time_until(&p.objective, &req.config, &known, progress, stop)?;
+    let calibration = match outcome {
+        nlsim_calib::Outcome::Finished(c) => *c,
+        nlsim_calib::Outcome::Interrupted(kept) => {
+            return Ok(super::RunOutcome::Interrupted(kept));
+        }
+    };
+    Ok(super::RunOutcome::Finished(Box::new(TimeRun {
         request: req.clone(),
         model_name: p.model_name,
         records: p.records,
@@ -130,7 +150,8 @@ pub fn run_time_calibration(
         calibration,
         setup_seconds: p.seconds,
         seconds: t.elapsed().as_secs_f64(),
-    })
+        candidates_from,
+    })))
 }
 
 /// Builds the objective of a time-domain `req` and times one evaluation of each kind at the
@@ -188,7 +209,12 @@ impl TimeRun {
                 self.modes,
                 self.setup_seconds
             ),
-            optimisation_line(best, c.candidates.len(), "", self.seconds),
+            optimisation_line(
+                best,
+                c.candidates.len(),
+                &super::report::reused_costs(self.candidates_from.as_deref()),
+                self.seconds,
+            ),
             format!(
                 "cost {:.6e}, reduced chi2 {:.3} (1 when the noise model fits: each channel's \
                  noise is {} of its rms), collinearity index {:.2}",
