@@ -288,16 +288,10 @@ pub fn calibrate_until(
     // sweep) is refused before the candidates, not after them.
     fold_plan(objective.data(), config)?;
     let points = candidate_points(objective, config)?;
-    let costs = evaluate_costs(
-        objective,
-        &points,
-        known,
-        |obj, v| obj.cost_values(v),
-        &|done, total| progress(Progress::Candidates { done, total }),
-        stop,
-    )?;
     let params: Vec<Param> = objective.specs().iter().map(|s| s.param.clone()).collect();
-    let candidates = match Interrupted::unless_evaluated(params, points, costs) {
+    let cost = |obj: &mut FrfObjective, v: &[f64]| obj.cost_values(v);
+    let candidates = match candidates_until(objective, params, points, known, cost, progress, stop)?
+    {
         Ok(c) => c,
         Err(kept) => return Ok(Outcome::Interrupted(kept)),
     };
@@ -730,6 +724,29 @@ pub(crate) fn evaluate_costs<O: Clone + Send + Sync>(
         })
         .collect();
     costs.into_iter().collect()
+}
+
+/// The candidates at `points` with their costs (those in `known` reused, the rest evaluated
+/// by `cost` in parallel with `progress` told as they finish, [`evaluate_costs`]), or the
+/// stop in the candidate phase with the costs evaluated so far.
+pub(crate) fn candidates_until<O: Clone + Send + Sync>(
+    objective: &O,
+    params: Vec<Param>,
+    points: Vec<Vec<f64>>,
+    known: &[Option<f64>],
+    cost: impl Fn(&mut O, &[f64]) -> Result<f64> + Sync,
+    progress: &(dyn Fn(Progress) + Sync),
+    stop: Stop<'_>,
+) -> Result<std::result::Result<Vec<Candidate>, Box<Interrupted>>> {
+    let costs = evaluate_costs(
+        objective,
+        &points,
+        known,
+        cost,
+        &|done, total| progress(Progress::Candidates { done, total }),
+        stop,
+    )?;
+    Ok(Interrupted::unless_evaluated(params, points, costs))
 }
 
 /// Asked between units of work (a candidate, a Levenberg–Marquardt evaluation): `true`

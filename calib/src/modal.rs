@@ -26,7 +26,7 @@
 use crate::CalibrationConfig;
 use crate::calibrate::{
     Candidate, Interrupted, Outcome, Phase, Progress, StartRun, Stop, best_candidates,
-    evaluate_costs, per_value, run_starts_until, start_points,
+    candidates_until, per_value, run_starts_until, start_points,
 };
 use crate::lm::{Evaluation, LeastSquares};
 use crate::objective::{
@@ -695,15 +695,16 @@ pub fn calibrate_modal_until(
     let specs = objective.specs.clone();
     let params: Vec<Param> = specs.iter().map(|s| s.param.clone()).collect();
     let points = objective.candidate_points(config)?;
-    let costs = evaluate_costs(
+    let cost = |obj: &mut ModalObjective, v: &[f64]| obj.cost_values(v);
+    let candidates = match candidates_until(
         objective,
-        &points,
+        params.clone(),
+        points,
         known,
-        |obj, v| obj.cost_values(v),
-        &|done, total| progress(Progress::Candidates { done, total }),
+        cost,
+        progress,
         stop,
-    )?;
-    let candidates = match Interrupted::unless_evaluated(params.clone(), points, costs) {
+    )? {
         Ok(c) => c,
         Err(kept) => return Ok(Outcome::Interrupted(kept)),
     };

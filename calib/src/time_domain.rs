@@ -20,7 +20,7 @@
 use crate::CalibrationConfig;
 use crate::calibrate::{
     Candidate, FoldResult, Interrupted, KFold, Outcome, Phase, Progress, StartRun, Stop,
-    best_candidates, evaluate_costs, lm_until, per_value, start_points,
+    best_candidates, candidates_until, lm_until, per_value, start_points,
 };
 use crate::lm::{Evaluation, LeastSquares};
 use crate::objective::{ParamSpec, specs_to_internal, specs_to_values};
@@ -538,15 +538,16 @@ pub fn calibrate_time_until(
     let specs = objective.specs.clone();
     let params: Vec<Param> = specs.iter().map(|s| s.param.clone()).collect();
     let points = objective.candidate_points(config)?;
-    let costs = evaluate_costs(
+    let cost = |obj: &mut TimeObjective, v: &[f64]| obj.cost_values(v);
+    let candidates = match candidates_until(
         objective,
-        &points,
+        params.clone(),
+        points,
         known,
-        |obj, v| obj.cost_values(v),
-        &|done, total| progress(Progress::Candidates { done, total }),
+        cost,
+        progress,
         stop,
-    )?;
-    let candidates = match Interrupted::unless_evaluated(params.clone(), points, costs) {
+    )? {
         Ok(c) => c,
         Err(kept) => return Ok(Outcome::Interrupted(kept)),
     };
