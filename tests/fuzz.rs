@@ -157,6 +157,7 @@ fn resolve_symmetric(
         &nlsim::kernel::DofMap::scalar(n),
         entries,
         place,
+        nlsim::formats::fe_matrices::SYMMETRY_TOLERANCE,
     )
     .err()
     .map(|e| e.to_string())
@@ -1117,7 +1118,7 @@ fn fuzz_inner() {
     ];
     let fe_place = |m: nlsim::formats::fe_matrices::LabelledMatrix| -> Option<String> {
         nlsim::formats::fe_matrices::union_dofs(&[&m])
-            .and_then(|d| m.onto(&d, "stiffness matrix"))
+            .and_then(|d| m.onto(&d, "stiffness matrix", 1e-12))
             .err()
             .map(|e| e.to_string())
     };
@@ -1275,7 +1276,12 @@ fn fuzz_inner() {
     let op4 = [std::fs::read_to_string(root().join("examples/models/spring_mass.op4")).unwrap()];
     panics.extend(survive("op4 ascii", 10000 * scale(), |_| {
         let text = mutate(rng.pick(&op4).clone().as_str(), &mut rng);
-        match nlsim::formats::op4::parse_op4(&text, Path::new("k.op4"), Some("KAAX")) {
+        match nlsim::formats::op4::parse_op4(
+            &text,
+            Path::new("k.op4"),
+            Some("KAAX"),
+            nlsim::formats::op4::Op4Role::Stiffness,
+        ) {
             Ok(m) => resolve_symmetric(
                 "k.op4",
                 m.n,
@@ -1307,6 +1313,16 @@ fn fuzz_inner() {
             nlsim::formats::op4_write::to_op4(&[("KAAX", m.stiffness()), ("MAAX", m.mass())], l)
         })
     })
+    .chain(
+        // Real Nastran files of the corpus: 64-bit words (MSC 2017), end-of-matrix records
+        // that hold a double, repeated names.
+        [
+            "nas2cam_notall6_msc2017.op4",
+            "nas2cam_notall6_nx2021.op4",
+            "inboard_mk_csuper.op4",
+        ]
+        .map(|f| std::fs::read(root().join("tests/data/fe_real/pyyeti").join(f)).unwrap()),
+    )
     .collect();
     panics.extend(survive("op4 binary", 10000 * scale(), |_| {
         let mut b = rng.pick(&op4_bin).clone();
@@ -1335,8 +1351,12 @@ fn fuzz_inner() {
                 b[at..at + 4].copy_from_slice(&bytes);
             }
         });
-        let name = *rng.pick(&["KAAX", "MAAX"]);
-        match nlsim::formats::op4::parse_op4_binary(&b, Path::new("k.op4"), Some(name)) {
+        let name = *rng.pick(&[Some("KAAX"), Some("MAAX"), Some("KAA@2"), Some("MXX"), None]);
+        let role = *rng.pick(&[
+            nlsim::formats::op4::Op4Role::Stiffness,
+            nlsim::formats::op4::Op4Role::Mass,
+        ]);
+        match nlsim::formats::op4::parse_op4_binary(&b, Path::new("k.op4"), name, role) {
             Ok(m) => resolve_symmetric(
                 "k.op4",
                 m.n,

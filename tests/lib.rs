@@ -8030,3 +8030,6 @@ mod outputs;
 
 #[path = "end_to_end/interrupts.rs"]
 mod interrupts;
+
+#[path = "end_to_end/fe_real.rs"]
+mod fe_real;

@@ -220,18 +220,18 @@ mod tests {
         let both = "1,3,1,3,2.0\n1,3,2,3,-1.0\n2,3,1,3,-1.0\n2,3,2,3,1.0\n";
         let m = parse_abaqus(both, p).unwrap();
         let dofs = union_dofs(&[&m]).unwrap();
-        assert_eq!(m.onto(&dofs, "K").unwrap().get(0, 1), -1.0);
+        assert_eq!(m.onto(&dofs, "K", 0.0).unwrap().get(0, 1), -1.0);
         let differ = "1,3,1,3,2.0\n1,3,2,3,-1.0\n2,3,1,3,-1.5\n";
         let e = parse_abaqus(differ, p)
             .unwrap()
-            .onto(&dofs, "K")
+            .onto(&dofs, "K", 0.0)
             .unwrap_err()
             .to_string();
         assert!(e.contains("k.mtx:3") && e.contains("differ"), "{e}");
         let again = "1,3,1,3,2.0\n1,3,1,3,2.0\n";
         let e = parse_abaqus(again, p)
             .unwrap()
-            .onto(&dofs, "K")
+            .onto(&dofs, "K", 0.0)
             .unwrap_err()
             .to_string();
         assert!(

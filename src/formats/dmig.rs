@@ -458,7 +458,7 @@ mod tests {
                 .collect();
             assert_eq!(got, want, "{text}");
             let dofs = union_dofs(&[&m]).unwrap();
-            let k = m.onto(&dofs, "stiffness matrix").unwrap().to_dense();
+            let k = m.onto(&dofs, "stiffness matrix", 0.0).unwrap().to_dense();
             assert_eq!(k[(0, 1)], -1e6);
             assert_eq!(k[(1, 0)], -1e6);
         }

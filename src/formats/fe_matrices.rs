@@ -142,10 +142,11 @@ impl LabelledMatrix {
     }
 
     /// The matrix on the DOFs of `dofs` (named `what` in errors): symmetric storage resolved
-    /// (an entry and its mirror may both be given only with the same value), repeats refused,
+    /// (an entry and its mirror may both be given when they agree within `tolerance`,
+    /// [`symmetric_from_entries`]), repeats refused,
     /// every label required to be one of `dofs` (else the DOF was constrained out of the
     /// model's other matrix, or the label is not the model's).
-    pub fn onto(&self, dofs: &DofMap, what: &str) -> Result<SparseSym> {
+    pub fn onto(&self, dofs: &DofMap, what: &str, tolerance: f64) -> Result<SparseSym> {
         let err = |line: usize, m: String| Error::DataFile {
             file: self.path.clone(),
             line,
@@ -177,6 +178,7 @@ impl LabelledMatrix {
             dofs,
             &indexed,
             Place::Line,
+            tolerance,
         )
     }
 }
@@ -190,16 +192,25 @@ pub enum Place {
     Record,
 }
 
+/// How far an entry and its mirror may differ and still be one symmetric entry (their mean),
+/// relative to the larger of the largest magnitudes in their two columns: FE codes that
+/// store both triangles (Nastran's OUTPUT4 of KAA/MAA, reduced EXTSEOUT matrices) write
+/// mirrors that differ in the last bits (6e-16 of the column's largest in the files of
+/// `tests/data/fe_real`). A model file's `[matrices] symmetry_tolerance` sets another.
+pub const SYMMETRY_TOLERANCE: f64 = 1e-12;
+
 /// A symmetric matrix on `dofs` from stored entries `(row, col, value, place)` of `path`
 /// (named `what` in errors; `place` a line or record number as `unit` says): one triangle, or
-/// both when each entry and its mirror are equal to the bit; an entry given twice is refused
-/// with both places.
+/// both when each entry and its mirror agree within `tolerance` of the larger of their two
+/// columns' largest magnitudes (the mean is taken; [`SYMMETRY_TOLERANCE`]); beyond it the
+/// matrix is refused with both values. An entry given twice is refused with both places.
 pub fn symmetric_from_entries(
     path: &Path,
     what: &str,
     dofs: &DofMap,
     entries: &[(usize, usize, f64, usize)],
     unit: Place,
+    tolerance: f64,
 ) -> Result<SparseSym> {
     let err = |line: usize, m: String| match unit {
         Place::Line => Error::DataFile {
@@ -237,6 +248,12 @@ pub fn symmetric_from_entries(
         order[next[c]] = k;
         next[c] += 1;
     }
+    // The largest magnitude of each column (a symmetric matrix's row i is its column i).
+    let mut largest = vec![0.0f64; n];
+    for &(i, j, v, _) in entries {
+        largest[i] = largest[i].max(v.abs());
+        largest[j] = largest[j].max(v.abs());
+    }
     let hi = |k: usize| entries[k].0.max(entries[k].1);
     let below = |k: usize| entries[k].0 >= entries[k].1;
     let mut lower = Vec::with_capacity(entries.len());
@@ -252,7 +269,7 @@ pub fn symmetric_from_entries(
             }
             // In file order: the first, its mirror (the only other entry allowed), then repeats.
             let f = col[g];
-            lower.push((h, c, entries[f].2));
+            let mut value_here = entries[f].2;
             if e - g >= 2 {
                 let k = col[g + 1];
                 let (i, j, value, here) = entries[k];
@@ -266,16 +283,25 @@ pub fn symmetric_from_entries(
                     ));
                 }
                 if v.to_bits() != value.to_bits() {
-                    let (row, column) = names();
-                    return Err(err(
-                        here,
-                        format!(
-                            "entry ({row}, {column}) = {value:e} and its mirror on {at} {line} = \
-                             {v:e} differ: the matrix is not symmetric"
-                        ),
-                    ));
+                    let scale = largest[i].max(largest[j]);
+                    if (v - value).abs() > tolerance * scale {
+                        let (row, column) = names();
+                        return Err(err(
+                            here,
+                            format!(
+                                "entry ({row}, {column}) = {value:e} and its mirror on {at} \
+                                 {line} = {v:e} differ by {:.1e} of the columns' largest \
+                                 magnitude, more than the symmetry tolerance {tolerance:e}: the \
+                                 matrix is not symmetric ([matrices] symmetry_tolerance sets \
+                                 another)",
+                                (v - value).abs() / scale
+                            ),
+                        ));
+                    }
+                    value_here = 0.5 * (v + value);
                 }
             }
+            lower.push((h, c, value_here));
             if e - g >= 3 {
                 let k = col[g + 2];
                 let (i, j, _, here) = entries[k];

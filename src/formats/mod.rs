@@ -49,6 +49,8 @@ pub mod modal_data;
 pub mod model_file;
 pub mod modes_file;
 pub mod op4;
+pub mod op4_binary;
+pub mod op4_select;
 pub mod op4_write;
 pub mod raw_records;
 pub mod settings;

@@ -20,366 +20,39 @@
 
 use crate::error::{Error, Result};
 use crate::formats::files::quoted;
+use crate::formats::op4_binary::binary_layout;
+pub use crate::formats::op4_binary::parse_op4_binary;
+use crate::formats::op4_select::choose;
+pub use crate::formats::op4_select::{MAX_OP4_BYTES, Op4Header, Op4Matrix, Op4Role};
 use std::path::Path;
 
-/// Largest OUTPUT4 file read (bytes).
-pub const MAX_OP4_BYTES: u64 = crate::formats::fe_matrices::MAX_FE_FILE_BYTES;
-
-/// The stored entries of one square real OUTPUT4 matrix: `(row, col, value, line)`, 0-based
-/// indices, exact zeros dropped, and its order.
-#[derive(Debug, Clone)]
-pub struct Op4Matrix {
-    /// The matrix's name in the file.
-    pub name: String,
-    /// Order (rows = columns).
-    pub n: usize,
-    /// Entries `(row, col, value, place)` as stored (both triangles for Nastran's own files);
-    /// `place` is the 1-based line (ASCII) or record (binary) it was read from.
-    pub entries: Vec<(usize, usize, f64, usize)>,
-    /// Whether the file was binary (`place` counts records, not lines).
-    pub binary: bool,
-}
-
-/// Reads matrix `name` (the first of the file when `None`) of the OUTPUT4 file `path`, ASCII
-/// or binary (told from the first record's length).
-pub fn read_op4(path: &Path, name: Option<&str>) -> Result<Op4Matrix> {
+/// Reads the OUTPUT4 file `path` (ASCII or binary, told from the first record's length) and
+/// returns matrix `name` (any case), or without a name the one `role` picks
+/// ([`Op4Role`]).
+pub fn read_op4(path: &Path, name: Option<&str>, role: Op4Role) -> Result<Op4Matrix> {
     let bytes = crate::formats::files::read_bytes_up_to(path, Some(MAX_OP4_BYTES))?;
-    parse_op4_bytes(&bytes, path, name)
+    parse_op4_bytes(&bytes, path, name, role)
 }
 
-/// Matrix `name` (the first when `None`) of an OUTPUT4 file's bytes read from `path`, ASCII
-/// or binary (told from the first record's length).
-pub fn parse_op4_bytes(bytes: &[u8], path: &Path, name: Option<&str>) -> Result<Op4Matrix> {
-    if binary_order(bytes).is_some() {
-        return parse_op4_binary(bytes, path, name);
+/// Matrix `name` (or the one `role` picks) of an OUTPUT4 file's bytes read from `path`,
+/// ASCII or binary.
+pub fn parse_op4_bytes(
+    bytes: &[u8],
+    path: &Path,
+    name: Option<&str>,
+    role: Op4Role,
+) -> Result<Op4Matrix> {
+    if binary_layout(bytes).is_some() {
+        return parse_op4_binary(bytes, path, name, role);
     }
     let text = std::str::from_utf8(bytes).map_err(|_| {
         Error::Usage(format!(
             "{}: neither an ASCII OUTPUT4 file nor a binary one (whose first record is the \
-             24-byte header)",
+             24- or 48-byte header)",
             path.display()
         ))
     })?;
-    parse_op4(text, path, name)
-}
-
-/// The byte order of a binary OUTPUT4 file (`Some(true)`: little-endian), from its first
-/// record's length (24 bytes; 48 for the 64-bit-word variant, refused by the parser with its
-/// own message), or `None` for text.
-fn binary_order(bytes: &[u8]) -> Option<bool> {
-    let head: [u8; 4] = bytes.get(..4)?.try_into().ok()?;
-    let (le, be) = (u32::from_le_bytes(head), u32::from_be_bytes(head));
-    if le == 24 || le == 48 {
-        Some(true)
-    } else if be == 24 || be == 48 {
-        Some(false)
-    } else {
-        None
-    }
-}
-
-/// Matrix `name` (or the first) of a binary OUTPUT4 file's bytes read from `path`. The entries'
-/// `line` is the 1-based record number; errors name the file, the record and its byte offset.
-pub fn parse_op4_binary(bytes: &[u8], path: &Path, name: Option<&str>) -> Result<Op4Matrix> {
-    let little = binary_order(bytes).ok_or_else(|| {
-        Error::Usage(format!(
-            "{}: not a binary OUTPUT4 file (its first record is not the 24-byte header)",
-            path.display()
-        ))
-    })?;
-    let word = |b: &[u8]| -> i32 {
-        let a: [u8; 4] = [b[0], b[1], b[2], b[3]];
-        if little {
-            i32::from_le_bytes(a)
-        } else {
-            i32::from_be_bytes(a)
-        }
-    };
-    // A content error: exit code 1, as the same error in the ASCII form (the "line" is the
-    // record's number).
-    let err = |record: usize, offset: usize, m: String| Error::DataFile {
-        file: path.to_path_buf(),
-        line: record,
-        message: format!("record {record} (byte {offset}): {m}"),
-    };
-    // The records: (1-based number, byte offset, payload).
-    let mut at = 0usize;
-    let mut record = 0usize;
-    let mut next = || -> Result<Option<(usize, usize, &[u8])>> {
-        if at == bytes.len() {
-            return Ok(None);
-        }
-        record += 1;
-        let start = at;
-        let len_of = |at: usize| -> Option<usize> {
-            bytes
-                .get(at..at + 4)
-                .map(&word)
-                .and_then(|l| usize::try_from(l).ok())
-        };
-        let len = len_of(at).ok_or_else(|| {
-            err(
-                record,
-                start,
-                "a record length that is cut off or negative".into(),
-            )
-        })?;
-        let end = at
-            .checked_add(4 + len)
-            .filter(|&e| e + 4 <= bytes.len())
-            .ok_or_else(|| {
-                err(
-                    record,
-                    start,
-                    format!(
-                        "the record declares {len} bytes, the file has {} left: truncated",
-                        bytes.len() - at - 4
-                    ),
-                )
-            })?;
-        if len_of(end) != Some(len) {
-            return Err(err(
-                record,
-                start,
-                format!("the record's closing length differs from its opening one ({len})"),
-            ));
-        }
-        at = end + 4;
-        Ok(Some((record, start, &bytes[start + 4..end])))
-    };
-    let mut names = Vec::new();
-    while let Some((hr, ho, h)) = next()? {
-        if h.len() == 48 {
-            return Err(err(
-                hr,
-                ho,
-                "a header of 64-bit words (written with 8-byte integers): nlsim reads the \
-                 usual 4-byte-word OUTPUT4; write it without the 64-bit option"
-                    .into(),
-            ));
-        }
-        if h.len() != 24 {
-            return Err(err(
-                hr,
-                ho,
-                format!(
-                    "expected a matrix header of 24 bytes (NCOL NROW FORM TYPE NAME), found {}",
-                    h.len()
-                ),
-            ));
-        }
-        let (ncol, nrow, ty) = (word(&h[0..]), word(&h[4..]), word(&h[12..]));
-        let mname = String::from_utf8_lossy(&h[16..24]).trim().to_string();
-        let n = nrow.unsigned_abs() as usize;
-        if ncol < 1 || nrow == 0 || ncol.unsigned_abs() as usize != n {
-            return Err(err(
-                hr,
-                ho,
-                format!(
-                    "matrix {} is {n} × {ncol}: nlsim takes square matrices",
-                    quoted(&mname)
-                ),
-            ));
-        }
-        if n > crate::formats::matrices::MAX_DIM {
-            return Err(err(
-                hr,
-                ho,
-                format!(
-                    "matrix {} declares {n} rows, more than {} DOFs",
-                    quoted(&mname),
-                    crate::formats::matrices::MAX_DIM
-                ),
-            ));
-        }
-        let wper = match ty {
-            1 => 1usize,
-            2 => 2,
-            _ => {
-                return Err(err(
-                    hr,
-                    ho,
-                    format!(
-                        "matrix {} has type {ty}: nlsim takes real matrices (1 single, 2 double \
-                         precision)",
-                        quoted(&mname)
-                    ),
-                ));
-            }
-        };
-        let bigmat = nrow < 0 || n >= 65536;
-        names.push(mname.clone());
-        let wanted = name.is_none_or(|w| w.eq_ignore_ascii_case(&mname));
-        let value = |w: &[u8]| -> f64 {
-            if wper == 1 {
-                f32::from_bits(word(w) as u32) as f64
-            } else {
-                let a: [u8; 8] = w[..8].try_into().expect("8 bytes");
-                if little {
-                    f64::from_le_bytes(a)
-                } else {
-                    f64::from_be_bytes(a)
-                }
-            }
-        };
-        let mut entries = Vec::new();
-        loop {
-            let Some((r, o, c)) = next()? else {
-                return Err(err(
-                    hr,
-                    ho,
-                    format!(
-                        "matrix {mname} (its header here) ends without its closing record \
-                         (ICOL > NCOL): truncated"
-                    ),
-                ));
-            };
-            if c.len() < 12 || c.len() % 4 != 0 {
-                return Err(err(
-                    r,
-                    o,
-                    format!(
-                        "a column record of {} bytes: expected ICOL IROW NW and NW words",
-                        c.len()
-                    ),
-                ));
-            }
-            let (icol, irow, nw) = (word(&c[0..]), word(&c[4..]), word(&c[8..]));
-            let words = &c[12..];
-            if nw < 0 || nw as usize != words.len() / 4 {
-                return Err(err(
-                    r,
-                    o,
-                    format!(
-                        "column record {icol}: NW = {nw} words announced, the record holds {}",
-                        words.len() / 4
-                    ),
-                ));
-            }
-            if icol > ncol {
-                break;
-            }
-            if icol < 1 || irow < 0 {
-                return Err(err(
-                    r,
-                    o,
-                    format!("column record {icol} {irow} {nw}: expected ICOL 1..={ncol}, IROW ≥ 0"),
-                ));
-            }
-            let col = (icol - 1) as usize;
-            let mut put = |row0: usize, vals: &[u8], keep_zeros: bool| -> Result<()> {
-                if !vals.len().is_multiple_of(4 * wper) {
-                    return Err(err(
-                        r,
-                        o,
-                        format!(
-                            "column {icol}: {} words do not make whole values of {wper} words",
-                            vals.len() / 4
-                        ),
-                    ));
-                }
-                for (k, w) in vals.chunks_exact(4 * wper).enumerate() {
-                    let row = row0 + k;
-                    if row >= n {
-                        return Err(err(
-                            r,
-                            o,
-                            format!(
-                                "column {icol}: row {} is past the matrix's {n} rows",
-                                row + 1
-                            ),
-                        ));
-                    }
-                    let v = value(w);
-                    if !v.is_finite() {
-                        return Err(err(
-                            r,
-                            o,
-                            format!("column {icol}, row {}: value {v} is not finite", row + 1),
-                        ));
-                    }
-                    if wanted && (keep_zeros || v != 0.0) {
-                        entries.push((row, col, v, r));
-                    }
-                }
-                Ok(())
-            };
-            if irow > 0 {
-                // Dense: the zeros between the first and last nonzero rows are fill.
-                put((irow - 1) as usize, words, false)?;
-                continue;
-            }
-            let mut k = 0usize;
-            while k < words.len() {
-                let head = if bigmat { 8 } else { 4 };
-                if k + head > words.len() {
-                    return Err(err(
-                        r,
-                        o,
-                        format!("column {icol}: a string header cut off by the record's end"),
-                    ));
-                }
-                let (l, row) = if bigmat {
-                    (
-                        i64::from(word(&words[k..])) - 1,
-                        i64::from(word(&words[k + 4..])),
-                    )
-                } else {
-                    let is = i64::from(word(&words[k..]));
-                    ((is >> 16) - 1, is & 0xffff)
-                };
-                if l < 1 || row < 1 {
-                    return Err(err(
-                        r,
-                        o,
-                        format!(
-                            "column {icol}: a string of {l} words at row {row} (expected at \
-                             least one word from row 1 on)"
-                        ),
-                    ));
-                }
-                k += head;
-                let end = k
-                    .checked_add(4 * l as usize)
-                    .filter(|&e| e <= words.len())
-                    .ok_or_else(|| {
-                        err(
-                            r,
-                            o,
-                            format!(
-                                "column {icol}: a string of {l} words runs past the record's \
-                                 end"
-                            ),
-                        )
-                    })?;
-                put((row - 1) as usize, &words[k..end], true)?;
-                k = end;
-            }
-        }
-        if wanted {
-            return Ok(Op4Matrix {
-                name: mname,
-                n,
-                entries,
-                binary: false,
-            });
-        }
-    }
-    Err(not_found(path, name, &names))
-}
-
-/// The error for a matrix `name` that is not among `names`, the matrices of the file.
-fn not_found(path: &Path, name: Option<&str>, names: &[String]) -> Error {
-    Error::Usage(format!(
-        "{}: no OUTPUT4 matrix {} (matrices in the file: {})",
-        path.display(),
-        quoted(name.unwrap_or("")),
-        if names.is_empty() {
-            "none".into()
-        } else {
-            names.join(", ")
-        }
-    ))
+    parse_op4(text, path, name, role)
 }
 
 /// Whether a line holds integers only (a record or string header), not values.
@@ -424,17 +97,16 @@ fn value_format(f: &str) -> Option<(usize, usize)> {
     (count >= 1 && (1..=64).contains(&width)).then_some((count, width))
 }
 
-/// Matrix `name` (or the first) of an ASCII OUTPUT4 text read from `path`. Errors name the
-/// file, line and what was wrong.
-pub fn parse_op4(text: &str, path: &Path, name: Option<&str>) -> Result<Op4Matrix> {
+/// Matrix `name` (or the one `role` picks, [`Op4Role`]) of an ASCII OUTPUT4 text read from
+/// `path`. The other matrices are skipped to the next header, whatever their shape, type or
+/// form. Errors name the file, line and what was wrong.
+pub fn parse_op4(text: &str, path: &Path, name: Option<&str>, role: Op4Role) -> Result<Op4Matrix> {
     let err = |line: usize, m: String| Error::DataFile {
         file: path.to_path_buf(),
         line,
         message: m,
     };
     let lines: Vec<&str> = text.lines().map(|l| l.trim_end_matches('\r')).collect();
-    let mut at = 0usize;
-    let mut names = Vec::new();
     // Integers in I8 fields: separated by blanks, or touching when a number fills its field.
     let ints = |ln: usize, t: &str, want: usize| -> Result<Vec<i64>> {
         let split: Option<Vec<i64>> = t
@@ -458,12 +130,17 @@ pub fn parse_op4(text: &str, path: &Path, name: Option<&str>) -> Result<Op4Matri
             .or_else(fixed)
             .ok_or_else(|| err(ln, format!("expected {want} integers, found {}", quoted(t))))
     };
+    // The headers (with their value formats); each matrix runs to the next header line
+    // (value lines hold a '.' in their first 32 columns, record lines are shorter, so
+    // neither looks like one).
+    let mut headers = Vec::new();
+    let mut formats = Vec::new();
+    let mut at = 0usize;
     while at < lines.len() {
         if lines[at].trim().is_empty() {
             at += 1;
             continue;
         }
-        // The header.
         let hl = at + 1;
         let h = lines[at];
         let head: String = h.chars().take(32).collect();
@@ -477,8 +154,6 @@ pub fn parse_op4(text: &str, path: &Path, name: Option<&str>) -> Result<Op4Matri
                 ),
             )
         })?;
-        let (ncol, nrow, _form, ty) = (v[0], v[1], v[2], v[3]);
-        let bigmat = !(0..65536).contains(&nrow);
         let mname: String = h
             .chars()
             .skip(32)
@@ -487,51 +162,50 @@ pub fn parse_op4(text: &str, path: &Path, name: Option<&str>) -> Result<Op4Matri
             .trim()
             .to_string();
         let fmt: String = h.chars().skip(40).collect();
-        let (per_line, width) = value_format(&fmt).ok_or_else(|| {
-            err(
-                hl,
-                format!(
-                    "value format {} is not a Fortran E or D format such as 1P,3E23.16",
-                    quoted(fmt.trim())
-                ),
-            )
-        })?;
-        let n = nrow.unsigned_abs() as usize;
-        if ncol < 1 || nrow == 0 || ncol.unsigned_abs() as usize != n {
-            return Err(err(
-                hl,
-                format!("matrix {mname} is {n} × {ncol}: nlsim takes square matrices"),
-            ));
-        }
-        if n > crate::formats::matrices::MAX_DIM {
-            return Err(err(
-                hl,
-                format!(
-                    "matrix {mname} declares {n} rows, more than {} DOFs",
-                    crate::formats::matrices::MAX_DIM
-                ),
-            ));
-        }
-        if ty != 1 && ty != 2 {
-            return Err(err(
-                hl,
-                format!(
-                    "matrix {mname} has type {ty}: nlsim takes real matrices (1 single, 2 double \
-                     precision)"
-                ),
-            ));
-        }
-        names.push(mname.clone());
-        let wanted = name.is_none_or(|w| w.eq_ignore_ascii_case(&mname));
+        headers.push(Op4Header {
+            ncol: v[0],
+            nrow: v[1],
+            form: v[2],
+            ty: v[3],
+            name: mname,
+            place: hl,
+        });
+        formats.push(fmt);
         at += 1;
-        if !wanted {
-            // Another matrix: skipped unparsed to the next header (value lines hold a '.'
-            // in their first 32 columns, record lines are shorter, so neither looks like one).
-            while at < lines.len() && !header_line(lines[at]) {
-                at += 1;
-            }
-            continue;
+        while at < lines.len() && !header_line(lines[at]) {
+            at += 1;
         }
+    }
+    let chosen = choose(path, &headers, name, role, "line")?;
+    let h = &headers[chosen];
+    let (ncol, nrow, ty, hl) = (h.ncol, h.nrow, h.ty, h.place);
+    let mname = h.name.clone();
+    let fmt = &formats[chosen];
+    let (per_line, width) = value_format(fmt).ok_or_else(|| {
+        err(
+            hl,
+            format!(
+                "value format {} is not a Fortran E or D format such as 1P,3E23.16",
+                quoted(fmt.trim())
+            ),
+        )
+    })?;
+    if let Some(why) = h.refusal() {
+        return Err(err(hl, why));
+    }
+    let bigmat = !(0..65536).contains(&nrow);
+    let n = nrow.unsigned_abs() as usize;
+    if n > crate::formats::matrices::MAX_DIM {
+        return Err(err(
+            hl,
+            format!(
+                "matrix {mname} declares {n} rows, more than {} DOFs",
+                crate::formats::matrices::MAX_DIM
+            ),
+        ));
+    }
+    let mut at = hl;
+    {
         let mut entries = Vec::new();
         // Values of the value lines from `at` on, until an integer line or the end.
         let values = |at: &mut usize| -> Result<Vec<(f64, usize)>> {
@@ -604,7 +278,7 @@ pub fn parse_op4(text: &str, path: &Path, name: Option<&str>) -> Result<Op4Matri
                             ),
                         ));
                     }
-                    if wanted && (keep_zeros || v != 0.0) {
+                    if keep_zeros || v != 0.0 {
                         entries.push((row, col, v, ln));
                     }
                 }
@@ -636,11 +310,11 @@ pub fn parse_op4(text: &str, path: &Path, name: Option<&str>) -> Result<Op4Matri
                         break;
                     }
                     let sl = at + 1;
-                    // The string's length L in its header is not checked against the values
-                    // that follow: writers count it differently (pyNastran's files and
-                    // nlsim's own disagree); see issue 73 for real files.
-                    let row = if bigmat {
-                        ints(sl, t, 2)?[1]
+                    // The header: `IROW + 65536·(L + 1)`, or `L + 1` and `IROW` (bigmat),
+                    // with L the words of values that follow (Nastran: two per double).
+                    let (l, row) = if bigmat {
+                        let v = ints(sl, t, 2)?;
+                        (v[0] - 1, v[1])
                     } else {
                         let is = ints(sl, t, 1)?[0];
                         if is < 65536 {
@@ -649,7 +323,7 @@ pub fn parse_op4(text: &str, path: &Path, name: Option<&str>) -> Result<Op4Matri
                                 format!("string header {is}: expected IROW + 65536·(L + 1)"),
                             ));
                         }
-                        is % 65536
+                        ((is >> 16) - 1, is % 65536)
                     };
                     if row < 1 {
                         return Err(err(sl, format!("string starts at row {row}")));
@@ -659,20 +333,30 @@ pub fn parse_op4(text: &str, path: &Path, name: Option<&str>) -> Result<Op4Matri
                     if vals.is_empty() {
                         return Err(err(sl, "a string without values".into()));
                     }
+                    // Nastran's count, or pyNastran 1.4's (the column's words, NW − 1, in
+                    // every string header); any other is a damaged file.
+                    let words = vals.len() as i64 * if ty == 2 { 2 } else { 1 };
+                    if l != words && l != nw - 1 {
+                        return Err(err(
+                            sl,
+                            format!(
+                                "column {icol}: the string header announces {l} words, {} \
+                                 values ({words} words) follow",
+                                vals.len()
+                            ),
+                        ));
+                    }
                     put((row - 1) as usize, vals)?;
                 }
             }
         }
-        if wanted {
-            return Ok(Op4Matrix {
-                name: mname,
-                n,
-                entries,
-                binary: true,
-            });
-        }
+        Ok(Op4Matrix {
+            name: mname,
+            n,
+            entries,
+            binary: false,
+        })
     }
-    Err(not_found(path, name, &names))
 }
 
 #[cfg(test)]
@@ -706,24 +390,41 @@ mod tests {
  1.0000000000000000E+00
 ";
         let big = "       3      -3       6       2KAAX    1P,3E23.16
-       1       0       7
-       3       1
+       1       0       6
+       5       1
  2.0000000000000000E+00-1.0000000000000000E+00
-       2       0       7
-       4       1
+       2       0       8
+       7       1
 -1.0000000000000000E+00 2.0000000000000000E+00-1.0000000000000000E+00
-       3       0       5
-       3       2
+       3       0       6
+       5       2
 -1.0000000000000000E+00 1.0000000000000000E+00
        4       1       1
  1.0000000000000000E+00
 ";
         let p = Path::new("k.op4");
-        let want = parse_op4(DENSE, p, Some("kaax")).unwrap().entries;
+        // A string header whose L is neither Nastran's count nor pyNastran's.
+        let e = parse_op4(
+            &sparse.replace("  458753\n", "  393217\n"),
+            p,
+            None,
+            Op4Role::Any,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains(
+                "k.op4:3: column 1: the string header announces 5 words, 2 values (4 words)"
+            ),
+            "{e}"
+        );
+        let want = parse_op4(DENSE, p, Some("kaax"), Op4Role::Any)
+            .unwrap()
+            .entries;
         assert_eq!(want.len(), 7);
         assert_eq!((want[1].0, want[1].1, want[1].2), (1, 0, -1.0));
         for t in [sparse, big] {
-            let got = parse_op4(t, p, None).unwrap();
+            let got = parse_op4(t, p, None, Op4Role::Stiffness).unwrap();
             let strip = |v: &[(usize, usize, f64, usize)]| -> Vec<(usize, usize, f64)> {
                 v.iter().map(|e| (e.0, e.1, e.2)).collect()
             };
@@ -757,10 +458,14 @@ mod tests {
                 "k.op4:7: value".to_string(),
             ),
         ] {
-            let e = parse_op4(&t, p, None).unwrap_err().to_string();
+            let e = parse_op4(&t, p, None, Op4Role::Stiffness)
+                .unwrap_err()
+                .to_string();
             assert!(e.contains(&want), "{t}: {e}");
         }
-        let e = parse_op4(DENSE, p, Some("MAAX")).unwrap_err().to_string();
+        let e = parse_op4(DENSE, p, Some("MAAX"), Op4Role::Mass)
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("no OUTPUT4 matrix 'MAAX' (matrices in the file: KAAX)"),
             "{e}"
@@ -785,7 +490,7 @@ mod tests {
         rec(&mut f, &[i(1), i(1), i(2), r(2.5), r(0.0)]);
         rec(&mut f, &[i(2), i(2), i(1), r(0.75)]);
         rec(&mut f, &[i(3), i(1), i(1), r(1.0)]);
-        let m = parse_op4_binary(&f, Path::new("k.op4"), None).unwrap();
+        let m = parse_op4_binary(&f, Path::new("k.op4"), None, Op4Role::Stiffness).unwrap();
         assert_eq!(m.name, "K");
         let got: Vec<_> = m.entries.iter().map(|e| (e.0, e.1, e.2, e.3)).collect();
         assert_eq!(got, vec![(0, 0, 2.5, 2), (1, 1, 0.75, 3)]);

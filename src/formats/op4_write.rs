@@ -178,7 +178,7 @@ pub fn to_op4(matrices: &[(&str, &SparseSym)], layout: Op4Layout) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::formats::op4::{parse_op4_binary, parse_op4_bytes};
+    use crate::formats::op4::{Op4Role, parse_op4_binary, parse_op4_bytes};
     use std::path::Path;
 
     fn sample() -> SparseSym {
@@ -206,7 +206,7 @@ mod tests {
 
     fn read_back(bytes: &[u8], name: &str) -> Vec<(usize, usize, u64)> {
         let p = Path::new("a.op4");
-        let m = parse_op4_bytes(bytes, p, Some(name)).unwrap();
+        let m = parse_op4_bytes(bytes, p, Some(name), Op4Role::Any).unwrap();
         let mut v: Vec<_> = m
             .entries
             .iter()
@@ -245,7 +245,11 @@ mod tests {
         let a = sample();
         let good = to_op4(&[("KAAX", &a)], Op4Layout::BinaryLittleEndian);
         let p = Path::new("k.op4");
-        let e = |b: &[u8]| parse_op4_binary(b, p, None).unwrap_err().to_string();
+        let e = |b: &[u8]| {
+            parse_op4_binary(b, p, None, Op4Role::Stiffness)
+                .unwrap_err()
+                .to_string()
+        };
         // Truncated inside the third record.
         let cut = &good[..good.len() - 30];
         assert!(e(cut).contains("truncated"), "{}", e(cut));
@@ -280,10 +284,14 @@ mod tests {
         b[4..8].copy_from_slice(&2_000_000_000i32.to_le_bytes());
         b[8..12].copy_from_slice(&2_000_000_000i32.to_le_bytes());
         assert!(e(&b).contains("declares 2000000000 rows"), "{}", e(&b));
-        // The 64-bit-word header.
+        // A 64-bit-word header alone (the variant is read; here its columns are missing).
         let mut b = vec![48, 0, 0, 0];
         b.extend_from_slice(&[0; 48]);
         b.extend_from_slice(&[48, 0, 0, 0]);
-        assert!(e(&b).contains("64-bit words"), "{}", e(&b));
+        assert!(
+            e(&b).contains("ends without its closing record"),
+            "{}",
+            e(&b)
+        );
     }
 }

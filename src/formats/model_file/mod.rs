@@ -178,8 +178,8 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
             let label = format!("group '{gname}' {what}");
             let m = match fe_matrix(&g, key, v, &base_dir, None)? {
                 // An FE code's matrix lands on the model's DOFs by label.
-                Some(m) => m.onto(model.dofs(), &label)?,
-                None => read_matrix(&g, key, v, &label, &base_dir)?,
+                Some(m) => m.onto(model.dofs(), &label, fe::SYMMETRY_TOLERANCE)?,
+                None => read_matrix(&g, key, v, &label, &base_dir, fe::SYMMETRY_TOLERANCE)?,
             };
             if m.n() != n {
                 return Err(g.err(
@@ -353,6 +353,21 @@ fn read_matrices(t: &mut Tab<'_, '_>, name: &str, base: &Path) -> Result<Matrice
             "the stiffness matrix (Matrix Market path or inline rows)",
         )
     })?;
+    // How far an entry and its mirror may differ (relative to their columns' largest
+    // magnitude) in files that store both triangles.
+    let tolerance = match t.f64("symmetry_tolerance")? {
+        None => fe::SYMMETRY_TOLERANCE,
+        Some(x) if (0.0..=1e-3).contains(&x) => x,
+        Some(x) => {
+            return Err(t.doc.err(
+                t.span.clone(),
+                &t.key("symmetry_tolerance"),
+                format!(
+                    "{x:e}: give a relative tolerance from 0 (mirrors equal to the bit) to 1e-3"
+                ),
+            ));
+        }
+    };
     let format = match t.str("format")? {
         None => None,
         Some((f, span)) => Some(match f.to_ascii_lowercase().as_str() {
@@ -385,8 +400,8 @@ fn read_matrices(t: &mut Tab<'_, '_>, name: &str, base: &Path) -> Result<Matrice
             t.doc
                 .err(t.span.clone(), &t.key("stiffness"), e.to_string())
         })?;
-        let mass = m.onto(&dofs, "mass matrix")?;
-        let stiffness = k.onto(&dofs, "stiffness matrix")?;
+        let mass = m.onto(&dofs, "mass matrix", tolerance)?;
+        let stiffness = k.onto(&dofs, "stiffness matrix", tolerance)?;
         let model = Model::new(name, dofs, mass, stiffness).map_err(|e| {
             t.doc
                 .err(t.span.clone(), &t.key("stiffness"), e.to_string())
@@ -401,8 +416,8 @@ fn read_matrices(t: &mut Tab<'_, '_>, name: &str, base: &Path) -> Result<Matrice
              their DOFs, or both as Matrix Market, HDF5 or inline rows with `dofs`",
         ));
     }
-    let mass = read_matrix(t, "mass", mass_v, "mass matrix", base)?;
-    let stiffness = read_matrix(t, "stiffness", stiff_v, "stiffness matrix", base)?;
+    let mass = read_matrix(t, "mass", mass_v, "mass matrix", base, tolerance)?;
+    let stiffness = read_matrix(t, "stiffness", stiff_v, "stiffness matrix", base, tolerance)?;
     let dofs = match t.get("dofs") {
         None => DofMap::scalar(mass.n()),
         Some(v) => {
@@ -476,6 +491,7 @@ fn read_matrix(
     v: Val<'_, '_>,
     name: &str,
     base: &Path,
+    tolerance: f64,
 ) -> Result<SparseSym> {
     match v.get_ref() {
         DeValue::String(p) => {
@@ -502,7 +518,15 @@ fn read_matrix(
             };
             if let Some((file, object)) = op4 {
                 let path = base.join(file);
-                let m = crate::formats::op4::read_op4(&path, object)?;
+                use crate::formats::op4::Op4Role;
+                // Without a name, a file of several matrices gives the one of the standard
+                // name for the key's role (KAAX, KXX, …; MAAX, MXX, …).
+                let role = match key {
+                    "stiffness" => Op4Role::Stiffness,
+                    "mass" => Op4Role::Mass,
+                    _ => Op4Role::Any,
+                };
+                let m = crate::formats::op4::read_op4(&path, object, role)?;
                 let dofs = nlsim_kernel::DofMap::scalar(m.n);
                 return fe::symmetric_from_entries(
                     &path,
@@ -514,6 +538,7 @@ fn read_matrix(
                     } else {
                         fe::Place::Line
                     },
+                    tolerance,
                 );
             }
             match h5 {
@@ -625,7 +650,14 @@ fn read_damping(t: &mut Tab<'_, '_>, base: &Path, n: usize) -> Result<Damping> {
                     "the damping matrix (Matrix Market path or inline rows)",
                 )
             })?;
-            let m = read_matrix(t, "matrix", v, "damping matrix", base)?;
+            let m = read_matrix(
+                t,
+                "matrix",
+                v,
+                "damping matrix",
+                base,
+                fe::SYMMETRY_TOLERANCE,
+            )?;
             if m.n() != n {
                 return Err(t.err(
                     v,
