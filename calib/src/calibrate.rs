@@ -265,10 +265,7 @@ pub fn calibrate_with_progress(
     config: &CalibrationConfig,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Calibration> {
-    match calibrate_until(objective, config, &[], progress, &|| false)? {
-        Outcome::Finished(c) => Ok(*c),
-        Outcome::Interrupted(_) => unreachable!("nothing stops a calibration without a stop"),
-    }
+    Ok(calibrate_until(objective, config, &[], progress, &|| false)?.unstopped())
 }
 
 /// [`calibrate_with_progress`] that reuses the candidate costs in `known` (one per point of
@@ -321,10 +318,10 @@ pub fn calibrate_from_candidates(
     config: &CalibrationConfig,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Calibration> {
-    match calibrate_from_candidates_until(objective, candidates, config, progress, &|| false)? {
-        Outcome::Finished(c) => Ok(*c),
-        Outcome::Interrupted(_) => unreachable!("nothing stops a calibration without a stop"),
-    }
+    Ok(
+        calibrate_from_candidates_until(objective, candidates, config, progress, &|| false)?
+            .unstopped(),
+    )
 }
 
 /// [`calibrate_from_candidates`] that stops at the next Levenberg–Marquardt evaluation once
@@ -786,6 +783,17 @@ impl Searched for crate::ModalCalibration {
 impl Searched for crate::TimeCalibration {
     fn into_search(self) -> (Vec<Param>, Vec<Candidate>, Vec<StartRun>) {
         (self.params, self.candidates, self.runs)
+    }
+}
+
+impl<C> Outcome<C> {
+    /// The result of a run whose stop never fires (the `_until` forms called by the plain
+    /// ones): it cannot have been interrupted.
+    pub(crate) fn unstopped(self) -> C {
+        match self {
+            Outcome::Finished(c) => *c,
+            Outcome::Interrupted(_) => unreachable!("nothing stops a calibration without a stop"),
+        }
     }
 }
 

@@ -672,10 +672,7 @@ pub fn calibrate_modal_with_progress(
     config: &CalibrationConfig,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<ModalCalibration> {
-    match calibrate_modal_until(objective, config, &[], progress, &|| false)? {
-        Outcome::Finished(c) => Ok(*c),
-        Outcome::Interrupted(_) => unreachable!("nothing stops a calibration without a stop"),
-    }
+    Ok(calibrate_modal_until(objective, config, &[], progress, &|| false)?.unstopped())
 }
 
 /// [`calibrate_modal_with_progress`] that reuses the candidate costs in `known` (one per

@@ -513,10 +513,7 @@ pub fn calibrate_time(
     config: &CalibrationConfig,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<TimeCalibration> {
-    match calibrate_time_until(objective, config, &[], progress, &|| false)? {
-        Outcome::Finished(c) => Ok(*c),
-        Outcome::Interrupted(_) => unreachable!("nothing stops a calibration without a stop"),
-    }
+    Ok(calibrate_time_until(objective, config, &[], progress, &|| false)?.unstopped())
 }
 
 /// [`calibrate_time`] that reuses the candidate costs in `known` (one per point of

@@ -205,158 +205,156 @@ pub fn parse_op4(text: &str, path: &Path, name: Option<&str>, role: Op4Role) -> 
         ));
     }
     let mut at = hl;
-    {
-        let mut entries = Vec::new();
-        // Values of the value lines from `at` on, until an integer line or the end.
-        let values = |at: &mut usize| -> Result<Vec<(f64, usize)>> {
-            let mut out = Vec::new();
-            while *at < lines.len() && value_line(lines[*at]) {
-                let l = lines[*at];
-                let ln = *at + 1;
-                if !l.is_ascii() {
-                    return Err(err(ln, "a non-ASCII character in a value line".into()));
+    let mut entries = Vec::new();
+    // Values of the value lines from `at` on, until an integer line or the end.
+    let values = |at: &mut usize| -> Result<Vec<(f64, usize)>> {
+        let mut out = Vec::new();
+        while *at < lines.len() && value_line(lines[*at]) {
+            let l = lines[*at];
+            let ln = *at + 1;
+            if !l.is_ascii() {
+                return Err(err(ln, "a non-ASCII character in a value line".into()));
+            }
+            let mut k = 0;
+            while k < l.len() {
+                let f = l[k..(k + width).min(l.len())].trim();
+                k += width;
+                if f.is_empty() {
+                    continue;
                 }
-                let mut k = 0;
-                while k < l.len() {
-                    let f = l[k..(k + width).min(l.len())].trim();
-                    k += width;
-                    if f.is_empty() {
-                        continue;
-                    }
-                    let v: f64 = crate::formats::fe_matrices::nastran_real(f).ok_or_else(|| {
-                        err(ln, format!("value {} is not a finite number", quoted(f)))
-                    })?;
-                    out.push((v, ln));
-                }
-                if l.trim().len() > per_line * width {
+                let v: f64 = crate::formats::fe_matrices::nastran_real(f).ok_or_else(|| {
+                    err(ln, format!("value {} is not a finite number", quoted(f)))
+                })?;
+                out.push((v, ln));
+            }
+            if l.trim().len() > per_line * width {
+                return Err(err(
+                    ln,
+                    format!("a value line wider than {per_line} fields of {width}"),
+                ));
+            }
+            *at += 1;
+        }
+        Ok(out)
+    };
+    loop {
+        let Some(l) = lines.get(at) else {
+            return Err(err(
+                lines.len(),
+                format!("matrix {mname} ends without its closing record (ICOL > NCOL)"),
+            ));
+        };
+        let rl = at + 1;
+        let r = ints(rl, l, 3)?;
+        at += 1;
+        let (icol, irow, nw) = (r[0], r[1], r[2]);
+        if icol > ncol {
+            // The closing record and its one value.
+            values(&mut at)?;
+            break;
+        }
+        if icol < 1 || irow < 0 || nw < 0 {
+            return Err(err(
+                rl,
+                format!(
+                    "column record {icol} {irow} {nw}: expected ICOL 1..={ncol}, IROW ≥ 0, NW ≥ 0"
+                ),
+            ));
+        }
+        let col = (icol - 1) as usize;
+        // A dense column stores every row from its first to its last nonzero: its zeros
+        // are fill, not entries. A sparse string's zeros are stored entries (kept).
+        let keep_zeros = irow == 0;
+        let mut put = |row0: usize, vals: Vec<(f64, usize)>| -> Result<()> {
+            for (k, (v, ln)) in vals.into_iter().enumerate() {
+                let row = row0 + k;
+                if row >= n {
                     return Err(err(
                         ln,
-                        format!("a value line wider than {per_line} fields of {width}"),
-                    ));
-                }
-                *at += 1;
-            }
-            Ok(out)
-        };
-        loop {
-            let Some(l) = lines.get(at) else {
-                return Err(err(
-                    lines.len(),
-                    format!("matrix {mname} ends without its closing record (ICOL > NCOL)"),
-                ));
-            };
-            let rl = at + 1;
-            let r = ints(rl, l, 3)?;
-            at += 1;
-            let (icol, irow, nw) = (r[0], r[1], r[2]);
-            if icol > ncol {
-                // The closing record and its one value.
-                values(&mut at)?;
-                break;
-            }
-            if icol < 1 || irow < 0 || nw < 0 {
-                return Err(err(
-                    rl,
-                    format!(
-                        "column record {icol} {irow} {nw}: expected ICOL 1..={ncol}, IROW ≥ 0, NW ≥ 0"
-                    ),
-                ));
-            }
-            let col = (icol - 1) as usize;
-            // A dense column stores every row from its first to its last nonzero: its zeros
-            // are fill, not entries. A sparse string's zeros are stored entries (kept).
-            let keep_zeros = irow == 0;
-            let mut put = |row0: usize, vals: Vec<(f64, usize)>| -> Result<()> {
-                for (k, (v, ln)) in vals.into_iter().enumerate() {
-                    let row = row0 + k;
-                    if row >= n {
-                        return Err(err(
-                            ln,
-                            format!(
-                                "column {icol}: row {} is past the matrix's {n} rows",
-                                row + 1
-                            ),
-                        ));
-                    }
-                    if keep_zeros || v != 0.0 {
-                        entries.push((row, col, v, ln));
-                    }
-                }
-                Ok(())
-            };
-            if irow > 0 {
-                let vals = values(&mut at)?;
-                let count = vals.len() as i64;
-                if count != nw && !(ty == 2 && 2 * count == nw) {
-                    return Err(err(
-                        rl,
                         format!(
-                            "column {icol}: NW = {nw} announces {} values, {count} follow",
-                            if ty == 2 {
-                                format!("{nw} or {}", nw / 2)
-                            } else {
-                                nw.to_string()
-                            }
+                            "column {icol}: row {} is past the matrix's {n} rows",
+                            row + 1
                         ),
                     ));
                 }
-                put((irow - 1) as usize, vals)?;
-            } else {
-                // Sparse strings until the next column record (three integers).
-                while let Some(s) = lines.get(at) {
-                    let t = s.trim();
-                    let fields = t.split_whitespace().count();
-                    if !integer_line(t) || fields == 3 {
-                        break;
-                    }
-                    let sl = at + 1;
-                    // The header: `IROW + 65536·(L + 1)`, or `L + 1` and `IROW` (bigmat),
-                    // with L the words of values that follow (Nastran: two per double).
-                    let (l, row) = if bigmat {
-                        let v = ints(sl, t, 2)?;
-                        (v[0] - 1, v[1])
-                    } else {
-                        let is = ints(sl, t, 1)?[0];
-                        if is < 65536 {
-                            return Err(err(
-                                sl,
-                                format!("string header {is}: expected IROW + 65536·(L + 1)"),
-                            ));
-                        }
-                        ((is >> 16) - 1, is % 65536)
-                    };
-                    if row < 1 {
-                        return Err(err(sl, format!("string starts at row {row}")));
-                    }
-                    at += 1;
-                    let vals = values(&mut at)?;
-                    if vals.is_empty() {
-                        return Err(err(sl, "a string without values".into()));
-                    }
-                    // Nastran's count, or pyNastran 1.4's (the column's words, NW − 1, in
-                    // every string header); any other is a damaged file.
-                    let words = vals.len() as i64 * if ty == 2 { 2 } else { 1 };
-                    if l != words && l != nw - 1 {
-                        return Err(err(
-                            sl,
-                            format!(
-                                "column {icol}: the string header announces {l} words, {} \
-                                 values ({words} words) follow",
-                                vals.len()
-                            ),
-                        ));
-                    }
-                    put((row - 1) as usize, vals)?;
+                if keep_zeros || v != 0.0 {
+                    entries.push((row, col, v, ln));
                 }
             }
+            Ok(())
+        };
+        if irow > 0 {
+            let vals = values(&mut at)?;
+            let count = vals.len() as i64;
+            if count != nw && !(ty == 2 && 2 * count == nw) {
+                return Err(err(
+                    rl,
+                    format!(
+                        "column {icol}: NW = {nw} announces {} values, {count} follow",
+                        if ty == 2 {
+                            format!("{nw} or {}", nw / 2)
+                        } else {
+                            nw.to_string()
+                        }
+                    ),
+                ));
+            }
+            put((irow - 1) as usize, vals)?;
+        } else {
+            // Sparse strings until the next column record (three integers).
+            while let Some(s) = lines.get(at) {
+                let t = s.trim();
+                let fields = t.split_whitespace().count();
+                if !integer_line(t) || fields == 3 {
+                    break;
+                }
+                let sl = at + 1;
+                // The header: `IROW + 65536·(L + 1)`, or `L + 1` and `IROW` (bigmat),
+                // with L the words of values that follow (Nastran: two per double).
+                let (l, row) = if bigmat {
+                    let v = ints(sl, t, 2)?;
+                    (v[0] - 1, v[1])
+                } else {
+                    let is = ints(sl, t, 1)?[0];
+                    if is < 65536 {
+                        return Err(err(
+                            sl,
+                            format!("string header {is}: expected IROW + 65536·(L + 1)"),
+                        ));
+                    }
+                    ((is >> 16) - 1, is % 65536)
+                };
+                if row < 1 {
+                    return Err(err(sl, format!("string starts at row {row}")));
+                }
+                at += 1;
+                let vals = values(&mut at)?;
+                if vals.is_empty() {
+                    return Err(err(sl, "a string without values".into()));
+                }
+                // Nastran's count, or pyNastran 1.4's (the column's words, NW − 1, in
+                // every string header); any other is a damaged file.
+                let words = vals.len() as i64 * if ty == 2 { 2 } else { 1 };
+                if l != words && l != nw - 1 {
+                    return Err(err(
+                        sl,
+                        format!(
+                            "column {icol}: the string header announces {l} words, {} \
+                                 values ({words} words) follow",
+                            vals.len()
+                        ),
+                    ));
+                }
+                put((row - 1) as usize, vals)?;
+            }
         }
-        Ok(Op4Matrix {
-            name: mname,
-            n,
-            entries,
-            binary: false,
-        })
     }
+    Ok(Op4Matrix {
+        name: mname,
+        n,
+        entries,
+        binary: false,
+    })
 }
 
 #[cfg(test)]
