@@ -1267,7 +1267,77 @@ fn fuzz_inner() {
     panics.extend(survive("abaqus mtx", 10000 * scale(), |_| {
         let text = mutate(rng.pick(&abaqus).clone().as_str(), &mut rng);
         match nlsim::formats::abaqus::parse_abaqus(&text, Path::new("k.mtx")) {
-            Ok(m) => fe_place(m),
+            Ok(nlsim::formats::fe_matrices::FeMatrix::Labelled(m)) => fe_place(m),
+            Ok(nlsim::formats::fe_matrices::FeMatrix::Numbered(m)) => Some(m.n.to_string()),
+            Err(e) => Some(e.to_string()),
+        }
+    }));
+    // Real Abaqus output (tests/data/fe_real): 3-column COORDINATE files (the first 60 lines
+    // of EXUDYN's block, and all of FEMBeam's 5-column mass), labelled by equation from a
+    // job's input file, then placed.
+    let fe_real = root().join("tests/data/fe_real");
+    let head = |file: &str, lines: usize| -> String {
+        std::fs::read_to_string(fe_real.join(file))
+            .unwrap()
+            .lines()
+            .take(lines)
+            .map(|l| format!("{l}\n"))
+            .collect()
+    };
+    let coordinate = [
+        head("exudyn/blockC3D8_MASS1.mtx", 60),
+        head("exudyn/rotorDiscTestSTIF1.mtx", 60),
+        head("fembeam/model_MASS1.mtx", 60),
+    ];
+    let block_labels = nlsim::formats::abaqus::inp_equation_labels(
+        &std::fs::read_to_string(fe_real.join("exudyn/blockC3D8.inp")).unwrap(),
+        Path::new("block.inp"),
+    )
+    .unwrap();
+    panics.extend(survive("abaqus coordinate", 10000 * scale(), |_| {
+        let text = mutate(rng.pick(&coordinate).clone().as_str(), &mut rng);
+        match nlsim::formats::abaqus::parse_abaqus(&text, Path::new("k.mtx")) {
+            Ok(nlsim::formats::fe_matrices::FeMatrix::Labelled(m)) => fe_place(m),
+            Ok(nlsim::formats::fe_matrices::FeMatrix::Numbered(m)) => {
+                match m.labelled(&block_labels, "block.inp") {
+                    Ok(m) => fe_place(m),
+                    Err(e) => Some(e.to_string()),
+                }
+            }
+            Err(e) => Some(e.to_string()),
+        }
+    }));
+    let inp = [
+        std::fs::read_to_string(fe_real.join("exudyn/blockC3D8.inp")).unwrap(),
+        std::fs::read_to_string(fe_real.join("fembeam/model.inp")).unwrap(),
+        "*NODE\n1, 0., 0.\n2, 1., 0.\n3, 2., 0.\n*ELEMENT, TYPE=B21\n1, 1, 2\n\
+         *ELEMENT, TYPE=T2D2\n2, 2, 3\n*ELEMENT, TYPE=C3D20\n3, 1, 2, 3, 1, 2, 3, 1, 2, 3,\n1, 2, 3\n"
+            .to_string(),
+    ];
+    panics.extend(survive("abaqus inp equations", 10000 * scale(), |_| {
+        let text = mutate(rng.pick(&inp).clone().as_str(), &mut rng);
+        match nlsim::formats::abaqus::inp_equation_labels(&text, Path::new("job.inp")) {
+            Ok(labels) => nlsim::kernel::DofMap::new(labels)
+                .err()
+                .map(|e| e.to_string()),
+            Err(e) => Some(e.to_string()),
+        }
+    }));
+    // Ansys's DOF mapping vector (Matrix Market integer array), for matrices of 345 (the
+    // rotor's: 3 DOFs per node) or other orders.
+    let vector =
+        [
+            std::fs::read_to_string(fe_real.join("exudyn/rotorAnsysMatrixDofMappingVector.txt"))
+                .unwrap(),
+        ];
+    panics.extend(survive("ansys mapping vector", 10000 * scale(), |_| {
+        let text = mutate(rng.pick(&vector).clone().as_str(), &mut rng);
+        let n = *rng.pick(&[345usize, 690, 230, 344, 1, 0]);
+        match nlsim::formats::equations::parse_ansys_mapping_vector(&text, Path::new("map.txt"), n)
+        {
+            Ok(labels) => nlsim::kernel::DofMap::new(labels)
+                .err()
+                .map(|e| e.to_string()),
             Err(e) => Some(e.to_string()),
         }
     }));
@@ -1450,6 +1520,9 @@ fn readers_survive_mutated_inputs() {
         "prior csv",
         "dmig",
         "abaqus mtx",
+        "abaqus coordinate",
+        "abaqus inp equations",
+        "ansys mapping vector",
         "op4 ascii",
         "op4 binary",
         "harwell-boeing",

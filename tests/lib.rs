@@ -7820,7 +7820,11 @@ mod fe_formats {
                 hb.replace("       1       2       2\n", "       1       3       2\n"),
                 "k9.rsa:6: row index 3 of column 1 is outside 1..=2",
             ),
-            ("k10.rsa", hb.to_string(), "k10.mapping, which is missing"),
+            (
+                "k10.rsa",
+                hb.to_string(),
+                "k10.mapping is missing: its equations need labels",
+            ),
         ];
         let mut all: Vec<(&str, String, &str)> = cases
             .iter()

@@ -622,8 +622,9 @@ pub fn effective_masses(model: &Model, modes: &Modes) -> Vec<EffectiveMass> {
 
 /// Viscous damping ratio `ζ_r` of each mode: exact for proportional damping
 /// (`α/(2ω) + βω/2`, or the modal table), and `φ_rᵀ V φ_r / (2 ω_r)` for an explicit matrix
-/// (the diagonal of the modal damping matrix; the off-diagonal coupling is left out). Rigid-body
-/// modes get `NaN` unless the damping is mass-proportional only.
+/// (the diagonal of the modal damping matrix; the off-diagonal coupling is left out). A
+/// rigid-body mode (`ω_r = 0`) gets 0 when its modal damping `φ_rᵀ C φ_r` is 0 (no damping, or
+/// stiffness-proportional damping only) and `+∞` otherwise (`c / (2ω) → ∞`).
 pub fn damping_ratios(modes: &Modes, damping: &Damping) -> Vec<f64> {
     let omega = modes.omega();
     (0..modes.len())
@@ -640,7 +641,13 @@ pub fn damping_ratios(modes: &Modes, damping: &Damping) -> Vec<f64> {
                     v.bilinear(&col, &col)
                 }
             };
-            if w > 0.0 { c / (2.0 * w) } else { f64::NAN }
+            if w > 0.0 {
+                c / (2.0 * w)
+            } else if c == 0.0 {
+                0.0
+            } else {
+                f64::INFINITY
+            }
         })
         .collect()
 }

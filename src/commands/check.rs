@@ -19,6 +19,9 @@ pub fn check(spec: &str, check_definiteness: bool, console: &Console) -> Result<
         &loaded.source,
         Some(&report),
     ));
+    for note in &loaded.notes {
+        console.say(note);
+    }
     Ok(())
 }
 

@@ -269,7 +269,34 @@ pub fn solve(
     {
         console.progress_end();
     }
-    Ok(ModeReport::new(model, modes?, cfg))
+    let modes = modes?;
+    indefinite(model, &modes)?;
+    Ok(ModeReport::new(model, modes, cfg))
+}
+
+/// Refuses modes of an indefinite stiffness: an eigenvalue `ω² < 0` beyond round-off (below
+/// −1e-8 of `max Kᵢᵢ / max Mᵢᵢ`, a bound of the spectrum's scale; the rigid-body eigenvalues of
+/// a free–free model are ±1e-16 of it) would print as a 0 Hz mode with meaningless damping.
+fn indefinite(model: &Model, modes: &nlsim_reduction::Modes) -> Result<()> {
+    let largest =
+        |m: &nlsim_kernel::SparseSym| (0..m.n()).fold(0.0f64, |a, i| a.max(m.get(i, i).abs()));
+    let scale = largest(model.stiffness()) / largest(model.mass()).max(f64::MIN_POSITIVE);
+    match modes.eigenvalues.iter().position(|&l| l < -1e-8 * scale) {
+        None => Ok(()),
+        Some(i) => Err(nlsim_kernel::Error::NotDefinite {
+            matrix: "stiffness matrix".into(),
+            required: "positive semi-definite".into(),
+            detail: format!(
+                "mode {} has eigenvalue ω² = {:.4e} rad²/s² ({:.1e} of the scale max Kii / max \
+                 Mii = {scale:.3e}), a mode without a frequency; `nlsim check` finds where (a \
+                 negative spring or element sign?)",
+                i + 1,
+                modes.eigenvalues[i],
+                modes.eigenvalues[i] / scale
+            ),
+        }
+        .into()),
+    }
 }
 
 /// `nlsim modes MODEL`: the modes, the table on the terminal, the modes file and the report.

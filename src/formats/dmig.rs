@@ -86,19 +86,30 @@ fn split_expanded<'a>(
 struct Card<'c, 'a> {
     fields: &'c [Cow<'a, str>],
     line: usize,
+    /// The physical line of each field (continuation lines follow the card's first).
+    lines: &'c [usize],
 }
 
-/// Calls `f(fields, line)` for each card of a bulk-data text (its data fields, continuations
-/// appended, and the line it starts on), one card at a time; comments `$` and blank lines are
+impl Card<'_, '_> {
+    /// The line field `k` (0-based data field) was read from; the card's first line for a
+    /// field past its end.
+    fn line_of(&self, k: usize) -> usize {
+        self.lines.get(k).copied().unwrap_or(self.line)
+    }
+}
+
+/// Calls `f(fields, line, lines)` for each card of a bulk-data text (its data fields,
+/// continuations appended, the line it starts on and each field's line), one card at a time; comments `$` and blank lines are
 /// skipped, cards after `ENDDATA` ignored; `keep(name, fields of the first line)` decides
 /// which cards are passed (others are skipped with their continuations, unsplit).
 fn each_card<'a>(
     text: &'a str,
     path: &Path,
     mut keep: impl FnMut(&str, &[Cow<'a, str>]) -> bool,
-    mut f: impl FnMut(&[Cow<'a, str>], usize) -> Result<()>,
+    mut f: impl FnMut(&[Cow<'a, str>], usize, &[usize]) -> Result<()>,
 ) -> Result<()> {
     let mut cur: Vec<Cow<'a, str>> = Vec::new();
+    let mut lines: Vec<usize> = Vec::new();
     let mut cur_line = 0usize;
     let mut keeping = false;
     for (i, raw) in text.lines().enumerate() {
@@ -121,6 +132,7 @@ fn each_card<'a>(
         let at = cur.len();
         let mut overflow = 0;
         let first = split_line(raw, &mut cur, &mut overflow);
+        lines.resize(cur.len(), i + 1);
         let continuation = first.is_empty() || first.starts_with('+') || first.starts_with('*');
         let lost = || Error::DataFile {
             file: path.to_path_buf(),
@@ -134,6 +146,7 @@ fn each_card<'a>(
         if continuation {
             if !keeping {
                 cur.truncate(at);
+                lines.truncate(at);
             } else if overflow > 0 {
                 return Err(lost());
             }
@@ -141,12 +154,14 @@ fn each_card<'a>(
         }
         // A new card: the previous one is complete.
         if keeping {
-            f(&cur[..at], cur_line)?;
+            f(&cur[..at], cur_line, &lines[..at])?;
         }
         cur.drain(..at);
+        lines.drain(..at);
         let name = first.trim_end_matches('*').to_ascii_uppercase();
         if name == "ENDDATA" {
             cur.clear();
+            lines.clear();
             keeping = false;
             break;
         }
@@ -157,10 +172,11 @@ fn each_card<'a>(
         cur_line = i + 1;
         if !keeping {
             cur.clear();
+            lines.clear();
         }
     }
     if keeping {
-        f(&cur, cur_line)?;
+        f(&cur, cur_line, &lines)?;
     }
     Ok(())
 }
@@ -194,8 +210,12 @@ pub fn parse_dmig(text: &str, path: &Path, name: &str) -> Result<LabelledMatrix>
         }
         false
     };
-    each_card(text, path, keep, |fields, line| {
-        let c = Card { fields, line };
+    each_card(text, path, keep, |fields, line, lines| {
+        let c = Card {
+            fields,
+            line,
+            lines,
+        };
         let field = |k: usize| c.fields.get(k).map_or("", |f| f.as_ref());
         let int = |k: usize, what: &str, blank: Option<i64>| -> Result<i64> {
             let f = field(k);
@@ -206,7 +226,7 @@ pub fn parse_dmig(text: &str, path: &Path, name: &str) -> Result<LabelledMatrix>
             }
             f.parse::<i64>().map_err(|_| {
                 err(
-                    c.line,
+                    c.line_of(k),
                     format!("field {} ({what}): {} is not an integer", k + 2, quoted(f)),
                 )
             })
@@ -263,11 +283,12 @@ pub fn parse_dmig(text: &str, path: &Path, name: &str) -> Result<LabelledMatrix>
             let at = 4 + k;
             let g = int(at, "G", None)?;
             let ci = int(at + 1, "C", Some(0))?;
-            let row = label(g, ci).map_err(|m| err(c.line, m))?;
+            let here = c.line_of(at + 2);
+            let row = label(g, ci).map_err(|m| err(c.line_of(at), m))?;
             let a = field(at + 2);
             let value = nastran_real(a).ok_or_else(|| {
                 err(
-                    c.line,
+                    here,
                     format!(
                         "field {} (A, the value of row {row}, column {col}): {} is not a finite \
                          number",
@@ -278,7 +299,7 @@ pub fn parse_dmig(text: &str, path: &Path, name: &str) -> Result<LabelledMatrix>
             })?;
             if !field(at + 3).is_empty() {
                 return Err(err(
-                    c.line,
+                    c.line_of(at + 3),
                     format!(
                         "field {} (B) holds {}: an imaginary part in a real matrix",
                         at + 5,
@@ -286,7 +307,9 @@ pub fn parse_dmig(text: &str, path: &Path, name: &str) -> Result<LabelledMatrix>
                     ),
                 ));
             }
-            entries.push((labels.id(row), col_id, value, c.line));
+            // The entry's place is the line of its value, so that a repeat or an asymmetry
+            // names the line holding it, not its column's header.
+            entries.push((labels.id(row), col_id, value, here));
             any = true;
             k += 4;
         }
@@ -335,7 +358,7 @@ pub fn parse_grids(text: &str, path: &Path) -> Result<Vec<(u64, [f64; 3])>> {
         text,
         path,
         |n, _| n == "GRID",
-        |fields, line| {
+        |fields, line, _| {
             let field = |k: usize| fields.get(k).map_or("", |f| f.as_ref()).trim();
             let id = field(0)
                 .parse::<u64>()
@@ -417,6 +440,28 @@ mod tests {
     }
 
     #[test]
+    fn an_entry_is_placed_on_the_line_of_its_value() {
+        // Column 1:uz's card spans lines 3-5; its mirror entry (2:uz, 1:uz) on line 5
+        // disagrees with column 2:uz's (1:uz, 2:uz) on line 7: the error names both value
+        // lines, not the cards' first lines.
+        let text = "DMIG*   KAAX                           0               6               2\n\
+                    *                      2               0                               2\n\
+                    DMIG*   KAAX                           1               3\n\
+                    *                      1               32.000000000D+06\n\
+                    *                      2               3-1.00000000D+06\n\
+                    DMIG*   KAAX                           2               3\n\
+                    *                      1               3-1.50000000D+06\n\
+                    *                      2               31.000000000D+06\n";
+        let p = Path::new("k.pch");
+        let m = parse_dmig(text, p, "KAAX").unwrap();
+        let lines: Vec<usize> = m.entries.iter().map(|e| e.3).collect();
+        assert_eq!(lines, [4, 5, 7, 8]);
+        let dofs = union_dofs(&[&m]).unwrap();
+        let e = m.onto(&dofs, "K", 1e-12).unwrap_err().to_string();
+        assert!(e.contains("k.pch:7") && e.contains("on line 5"), "{e}");
+    }
+
+    #[test]
     fn dmig_small_large_and_free_field_give_one_matrix() {
         let small = "DMIG    KAAX    0       6       2       0                       2\n\
                      DMIG    KAAX    1       3               1       3       2.0+6\n\
@@ -468,7 +513,15 @@ mod tests {
     fn bad_entries_name_line_and_field() {
         let p = Path::new("m.mtx");
         for (text, want) in [
-            ("1,3,1,3\n", "m.mtx:1: 4 fields"),
+            (
+                "1,3,1,3\n",
+                "m.mtx:1: 4 fields, expected 3 (ROW, COLUMN, VALUE",
+            ),
+            (
+                "1 1 2.0\n1,1,2,1,1.0\n",
+                "m.mtx:2: 5 fields, the file's first entry (line 1) has 3",
+            ),
+            ("0 1 2.0\n", "m.mtx:1: equation 0 in field 1"),
             ("1,9,1,3,1.0\n", "component 9 of node 1"),
             ("-4,1,1,3,1.0\n", "node -4 is not a positive node number"),
             ("1,3,1,3,1e999\n", "is not a finite number"),

@@ -147,6 +147,17 @@ impl LabelledMatrix {
     /// every label required to be one of `dofs` (else the DOF was constrained out of the
     /// model's other matrix, or the label is not the model's).
     pub fn onto(&self, dofs: &DofMap, what: &str, tolerance: f64) -> Result<SparseSym> {
+        self.onto_measured(dofs, what, tolerance).map(|(m, _)| m)
+    }
+
+    /// [`onto`](Self::onto) with the largest relative difference of the mirrors averaged
+    /// ([`symmetric_measured`]).
+    pub fn onto_measured(
+        &self,
+        dofs: &DofMap,
+        what: &str,
+        tolerance: f64,
+    ) -> Result<(SparseSym, f64)> {
         let err = |line: usize, m: String| Error::DataFile {
             file: self.path.clone(),
             line,
@@ -172,7 +183,7 @@ impl LabelledMatrix {
             };
             indexed.push((index(r)?, index(c)?, value, line));
         }
-        symmetric_from_entries(
+        symmetric_measured(
             &self.path,
             &format!("{what} {}", self.name),
             dofs,
@@ -180,6 +191,64 @@ impl LabelledMatrix {
             Place::Line,
             tolerance,
         )
+    }
+}
+
+/// A matrix read from an FE code's file: labelled by the file itself (DMIG, 5-column Abaqus,
+/// Harwell–Boeing with its `.mapping`), or numbered by equation only (3-column Abaqus
+/// `FORMAT=COORDINATE` output, Harwell–Boeing without a mapping), whose labels come from a
+/// model file's `dofs` ([`crate::formats::equations`]).
+#[derive(Debug, Clone)]
+pub enum FeMatrix {
+    /// Entries by node/DOF label.
+    Labelled(LabelledMatrix),
+    /// Entries by equation number.
+    Numbered(NumberedMatrix),
+}
+
+/// A square matrix whose file numbers its equations without saying which node and DOF each
+/// is: Abaqus `*MATRIX OUTPUT, FORMAT=COORDINATE` (`ROW, COLUMN, VALUE` by global equation),
+/// Harwell–Boeing without its mapping file.
+#[derive(Debug, Clone)]
+pub struct NumberedMatrix {
+    /// The file.
+    pub path: PathBuf,
+    /// The highest equation an entry names (the matrix's order as far as the file shows).
+    pub n: usize,
+    /// The entries as stored: `(row, col, value, line)`, `row` and `col` 0-based equations.
+    pub entries: Vec<(usize, usize, f64, usize)>,
+    /// What the file is, for errors: e.g. "Abaqus COORDINATE output (…)".
+    pub kind: String,
+}
+
+impl NumberedMatrix {
+    /// The matrix labelled by `labels` (equation k is `labels[k]`), named `source` (the file
+    /// or list the labels came from) in errors: every equation an entry names must have a
+    /// label.
+    pub fn labelled(self, labels: &[DofLabel], source: &str) -> Result<LabelledMatrix> {
+        if self.n > labels.len() {
+            let line = self
+                .entries
+                .iter()
+                .find(|e| e.0.max(e.1) >= labels.len())
+                .map_or(1, |e| e.3);
+            return Err(Error::DataFile {
+                file: self.path.clone(),
+                line,
+                message: format!(
+                    "equation {} is past the {} DOF labels of {source} (the file numbers {} \
+                     equations)",
+                    labels.len() + 1,
+                    labels.len(),
+                    self.n
+                ),
+            });
+        }
+        Ok(LabelledMatrix::named_by_file(
+            &self.path,
+            labels.to_vec(),
+            self.entries,
+        ))
     }
 }
 
@@ -212,6 +281,20 @@ pub fn symmetric_from_entries(
     unit: Place,
     tolerance: f64,
 ) -> Result<SparseSym> {
+    symmetric_measured(path, what, dofs, entries, unit, tolerance).map(|(m, _)| m)
+}
+
+/// [`symmetric_from_entries`] with the largest difference between an entry and its mirror
+/// that was averaged, relative to the larger of their columns' largest magnitudes (0 when
+/// one triangle was stored or every mirror agreed to the bit): what `nlsim check` reports.
+pub fn symmetric_measured(
+    path: &Path,
+    what: &str,
+    dofs: &DofMap,
+    entries: &[(usize, usize, f64, usize)],
+    unit: Place,
+    tolerance: f64,
+) -> Result<(SparseSym, f64)> {
     let err = |line: usize, m: String| match unit {
         Place::Line => Error::DataFile {
             file: path.to_path_buf(),
@@ -257,6 +340,7 @@ pub fn symmetric_from_entries(
     let hi = |k: usize| entries[k].0.max(entries[k].1);
     let below = |k: usize| entries[k].0 >= entries[k].1;
     let mut lower = Vec::with_capacity(entries.len());
+    let mut worst = 0.0f64;
     for c in 0..n {
         let col = &mut order[start[c]..start[c + 1]];
         col.sort_unstable_by_key(|&k| (hi(k), k));
@@ -299,6 +383,7 @@ pub fn symmetric_from_entries(
                         ));
                     }
                     value_here = 0.5 * (v + value);
+                    worst = worst.max((v - value).abs() / scale);
                 }
             }
             lower.push((h, c, value_here));
@@ -323,12 +408,16 @@ pub fn symmetric_from_entries(
             g = e;
         }
     }
-    Ok(SparseSym::from_lower_triplets(what, dofs.len(), &lower)?)
+    Ok((
+        SparseSym::from_lower_triplets(what, dofs.len(), &lower)?,
+        worst,
+    ))
 }
 
 /// The format of an FE matrix file by extension and content: `.pch`, `.bdf`, `.dat`, `.nas`
-/// → DMIG; `.mtx` → Abaqus unless it starts with `%%MatrixMarket`; `.rsa`, `.rua`, `.hb`,
-/// `.rb`, `.matrix` (HBMAT's default) → Harwell–Boeing (`None`: not an FE-code format, e.g.
+/// → DMIG; `.mtx` → Abaqus unless it starts with `%%MatrixMarket`; `.hb`, `.rb`, `.matrix`
+/// (HBMAT's default) and the Harwell–Boeing types (`.rsa`, `.rua`, `.pse`, `.csa`, …) →
+/// Harwell–Boeing (`None`: not an FE-code format, e.g.
 /// Matrix Market or HDF5).
 pub fn detect(path: &Path) -> Result<Option<FeFormat>> {
     if dmig_extension(path) {
@@ -340,7 +429,15 @@ pub fn detect(path: &Path) -> Result<Option<FeFormat>> {
         .unwrap_or("")
         .to_ascii_lowercase();
     Ok(match ext.as_str() {
-        "rsa" | "rua" | "hb" | "rb" | "matrix" => Some(FeFormat::HarwellBoeing),
+        "hb" | "rb" | "matrix" => Some(FeFormat::HarwellBoeing),
+        // The collection's names: the type as the extension (RSA, RUA, PSE, CSA, ...).
+        t if t.len() == 3
+            && matches!(t.as_bytes()[0], b'r' | b'c' | b'p')
+            && matches!(t.as_bytes()[1], b's' | b'u' | b'h' | b'z' | b'r')
+            && matches!(t.as_bytes()[2], b'a' | b'e') =>
+        {
+            Some(FeFormat::HarwellBoeing)
+        }
         "mtx" => {
             use std::io::Read;
             crate::formats::files::input_file(path)?;
@@ -435,6 +532,18 @@ pub fn nastran_real(s: &str) -> Option<f64> {
 pub fn union_dofs(mats: &[&LabelledMatrix]) -> Result<DofMap> {
     let all: BTreeSet<DofLabel> = mats.iter().flat_map(|m| m.labels()).collect();
     Ok(DofMap::new(all.into_iter().collect())?)
+}
+
+/// The line `nlsim check` prints for a matrix whose two stored triangles were averaged
+/// (`None` when nothing was: one triangle stored, or mirrors equal to the bit).
+pub fn asymmetry_note(what: &str, path: &Path, largest: f64, tolerance: f64) -> Option<String> {
+    (largest > 0.0).then(|| {
+        format!(
+            "{what} ({}): both triangles stored; mirrors averaged, the largest differs by \
+             {largest:.1e} of its columns' largest magnitude (symmetry_tolerance {tolerance:e})",
+            path.display()
+        )
+    })
 }
 
 #[cfg(test)]

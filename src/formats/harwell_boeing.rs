@@ -36,6 +36,11 @@ fn fortran_fields(f: &str, integer: bool) -> Option<(usize, usize)> {
         .trim_end_matches(')')
         .to_ascii_uppercase();
     let spec = u.rsplit(',').next()?.trim();
+    // A scale factor may lead without a comma: `(1P5D16.8)` is `(1P,5D16.8)`.
+    let spec = match spec.split_once('P') {
+        Some((scale, rest)) if scale.chars().all(|c| c.is_ascii_digit() || c == '-') => rest,
+        _ => spec,
+    };
     let at = if integer {
         spec.find('I')?
     } else {
@@ -64,8 +69,12 @@ pub fn parse_harwell_boeing(text: &str, path: &Path) -> Result<HarwellBoeing> {
             "a Harwell-Boeing file starts with four header lines".into(),
         ));
     }
-    if let Some(k) = lines.iter().position(|l| !l.is_ascii()) {
-        return Err(err(k + 1, "a non-ASCII character".into()));
+    // The title (line 1) is free text in any code page; the rest is fixed-width ASCII.
+    if let Some(k) = lines.iter().skip(1).position(|l| !l.is_ascii()) {
+        return Err(err(
+            k + 2,
+            "a non-ASCII character (only the title line may hold one)".into(),
+        ));
     }
     let ints = |ln: usize, t: &str, what: &str| -> Result<Vec<i64>> {
         t.split_whitespace()

@@ -17,6 +17,7 @@
 //! | [`model_file`] | model files (TOML) and the `MODEL` argument (file or built-in name) |
 //! | [`matrices`] | Matrix Market and HDF5 (scipy-style CSC) matrices |
 //! | [`fe_matrices`] | Nastran DMIG and Abaqus `*MATRIX GENERATE` matrices, labelled by node and DOF |
+//! | [`equations`] | the node and DOF of each equation of a numbered matrix: a labels file, an Abaqus `.inp`, an Ansys mapping vector |
 //! | [`op4`] | Nastran OUTPUT4 matrices (ASCII, dense and sparse) |
 //! | [`cache`] | the memory-mapped binary cache of parsed Matrix Market matrices |
 //! | [`test_data`] | stepped-sine test data (CSV and HDF5) |
@@ -35,6 +36,7 @@ pub mod cache;
 #[cfg(feature = "hdf5")]
 pub mod candidates;
 pub mod dmig;
+pub mod equations;
 pub mod excitation;
 pub mod fe_matrices;
 pub mod fe_read;

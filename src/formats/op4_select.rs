@@ -159,13 +159,22 @@ pub(crate) fn choose(
                 "{}: {} matrices are named {base} ({}); name one as {base}@1 … {base}@{}",
                 path.display(),
                 same.len(),
-                same.iter()
-                    .map(|&k| {
-                        let h = &headers[k];
-                        format!("{}×{} at {unit} {}", h.nrow.unsigned_abs(), h.ncol, h.place)
-                    })
-                    .collect::<Vec<_>>()
-                    .join(", "),
+                {
+                    // The first few, then how many more: a file of 30 same-named matrices
+                    // (a QHH per Mach number and frequency) would flood the line.
+                    let mut shown: Vec<String> = same
+                        .iter()
+                        .take(4)
+                        .map(|&k| {
+                            let h = &headers[k];
+                            format!("{}×{} at {unit} {}", h.nrow.unsigned_abs(), h.ncol, h.place)
+                        })
+                        .collect();
+                    if same.len() > 4 {
+                        shown.push(format!("{} more", same.len() - 4));
+                    }
+                    shown.join(", ")
+                },
                 same.len()
             ))),
         };

@@ -14,7 +14,6 @@ pub use self::toml::toml_message;
 use self::toml::{Doc, Tab, Val, number};
 use crate::error::{Error, Result};
 use crate::formats::fe_matrices as fe;
-use crate::formats::matrices as mtx;
 use ::toml::de::{DeTable, DeValue};
 use elements::{name_and_site, read_dof, read_element, read_force_harmonic};
 use nlsim_kernel::{
@@ -34,6 +33,9 @@ pub struct LoadedModel {
     pub description: Option<String>,
     /// The fixture's reference values, when it is one.
     pub references: Vec<nlsim_fixtures::Reference>,
+    /// What reading the matrices did that `nlsim check` reports (e.g. mirrors of a matrix
+    /// stored in full averaged, with the largest difference).
+    pub notes: Vec<String>,
 }
 
 /// Resolves a `MODEL` argument: an existing file (or anything ending in `.toml`) is read as a
@@ -61,6 +63,7 @@ pub fn load_model(arg: &str) -> Result<LoadedModel> {
         source: format!("built-in model {arg}"),
         description: Some(fx.description),
         references: fx.references,
+        notes: Vec::new(),
     })
 }
 
@@ -112,6 +115,7 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
     let modal_table = top.sub("modal")?;
     let matrices_table = top.sub("matrices")?;
     let mut residuals = Vec::new();
+    let mut notes = Vec::new();
     let (mut model, description, references, from_fixture) = match (modal_table, matrices_table) {
         (Some(md), Some(_)) => {
             return Err(doc.err(
@@ -128,7 +132,7 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
             (model, None, Vec::new(), false)
         }
         (None, Some(mut mats)) => {
-            let read = read_matrices(&mut mats, &name, &base_dir)?;
+            let read = read_matrices(&mut mats, &name, &base_dir, &mut notes)?;
             mats.finish(
                 "[matrices] takes fixture and options, or mass, stiffness, dofs and format",
             )?;
@@ -178,8 +182,22 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
             let label = format!("group '{gname}' {what}");
             let m = match fe_matrix(&g, key, v, &base_dir, None)? {
                 // An FE code's matrix lands on the model's DOFs by label.
-                Some(m) => m.onto(model.dofs(), &label, fe::SYMMETRY_TOLERANCE)?,
-                None => read_matrix(&g, key, v, &label, &base_dir, fe::SYMMETRY_TOLERANCE)?,
+                Some(fe::FeMatrix::Labelled(m)) => {
+                    m.onto(model.dofs(), &label, fe::SYMMETRY_TOLERANCE)?
+                }
+                // A file that numbers its equations numbers them as the model's.
+                Some(fe::FeMatrix::Numbered(m)) => m
+                    .labelled(model.dofs().labels(), "the model's DOFs")?
+                    .onto(model.dofs(), &label, fe::SYMMETRY_TOLERANCE)?,
+                None => read_matrix(
+                    &g,
+                    key,
+                    v,
+                    &label,
+                    &base_dir,
+                    fe::SYMMETRY_TOLERANCE,
+                    &mut Vec::new(),
+                )?,
             };
             if m.n() != n {
                 return Err(g.err(
@@ -294,6 +312,7 @@ pub fn parse_model_file(text: &str, file: &Path) -> Result<LoadedModel> {
         source: file.display().to_string(),
         description,
         references,
+        notes,
     })
 }
 
@@ -316,7 +335,12 @@ fn rebuild(m: &Model, name: &str, keep_el: bool, keep_ex: bool, keep_se: bool) -
 
 type Matrices = (Model, Option<String>, Vec<nlsim_fixtures::Reference>, bool);
 
-fn read_matrices(t: &mut Tab<'_, '_>, name: &str, base: &Path) -> Result<Matrices> {
+fn read_matrices(
+    t: &mut Tab<'_, '_>,
+    name: &str,
+    base: &Path,
+    notes: &mut Vec<String>,
+) -> Result<Matrices> {
     if let Some((fx, span)) = t.str("fixture")? {
         let mut opts = Vec::new();
         if let Some(o) = t.sub("options")? {
@@ -387,63 +411,131 @@ fn read_matrices(t: &mut Tab<'_, '_>, name: &str, base: &Path) -> Result<Matrice
     };
     let mass_fe = fe_matrix(t, "mass", mass_v, base, format)?;
     let stiff_fe = fe_matrix(t, "stiffness", stiff_v, base, format)?;
-    if let (Some(m), Some(k)) = (&mass_fe, &stiff_fe) {
-        // The labels come from the files: every DOF either matrix names.
-        if let Some(v) = t.get("dofs") {
-            return Err(t.err(
-                v,
-                "dofs",
-                "DMIG, Abaqus and Harwell-Boeing (with its mapping) matrices label their DOFs themselves: leave `dofs` out",
-            ));
-        }
-        let dofs = fe::union_dofs(&[k, m]).map_err(|e| {
+    let mixed = mass_fe.is_some() != stiff_fe.is_some();
+    if let (Some(m), Some(k)) = (mass_fe, stiff_fe) {
+        // The labels come from the files (every DOF either matrix names), or, for files
+        // that number their equations only, from `dofs`.
+        let order = |f: &fe::FeMatrix| match f {
+            fe::FeMatrix::Numbered(n) => Some((n.n, n.kind.clone(), n.path.clone())),
+            fe::FeMatrix::Labelled(_) => None,
+        };
+        let numbered = order(&m).into_iter().chain(order(&k)).max_by_key(|o| o.0);
+        let (m, k) = match (numbered, t.get("dofs")) {
+            (None, Some(v)) => {
+                return Err(t.err(
+                    v,
+                    "dofs",
+                    "DMIG, 5-column Abaqus and Harwell-Boeing (with its mapping) matrices label \
+                     their DOFs themselves: leave `dofs` out",
+                ));
+            }
+            (None, None) => (labelled_only(m), labelled_only(k)),
+            (Some((_, kind, path)), None) => {
+                return Err(t.missing(
+                    "dofs",
+                    &format!(
+                        "{} is {kind}: its equations need labels; give dofs = the job's \
+                         input file (\"job.inp\"), Ansys's mapping vector, a labels file or a \
+                         list",
+                        path.display()
+                    ),
+                ));
+            }
+            (Some((n, _, _)), Some(v)) => {
+                let (labels, source) = dof_labels(t, v, base, n)?;
+                let with = |f: fe::FeMatrix| match f {
+                    fe::FeMatrix::Numbered(x) => x.labelled(&labels, &source),
+                    fe::FeMatrix::Labelled(x) => Ok(x),
+                };
+                (with(m)?, with(k)?)
+            }
+        };
+        let dofs = fe::union_dofs(&[&k, &m]).map_err(|e| {
             t.doc
                 .err(t.span.clone(), &t.key("stiffness"), e.to_string())
         })?;
-        let mass = m.onto(&dofs, "mass matrix", tolerance)?;
-        let stiffness = k.onto(&dofs, "stiffness matrix", tolerance)?;
+        let (mass, dm) = m.onto_measured(&dofs, "mass matrix", tolerance)?;
+        let (stiffness, dk) = k.onto_measured(&dofs, "stiffness matrix", tolerance)?;
+        notes.extend(fe::asymmetry_note(
+            "stiffness matrix",
+            &k.path,
+            dk,
+            tolerance,
+        ));
+        notes.extend(fe::asymmetry_note("mass matrix", &m.path, dm, tolerance));
         let model = Model::new(name, dofs, mass, stiffness).map_err(|e| {
             t.doc
                 .err(t.span.clone(), &t.key("stiffness"), e.to_string())
         })?;
         return Ok((model, None, vec![], false));
     }
-    if mass_fe.is_some() != stiff_fe.is_some() {
+    if mixed {
         return Err(t.err(
             stiff_v,
             "stiffness",
-            "give mass and stiffness both from FE-code files (DMIG, Abaqus, Harwell-Boeing with mapping), which label \
-             their DOFs, or both as Matrix Market, HDF5 or inline rows with `dofs`",
+            "give mass and stiffness both from FE-code files (DMIG, Abaqus, Harwell-Boeing), \
+             or both as Matrix Market, HDF5, OUTPUT4 or inline rows with `dofs`",
         ));
     }
-    let mass = read_matrix(t, "mass", mass_v, "mass matrix", base, tolerance)?;
-    let stiffness = read_matrix(t, "stiffness", stiff_v, "stiffness matrix", base, tolerance)?;
+    let mass = read_matrix(t, "mass", mass_v, "mass matrix", base, tolerance, notes)?;
+    let stiffness = read_matrix(
+        t,
+        "stiffness",
+        stiff_v,
+        "stiffness matrix",
+        base,
+        tolerance,
+        notes,
+    )?;
     let dofs = match t.get("dofs") {
         None => DofMap::scalar(mass.n()),
         Some(v) => {
-            let labels = match v.get_ref() {
-                DeValue::String(p) => {
-                    let path = base.join(p.as_ref());
-                    let text = crate::formats::files::read_text(&path)?;
-                    mtx::parse_dof_labels(&text, &path)?
-                }
-                DeValue::Array(a) => a
-                    .iter()
-                    .map(|l| match l.get_ref() {
-                        DeValue::String(s) => s
-                            .parse::<DofLabel>()
-                            .map_err(|e| t.err(l, "dofs", e.to_string())),
-                        _ => Err(t.err(l, "dofs", "expected DOF labels such as \"12:uz\"")),
-                    })
-                    .collect::<Result<Vec<_>>>()?,
-                _ => return Err(t.err(v, "dofs", "expected a file path or a list of DOF labels")),
-            };
+            let (labels, _) = dof_labels(t, v, base, mass.n())?;
             DofMap::new(labels).map_err(|e| t.err(v, "dofs", e.to_string()))?
         }
     };
     let model = Model::new(name, dofs, mass, stiffness)
         .map_err(|e| t.doc.err(t.span.clone(), &t.key("dofs"), e.to_string()))?;
     Ok((model, None, vec![], false))
+}
+
+/// A matrix labelled by its own file (the caller has checked that it is).
+fn labelled_only(f: fe::FeMatrix) -> fe::LabelledMatrix {
+    match f {
+        fe::FeMatrix::Labelled(m) => m,
+        fe::FeMatrix::Numbered(n) => fe::LabelledMatrix::named_by_file(&n.path, vec![], vec![]),
+    }
+}
+
+/// The labels of `n` equations from `dofs` (`v`): a file (labels, an Abaqus `.inp`, Ansys's
+/// mapping vector: [`crate::formats::equations::equation_labels`]) or an inline list, with
+/// where they came from for errors.
+fn dof_labels(
+    t: &Tab<'_, '_>,
+    v: Val<'_, '_>,
+    base: &Path,
+    n: usize,
+) -> Result<(Vec<DofLabel>, String)> {
+    match v.get_ref() {
+        DeValue::String(p) => {
+            let path = base.join(p.as_ref());
+            let labels = crate::formats::equations::equation_labels(&path, n)?;
+            Ok((labels, path.display().to_string()))
+        }
+        DeValue::Array(a) => {
+            let labels = a
+                .iter()
+                .map(|l| match l.get_ref() {
+                    DeValue::String(s) => s
+                        .parse::<DofLabel>()
+                        .map_err(|e| t.err(l, "dofs", e.to_string())),
+                    _ => Err(t.err(l, "dofs", "expected DOF labels such as \"12:uz\"")),
+                })
+                .collect::<Result<Vec<_>>>()?;
+            Ok((labels, t.key("dofs")))
+        }
+        _ => Err(t.err(v, "dofs", "expected a file path or a list of DOF labels")),
+    }
 }
 
 /// The matrix of `key` if it names an FE code's file (`FILE.pch[:NAME]`, `FILE.bdf[:NAME]`,
@@ -456,7 +548,7 @@ fn fe_matrix(
     v: Val<'_, '_>,
     base: &Path,
     format: Option<Option<fe::FeFormat>>,
-) -> Result<Option<fe::LabelledMatrix>> {
+) -> Result<Option<fe::FeMatrix>> {
     let DeValue::String(p) = v.get_ref() else {
         return Ok(None);
     };
@@ -492,6 +584,7 @@ fn read_matrix(
     name: &str,
     base: &Path,
     tolerance: f64,
+    notes: &mut Vec<String>,
 ) -> Result<SparseSym> {
     match v.get_ref() {
         DeValue::String(p) => {
@@ -528,9 +621,10 @@ fn read_matrix(
                 };
                 let m = crate::formats::op4::read_op4(&path, object, role)?;
                 let dofs = nlsim_kernel::DofMap::scalar(m.n);
-                return fe::symmetric_from_entries(
+                let what = format!("{name} {}", m.name);
+                let (matrix, largest) = fe::symmetric_measured(
                     &path,
-                    &format!("{name} {}", m.name),
+                    &what,
                     &dofs,
                     &m.entries,
                     if m.binary {
@@ -539,11 +633,15 @@ fn read_matrix(
                         fe::Place::Line
                     },
                     tolerance,
-                );
+                )?;
+                notes.extend(fe::asymmetry_note(&what, &path, largest, tolerance));
+                return Ok(matrix);
             }
             match h5 {
                 #[cfg(feature = "hdf5")]
-                Some((file, object)) => mtx::read_hdf5_matrix(&base.join(file), object, name),
+                Some((file, object)) => {
+                    crate::formats::matrices::read_hdf5_matrix(&base.join(file), object, name)
+                }
                 #[cfg(not(feature = "hdf5"))]
                 Some((file, _)) => Err(crate::formats::files::without_hdf5(&base.join(file))),
                 None => crate::formats::cache::load_matrix_market(&base.join(p), name),
@@ -657,6 +755,7 @@ fn read_damping(t: &mut Tab<'_, '_>, base: &Path, n: usize) -> Result<Damping> {
                 "damping matrix",
                 base,
                 fe::SYMMETRY_TOLERANCE,
+                &mut Vec::new(),
             )?;
             if m.n() != n {
                 return Err(t.err(
