@@ -349,8 +349,12 @@ pub fn inp_equation_labels(text: &str, path: &Path) -> Result<Vec<DofLabel>> {
         }
         if let Some(kw) = l.strip_prefix('*') {
             continues = false;
-            let mut params = kw.split(',');
-            let name = params.next().unwrap_or("").trim().to_ascii_uppercase();
+            let name = kw
+                .split(',')
+                .next()
+                .unwrap_or("")
+                .trim()
+                .to_ascii_uppercase();
             let param = |key: &str| {
                 kw.split(',').skip(1).find_map(|p| {
                     let (k, v) = p.split_once('=')?;

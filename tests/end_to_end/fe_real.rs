@@ -12,54 +12,44 @@ fn corpus() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fe_real")
 }
 
+/// FNV-1a (64 bit) of `bytes` as 16 hex digits, as the reference script hashes.
+fn fnv1a(bytes: &[u8]) -> String {
+    let h = bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    });
+    format!("{h:016x}")
+}
+
 /// FNV-1a of the nonzero entries of the lower triangle, column by column: row and column as
 /// u64 and the value's bits, little-endian (as the reference script hashes them).
 fn fnv(m: &nlsim::kernel::SparseSym) -> String {
     let d = m.to_dense();
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut bytes = Vec::new();
     for j in 0..d.ncols() {
         for i in j..d.nrows() {
             let v = d[(i, j)];
-            if v == 0.0 {
-                continue;
-            }
-            let mut bytes = Vec::with_capacity(24);
-            bytes.extend_from_slice(&(i as u64).to_le_bytes());
-            bytes.extend_from_slice(&(j as u64).to_le_bytes());
-            bytes.extend_from_slice(&v.to_le_bytes());
-            for b in bytes {
-                h = (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3);
+            if v != 0.0 {
+                bytes.extend_from_slice(&(i as u64).to_le_bytes());
+                bytes.extend_from_slice(&(j as u64).to_le_bytes());
+                bytes.extend_from_slice(&v.to_le_bytes());
             }
         }
     }
-    format!("{h:016x}")
+    fnv1a(&bytes)
 }
 
 /// FNV-1a of the DOF labels in order as text, "NODE:DOF," each with DOF 1–6 (0 for a
-/// scalar point), as the reference script hashes them.
+/// scalar point: the UFF direction numbers), as the reference script hashes them.
 fn labels_fnv(dofs: &nlsim::kernel::DofMap) -> String {
-    use nlsim::kernel::Component as C;
     let text: String = dofs
         .labels()
         .iter()
-        .map(|l| {
-            let c = match l.component {
-                C::U => 0,
-                C::Ux => 1,
-                C::Uy => 2,
-                C::Uz => 3,
-                C::Rx => 4,
-                C::Ry => 5,
-                C::Rz => 6,
-            };
-            format!("{}:{c},", l.node)
+        .map(|&l| {
+            let (node, dof) = nlsim::formats::uff_write::node_direction(l);
+            format!("{node}:{dof},")
         })
         .collect();
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in text.bytes() {
-        h = (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    format!("{h:016x}")
+    fnv1a(text.as_bytes())
 }
 
 /// A model file in `dir` reading `stiffness` and `mass` (corpus files, each with its

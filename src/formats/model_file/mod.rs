@@ -420,7 +420,8 @@ fn read_matrices(
             fe::FeMatrix::Labelled(_) => None,
         };
         let numbered = order(&m).into_iter().chain(order(&k)).max_by_key(|o| o.0);
-        let (m, k) = match (numbered, t.get("dofs")) {
+        // The equations' labels when a file numbers them (none needed otherwise).
+        let (labels, source) = match (numbered, t.get("dofs")) {
             (None, Some(v)) => {
                 return Err(t.err(
                     v,
@@ -429,7 +430,7 @@ fn read_matrices(
                      their DOFs themselves: leave `dofs` out",
                 ));
             }
-            (None, None) => (labelled_only(m), labelled_only(k)),
+            (None, None) => (Vec::new(), String::new()),
             (Some((_, kind, path)), None) => {
                 return Err(t.missing(
                     "dofs",
@@ -441,15 +442,13 @@ fn read_matrices(
                     ),
                 ));
             }
-            (Some((n, _, _)), Some(v)) => {
-                let (labels, source) = dof_labels(t, v, base, n)?;
-                let with = |f: fe::FeMatrix| match f {
-                    fe::FeMatrix::Numbered(x) => x.labelled(&labels, &source),
-                    fe::FeMatrix::Labelled(x) => Ok(x),
-                };
-                (with(m)?, with(k)?)
-            }
+            (Some((n, _, _)), Some(v)) => dof_labels(t, v, base, n)?,
         };
+        let with = |f: fe::FeMatrix| match f {
+            fe::FeMatrix::Numbered(x) => x.labelled(&labels, &source),
+            fe::FeMatrix::Labelled(x) => Ok(x),
+        };
+        let (m, k) = (with(m)?, with(k)?);
         let dofs = fe::union_dofs(&[&k, &m]).map_err(|e| {
             t.doc
                 .err(t.span.clone(), &t.key("stiffness"), e.to_string())
@@ -497,14 +496,6 @@ fn read_matrices(
     let model = Model::new(name, dofs, mass, stiffness)
         .map_err(|e| t.doc.err(t.span.clone(), &t.key("dofs"), e.to_string()))?;
     Ok((model, None, vec![], false))
-}
-
-/// A matrix labelled by its own file (the caller has checked that it is).
-fn labelled_only(f: fe::FeMatrix) -> fe::LabelledMatrix {
-    match f {
-        fe::FeMatrix::Labelled(m) => m,
-        fe::FeMatrix::Numbered(n) => fe::LabelledMatrix::named_by_file(&n.path, vec![], vec![]),
-    }
 }
 
 /// The labels of `n` equations from `dofs` (`v`): a file (labels, an Abaqus `.inp`, Ansys's
