@@ -8037,3 +8037,6 @@ mod interrupts;
 
 #[path = "end_to_end/fe_real.rs"]
 mod fe_real;
+
+#[path = "end_to_end/backbone.rs"]
+mod backbone;

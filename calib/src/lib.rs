@@ -17,6 +17,8 @@
 //! - [`stats`]: Cramér–Rao bounds, identifiability, estimate statistics;
 //! - [`plan`]: pre-test planning by Fisher information (design ranking, sensor placement,
 //!   multi-sine side tones);
+//! - [`backbone`]: amplitude-dependent natural frequency and damping of one mode from free
+//!   decays, stepped sines and phase-resonance tests, with standard deviations;
 //! - [`dwell`], [`track`]: harmonics from raw time histories of stepped-sine dwells and of
 //!   slow sweeps;
 //! - [`shaker`]: a virtual stepped-sine test through an electrodynamic shaker model, with and
@@ -28,6 +30,7 @@
 //! Solvers that stop short return what they computed with a [`Status`];
 //! `Err` means invalid input. Nothing here prints, reads files or exits.
 
+pub mod backbone;
 pub mod calibrate;
 pub mod coupling;
 pub mod data;

@@ -293,6 +293,15 @@ pub fn free_motion_system(
     reduced: &ReducedModel,
     set: HarmonicSet,
 ) -> Result<HbSystem> {
+    let aligned = aligned_reduction(free, reduced)?;
+    HbSystem::from_model(free, &aligned, set, HbConfig::default())
+}
+
+/// The reduction [`free_motion_system`] builds its system on: `reduced` with each cluster
+/// of equal frequencies rotated so that its members beyond the rank of their participation
+/// at the elements of `free` do not move them. A time simulation that starts from a
+/// nonlinear mode's state (modal coordinates of the system) must use this basis.
+pub fn aligned_reduction(free: &Model, reduced: &ReducedModel) -> Result<ReducedModel> {
     let mut aligned = reduced.clone();
     let element_ports: Vec<usize> = nlsim_reduction::model_port_map(free, &reduced.ports)?
         .element_coordinates
@@ -300,7 +309,7 @@ pub fn free_motion_system(
         .flatten()
         .collect();
     align_clusters(&mut aligned, &element_ports);
-    HbSystem::from_model(free, &aligned, set, HbConfig::default())
+    Ok(aligned)
 }
 
 /// Rotates each cluster of equal eigenvalues (to 1e-8) of `reduced` by the orthogonal `Q`

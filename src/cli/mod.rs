@@ -6,12 +6,14 @@
 //! without running it ([`Cli::try_parse_from`](clap::Parser::try_parse_from)).
 
 mod analysis;
+mod backbone;
 mod batch;
 mod calibration;
 pub mod interrupt;
 mod lanczos;
 
 pub use analysis::*;
+pub use backbone::*;
 pub use batch::*;
 pub use calibration::*;
 pub use lanczos::*;
@@ -96,6 +98,11 @@ pub enum Command {
     /// ratio that the model's damping and dissipative elements give at each amplitude.
     #[command(allow_negative_numbers = true)]
     Nnm(NnmArgs),
+    /// Amplitude-dependent natural frequency and damping ratio of one mode from measured
+    /// data, with standard deviations: free decays in time records (--decay: band pass,
+    /// Hilbert envelope and windowed fits) or stepped sines and phase-resonance dwells (the
+    /// −90° crossing with the energy-balance damping, and each level's single-mode fit).
+    Backbone(BackboneArgs),
     /// Run the pipeline on a built-in model, print a readable summary and write a report
     /// folder with plots.
     Demo(DemoArgs),
@@ -135,6 +142,7 @@ pub fn dispatch(cli: &Cli, console: &Console) -> crate::Result<()> {
         Command::Simulate(a) => a.execute(par, console),
         Command::Frf(a) => a.execute(par, console),
         Command::Nnm(a) => a.execute(par, console),
+        Command::Backbone(a) => a.execute(console),
         Command::Demo(a) => a.execute(console),
         Command::Calibrate(a) => a.execute(console),
         Command::Validate(a) => a.execute(console),

@@ -25,6 +25,8 @@
 //! use formats, present and the numeric crates, never the binary or `crate::batch`.
 
 #[cfg(feature = "io")]
+pub mod backbone;
+#[cfg(feature = "io")]
 pub mod calibrate;
 #[cfg(feature = "io")]
 pub mod check;

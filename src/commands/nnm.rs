@@ -405,13 +405,7 @@ pub fn execute(
     if let Some(p) = plot_path {
         let [freq, damping] = plots(&run, &model, req);
         crate::present::plot::write(&p, &freq)?;
-        let stem = p
-            .file_stem()
-            .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
-        let ext = p
-            .extension()
-            .map_or_else(|| "svg".into(), |e| e.to_string_lossy().into_owned());
-        let dp = p.with_file_name(format!("{stem}-damping.{ext}"));
+        let dp = crate::present::plot::companion(&p, "damping");
         crate::present::plot::write(&dp, &damping)?;
         console.say(&format!("  plots {} and {}", p.display(), dp.display()));
     }

@@ -41,9 +41,26 @@ fn read_h5_records(path: &Path) -> Result<crate::formats::time_records::TimeReco
     }
 }
 
+/// Time records by extension: `.uff`/`.unv`/`.uf` universal file (datasets 58 of function
+/// type 1), `.h5`/`.hdf5`, else CSV.
+pub fn read_any(path: &Path) -> Result<TimeRecords> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    match ext.as_deref() {
+        Some("uff" | "unv" | "uf") => {
+            let sets = crate::formats::uff::read(path)?;
+            crate::formats::time_records::from_uff(&sets, path)
+        }
+        Some("h5" | "hdf5") => read_h5_records(path),
+        _ => crate::formats::time_records::read_records(path),
+    }
+}
+
 /// Refuses a signal clipped by its recorder: its largest or smallest value held for 4 or
 /// more samples in a row, at least twice (every period of a clipped sine).
-fn check_clipping(name: &str, x: &[f64], rec: &TimeRecords, path: &Path) -> Result<()> {
+pub(crate) fn check_clipping(name: &str, x: &[f64], rec: &TimeRecords, path: &Path) -> Result<()> {
     let (lo, hi) = x
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
@@ -95,18 +112,7 @@ pub fn map_records(
     drive: Option<&str>,
     voltage: bool,
 ) -> Result<MappedRecords> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    let rec = match ext.as_deref() {
-        Some("uff" | "unv" | "uf") => {
-            let sets = crate::formats::uff::read(path)?;
-            crate::formats::time_records::from_uff(&sets, path)?
-        }
-        Some("h5" | "hdf5") => read_h5_records(path)?,
-        _ => crate::formats::time_records::read_records(path)?,
-    };
+    let rec = read_any(path)?;
     let drive = match drive {
         Some(d) => d.to_string(),
         None => model

@@ -174,6 +174,18 @@ pub use crate::present::axis::{
 };
 pub use crate::present::legend::{Entry, Layout, Swatch, legend_band};
 
+/// The companion of plot `path` named `STEM-suffix.EXT` (e.g. the damping plot beside a
+/// backbone's frequency plot), in the same folder and format (`svg` when `path` has none).
+pub fn companion(path: &Path, suffix: &str) -> std::path::PathBuf {
+    let stem = path
+        .file_stem()
+        .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+    let ext = path
+        .extension()
+        .map_or_else(|| "svg".into(), |e| e.to_string_lossy().into_owned());
+    path.with_file_name(format!("{stem}-{suffix}.{ext}"))
+}
+
 /// Checks that `path` names a plot format, before a long run.
 pub fn check_path(path: &Path) -> Result<()> {
     match path.extension().and_then(|e| e.to_str()) {

@@ -714,7 +714,19 @@ pub fn read(path: &Path, model: &nlsim_kernel::Model, options: &DataOptions) -> 
     options
         .check()
         .map_err(|(k, m)| Error::Usage(format!("{}: {k}: {m}", path.display())))?;
-    let mut data = read_as_given(path, model, options)?;
+    let input = |what: &str| single_input(path, model, what).map(str::to_string);
+    let mut data = read_as_given(path, &input, options)?;
+    options.apply(path, &mut data)?;
+    Ok(data)
+}
+
+/// [`read`] without a model: data that name no drive point (tables, UFF) are driven at
+/// `drive` (`nlsim backbone` reads the measurements alone).
+pub fn read_standalone(path: &Path, drive: &str, options: &DataOptions) -> Result<TestData> {
+    options
+        .check()
+        .map_err(|(k, m)| Error::Usage(format!("{}: {k}: {m}", path.display())))?;
+    let mut data = read_as_given(path, &|_| Ok(drive.to_string()), options)?;
     options.apply(path, &mut data)?;
     Ok(data)
 }
@@ -737,9 +749,10 @@ fn single_input<'a>(path: &Path, model: &'a nlsim_kernel::Model, what: &str) -> 
     Ok(input)
 }
 
+/// The data at `path` as held; `input(what)` names the drive of data that name none.
 fn read_as_given(
     path: &Path,
-    model: &nlsim_kernel::Model,
+    input: &dyn Fn(&str) -> Result<String>,
     options: &DataOptions,
 ) -> Result<TestData> {
     let ext = path
@@ -757,8 +770,8 @@ fn read_as_given(
         "csv" => {
             let text = crate::formats::files::read_text(path)?;
             if is_amplitude_phase(&text) {
-                let input = single_input(path, model, "amplitude-and-phase tables")?;
-                parse_amplitude_phase(&text, path, input, Noise::relative(options.noise))
+                let input = input("amplitude-and-phase tables")?;
+                parse_amplitude_phase(&text, path, &input, Noise::relative(options.noise))
             } else {
                 parse_csv(&text, path)
             }
@@ -769,8 +782,8 @@ fn read_as_given(
         "h5" | "hdf5" => Err(crate::formats::files::without_hdf5(path)),
         "uff" | "unv" | "uf" => {
             let records = crate::formats::uff::read(path)?;
-            let input = single_input(path, model, "FRFs")?;
-            crate::formats::uff::to_test_data(&records, input, Noise::relative(options.noise))
+            let input = input("FRFs")?;
+            crate::formats::uff::to_test_data(&records, &input, Noise::relative(options.noise))
                 .map_err(
                     // Invalid records are bad input; the line names the file.
                     |e| Error::Usage(format!("{}: {e}", path.display())),
