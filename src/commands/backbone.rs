@@ -594,8 +594,8 @@ pub fn plots(run: &BackboneRun, req: &BackboneRequest) -> [crate::present::plot:
                     .collect()
             };
             out.push((c.method.to_string(), line(0.0)));
-            out.push((format!("{} ± σ", c.method), line(1.0)));
-            out.push((String::new(), line(-1.0)));
+            out.push((format!("{} + σ", c.method), line(1.0)));
+            out.push((format!("{} − σ", c.method), line(-1.0)));
         }
         out
     };

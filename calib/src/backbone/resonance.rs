@@ -419,7 +419,14 @@ pub fn identify_resonance(levels: &[StepLevel], config: &ResonanceConfig) -> Res
             // Steps without their own deviations take the scatter of the level's fit about
             // them (its many residuals), not that of the few steps of the local lines.
             let fallback = fit.as_ref().map(|f| f.rms);
-            crossing(level, d, j, config.neighbours, (k, k_sigma), fallback)
+            let p = crossing(level, d, j, config.neighbours, (k, k_sigma), fallback);
+            if p.is_none() {
+                note = format!(
+                    "the local line through the phases near {:.4} Hz does not fall through                      −90° (noise larger than the phase change between steps)",
+                    d[j].0 / (2.0 * PI)
+                );
+            }
+            p
         } else if d.is_empty() {
             note = "no step with a force and a response".into();
             None
