@@ -174,14 +174,20 @@ pub(crate) fn block_diag(set: &nlsim_hb::HarmonicSet, z: &[c64]) -> Mat<f64> {
 
 /// Solves `a y = b` for a small dense square `a`; `None` when singular.
 pub(crate) fn solve_dense(a: &Mat<f64>, b: &[f64]) -> Option<Vec<f64>> {
+    let x = solve_dense_many(a, Mat::from_fn(b.len(), 1, |i, _| b[i]))?;
+    Some((0..b.len()).map(|i| x[(i, 0)]).collect())
+}
+
+/// Solves `a Y = B` for a small dense square `a` and the columns of `b` (one LU
+/// factorisation); `None` when singular.
+pub(crate) fn solve_dense_many(a: &Mat<f64>, b: Mat<f64>) -> Option<Mat<f64>> {
     use faer::linalg::solvers::Solve;
     let lu = a.partial_piv_lu();
     let u = lu.U();
     if (0..a.nrows()).any(|i| u[(i, i)] == 0.0 || !u[(i, i)].is_finite()) {
         return None;
     }
-    let x = lu.solve(Mat::from_fn(b.len(), 1, |i, _| b[i]));
-    Some((0..b.len()).map(|i| x[(i, 0)]).collect())
+    Some(lu.solve(b))
 }
 
 /// Sets the force coefficients `phi` (real layout) on input `input` as the forcing of `sys`.

@@ -147,12 +147,7 @@ pub fn parse_inp_nodes(text: &str, path: &Path) -> Result<Vec<(u64, [f64; 3])>> 
             continue;
         }
         if let Some(kw) = l.strip_prefix('*') {
-            let name = kw
-                .split(',')
-                .next()
-                .unwrap_or("")
-                .trim()
-                .to_ascii_uppercase();
+            let name = keyword_name(kw);
             if name == "PART" || name == "INSTANCE" {
                 return Err(err(
                     i + 1,
@@ -236,6 +231,15 @@ pub fn parse_inp_nodes(text: &str, path: &Path) -> Result<Vec<(u64, [f64; 3])>> 
         )));
     }
     Ok(out)
+}
+
+/// The keyword of an input-file line after its `*`, upper case (`NODE` of `*Node, nset=a`).
+fn keyword_name(kw: &str) -> String {
+    kw.split(',')
+        .next()
+        .unwrap_or("")
+        .trim()
+        .to_ascii_uppercase()
 }
 
 /// The DOFs (bit k−1 for Abaqus DOF k, 1–6) an element type gives its nodes, for the
@@ -349,12 +353,7 @@ pub fn inp_equation_labels(text: &str, path: &Path) -> Result<Vec<DofLabel>> {
         }
         if let Some(kw) = l.strip_prefix('*') {
             continues = false;
-            let name = kw
-                .split(',')
-                .next()
-                .unwrap_or("")
-                .trim()
-                .to_ascii_uppercase();
+            let name = keyword_name(kw);
             let param = |key: &str| {
                 kw.split(',').skip(1).find_map(|p| {
                     let (k, v) = p.split_once('=')?;

@@ -35,6 +35,7 @@ pub use virtual_decay::{nnm_release_state, virtual_ringdown};
 #[cfg(test)]
 mod tests;
 
+use faer::Mat;
 use nlsim_kernel::Quantity;
 use std::f64::consts::PI;
 
@@ -87,59 +88,23 @@ fn propagate(g: &[f64], c: &[Vec<f64>]) -> f64 {
     v.max(0.0)
 }
 
-/// Solves the small dense system `a x = b` by Gaussian elimination with partial pivoting;
-/// `None` when a pivot is below `1e-14` of the largest entry (singular).
+/// Solves the small dense system `a x = b` ([`crate::coupling::solve_dense`]); `None` when
+/// singular.
 fn solve_small(a: &[Vec<f64>], b: &[f64]) -> Option<Vec<f64>> {
-    let n = b.len();
-    let mut m: Vec<Vec<f64>> = a
-        .iter()
-        .zip(b)
-        .map(|(r, &v)| {
-            let mut r = r.clone();
-            r.push(v);
-            r
-        })
-        .collect();
-    let scale = a
-        .iter()
-        .flatten()
-        .fold(0.0f64, |s, v| s.max(v.abs()))
-        .max(1e-300);
-    for c in 0..n {
-        let p = (c..n).max_by(|&i, &j| m[i][c].abs().total_cmp(&m[j][c].abs()))?;
-        if m[p][c].abs() <= 1e-14 * scale {
-            return None;
-        }
-        m.swap(c, p);
-        for r in c + 1..n {
-            let f = m[r][c] / m[c][c];
-            if f != 0.0 {
-                for k in c..=n {
-                    m[r][k] -= f * m[c][k];
-                }
-            }
-        }
-    }
-    let mut x = vec![0.0; n];
-    for r in (0..n).rev() {
-        let s: f64 = (r + 1..n).map(|k| m[r][k] * x[k]).sum();
-        x[r] = (m[r][n] - s) / m[r][r];
-    }
-    Some(x)
+    crate::coupling::solve_dense(&Mat::from_fn(b.len(), b.len(), |i, j| a[i][j]), b)
 }
 
-/// The inverse of a small symmetric positive-definite matrix by [`solve_small`] on each
-/// column of the identity; `None` when singular.
+/// The inverse of a small dense matrix (one LU factorisation,
+/// [`crate::coupling::solve_dense_many`]); `None` when singular.
 fn inverse_small(a: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
     let n = a.len();
-    let mut cols = Vec::with_capacity(n);
-    for j in 0..n {
-        let e: Vec<f64> = (0..n).map(|i| if i == j { 1.0 } else { 0.0 }).collect();
-        cols.push(solve_small(a, &e)?);
-    }
+    let x = crate::coupling::solve_dense_many(
+        &Mat::from_fn(n, n, |i, j| a[i][j]),
+        Mat::identity(n, n),
+    )?;
     Some(
         (0..n)
-            .map(|i| (0..n).map(|j| cols[j][i]).collect())
+            .map(|i| (0..n).map(|j| x[(i, j)]).collect())
             .collect(),
     )
 }

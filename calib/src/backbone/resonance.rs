@@ -228,13 +228,26 @@ impl LeastSquares for Sdof<'_> {
     }
 }
 
-/// The steps of a level turned into `(ω, α, relative σ, |R|, |F|)`, sorted by frequency,
-/// with `arg α` unwrapped along frequency (the first in (−3π/2, π/2]).
-#[allow(clippy::type_complexity)]
-fn receptances(
-    level: &StepLevel,
-    quantity: Quantity,
-) -> Result<Vec<(f64, c64, f64, f64, f64, f64)>> {
+/// One step of a level as the identification uses it.
+#[derive(Debug, Clone, Copy)]
+struct Receptance {
+    /// `ω` (rad/s).
+    w: f64,
+    /// The displacement receptance `α = R/((iω)^d F)`.
+    alpha: c64,
+    /// Relative standard deviation of the response (NaN when unknown).
+    sigma: f64,
+    /// `|R|` (the sensor's unit).
+    response: f64,
+    /// `|F|` (N).
+    force: f64,
+    /// `arg α`, unwrapped along the level (rad).
+    phase: f64,
+}
+
+/// The steps of a level as [`Receptance`]s, sorted by frequency, with `arg α` unwrapped
+/// along frequency (the first in (−3π/2, π/2]).
+fn receptances(level: &StepLevel, quantity: Quantity) -> Result<Vec<Receptance>> {
     let d = match quantity {
         Quantity::Displacement => 0,
         Quantity::Velocity => 1,
@@ -263,19 +276,19 @@ fn receptances(
             den *= iw;
         }
         let alpha = s.response / den;
-        out.push((
+        out.push(Receptance {
             w,
             alpha,
-            s.sigma,
-            s.response.norm(),
-            s.force.norm(),
-            alpha.arg(),
-        ));
+            sigma: s.sigma,
+            response: s.response.norm(),
+            force: s.force.norm(),
+            phase: alpha.arg(),
+        });
     }
-    out.sort_by(|a, b| a.0.total_cmp(&b.0));
+    out.sort_by(|a, b| a.w.total_cmp(&b.w));
     let mut prev: Option<f64> = None;
     for e in out.iter_mut() {
-        let mut p = e.5;
+        let mut p = e.phase;
         match prev {
             None => {
                 if p > PI / 2.0 {
@@ -284,7 +297,7 @@ fn receptances(
             }
             Some(q) => p = q + (p - q) - 2.0 * PI * ((p - q) / (2.0 * PI)).round(),
         }
-        e.5 = p;
+        e.phase = p;
         prev = Some(p);
     }
     Ok(out)
@@ -322,7 +335,7 @@ pub fn identify_resonance(levels: &[StepLevel], config: &ResonanceConfig) -> Res
     for d in &data {
         let cross: Vec<usize> = (0..d.len().saturating_sub(1))
             .filter(|&j| {
-                let (a, b) = (d[j].5 + PI / 2.0, d[j + 1].5 + PI / 2.0);
+                let (a, b) = (d[j].phase + PI / 2.0, d[j + 1].phase + PI / 2.0);
                 a == 0.0 || a.signum() != b.signum()
             })
             .collect();
@@ -383,7 +396,14 @@ pub fn identify_resonance(levels: &[StepLevel], config: &ResonanceConfig) -> Res
     for (((level, d), cross), fit) in levels.iter().zip(&data).zip(&crossings).zip(fits) {
         let mut note = String::new();
         let point = if d.len() == 1 {
-            let (w, a, s, r, f, ph) = d[0];
+            let Receptance {
+                w,
+                alpha: a,
+                sigma: s,
+                response: r,
+                force: f,
+                phase: ph,
+            } = d[0];
             if (ph + PI / 2.0).abs() <= 10f64.to_radians() {
                 let sin = (-ph).sin();
                 let z = k * sin / (2.0 * w * w * a.norm());
@@ -407,7 +427,8 @@ pub fn identify_resonance(levels: &[StepLevel], config: &ResonanceConfig) -> Res
                 None
             }
         } else if let Some(&j) = cross.iter().max_by(|&&a, &&b| {
-            (d[a].1.norm() + d[a + 1].1.norm()).total_cmp(&(d[b].1.norm() + d[b + 1].1.norm()))
+            (d[a].alpha.norm() + d[a + 1].alpha.norm())
+                .total_cmp(&(d[b].alpha.norm() + d[b + 1].alpha.norm()))
         }) {
             if cross.len() > 1 {
                 note = format!(
@@ -422,8 +443,9 @@ pub fn identify_resonance(levels: &[StepLevel], config: &ResonanceConfig) -> Res
             let p = crossing(level, d, j, config.neighbours, (k, k_sigma), fallback);
             if p.is_none() {
                 note = format!(
-                    "the local line through the phases near {:.4} Hz does not fall through                      −90° (noise larger than the phase change between steps)",
-                    d[j].0 / (2.0 * PI)
+                    "the local line through the phases near {:.4} Hz does not fall through \
+                     −90° (noise larger than the phase change between steps)",
+                    d[j].w / (2.0 * PI)
                 );
             }
             p
@@ -431,7 +453,7 @@ pub fn identify_resonance(levels: &[StepLevel], config: &ResonanceConfig) -> Res
             note = "no step with a force and a response".into();
             None
         } else {
-            let (a, b) = (d[0].5.to_degrees(), d[d.len() - 1].5.to_degrees());
+            let (a, b) = (d[0].phase.to_degrees(), d[d.len() - 1].phase.to_degrees());
             note = format!(
                 "the phase runs from {a:.1}° to {b:.1}° and does not cross −90°: the level \
                  does not reach the resonance"
@@ -456,7 +478,7 @@ pub fn identify_resonance(levels: &[StepLevel], config: &ResonanceConfig) -> Res
 /// The phase-resonance point of a level between its steps `j` and `j + 1`.
 fn crossing(
     level: &StepLevel,
-    d: &[(f64, c64, f64, f64, f64, f64)],
+    d: &[Receptance],
     j: usize,
     neighbours: usize,
     (k, k_sigma): (f64, f64),
@@ -465,20 +487,20 @@ fn crossing(
     let lo = (j + 1).saturating_sub(neighbours);
     let hi = (j + 1 + neighbours).min(d.len());
     let pts = &d[lo..hi];
-    let own = pts.iter().all(|p| p.2.is_finite() && p.2 > 0.0);
+    let own = pts.iter().all(|p| p.sigma.is_finite() && p.sigma > 0.0);
     let fallback = fallback.filter(|s| s.is_finite() && *s > 0.0);
     let known = own || fallback.is_some();
     let w: Vec<f64> = pts
         .iter()
         .map(|p| match (own, fallback) {
-            (true, _) => 1.0 / (p.2 * p.2),
+            (true, _) => 1.0 / (p.sigma * p.sigma),
             (false, Some(s)) => 1.0 / (s * s),
             (false, None) => 1.0,
         })
         .collect();
-    let x: Vec<f64> = pts.iter().map(|p| p.0).collect();
-    let x0 = 0.5 * (d[j].0 + d[j + 1].0);
-    let ph: Vec<f64> = pts.iter().map(|p| p.5 + PI / 2.0).collect();
+    let x: Vec<f64> = pts.iter().map(|p| p.w).collect();
+    let x0 = 0.5 * (d[j].w + d[j + 1].w);
+    let ph: Vec<f64> = pts.iter().map(|p| p.phase + PI / 2.0).collect();
     let (c, cov) = poly(&x, &ph, &w, x0, 1, known)?;
     if c[1] >= 0.0 {
         return None;
@@ -493,9 +515,9 @@ fn crossing(
         let v: f64 = g.iter().zip(&c).map(|(a, b)| a * b).sum();
         Some((v, propagate(&g, &cov).sqrt()))
     };
-    let (la, sla) = at(pts.iter().map(|p| p.1.norm().ln()).collect())?;
-    let (lr, slr) = at(pts.iter().map(|p| p.3.ln()).collect())?;
-    let (lf, _) = at(pts.iter().map(|p| p.4.ln()).collect())?;
+    let (la, sla) = at(pts.iter().map(|p| p.alpha.norm().ln()).collect())?;
+    let (lr, slr) = at(pts.iter().map(|p| p.response.ln()).collect())?;
+    let (lf, _) = at(pts.iter().map(|p| p.force.ln()).collect())?;
     let alpha = la.exp();
     // At the crossing sin(−arg α) = 1.
     let z = k / (2.0 * ws * ws * alpha);
@@ -515,30 +537,33 @@ fn crossing(
 }
 
 /// The single-mode fit of a level's receptances.
-fn fit_level(d: &[(f64, c64, f64, f64, f64, f64)]) -> Option<SdofFit> {
-    let omega: Vec<f64> = d.iter().map(|p| p.0).collect();
-    let ln_alpha: Vec<c64> = d.iter().map(|p| c64::new(p.1.norm().ln(), p.5)).collect();
-    let known = d.iter().all(|p| p.2.is_finite() && p.2 > 0.0);
+fn fit_level(d: &[Receptance]) -> Option<SdofFit> {
+    let omega: Vec<f64> = d.iter().map(|p| p.w).collect();
+    let ln_alpha: Vec<c64> = d
+        .iter()
+        .map(|p| c64::new(p.alpha.norm().ln(), p.phase))
+        .collect();
+    let known = d.iter().all(|p| p.sigma.is_finite() && p.sigma > 0.0);
     let weight: Vec<f64> = d
         .iter()
-        .map(|p| if known { 1.0 / p.2 } else { 1.0 })
+        .map(|p| if known { 1.0 / p.sigma } else { 1.0 })
         .collect();
     // Start: the step nearest −π/2 gives ω_n, the phase slope there ζ (dφ/dω = −1/ζω_n),
     // the magnitude there K = 2ζω_n²|α|.
     let j = (0..d.len()).min_by(|&a, &b| {
-        (d[a].5 + PI / 2.0)
+        (d[a].phase + PI / 2.0)
             .abs()
-            .total_cmp(&(d[b].5 + PI / 2.0).abs())
+            .total_cmp(&(d[b].phase + PI / 2.0).abs())
     })?;
     let (a, b) = (j.saturating_sub(1), (j + 1).min(d.len() - 1));
-    let wn = d[j].0;
-    let slope = (d[b].5 - d[a].5) / (d[b].0 - d[a].0);
+    let wn = d[j].w;
+    let slope = (d[b].phase - d[a].phase) / (d[b].w - d[a].w);
     let z0 = if slope < 0.0 {
         (-1.0 / (slope * wn)).clamp(1e-5, 0.5)
     } else {
         0.01
     };
-    let k0 = 2.0 * z0 * wn * wn * d[j].1.norm();
+    let k0 = 2.0 * z0 * wn * wn * d[j].alpha.norm();
     let mut prob = Sdof {
         omega: &omega,
         ln_alpha: &ln_alpha,
